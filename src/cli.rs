@@ -1,0 +1,18 @@
+//! Command-line interface (clap derive). Each subcommand's arguments live next to its command
+//! module; this file only lists them.
+
+use clap::{Parser, Subcommand};
+
+/// Digital twin of a legged or armed robot, simulated with MuJoCo.
+#[derive(Debug, Parser)]
+#[command(name = "twin", version = crate::commands::VERSION_LINE, about, long_about = None)]
+pub struct Cli {
+    #[command(subcommand)]
+    pub command: Command,
+}
+
+#[derive(Debug, Subcommand)]
+pub enum Command {
+    /// Print a model's bodies, joints, actuators, sensors and total mass.
+    Info(crate::commands::info::Args),
+}

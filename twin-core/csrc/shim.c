@@ -1,0 +1,163 @@
+// Catches MuJoCo's mju_user_error so that no MuJoCo error ends the process.
+//
+// MuJoCo reports fatal errors by calling mju_user_error, which by default prints and exit()s, and
+// must not return. We install one handler for the whole process that longjmps to a setjmp placed
+// in the wrapper below. The jump crosses only MuJoCo's C frames and this file's frames, never a
+// Rust frame (a longjmp over Rust frames is undefined behaviour). The jump target and message are
+// thread-local, so guarded calls on different threads do not interfere. This is what MuJoCo's own
+// Python bindings do, with their setjmp in C++ right around each call.
+
+#include <setjmp.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+
+#include <mujoco/mujoco.h>
+
+static _Thread_local jmp_buf* tls_jump = NULL;
+static _Thread_local char tls_error[1024];
+static _Thread_local unsigned long long tls_warning_count = 0;
+static _Thread_local char tls_warning[1024];
+
+static void copy_message(char* dst, size_t dst_sz, const char* msg) {
+  if (!dst || dst_sz == 0) return;
+  if (!msg) msg = "";
+  size_t n = strlen(msg);
+  if (n >= dst_sz) n = dst_sz - 1;
+  memcpy(dst, msg, n);
+  dst[n] = '\0';
+}
+
+static void twin_error_handler(const char* msg) {
+  copy_message(tls_error, sizeof(tls_error), msg);
+  if (tls_jump) {
+    longjmp(*tls_jump, 1);
+  }
+  // Only reachable if twin calls a raising MuJoCo function without a guard: a bug in twin, not
+  // bad input. MuJoCo must not continue after an error, so stop loudly rather than corrupt memory.
+  fprintf(stderr, "twin: internal error: unguarded MuJoCo error: %s\n", tls_error);
+  abort();
+}
+
+static void twin_warning_handler(const char* msg) {
+  tls_warning_count++;
+  copy_message(tls_warning, sizeof(tls_warning), msg);
+}
+
+void twin_install_handlers(void) {
+  mju_user_error = twin_error_handler;
+  mju_user_warning = twin_warning_handler;
+}
+
+unsigned long long twin_warning_count(void) { return tls_warning_count; }
+
+const char* twin_last_warning(void) { return tls_warning; }
+
+// After a longjmp out of a computation, mjData's arena stack still holds the frames that the
+// interrupted functions had marked; drop them so the mjData stays usable.
+static void reset_stack(mjData* d) {
+  if (d) {
+    d->pstack = 0;
+    d->pbase = 0;
+  }
+}
+
+// Runs STMT with a jump target installed; on a MuJoCo error, runs CLEANUP, copies the message to
+// err and returns 1. Returns 0 on success. `prev` keeps nested guards correct.
+#define TWIN_GUARD(STMT, CLEANUP)                   \
+  jmp_buf env;                                      \
+  jmp_buf* prev = tls_jump;                         \
+  if (setjmp(env)) {                                \
+    tls_jump = prev;                                \
+    CLEANUP;                                        \
+    copy_message(err, err_sz, tls_error);           \
+    return 1;                                       \
+  }                                                 \
+  tls_jump = &env;                                  \
+  STMT;                                             \
+  tls_jump = prev;                                  \
+  return 0;
+
+int twin_load_xml(const char* filename, mjModel** out, char* err, int err_sz) {
+  *out = NULL;
+  TWIN_GUARD(*out = mj_loadXML(filename, NULL, err, err_sz), (void)0)
+}
+
+int twin_parse_xml_string(const char* xml, mjSpec** out, char* err, int err_sz) {
+  *out = NULL;
+  TWIN_GUARD(*out = mj_parseXMLString(xml, NULL, err, err_sz), (void)0)
+}
+
+int twin_compile(mjSpec* spec, mjModel** out, char* err, int err_sz) {
+  *out = NULL;
+  TWIN_GUARD(*out = mj_compile(spec, NULL), (void)0)
+}
+
+int twin_save_xml_string(const mjSpec* spec, char* xml, int xml_sz, int* status, char* err,
+                         int err_sz) {
+  TWIN_GUARD(*status = mj_saveXMLString(spec, xml, xml_sz, err, err_sz), (void)0)
+}
+
+int twin_copy_model(const mjModel* src, mjModel** out, char* err, int err_sz) {
+  *out = NULL;
+  TWIN_GUARD(*out = mj_copyModel(NULL, src), (void)0)
+}
+
+int twin_make_data(const mjModel* m, mjData** out, char* err, int err_sz) {
+  *out = NULL;
+  TWIN_GUARD(*out = mj_makeData(m), (void)0)
+}
+
+int twin_copy_data(mjData* dst, const mjModel* m, const mjData* src, char* err, int err_sz) {
+  TWIN_GUARD(mj_copyData(dst, m, src), reset_stack(dst))
+}
+
+int twin_step(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_step(m, d), reset_stack(d))
+}
+
+int twin_step_n(const mjModel* m, mjData* d, long n, char* err, int err_sz) {
+  TWIN_GUARD(for (long i = 0; i < n; i++) mj_step(m, d), reset_stack(d))
+}
+
+int twin_step1(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_step1(m, d), reset_stack(d))
+}
+
+int twin_step2(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_step2(m, d), reset_stack(d))
+}
+
+int twin_forward(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_forward(m, d), reset_stack(d))
+}
+
+int twin_inverse(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_inverse(m, d), reset_stack(d))
+}
+
+int twin_rne(const mjModel* m, mjData* d, int flg_acc, mjtNum* result, char* err, int err_sz) {
+  TWIN_GUARD(mj_rne(m, d, flg_acc, result), reset_stack(d))
+}
+
+int twin_set_const(mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_setConst(m, d), reset_stack(d))
+}
+
+int twin_reset_data(const mjModel* m, mjData* d, int key, char* err, int err_sz) {
+  TWIN_GUARD(if (key < 0) mj_resetData(m, d); else mj_resetDataKeyframe(m, d, key),
+             reset_stack(d))
+}
+
+int twin_set_state(const mjModel* m, mjData* d, const mjtNum* state, int sig, char* err,
+                   int err_sz) {
+  TWIN_GUARD(mj_setState(m, d, state, sig), reset_stack(d))
+}
+
+// The reference loop for benchmarks: plain C, no guard, no Rust. Anything twin adds on top of
+// this is twin's own overhead.
+void twin_bench_c_step_loop(const mjModel* m, mjData* d, long n) {
+  for (long i = 0; i < n; i++) {
+    mj_step(m, d);
+  }
+}

@@ -1,0 +1,105 @@
+//! The one error type of `twin-core`.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong in `twin-core`. Variants carry the data needed to act on them
+/// (file, element, line, MuJoCo's own message).
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// Reading or writing a file failed.
+    #[error("{}: {source}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+
+    /// MuJoCo refused a model (parse or compile error). `message` is MuJoCo's text, which names
+    /// the element and line where it can.
+    #[error("{}: MuJoCo could not load the model: {message}", path.as_deref().map_or_else(|| "<string>".into(), |p| p.display().to_string()))]
+    Load {
+        /// The model file, `None` when loaded from a string.
+        path: Option<PathBuf>,
+        /// MuJoCo's error text.
+        message: String,
+    },
+
+    /// A MuJoCo call raised `mju_user_error`; the process keeps running and the data involved
+    /// should be reset before further use.
+    #[error("MuJoCo error in {call}: {message}")]
+    MuJoCo {
+        /// The MuJoCo function that raised it.
+        call: &'static str,
+        /// MuJoCo's error text.
+        message: String,
+    },
+
+    /// The header MuJoCo was compiled against does not match the loaded library.
+    #[error(
+        "MuJoCo library version {library} does not match the headers twin was built with ({header}); \
+         rebuild twin against the same MuJoCo (unset MUJOCO_DIR to use the pinned one)"
+    )]
+    Version {
+        /// `mj_version()` of the loaded library.
+        library: i32,
+        /// `mjVERSION_HEADER` of the bindings.
+        header: i32,
+    },
+
+    /// A URDF element is invalid; `line` is 1-based.
+    #[error("{}:{line}: <{element}{}>: {message}", path.display(), name.as_deref().map_or_else(String::new, |n| format!(" name=\"{n}\"")))]
+    Urdf {
+        /// The URDF file.
+        path: PathBuf,
+        /// Line of the offending element (1-based).
+        line: u32,
+        /// The element's tag, e.g. `inertia`.
+        element: String,
+        /// The `name` of the enclosing link or joint, if any.
+        name: Option<String>,
+        /// What is wrong and what to do about it.
+        message: String,
+    },
+
+    /// The file is not well-formed XML.
+    #[error("{}:{line}:{column}: not well-formed XML: {message}", path.display())]
+    Xml {
+        /// The file.
+        path: PathBuf,
+        /// 1-based line.
+        line: u32,
+        /// 1-based column.
+        column: u32,
+        /// The parser's message.
+        message: String,
+    },
+
+    /// No object of this kind and name in the model.
+    #[error("the model has no {kind} named \"{name}\"")]
+    NotFound {
+        /// Object kind, e.g. `body`.
+        kind: &'static str,
+        /// The name asked for.
+        name: String,
+    },
+
+    /// An index or a slice length does not fit the model.
+    #[error("{what}: expected {expected}, got {got}")]
+    Size {
+        /// What was being set.
+        what: &'static str,
+        /// Expected length or bound.
+        expected: usize,
+        /// Given length or index.
+        got: usize,
+    },
+
+    /// A model edit would make the model physically invalid (e.g. negative mass).
+    #[error("invalid model edit: {0}")]
+    InvalidEdit(String),
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

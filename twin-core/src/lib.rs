@@ -1,0 +1,23 @@
+//! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]) and URDF checks ([`urdf`]).
+//!
+//! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
+//! a small C shim and comes back as [`Error::MuJoCo`].
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use twin_core::mj::{Data, Model};
+//!
+//! let model = Arc::new(Model::from_file("models/humanoid.urdf")?);
+//! let mut data = Data::new(model.clone())?;
+//! for _ in 0..500 {
+//!     data.step()?;
+//! }
+//! println!("t = {} s, total mass {} kg", data.time_secs(), model.total_mass_kg());
+//! # Ok::<(), twin_core::Error>(())
+//! ```
+
+pub mod error;
+pub mod mj;
+pub mod urdf;
+
+pub use error::{Error, Result};

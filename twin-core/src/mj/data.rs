@@ -1,0 +1,403 @@
+use super::model::{raw_slice, raw_slice_mut};
+use super::{Model, ffi, guarded, init};
+use crate::error::{Error, Result};
+use mujoco_sys as sys;
+use std::ffi::c_int;
+use std::ptr::NonNull;
+use std::sync::Arc;
+
+/// Simulation state of one [`Model`] (`mjData`). Owns an `Arc` of its model so it can't outlive
+/// it; `Send` so each worker thread can own one.
+pub struct Data {
+    model: Arc<Model>,
+    ptr: NonNull<sys::mjData>,
+}
+
+// SAFETY: an mjData is a heap block used by one thread at a time; Data hands out access only
+// through &self/&mut self, so moving it to another thread is sound. The shared model is Sync.
+unsafe impl Send for Data {}
+
+impl Drop for Data {
+    fn drop(&mut self) {
+        // SAFETY: the pointer came from mj_makeData/mj_copyData and is owned by this Data.
+        unsafe { sys::mj_deleteData(self.ptr.as_ptr()) }
+    }
+}
+
+impl Clone for Data {
+    /// Copies the whole simulation state (`mj_copyData`). Panics only if MuJoCo cannot allocate.
+    fn clone(&self) -> Self {
+        self.try_clone().expect("mj_copyData failed")
+    }
+}
+
+impl std::fmt::Debug for Data {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Data")
+            .field("time", &self.time_secs())
+            .field("model", &self.model)
+            .finish()
+    }
+}
+
+/// MuJoCo's warning kinds (`mjtWarning`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[repr(u32)]
+pub enum Warning {
+    /// Inertia too small or not positive definite.
+    Inertia = sys::mjtWarning_mjWARN_INERTIA,
+    /// Contact buffer full.
+    ContactFull = sys::mjtWarning_mjWARN_CONTACTFULL,
+    /// Constraint buffer full.
+    ConstraintFull = sys::mjtWarning_mjWARN_CNSTRFULL,
+    /// Bad number in qpos: the simulation diverged and MuJoCo reset it.
+    BadQpos = sys::mjtWarning_mjWARN_BADQPOS,
+    /// Bad number in qvel: diverged.
+    BadQvel = sys::mjtWarning_mjWARN_BADQVEL,
+    /// Bad number in qacc: diverged.
+    BadQacc = sys::mjtWarning_mjWARN_BADQACC,
+    /// Bad number in ctrl.
+    BadCtrl = sys::mjtWarning_mjWARN_BADCTRL,
+}
+
+/// Which parts of the state [`Data::state`] copies (`mjtState` bits).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct StateSig(pub u32);
+
+impl StateSig {
+    /// Time, qpos, qvel, act, history: what integration needs (`mjSTATE_PHYSICS`).
+    pub const PHYSICS: StateSig = StateSig(sys::mjtState_mjSTATE_PHYSICS);
+    /// Physics plus time, plugin state (`mjSTATE_FULLPHYSICS`).
+    pub const FULL_PHYSICS: StateSig = StateSig(sys::mjtState_mjSTATE_FULLPHYSICS);
+    /// Everything a step depends on, user inputs included (`mjSTATE_INTEGRATION`).
+    pub const INTEGRATION: StateSig = StateSig(sys::mjtState_mjSTATE_INTEGRATION);
+}
+
+/// Typed views of `mjData` arrays: `name: element type = row count field of mjModel`.
+macro_rules! data_arrays {
+    ($( $(#[$doc:meta])* $name:ident, $name_mut:ident : $ty:ty = $count:ident; )*) => {
+        impl Data {
+            $(
+                $(#[$doc])*
+                pub fn $name(&self) -> &[$ty] {
+                    let n = self.model.raw().$count as usize;
+                    // SAFETY: mj_makeData allocates this array with `$count` rows of the row
+                    // type's size; it is only read while self is borrowed.
+                    unsafe { raw_slice(self.raw().$name as *const $ty, n) }
+                }
+
+                #[doc = concat!("Mutable [`Data::", stringify!($name), "`].")]
+                pub fn $name_mut(&mut self) -> &mut [$ty] {
+                    let n = self.model.raw().$count as usize;
+                    // SAFETY: as above, and `&mut self` makes the borrow exclusive.
+                    unsafe { raw_slice_mut(self.ptr.as_ref().$name as *mut $ty, n) }
+                }
+            )*
+        }
+    };
+}
+
+data_arrays! {
+    /// Joint positions (len `nq`): metres, radians, unit quaternions (w x y z) for free/ball.
+    qpos, qpos_mut: f64 = nq;
+    /// Joint velocities (len `nv`); free joints: linear in world frame, angular in body frame.
+    qvel, qvel_mut: f64 = nv;
+    /// Joint accelerations (len `nv`); input of `inverse`, output of `forward`.
+    qacc, qacc_mut: f64 = nv;
+    /// Actuator controls (len `nu`).
+    ctrl, ctrl_mut: f64 = nu;
+    /// Actuator activations (len `na`).
+    act, act_mut: f64 = na;
+    /// Generalised forces applied by the user (len `nv`).
+    qfrc_applied, qfrc_applied_mut: f64 = nv;
+    /// Cartesian wrench applied at each body's centre of mass, world frame: force (N) then
+    /// torque (N·m) (len `nbody`).
+    xfrc_applied, xfrc_applied_mut: [f64; 6] = nbody;
+    /// Sensor readings (len `nsensordata`).
+    sensordata, sensordata_mut: f64 = nsensordata;
+    /// Body frame positions, world frame, metres (len `nbody`).
+    xpos, xpos_mut: [f64; 3] = nbody;
+    /// Body frame orientations, world frame, quaternion w x y z (len `nbody`).
+    xquat, xquat_mut: [f64; 4] = nbody;
+    /// Body frame orientations as row-major 3×3 matrices (len `nbody`).
+    xmat, xmat_mut: [f64; 9] = nbody;
+    /// Body centres of mass, world frame (len `nbody`).
+    xipos, xipos_mut: [f64; 3] = nbody;
+    /// Centre of mass of each body's subtree, world frame (len `nbody`).
+    subtree_com, subtree_com_mut: [f64; 3] = nbody;
+    /// Geom positions, world frame (len `ngeom`).
+    geom_xpos, geom_xpos_mut: [f64; 3] = ngeom;
+    /// Site positions, world frame (len `nsite`).
+    site_xpos, site_xpos_mut: [f64; 3] = nsite;
+    /// Site orientations as row-major 3×3 matrices (len `nsite`).
+    site_xmat, site_xmat_mut: [f64; 9] = nsite;
+    /// Generalised forces from `inverse` (len `nv`).
+    qfrc_inverse, qfrc_inverse_mut: f64 = nv;
+    /// Coriolis, centrifugal and gravity forces C(q, q̇) (len `nv`).
+    qfrc_bias, qfrc_bias_mut: f64 = nv;
+    /// Generalised actuator forces (len `nv`).
+    qfrc_actuator, qfrc_actuator_mut: f64 = nv;
+    /// Scalar force of each actuator (len `nu`).
+    actuator_force, actuator_force_mut: f64 = nu;
+}
+
+impl Data {
+    /// Allocates simulation state for `model` at its default pose (`mj_makeData`).
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] if MuJoCo can't allocate (e.g. the model's `<size memory>` is too big).
+    pub fn new(model: Arc<Model>) -> Result<Data> {
+        init()?;
+        let mut out = std::ptr::null_mut();
+        guarded("mj_makeData", |e, n| {
+            // SAFETY: model is live; out receives a new mjData.
+            unsafe { ffi::twin_make_data(model.as_ptr(), &mut out, e, n) }
+        })?;
+        let ptr = NonNull::new(out).ok_or(Error::MuJoCo {
+            call: "mj_makeData",
+            message: "returned no data".into(),
+        })?;
+        Ok(Data { model, ptr })
+    }
+
+    /// Copies the state (`mj_copyData`).
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] if MuJoCo can't allocate.
+    pub fn try_clone(&self) -> Result<Data> {
+        let copy = Data::new(self.model.clone())?;
+        guarded("mj_copyData", |e, n| {
+            // SAFETY: both are live and made for the same model.
+            unsafe {
+                ffi::twin_copy_data(
+                    copy.ptr.as_ptr(),
+                    self.model.as_ptr(),
+                    self.ptr.as_ptr(),
+                    e,
+                    n,
+                )
+            }
+        })?;
+        Ok(copy)
+    }
+
+    /// The model this state belongs to.
+    pub fn model(&self) -> &Arc<Model> {
+        &self.model
+    }
+
+    /// The raw `mjData`, read-only.
+    pub fn raw(&self) -> &sys::mjData {
+        // SAFETY: live for self's lifetime; only read through this reference.
+        unsafe { self.ptr.as_ref() }
+    }
+
+    /// Raw pointers for FFI calls not wrapped here. The caller must not let MuJoCo raise an
+    /// error through them (use only calls that cannot raise, or the guarded methods).
+    pub fn raw_parts(&mut self) -> (*const sys::mjModel, *mut sys::mjData) {
+        (self.model.as_ptr(), self.ptr.as_ptr())
+    }
+
+    /// Simulation time, seconds.
+    pub fn time_secs(&self) -> f64 {
+        self.raw().time
+    }
+
+    /// Sets the simulation time, seconds.
+    pub fn set_time_secs(&mut self, t: f64) {
+        // SAFETY: exclusive access through &mut self; `time` is a plain field.
+        unsafe { self.ptr.as_mut().time = t }
+    }
+
+    /// Number of active contacts after the last forward pass.
+    pub fn ncon(&self) -> usize {
+        self.raw().ncon.max(0) as usize
+    }
+
+    /// Potential and kinetic energy, joules (when the model enables the energy flag).
+    pub fn energy(&self) -> [f64; 2] {
+        self.raw().energy
+    }
+
+    /// How often MuJoCo raised warning `w` on this data since the last reset.
+    pub fn warning_count(&self, w: Warning) -> u32 {
+        self.raw().warning[w as usize].number.max(0) as u32
+    }
+
+    /// Whether the simulation diverged (bad qpos/qvel/qacc: MuJoCo reset the state to recover).
+    /// A diverged run must not count as a success.
+    pub fn diverged(&self) -> bool {
+        [Warning::BadQpos, Warning::BadQvel, Warning::BadQacc]
+            .iter()
+            .any(|&w| self.warning_count(w) > 0)
+    }
+
+    /// Advances the simulation by one timestep (`mj_step`).
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] if MuJoCo raises (e.g. its arena is too small for the contacts); the
+    /// state is then inconsistent and should be reset.
+    #[inline]
+    pub fn step(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: live model/data pair made for each other; exclusive through &mut self.
+        guarded("mj_step", |e, n| unsafe { ffi::twin_step(m, d, e, n) })
+    }
+
+    /// Advances `n` timesteps in one guarded C loop (no per-step work in Rust).
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn step_n(&mut self, n: u64) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_step", |e, len| unsafe {
+            ffi::twin_step_n(m, d, n as std::ffi::c_long, e, len)
+        })
+    }
+
+    /// First half of a step, up to the control-dependent stage (`mj_step1`): set `ctrl` from
+    /// the fresh sensors, then call [`Data::step2`].
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn step1(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_step1", |e, n| unsafe { ffi::twin_step1(m, d, e, n) })
+    }
+
+    /// Second half of a step (`mj_step2`).
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn step2(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_step2", |e, n| unsafe { ffi::twin_step2(m, d, e, n) })
+    }
+
+    /// Forward dynamics without integration (`mj_forward`): positions, sensors, accelerations.
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn forward(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_forward", |e, n| unsafe {
+            ffi::twin_forward(m, d, e, n)
+        })
+    }
+
+    /// Inverse dynamics (`mj_inverse`): from qpos, qvel, qacc to [`Data::qfrc_inverse`].
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn inverse(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_inverse", |e, n| unsafe {
+            ffi::twin_inverse(m, d, e, n)
+        })
+    }
+
+    /// Recursive Newton–Euler (`mj_rne`): M(q)·q̈ + C(q, q̇) with `with_acceleration`, else
+    /// C(q, q̇) only. Needs positions and velocities computed (after `forward`). Len `nv`.
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn rne(&mut self, with_acceleration: bool) -> Result<Vec<f64>> {
+        let mut out = vec![0.0; self.model.nv()];
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        let res = out.as_mut_ptr();
+        // SAFETY: `out` has nv entries as mj_rne requires; pair is live and exclusive.
+        guarded("mj_rne", |e, n| unsafe {
+            ffi::twin_rne(m, d, with_acceleration as c_int, res, e, n)
+        })?;
+        Ok(out)
+    }
+
+    /// Resets to the model's default state (`mj_resetData`), warnings included.
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn reset(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_resetData", |e, n| unsafe {
+            ffi::twin_reset_data(m, d, -1, e, n)
+        })
+    }
+
+    /// Resets to keyframe `key` (`mj_resetDataKeyframe`).
+    ///
+    /// # Errors
+    /// [`Error::Size`] if the model has no such keyframe.
+    pub fn reset_to_keyframe(&mut self, key: usize) -> Result<()> {
+        let nkey = self.model.nkey();
+        if key >= nkey {
+            return Err(Error::Size {
+                what: "keyframe index",
+                expected: nkey,
+                got: key,
+            });
+        }
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: key checked above; pair live and exclusive.
+        guarded("mj_resetDataKeyframe", |e, n| unsafe {
+            ffi::twin_reset_data(m, d, key as c_int, e, n)
+        })
+    }
+
+    /// Copies the parts of the state named by `sig` (`mj_getState`).
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] for a signature MuJoCo rejects.
+    pub fn state(&self, sig: StateSig) -> Result<Vec<f64>> {
+        // Checked here because mj_stateSize/mj_getState raise on bad signatures and they are not
+        // wrapped by the shim.
+        if sig.0 >= (1 << sys::mjtState_mjNSTATE) {
+            return Err(Error::MuJoCo {
+                call: "mj_getState",
+                message: format!("invalid state signature {:#x}", sig.0),
+            });
+        }
+        // SAFETY: valid signature checked above; model live.
+        let size = unsafe { sys::mj_stateSize(self.model.as_ptr(), sig.0 as c_int) };
+        let mut out = vec![0.0; size.max(0) as usize];
+        // SAFETY: `out` has mj_stateSize entries for this signature.
+        unsafe {
+            sys::mj_getState(
+                self.model.as_ptr(),
+                self.ptr.as_ptr(),
+                out.as_mut_ptr(),
+                sig.0 as c_int,
+            )
+        };
+        Ok(out)
+    }
+
+    /// Restores a state saved with [`Data::state`] and the same signature (`mj_setState`).
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a wrong length, [`Error::MuJoCo`] for a signature MuJoCo rejects.
+    pub fn set_state(&mut self, state: &[f64], sig: StateSig) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        if sig.0 < (1 << sys::mjtState_mjNSTATE) {
+            // SAFETY: valid signature; model live.
+            let size = unsafe { sys::mj_stateSize(m, sig.0 as c_int) }.max(0) as usize;
+            if state.len() != size {
+                return Err(Error::Size {
+                    what: "state vector length",
+                    expected: size,
+                    got: state.len(),
+                });
+            }
+        }
+        // SAFETY: length checked for valid signatures; an invalid one makes MuJoCo raise before
+        // reading `state`, which the shim catches.
+        guarded("mj_setState", |e, n| unsafe {
+            ffi::twin_set_state(m, d, state.as_ptr(), sig.0 as c_int, e, n)
+        })
+    }
+}

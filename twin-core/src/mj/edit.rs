@@ -1,0 +1,213 @@
+use super::model::raw_slice_mut;
+use super::{Model, ffi, guarded};
+use crate::error::{Error, Result};
+use std::ptr::NonNull;
+
+/// An edit of a copy of a [`Model`]: change masses, inertias, friction, damping, armature, then
+/// [`ModelEdit::finish`] runs `mj_setConst` so that derived quantities (subtree masses,
+/// `dof_invweight0`, `actuator_acc0`, …) match. The only way to get the edited model is through
+/// `finish`, so no caller can forget `mj_setConst`.
+pub struct ModelEdit {
+    model: Model,
+}
+
+/// `body`, `geom` or `dof` index out of range.
+fn check(what: &'static str, index: usize, count: usize) -> Result<()> {
+    if index < count {
+        Ok(())
+    } else {
+        Err(Error::Size {
+            what,
+            expected: count,
+            got: index,
+        })
+    }
+}
+
+fn finite(what: &str, values: &[f64]) -> Result<()> {
+    if values.iter().all(|v| v.is_finite()) {
+        Ok(())
+    } else {
+        Err(Error::InvalidEdit(format!(
+            "{what} must be finite, got {values:?}"
+        )))
+    }
+}
+
+impl ModelEdit {
+    pub(super) fn new(model: Model) -> ModelEdit {
+        ModelEdit { model }
+    }
+
+    /// The model as edited so far (derived quantities not yet updated).
+    pub fn model(&self) -> &Model {
+        &self.model
+    }
+
+    fn raw_mut(&mut self) -> &mut mujoco_sys::mjModel {
+        // SAFETY: ModelEdit owns its Model exclusively; no Data refers to it until finish().
+        unsafe { &mut *self.model.as_mut_ptr() }
+    }
+
+    /// Sets body `body`'s mass in kg, keeping its inertia tensor as is.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a non-positive or non-finite mass; [`Error::Size`] for a bad id.
+    pub fn set_body_mass(&mut self, body: usize, mass_kg: f64) -> Result<&mut Self> {
+        check("body id", body, self.model.nbody())?;
+        if body == 0 || !(mass_kg > 0.0 && mass_kg.is_finite()) {
+            return Err(Error::InvalidEdit(format!(
+                "body {body} (\"{}\"): mass must be positive and finite, got {mass_kg} kg",
+                self.model.name(super::ObjType::Body, body)
+            )));
+        }
+        let n = self.model.nbody();
+        let m = self.raw_mut();
+        // SAFETY: body_mass has nbody entries; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.body_mass, n) };
+        rows[body] = mass_kg;
+        Ok(self)
+    }
+
+    /// Scales body `body`'s mass and its inertia by `factor` (a uniformly denser or lighter
+    /// link), the physically consistent way to randomise a mass.
+    ///
+    /// # Errors
+    /// As [`ModelEdit::set_body_mass`].
+    pub fn scale_body_mass(&mut self, body: usize, factor: f64) -> Result<&mut Self> {
+        check("body id", body, self.model.nbody())?;
+        let mass = self.model.body_mass()[body] * factor;
+        let inertia = self.model.body_inertia()[body].map(|i| i * factor);
+        self.set_body_mass(body, mass)?;
+        self.set_body_inertia(body, inertia)
+    }
+
+    /// Sets body `body`'s principal inertia (kg·m², in its inertial frame).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] unless all are positive and satisfy the triangle inequality.
+    pub fn set_body_inertia(&mut self, body: usize, inertia: [f64; 3]) -> Result<&mut Self> {
+        check("body id", body, self.model.nbody())?;
+        finite("inertia", &inertia)?;
+        let [a, b, c] = inertia;
+        let triangle =
+            a + b >= c * (1.0 - 1e-12) && a + c >= b * (1.0 - 1e-12) && b + c >= a * (1.0 - 1e-12);
+        if body == 0 || a <= 0.0 || b <= 0.0 || c <= 0.0 || !triangle {
+            return Err(Error::InvalidEdit(format!(
+                "body {body} (\"{}\"): principal inertia {inertia:?} must be positive and satisfy \
+                 the triangle inequality (each entry at most the sum of the other two)",
+                self.model.name(super::ObjType::Body, body)
+            )));
+        }
+        let n = self.model.nbody();
+        let m = self.raw_mut();
+        // SAFETY: body_inertia has nbody rows of 3; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.body_inertia.cast::<[f64; 3]>(), n) };
+        rows[body] = inertia;
+        Ok(self)
+    }
+
+    /// Sets body `body`'s centre of mass in its body frame, metres.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for non-finite values; [`Error::Size`] for a bad id.
+    pub fn set_body_com(&mut self, body: usize, com_body: [f64; 3]) -> Result<&mut Self> {
+        check("body id", body, self.model.nbody())?;
+        finite("centre of mass", &com_body)?;
+        let n = self.model.nbody();
+        let m = self.raw_mut();
+        // SAFETY: body_ipos has nbody rows of 3; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.body_ipos.cast::<[f64; 3]>(), n) };
+        rows[body] = com_body;
+        Ok(self)
+    }
+
+    /// Sets geom `geom`'s friction (sliding, torsional, rolling).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for negative or non-finite values.
+    pub fn set_geom_friction(&mut self, geom: usize, friction: [f64; 3]) -> Result<&mut Self> {
+        check("geom id", geom, self.model.ngeom())?;
+        finite("friction", &friction)?;
+        if friction.iter().any(|&f| f < 0.0) {
+            return Err(Error::InvalidEdit(format!(
+                "geom {geom}: friction {friction:?} must not be negative"
+            )));
+        }
+        let n = self.model.ngeom();
+        let m = self.raw_mut();
+        // SAFETY: geom_friction has ngeom rows of 3; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.geom_friction.cast::<[f64; 3]>(), n) };
+        rows[geom] = friction;
+        Ok(self)
+    }
+
+    fn set_dof(
+        &mut self,
+        what: &'static str,
+        dof: usize,
+        value: f64,
+        pick: fn(&mujoco_sys::mjModel) -> *mut f64,
+    ) -> Result<&mut Self> {
+        check("dof id", dof, self.model.nv())?;
+        if !(value >= 0.0 && value.is_finite()) {
+            return Err(Error::InvalidEdit(format!(
+                "dof {dof}: {what} must be finite and ≥ 0, got {value}"
+            )));
+        }
+        let n = self.model.nv();
+        let ptr = pick(self.raw_mut());
+        // SAFETY: every dof_* array picked here has nv entries; exclusive access.
+        let rows = unsafe { raw_slice_mut(ptr, n) };
+        rows[dof] = value;
+        Ok(self)
+    }
+
+    /// Sets DOF `dof`'s viscous damping (N·m·s/rad or N·s/m).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for negative values.
+    pub fn set_dof_damping(&mut self, dof: usize, damping: f64) -> Result<&mut Self> {
+        self.set_dof("damping", dof, damping, |m| m.dof_damping)
+    }
+
+    /// Sets DOF `dof`'s dry friction loss (N·m or N).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for negative values.
+    pub fn set_dof_frictionloss(&mut self, dof: usize, frictionloss: f64) -> Result<&mut Self> {
+        self.set_dof("friction loss", dof, frictionloss, |m| m.dof_frictionloss)
+    }
+
+    /// Sets DOF `dof`'s armature (kg·m² or kg).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for negative values.
+    pub fn set_dof_armature(&mut self, dof: usize, armature: f64) -> Result<&mut Self> {
+        self.set_dof("armature", dof, armature, |m| m.dof_armature)
+    }
+
+    /// Recomputes derived quantities with `mj_setConst` and returns the edited model.
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] if MuJoCo rejects the edited model.
+    pub fn finish(mut self) -> Result<Model> {
+        let mut data = std::ptr::null_mut();
+        guarded("mj_makeData", |e, n| {
+            // SAFETY: the model is live; data receives a scratch mjData.
+            unsafe { ffi::twin_make_data(self.model.as_ptr(), &mut data, e, n) }
+        })?;
+        let data = NonNull::new(data).ok_or(Error::MuJoCo {
+            call: "mj_makeData",
+            message: "returned no data".into(),
+        })?;
+        let m = self.model.as_mut_ptr();
+        // SAFETY: exclusive model, scratch data made for it.
+        let res = guarded("mj_setConst", |e, n| unsafe {
+            ffi::twin_set_const(m, data.as_ptr(), e, n)
+        });
+        // SAFETY: scratch data is ours and no longer used.
+        unsafe { mujoco_sys::mj_deleteData(data.as_ptr()) };
+        res.map(|()| self.model)
+    }
+}

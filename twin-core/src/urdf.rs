@@ -1,0 +1,200 @@
+//! URDF checks that MuJoCo reports poorly or not at all: every error names the file, the
+//! element, its line and the link, and says what to do.
+//!
+//! ## Limitations
+//! Only what is needed before handing a URDF to MuJoCo is checked here: well-formed XML, link
+//! masses, inertia tensors, and that mesh files exist.
+
+use crate::error::{Error, Result};
+use nalgebra::{Matrix3, SymmetricEigen};
+use roxmltree::{Document, Node};
+use std::path::{Path, PathBuf};
+
+/// Whether `text` looks like a URDF document (root element `<robot>`).
+pub fn is_urdf(text: &str) -> bool {
+    // Cheap: skip the prolog and comments, look at the first element's name.
+    let mut rest = text;
+    loop {
+        rest = rest.trim_start();
+        if let Some(r) = rest.strip_prefix("<?") {
+            rest = r.split_once("?>").map_or("", |(_, t)| t);
+        } else if let Some(r) = rest.strip_prefix("<!--") {
+            rest = r.split_once("-->").map_or("", |(_, t)| t);
+        } else if let Some(r) = rest.strip_prefix("<!") {
+            rest = r.split_once('>').map_or("", |(_, t)| t);
+        } else {
+            return rest.starts_with("<robot")
+                && rest[6..].starts_with(|c: char| c.is_whitespace() || c == '>');
+        }
+    }
+}
+
+/// Parses `text` as XML, with errors naming `path`, line and column.
+pub(crate) fn parse<'a>(path: &Path, text: &'a str) -> Result<Document<'a>> {
+    Document::parse(text).map_err(|e| {
+        let pos = e.pos();
+        Error::Xml {
+            path: path.to_path_buf(),
+            line: pos.row,
+            column: pos.col,
+            message: e.to_string(),
+        }
+    })
+}
+
+fn line_of(doc: &Document<'_>, node: Node<'_, '_>) -> u32 {
+    doc.text_pos_at(node.range().start).row
+}
+
+/// Name of the enclosing `<link>` or `<joint>`.
+fn owner_name(node: Node<'_, '_>) -> Option<String> {
+    node.ancestors()
+        .find(|n| n.has_tag_name("link") || n.has_tag_name("joint"))
+        .and_then(|n| n.attribute("name"))
+        .map(str::to_string)
+}
+
+/// Checks a URDF for errors MuJoCo would report without a line, or not at all.
+///
+/// # Errors
+/// [`Error::Xml`] for malformed XML, [`Error::Urdf`] for a bad mass, a bad inertia or a missing
+/// mesh file.
+pub fn validate(path: &Path, text: &str) -> Result<()> {
+    let doc = parse(path, text)?;
+    let err = |node: Node<'_, '_>, message: String| Error::Urdf {
+        path: path.to_path_buf(),
+        line: line_of(&doc, node),
+        element: node.tag_name().name().to_string(),
+        name: owner_name(node),
+        message,
+    };
+    let number = |node: Node<'_, '_>, attr: &str, default: Option<f64>| -> Result<f64> {
+        match node.attribute(attr) {
+            Some(v) => v
+                .trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|x| x.is_finite())
+                .ok_or_else(|| {
+                    err(
+                        node,
+                        format!("attribute {attr}=\"{v}\" is not a finite number"),
+                    )
+                }),
+            None => default.ok_or_else(|| err(node, format!("missing attribute {attr}"))),
+        }
+    };
+    let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+
+    for link in doc
+        .root_element()
+        .children()
+        .filter(|n| n.has_tag_name("link"))
+    {
+        if let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) {
+            if let Some(mass) = inertial.children().find(|n| n.has_tag_name("mass")) {
+                let m = number(mass, "value", None)?;
+                if m < 0.0 {
+                    return Err(err(
+                        mass,
+                        format!("negative mass {m} kg; give the link's real mass in kg (> 0)"),
+                    ));
+                }
+            }
+            if let Some(inertia) = inertial.children().find(|n| n.has_tag_name("inertia")) {
+                let mut v = [0.0; 6];
+                for (slot, attr) in v.iter_mut().zip(["ixx", "ixy", "ixz", "iyy", "iyz", "izz"]) {
+                    *slot = number(inertia, attr, Some(0.0))?;
+                }
+                check_inertia(v).map_err(|m| err(inertia, m))?;
+            }
+        }
+        for mesh in link.descendants().filter(|n| n.has_tag_name("mesh")) {
+            let Some(filename) = mesh.attribute("filename") else {
+                return Err(err(mesh, "<mesh> without filename attribute".into()));
+            };
+            if let Err(message) = resolve_mesh(&base_dir, filename) {
+                return Err(err(mesh, message));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Checks an inertia tensor `[ixx, ixy, ixz, iyy, iyz, izz]` (kg·m²): symmetric positive
+/// definite and its principal moments satisfy the triangle inequality. The message says why not.
+pub fn check_inertia(v: [f64; 6]) -> std::result::Result<(), String> {
+    let [ixx, ixy, ixz, iyy, iyz, izz] = v;
+    let tensor = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
+    let mut p: Vec<f64> = SymmetricEigen::new(tensor)
+        .eigenvalues
+        .iter()
+        .copied()
+        .collect();
+    p.sort_by(f64::total_cmp);
+    if p[0] <= 0.0 {
+        return Err(format!(
+            "inertia is not positive definite (principal moments {:.6e}, {:.6e}, {:.6e} kg·m²); \
+             fix ixx..izz (check units and signs of the products of inertia)",
+            p[0], p[1], p[2]
+        ));
+    }
+    // Relative tolerance: CAD exports of thin shapes sit exactly on the boundary.
+    if p[0] + p[1] < p[2] * (1.0 - 1e-9) {
+        return Err(format!(
+            "principal moments {:.6e}, {:.6e}, {:.6e} kg·m² violate the triangle inequality \
+             ({:.6e} + {:.6e} < {:.6e}): no rigid body has this inertia; fix ixx..izz",
+            p[0], p[1], p[2], p[0], p[1], p[2]
+        ));
+    }
+    Ok(())
+}
+
+/// Finds a mesh file the way MuJoCo will look for it (relative to the URDF's folder).
+fn resolve_mesh(base_dir: &Path, filename: &str) -> std::result::Result<PathBuf, String> {
+    if filename.starts_with("package://") {
+        return Err(format!(
+            "mesh \"{filename}\" uses a package:// URI, which MuJoCo cannot resolve; use a path \
+             relative to the URDF, or `twin convert --package-path DIR`"
+        ));
+    }
+    let plain = filename.strip_prefix("file://").unwrap_or(filename);
+    let candidate = base_dir.join(plain);
+    if candidate.is_file() {
+        Ok(candidate)
+    } else {
+        Err(format!(
+            "mesh file not found: \"{filename}\" (looked at {})",
+            candidate.display()
+        ))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn recognises_urdf_roots() {
+        assert!(is_urdf(
+            "<?xml version=\"1.0\"?>\n<!-- c -->\n<robot name=\"r\">"
+        ));
+        assert!(!is_urdf("<mujoco model=\"m\">"));
+        assert!(!is_urdf("<robots>"));
+    }
+
+    #[test]
+    fn inertia_checks() {
+        assert!(check_inertia([1.0, 0.0, 0.0, 1.0, 0.0, 1.0]).is_ok());
+        assert!(
+            check_inertia([1.0, 0.0, 0.0, 1.0, 0.0, 3.0])
+                .unwrap_err()
+                .contains("triangle")
+        );
+        assert!(
+            check_inertia([1.0, 2.0, 0.0, 1.0, 0.0, 1.0])
+                .unwrap_err()
+                .contains("positive definite")
+        );
+    }
+}
