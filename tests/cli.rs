@@ -1,0 +1,6 @@
+//! End-to-end tests of the `twin` binary: one test binary, a module per area under `tests/cli/`.
+
+#[path = "cli/common.rs"]
+mod common;
+#[path = "cli/info.rs"]
+mod info;
