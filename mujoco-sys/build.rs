@@ -36,13 +36,7 @@ const WHEELS: &[(&str, Wheel)] = &[(
 
 fn main() {
     println!("cargo::rerun-if-changed=build.rs");
-    for var in [
-        "MUJOCO_DIR",
-        "TWIN_MUJOCO_CACHE",
-        "XDG_CACHE_HOME",
-        "HOME",
-        "PYTHON",
-    ] {
+    for var in ["MUJOCO_DIR", "TWIN_MUJOCO_CACHE", "XDG_CACHE_HOME", "HOME", "PYTHON"] {
         println!("cargo::rerun-if-env-changed={var}");
     }
     let (lib_dir, include_dir, lib_file) = match env::var_os("MUJOCO_DIR") {
@@ -105,9 +99,7 @@ fn from_mujoco_dir(dir: &Path) -> (PathBuf, PathBuf, String) {
 }
 
 fn header_version(text: &str) -> Option<u32> {
-    text.lines()
-        .find_map(|l| l.trim().strip_prefix("#define mjVERSION_HEADER"))
-        .and_then(|v| v.trim().parse().ok())
+    text.lines().find_map(|l| l.trim().strip_prefix("#define mjVERSION_HEADER")).and_then(|v| v.trim().parse().ok())
 }
 
 fn cache_root() -> PathBuf {
@@ -120,9 +112,7 @@ fn cache_root() -> PathBuf {
     if let Some(home) = env::var_os("HOME").filter(|d| !d.is_empty()) {
         return PathBuf::from(home).join(".cache").join("twin");
     }
-    fail(
-        "cannot choose a cache folder for MuJoCo: set TWIN_MUJOCO_CACHE (or HOME), or set MUJOCO_DIR",
-    )
+    fail("cannot choose a cache folder for MuJoCo: set TWIN_MUJOCO_CACHE (or HOME), or set MUJOCO_DIR")
 }
 
 fn from_wheel() -> (PathBuf, PathBuf, String) {
@@ -157,27 +147,12 @@ fn from_wheel() -> (PathBuf, PathBuf, String) {
     // concurrent builds cannot see a half-unpacked tree.
     let scratch = parent.join(format!(".mujoco-{VERSION}-{}", std::process::id()));
     let _ = fs::remove_dir_all(&scratch);
-    fs::create_dir_all(&scratch)
-        .unwrap_or_else(|e| fail(format!("cannot create {} ({e})", scratch.display())));
+    fs::create_dir_all(&scratch).unwrap_or_else(|e| fail(format!("cannot create {} ({e})", scratch.display())));
 
     let python = env::var("PYTHON").unwrap_or_else(|_| "python3".to_string());
     let status = Command::new(&python)
-        .args([
-            "-m",
-            "pip",
-            "download",
-            &format!("mujoco-core=={VERSION}"),
-            "--no-deps",
-            "--only-binary=:all:",
-        ])
-        .args([
-            "--platform",
-            wheel.platform,
-            "--python-version",
-            "3.11",
-            "--disable-pip-version-check",
-            "-q",
-        ])
+        .args(["-m", "pip", "download", &format!("mujoco-core=={VERSION}"), "--no-deps", "--only-binary=:all:"])
+        .args(["--platform", wheel.platform, "--python-version", "3.11", "--disable-pip-version-check", "-q"])
         .arg("-d")
         .arg(&scratch)
         .status();
@@ -193,12 +168,9 @@ fn from_wheel() -> (PathBuf, PathBuf, String) {
         )),
     }
     let wheel_path = scratch.join(wheel.file);
-    let bytes = fs::read(&wheel_path)
-        .unwrap_or_else(|e| fail(format!("pip did not leave {} ({e})", wheel_path.display())));
-    let digest: String = Sha256::digest(&bytes)
-        .iter()
-        .map(|b| format!("{b:02x}"))
-        .collect();
+    let bytes =
+        fs::read(&wheel_path).unwrap_or_else(|e| fail(format!("pip did not leave {} ({e})", wheel_path.display())));
+    let digest: String = Sha256::digest(&bytes).iter().map(|b| format!("{b:02x}")).collect();
     if digest != wheel.sha256 {
         fail(format!(
             "{} has sha256 {digest}, expected {}: refusing to link an unverified library. \
@@ -233,14 +205,9 @@ with zipfile.ZipFile(whl) as z:
         .status()
         .is_ok_and(|s| s.success());
     if !ok || !tree.join("lib").join(LIB_NAME).is_file() {
-        fail(format!(
-            "unpacking {} failed; remove {} and retry, or set MUJOCO_DIR",
-            wheel.file,
-            scratch.display()
-        ));
+        fail(format!("unpacking {} failed; remove {} and retry, or set MUJOCO_DIR", wheel.file, scratch.display()));
     }
-    fs::write(tree.join(".sha256"), wheel.sha256)
-        .unwrap_or_else(|e| fail(format!("cannot write stamp ({e})")));
+    fs::write(tree.join(".sha256"), wheel.sha256).unwrap_or_else(|e| fail(format!("cannot write stamp ({e})")));
     let _ = fs::remove_dir_all(&dest);
     if fs::rename(&tree, &dest).is_err() && !dest.join("lib").join(LIB_NAME).is_file() {
         fail(format!("cannot move MuJoCo into {}", dest.display()));

@@ -7,12 +7,7 @@
 //! The build script links the shared library dynamically and publishes `include` and `lib_dir`
 //! to dependents (`DEP_MUJOCO_INCLUDE`, `DEP_MUJOCO_LIB_DIR`); see `build.rs` for how the library
 //! is found (`MUJOCO_DIR`, or the pinned `mujoco-core` wheel fetched with pip).
-#![allow(
-    non_upper_case_globals,
-    non_camel_case_types,
-    non_snake_case,
-    dead_code
-)]
+#![allow(non_upper_case_globals, non_camel_case_types, non_snake_case, dead_code)]
 #![allow(clippy::all, clippy::undocumented_unsafe_blocks)]
 
 /// The MuJoCo version these bindings were generated from.

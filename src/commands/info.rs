@@ -33,26 +33,11 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
     )?;
 
     writeln!(out, "\nbodies ({}):", m.nbody())?;
-    writeln!(
-        out,
-        "  {:>3}  {:<28} {:<28} {:>10}",
-        "id", "name", "parent", "mass_kg"
-    )?;
+    writeln!(out, "  {:>3}  {:<28} {:<28} {:>10}", "id", "name", "parent", "mass_kg")?;
     for b in 0..m.nbody() {
         let parent = m.body_parentid()[b] as usize;
-        let parent = if b == 0 {
-            "-"
-        } else {
-            m.name(ObjType::Body, parent)
-        };
-        writeln!(
-            out,
-            "  {:>3}  {:<28} {:<28} {:>10.4}",
-            b,
-            m.name(ObjType::Body, b),
-            parent,
-            m.body_mass()[b]
-        )?;
+        let parent = if b == 0 { "-" } else { m.name(ObjType::Body, parent) };
+        writeln!(out, "  {:>3}  {:<28} {:<28} {:>10.4}", b, m.name(ObjType::Body, b), parent, m.body_mass()[b])?;
     }
 
     writeln!(out, "\njoints ({}):", m.njnt())?;
@@ -85,17 +70,9 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
     writeln!(out, "\nactuators ({}):", m.nu())?;
     for a in 0..m.nu() {
         let target = m.actuator_trnid()[a][0];
-        let target = if target >= 0 {
-            m.name(ObjType::Joint, target as usize)
-        } else {
-            "-"
-        };
+        let target = if target >= 0 { m.name(ObjType::Joint, target as usize) } else { "-" };
         let [lo, hi] = m.actuator_ctrlrange()[a];
-        let range = if m.actuator_ctrllimited()[a] != 0 {
-            format!("[{lo}, {hi}]")
-        } else {
-            "unlimited".into()
-        };
+        let range = if m.actuator_ctrllimited()[a] != 0 { format!("[{lo}, {hi}]") } else { "unlimited".into() };
         writeln!(
             out,
             "  {:<28} joint {:<28} gear {:<8} ctrlrange {}",
@@ -108,13 +85,7 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
 
     writeln!(out, "\nsensors ({}):", m.nsensor())?;
     for s in 0..m.nsensor() {
-        writeln!(
-            out,
-            "  {:<28} type {:<3} dim {}",
-            m.name(ObjType::Sensor, s),
-            m.sensor_type()[s],
-            m.sensor_dim()[s]
-        )?;
+        writeln!(out, "  {:<28} type {:<3} dim {}", m.name(ObjType::Sensor, s), m.sensor_type()[s], m.sensor_dim()[s])?;
     }
 
     writeln!(out, "\ntotal mass: {:.4} kg", m.total_mass_kg())?;

@@ -19,9 +19,5 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
 /// current directory if there is one, else the copy in the source tree twin was built from.
 pub fn default_model() -> PathBuf {
     let local = PathBuf::from("models/humanoid.urdf");
-    if local.is_file() {
-        local
-    } else {
-        PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf"))
-    }
+    if local.is_file() { local } else { PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf")) }
 }

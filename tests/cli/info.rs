@@ -81,5 +81,8 @@ fn info_errors_name_the_file_and_element() {
     );
     let (ok, _, err) = run(&["info", path.to_str().unwrap()]);
     assert!(!ok);
-    assert!(err.contains("neg.urdf:4") && err.contains("<mass name=\"base\">") && err.contains("negative mass"), "{err}");
+    assert!(
+        err.contains("neg.urdf:4") && err.contains("<mass name=\"base\">") && err.contains("negative mass"),
+        "{err}"
+    );
 }

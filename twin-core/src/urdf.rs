@@ -23,8 +23,7 @@ pub fn is_urdf(text: &str) -> bool {
         } else if let Some(r) = rest.strip_prefix("<!") {
             rest = r.split_once('>').map_or("", |(_, t)| t);
         } else {
-            return rest.starts_with("<robot")
-                && rest[6..].starts_with(|c: char| c.is_whitespace() || c == '>');
+            return rest.starts_with("<robot") && rest[6..].starts_with(|c: char| c.is_whitespace() || c == '>');
         }
     }
 }
@@ -33,12 +32,7 @@ pub fn is_urdf(text: &str) -> bool {
 pub(crate) fn parse<'a>(path: &Path, text: &'a str) -> Result<Document<'a>> {
     Document::parse(text).map_err(|e| {
         let pos = e.pos();
-        Error::Xml {
-            path: path.to_path_buf(),
-            line: pos.row,
-            column: pos.col,
-            message: e.to_string(),
-        }
+        Error::Xml { path: path.to_path_buf(), line: pos.row, column: pos.col, message: e.to_string() }
     })
 }
 
@@ -75,30 +69,18 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
                 .parse::<f64>()
                 .ok()
                 .filter(|x| x.is_finite())
-                .ok_or_else(|| {
-                    err(
-                        node,
-                        format!("attribute {attr}=\"{v}\" is not a finite number"),
-                    )
-                }),
+                .ok_or_else(|| err(node, format!("attribute {attr}=\"{v}\" is not a finite number"))),
             None => default.ok_or_else(|| err(node, format!("missing attribute {attr}"))),
         }
     };
     let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
 
-    for link in doc
-        .root_element()
-        .children()
-        .filter(|n| n.has_tag_name("link"))
-    {
+    for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
         if let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) {
             if let Some(mass) = inertial.children().find(|n| n.has_tag_name("mass")) {
                 let m = number(mass, "value", None)?;
                 if m < 0.0 {
-                    return Err(err(
-                        mass,
-                        format!("negative mass {m} kg; give the link's real mass in kg (> 0)"),
-                    ));
+                    return Err(err(mass, format!("negative mass {m} kg; give the link's real mass in kg (> 0)")));
                 }
             }
             if let Some(inertia) = inertial.children().find(|n| n.has_tag_name("inertia")) {
@@ -126,11 +108,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
 pub fn check_inertia(v: [f64; 6]) -> std::result::Result<(), String> {
     let [ixx, ixy, ixz, iyy, iyz, izz] = v;
     let tensor = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
-    let mut p: Vec<f64> = SymmetricEigen::new(tensor)
-        .eigenvalues
-        .iter()
-        .copied()
-        .collect();
+    let mut p: Vec<f64> = SymmetricEigen::new(tensor).eigenvalues.iter().copied().collect();
     p.sort_by(f64::total_cmp);
     if p[0] <= 0.0 {
         return Err(format!(
@@ -163,10 +141,7 @@ fn resolve_mesh(base_dir: &Path, filename: &str) -> std::result::Result<PathBuf,
     if candidate.is_file() {
         Ok(candidate)
     } else {
-        Err(format!(
-            "mesh file not found: \"{filename}\" (looked at {})",
-            candidate.display()
-        ))
+        Err(format!("mesh file not found: \"{filename}\" (looked at {})", candidate.display()))
     }
 }
 
@@ -176,9 +151,7 @@ mod tests {
 
     #[test]
     fn recognises_urdf_roots() {
-        assert!(is_urdf(
-            "<?xml version=\"1.0\"?>\n<!-- c -->\n<robot name=\"r\">"
-        ));
+        assert!(is_urdf("<?xml version=\"1.0\"?>\n<!-- c -->\n<robot name=\"r\">"));
         assert!(!is_urdf("<mujoco model=\"m\">"));
         assert!(!is_urdf("<robots>"));
     }
@@ -186,15 +159,7 @@ mod tests {
     #[test]
     fn inertia_checks() {
         assert!(check_inertia([1.0, 0.0, 0.0, 1.0, 0.0, 1.0]).is_ok());
-        assert!(
-            check_inertia([1.0, 0.0, 0.0, 1.0, 0.0, 3.0])
-                .unwrap_err()
-                .contains("triangle")
-        );
-        assert!(
-            check_inertia([1.0, 2.0, 0.0, 1.0, 0.0, 1.0])
-                .unwrap_err()
-                .contains("positive definite")
-        );
+        assert!(check_inertia([1.0, 0.0, 0.0, 1.0, 0.0, 3.0]).unwrap_err().contains("triangle"));
+        assert!(check_inertia([1.0, 2.0, 0.0, 1.0, 0.0, 1.0]).unwrap_err().contains("positive definite"));
     }
 }

@@ -31,7 +31,10 @@ fn mujoco_error_in_step_is_returned_and_process_survives() {
     // Same again: the guard is re-armed and the mjData stack was reset.
     assert!(data.step().is_err());
     // And MuJoCo still works normally afterwards in this process.
-    let ok = Arc::new(Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>").unwrap());
+    let ok = Arc::new(
+        Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+            .unwrap(),
+    );
     let mut d = Data::new(ok).unwrap();
     d.step_n(10).unwrap();
     assert!(d.time_secs() > 0.0);
@@ -39,7 +42,10 @@ fn mujoco_error_in_step_is_returned_and_process_survives() {
 
 #[test]
 fn invalid_state_signature_is_an_error() {
-    let model = Arc::new(Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>").unwrap());
+    let model = Arc::new(
+        Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+            .unwrap(),
+    );
     let mut data = Data::new(model).unwrap();
     // Out-of-range signature bits: MuJoCo raises mju_user_error inside mj_setState.
     let err = data.set_state(&[0.0; 4], StateSig(1 << 20)).expect_err("bad signature");
@@ -51,7 +57,10 @@ fn invalid_state_signature_is_an_error() {
 #[test]
 fn errors_on_several_threads_do_not_interfere() {
     let bad = Arc::new(Model::from_xml_str(TINY_ARENA).unwrap());
-    let good = Arc::new(Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>").unwrap());
+    let good = Arc::new(
+        Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size='0.1'/></body></worldbody></mujoco>")
+            .unwrap(),
+    );
     std::thread::scope(|s| {
         for i in 0..4 {
             let (bad, good) = (bad.clone(), good.clone());
@@ -73,8 +82,10 @@ fn errors_on_several_threads_do_not_interfere() {
 
 #[test]
 fn malformed_mjcf_reports_mujoco_message_with_line() {
-    let err = Model::from_xml_str("<mujoco>\n<worldbody>\n<body>\n<geom type='box' size='a b c'/>\n</body></worldbody></mujoco>")
-        .expect_err("bad size");
+    let err = Model::from_xml_str(
+        "<mujoco>\n<worldbody>\n<body>\n<geom type='box' size='a b c'/>\n</body></worldbody></mujoco>",
+    )
+    .expect_err("bad size");
     let text = err.to_string();
     assert!(matches!(err, Error::Load { path: None, .. }), "{err:?}");
     assert!(text.contains("line 4"), "MuJoCo's message names the line: {text}");
@@ -92,7 +103,11 @@ fn write(dir: &std::path::Path, name: &str, text: &str) -> std::path::PathBuf {
 #[test]
 fn mjcf_file_errors_name_the_file() {
     let dir = tempfile::tempdir().unwrap();
-    let path = write(dir.path(), "broken.xml", "<mujoco>\n  <worldbody>\n    <geom type=\"sphere\" size=\"-1\"/>\n  </worldbody>\n</mujoco>\n");
+    let path = write(
+        dir.path(),
+        "broken.xml",
+        "<mujoco>\n  <worldbody>\n    <geom type=\"sphere\" size=\"-1\"/>\n  </worldbody>\n</mujoco>\n",
+    );
     let err = Model::from_file(&path).expect_err("negative size");
     let text = err.to_string();
     assert!(text.contains("broken.xml"), "{text}");

@@ -197,12 +197,21 @@ fn names_and_ids_round_trip() {
            <sensor><jointpos name="jpos" joint="j"/></sensor></mujoco>"#,
     )
     .unwrap();
-    for (kind, name) in [(ObjType::Body, "link"), (ObjType::Joint, "j"), (ObjType::Site, "tip"), (ObjType::Actuator, "push"), (ObjType::Sensor, "jpos")] {
+    for (kind, name) in [
+        (ObjType::Body, "link"),
+        (ObjType::Joint, "j"),
+        (ObjType::Site, "tip"),
+        (ObjType::Actuator, "push"),
+        (ObjType::Sensor, "jpos"),
+    ] {
         let id = model.require_id(kind, name).unwrap();
         assert_eq!(model.name(kind, id), name);
     }
     assert!(model.id(ObjType::Body, "nope").is_none());
-    assert_eq!(model.require_id(ObjType::Joint, "nope").unwrap_err().to_string(), "the model has no joint named \"nope\"");
+    assert_eq!(
+        model.require_id(ObjType::Joint, "nope").unwrap_err().to_string(),
+        "the model has no joint named \"nope\""
+    );
     assert_eq!(model.name(ObjType::Body, 99), "");
     assert_eq!(model.jnt_range()[0], [-0.5, 0.5]);
     assert_eq!(model.actuator_gear()[0][0], 2.0);

@@ -33,10 +33,7 @@ impl Clone for Data {
 
 impl std::fmt::Debug for Data {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Data")
-            .field("time", &self.time_secs())
-            .field("model", &self.model)
-            .finish()
+        f.debug_struct("Data").field("time", &self.time_secs()).field("model", &self.model).finish()
     }
 }
 
@@ -153,10 +150,7 @@ impl Data {
             // SAFETY: model is live; out receives a new mjData.
             unsafe { ffi::twin_make_data(model.as_ptr(), &mut out, e, n) }
         })?;
-        let ptr = NonNull::new(out).ok_or(Error::MuJoCo {
-            call: "mj_makeData",
-            message: "returned no data".into(),
-        })?;
+        let ptr = NonNull::new(out).ok_or(Error::MuJoCo { call: "mj_makeData", message: "returned no data".into() })?;
         Ok(Data { model, ptr })
     }
 
@@ -168,15 +162,7 @@ impl Data {
         let copy = Data::new(self.model.clone())?;
         guarded("mj_copyData", |e, n| {
             // SAFETY: both are live and made for the same model.
-            unsafe {
-                ffi::twin_copy_data(
-                    copy.ptr.as_ptr(),
-                    self.model.as_ptr(),
-                    self.ptr.as_ptr(),
-                    e,
-                    n,
-                )
-            }
+            unsafe { ffi::twin_copy_data(copy.ptr.as_ptr(), self.model.as_ptr(), self.ptr.as_ptr(), e, n) }
         })?;
         Ok(copy)
     }
@@ -227,9 +213,7 @@ impl Data {
     /// Whether the simulation diverged (bad qpos/qvel/qacc: MuJoCo reset the state to recover).
     /// A diverged run must not count as a success.
     pub fn diverged(&self) -> bool {
-        [Warning::BadQpos, Warning::BadQvel, Warning::BadQacc]
-            .iter()
-            .any(|&w| self.warning_count(w) > 0)
+        [Warning::BadQpos, Warning::BadQvel, Warning::BadQacc].iter().any(|&w| self.warning_count(w) > 0)
     }
 
     /// Advances the simulation by one timestep (`mj_step`).
@@ -251,9 +235,7 @@ impl Data {
     pub fn step_n(&mut self, n: u64) -> Result<()> {
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         // SAFETY: as in step.
-        guarded("mj_step", |e, len| unsafe {
-            ffi::twin_step_n(m, d, n as std::ffi::c_long, e, len)
-        })
+        guarded("mj_step", |e, len| unsafe { ffi::twin_step_n(m, d, n as std::ffi::c_long, e, len) })
     }
 
     /// First half of a step, up to the control-dependent stage (`mj_step1`): set `ctrl` from
@@ -284,9 +266,7 @@ impl Data {
     pub fn forward(&mut self) -> Result<()> {
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         // SAFETY: as in step.
-        guarded("mj_forward", |e, n| unsafe {
-            ffi::twin_forward(m, d, e, n)
-        })
+        guarded("mj_forward", |e, n| unsafe { ffi::twin_forward(m, d, e, n) })
     }
 
     /// Inverse dynamics (`mj_inverse`): from qpos, qvel, qacc to [`Data::qfrc_inverse`].
@@ -296,9 +276,7 @@ impl Data {
     pub fn inverse(&mut self) -> Result<()> {
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         // SAFETY: as in step.
-        guarded("mj_inverse", |e, n| unsafe {
-            ffi::twin_inverse(m, d, e, n)
-        })
+        guarded("mj_inverse", |e, n| unsafe { ffi::twin_inverse(m, d, e, n) })
     }
 
     /// Recursive Newton–Euler (`mj_rne`): M(q)·q̈ + C(q, q̇) with `with_acceleration`, else
@@ -311,9 +289,7 @@ impl Data {
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         let res = out.as_mut_ptr();
         // SAFETY: `out` has nv entries as mj_rne requires; pair is live and exclusive.
-        guarded("mj_rne", |e, n| unsafe {
-            ffi::twin_rne(m, d, with_acceleration as c_int, res, e, n)
-        })?;
+        guarded("mj_rne", |e, n| unsafe { ffi::twin_rne(m, d, with_acceleration as c_int, res, e, n) })?;
         Ok(out)
     }
 
@@ -324,9 +300,7 @@ impl Data {
     pub fn reset(&mut self) -> Result<()> {
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         // SAFETY: as in step.
-        guarded("mj_resetData", |e, n| unsafe {
-            ffi::twin_reset_data(m, d, -1, e, n)
-        })
+        guarded("mj_resetData", |e, n| unsafe { ffi::twin_reset_data(m, d, -1, e, n) })
     }
 
     /// Resets to keyframe `key` (`mj_resetDataKeyframe`).
@@ -336,17 +310,11 @@ impl Data {
     pub fn reset_to_keyframe(&mut self, key: usize) -> Result<()> {
         let nkey = self.model.nkey();
         if key >= nkey {
-            return Err(Error::Size {
-                what: "keyframe index",
-                expected: nkey,
-                got: key,
-            });
+            return Err(Error::Size { what: "keyframe index", expected: nkey, got: key });
         }
         let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
         // SAFETY: key checked above; pair live and exclusive.
-        guarded("mj_resetDataKeyframe", |e, n| unsafe {
-            ffi::twin_reset_data(m, d, key as c_int, e, n)
-        })
+        guarded("mj_resetDataKeyframe", |e, n| unsafe { ffi::twin_reset_data(m, d, key as c_int, e, n) })
     }
 
     /// Copies the parts of the state named by `sig` (`mj_getState`).
@@ -366,14 +334,7 @@ impl Data {
         let size = unsafe { sys::mj_stateSize(self.model.as_ptr(), sig.0 as c_int) };
         let mut out = vec![0.0; size.max(0) as usize];
         // SAFETY: `out` has mj_stateSize entries for this signature.
-        unsafe {
-            sys::mj_getState(
-                self.model.as_ptr(),
-                self.ptr.as_ptr(),
-                out.as_mut_ptr(),
-                sig.0 as c_int,
-            )
-        };
+        unsafe { sys::mj_getState(self.model.as_ptr(), self.ptr.as_ptr(), out.as_mut_ptr(), sig.0 as c_int) };
         Ok(out)
     }
 
@@ -387,17 +348,11 @@ impl Data {
             // SAFETY: valid signature; model live.
             let size = unsafe { sys::mj_stateSize(m, sig.0 as c_int) }.max(0) as usize;
             if state.len() != size {
-                return Err(Error::Size {
-                    what: "state vector length",
-                    expected: size,
-                    got: state.len(),
-                });
+                return Err(Error::Size { what: "state vector length", expected: size, got: state.len() });
             }
         }
         // SAFETY: length checked for valid signatures; an invalid one makes MuJoCo raise before
         // reading `state`, which the shim catches.
-        guarded("mj_setState", |e, n| unsafe {
-            ffi::twin_set_state(m, d, state.as_ptr(), sig.0 as c_int, e, n)
-        })
+        guarded("mj_setState", |e, n| unsafe { ffi::twin_set_state(m, d, state.as_ptr(), sig.0 as c_int, e, n) })
     }
 }

@@ -13,24 +13,14 @@ pub struct ModelEdit {
 
 /// `body`, `geom` or `dof` index out of range.
 fn check(what: &'static str, index: usize, count: usize) -> Result<()> {
-    if index < count {
-        Ok(())
-    } else {
-        Err(Error::Size {
-            what,
-            expected: count,
-            got: index,
-        })
-    }
+    if index < count { Ok(()) } else { Err(Error::Size { what, expected: count, got: index }) }
 }
 
 fn finite(what: &str, values: &[f64]) -> Result<()> {
     if values.iter().all(|v| v.is_finite()) {
         Ok(())
     } else {
-        Err(Error::InvalidEdit(format!(
-            "{what} must be finite, got {values:?}"
-        )))
+        Err(Error::InvalidEdit(format!("{what} must be finite, got {values:?}")))
     }
 }
 
@@ -90,8 +80,7 @@ impl ModelEdit {
         check("body id", body, self.model.nbody())?;
         finite("inertia", &inertia)?;
         let [a, b, c] = inertia;
-        let triangle =
-            a + b >= c * (1.0 - 1e-12) && a + c >= b * (1.0 - 1e-12) && b + c >= a * (1.0 - 1e-12);
+        let triangle = a + b >= c * (1.0 - 1e-12) && a + c >= b * (1.0 - 1e-12) && b + c >= a * (1.0 - 1e-12);
         if body == 0 || a <= 0.0 || b <= 0.0 || c <= 0.0 || !triangle {
             return Err(Error::InvalidEdit(format!(
                 "body {body} (\"{}\"): principal inertia {inertia:?} must be positive and satisfy \
@@ -130,9 +119,7 @@ impl ModelEdit {
         check("geom id", geom, self.model.ngeom())?;
         finite("friction", &friction)?;
         if friction.iter().any(|&f| f < 0.0) {
-            return Err(Error::InvalidEdit(format!(
-                "geom {geom}: friction {friction:?} must not be negative"
-            )));
+            return Err(Error::InvalidEdit(format!("geom {geom}: friction {friction:?} must not be negative")));
         }
         let n = self.model.ngeom();
         let m = self.raw_mut();
@@ -151,9 +138,7 @@ impl ModelEdit {
     ) -> Result<&mut Self> {
         check("dof id", dof, self.model.nv())?;
         if !(value >= 0.0 && value.is_finite()) {
-            return Err(Error::InvalidEdit(format!(
-                "dof {dof}: {what} must be finite and ≥ 0, got {value}"
-            )));
+            return Err(Error::InvalidEdit(format!("dof {dof}: {what} must be finite and ≥ 0, got {value}")));
         }
         let n = self.model.nv();
         let ptr = pick(self.raw_mut());
@@ -197,15 +182,11 @@ impl ModelEdit {
             // SAFETY: the model is live; data receives a scratch mjData.
             unsafe { ffi::twin_make_data(self.model.as_ptr(), &mut data, e, n) }
         })?;
-        let data = NonNull::new(data).ok_or(Error::MuJoCo {
-            call: "mj_makeData",
-            message: "returned no data".into(),
-        })?;
+        let data =
+            NonNull::new(data).ok_or(Error::MuJoCo { call: "mj_makeData", message: "returned no data".into() })?;
         let m = self.model.as_mut_ptr();
         // SAFETY: exclusive model, scratch data made for it.
-        let res = guarded("mj_setConst", |e, n| unsafe {
-            ffi::twin_set_const(m, data.as_ptr(), e, n)
-        });
+        let res = guarded("mj_setConst", |e, n| unsafe { ffi::twin_set_const(m, data.as_ptr(), e, n) });
         // SAFETY: scratch data is ours and no longer used.
         unsafe { mujoco_sys::mj_deleteData(data.as_ptr()) };
         res.map(|()| self.model)

@@ -28,36 +28,17 @@ pub(crate) mod ffi {
         pub fn twin_install_handlers();
         pub fn twin_warning_count() -> c_ulonglong;
         pub fn twin_last_warning() -> *const c_char;
-        pub fn twin_load_xml(
-            filename: *const c_char,
-            out: *mut *mut mjModel,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
+        pub fn twin_load_xml(filename: *const c_char, out: *mut *mut mjModel, err: *mut c_char, err_sz: c_int)
+        -> c_int;
         pub fn twin_parse_xml_string(
             xml: *const c_char,
             out: *mut *mut mjSpec,
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;
-        pub fn twin_compile(
-            spec: *mut mjSpec,
-            out: *mut *mut mjModel,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_copy_model(
-            src: *const mjModel,
-            out: *mut *mut mjModel,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_make_data(
-            m: *const mjModel,
-            out: *mut *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
+        pub fn twin_compile(spec: *mut mjSpec, out: *mut *mut mjModel, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_copy_model(src: *const mjModel, out: *mut *mut mjModel, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_make_data(m: *const mjModel, out: *mut *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
         pub fn twin_copy_data(
             dst: *mut mjData,
             m: *const mjModel,
@@ -65,43 +46,12 @@ pub(crate) mod ffi {
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;
-        pub fn twin_step(
-            m: *const mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_step_n(
-            m: *const mjModel,
-            d: *mut mjData,
-            n: c_long,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_step1(
-            m: *const mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_step2(
-            m: *const mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_forward(
-            m: *const mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_inverse(
-            m: *const mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
+        pub fn twin_step(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_step_n(m: *const mjModel, d: *mut mjData, n: c_long, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_step1(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_step2(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_forward(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_inverse(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
         pub fn twin_rne(
             m: *const mjModel,
             d: *mut mjData,
@@ -110,19 +60,9 @@ pub(crate) mod ffi {
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;
-        pub fn twin_set_const(
-            m: *mut mjModel,
-            d: *mut mjData,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
-        pub fn twin_reset_data(
-            m: *const mjModel,
-            d: *mut mjData,
-            key: c_int,
-            err: *mut c_char,
-            err_sz: c_int,
-        ) -> c_int;
+        pub fn twin_set_const(m: *mut mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_reset_data(m: *const mjModel, d: *mut mjData, key: c_int, err: *mut c_char, err_sz: c_int)
+        -> c_int;
         pub fn twin_set_state(
             m: *const mjModel,
             d: *mut mjData,
@@ -147,21 +87,14 @@ pub(crate) fn init() -> Result<()> {
         // SAFETY: mj_version has no preconditions.
         let library = unsafe { mujoco_sys::mj_version() };
         let header = mujoco_sys::mjVERSION_HEADER as i32;
-        if library == header {
-            Ok(())
-        } else {
-            Err((library, header))
-        }
+        if library == header { Ok(()) } else { Err((library, header)) }
     });
     checked.map_err(|(library, header)| Error::Version { library, header })
 }
 
 /// Runs one guarded shim call: hands it an error buffer and turns a raised error into `Err`.
 #[inline]
-pub(crate) fn guarded(
-    call: &'static str,
-    f: impl FnOnce(*mut c_char, c_int) -> c_int,
-) -> Result<()> {
+pub(crate) fn guarded(call: &'static str, f: impl FnOnce(*mut c_char, c_int) -> c_int) -> Result<()> {
     // Uninitialised on purpose: the shim writes a NUL-terminated message only on error, and we
     // read it only then. Zeroing 1 KiB per step would show in the step loop.
     let mut buf = MaybeUninit::<[c_char; ERR_LEN]>::uninit();
@@ -170,29 +103,20 @@ pub(crate) fn guarded(
         return Ok(());
     }
     // SAFETY: on a non-zero return the shim has written a NUL-terminated string into the buffer.
-    let message = unsafe { CStr::from_ptr(ptr) }
-        .to_string_lossy()
-        .trim()
-        .to_string();
+    let message = unsafe { CStr::from_ptr(ptr) }.to_string_lossy().trim().to_string();
     Err(Error::MuJoCo { call, message })
 }
 
 /// Reads a NUL-terminated buffer written by MuJoCo.
 pub(crate) fn buf_to_string(buf: &[c_char]) -> String {
-    let bytes: Vec<u8> = buf
-        .iter()
-        .take_while(|&&c| c != 0)
-        .map(|&c| c as u8)
-        .collect();
+    let bytes: Vec<u8> = buf.iter().take_while(|&&c| c != 0).map(|&c| c as u8).collect();
     String::from_utf8_lossy(&bytes).trim().to_string()
 }
 
 /// The MuJoCo library's version string, e.g. `"4.0.1"`.
 pub fn version() -> String {
     // SAFETY: returns a pointer to a static NUL-terminated string.
-    unsafe { CStr::from_ptr(mujoco_sys::mj_versionString()) }
-        .to_string_lossy()
-        .into_owned()
+    unsafe { CStr::from_ptr(mujoco_sys::mj_versionString()) }.to_string_lossy().into_owned()
 }
 
 /// MuJoCo warnings raised on the calling thread so far (each `mju_warning`, e.g. "Nan, Inf or
@@ -202,9 +126,7 @@ pub fn thread_warnings() -> (u64, String) {
     // SAFETY: both read thread-local state of the shim; the string is NUL-terminated.
     unsafe {
         let n = ffi::twin_warning_count();
-        let text = CStr::from_ptr(ffi::twin_last_warning())
-            .to_string_lossy()
-            .into_owned();
+        let text = CStr::from_ptr(ffi::twin_last_warning()).to_string_lossy().into_owned();
         (n, text)
     }
 }

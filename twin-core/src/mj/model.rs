@@ -286,39 +286,22 @@ impl Model {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Model> {
         init()?;
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
-            path: path.to_path_buf(),
-            source,
-        })?;
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         if crate::urdf::is_urdf(&text) {
             crate::urdf::validate(path, &text)?;
         }
-        let c_path =
-            CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
-                path: Some(path.to_path_buf()),
-                message: "the path contains a NUL byte".into(),
-            })?;
+        let c_path = CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
+            path: Some(path.to_path_buf()),
+            message: "the path contains a NUL byte".into(),
+        })?;
         let mut out = std::ptr::null_mut();
         let mut err = [0 as c_char; 1024];
         // mj_loadXML reports model errors in `err` itself; a raised error lands there too.
         // SAFETY: c_path is NUL-terminated; `out` and `err` outlive the call; the shim writes at
         // most `err.len()` bytes.
-        let rc = unsafe {
-            ffi::twin_load_xml(
-                c_path.as_ptr(),
-                &mut out,
-                err.as_mut_ptr(),
-                err.len() as c_int,
-            )
-        };
-        let raised = if rc == 0 {
-            Ok(())
-        } else {
-            Err(Error::MuJoCo {
-                call: "mj_loadXML",
-                message: buf_to_string(&err),
-            })
-        };
+        let rc = unsafe { ffi::twin_load_xml(c_path.as_ptr(), &mut out, err.as_mut_ptr(), err.len() as c_int) };
+        let raised =
+            if rc == 0 { Ok(()) } else { Err(Error::MuJoCo { call: "mj_loadXML", message: buf_to_string(&err) }) };
         Self::finish_load(out, raised, &err, Some(path))
     }
 
@@ -329,28 +312,16 @@ impl Model {
     /// [`Error::Load`] with MuJoCo's message if MuJoCo refuses the document.
     pub fn from_xml_str(xml: &str) -> Result<Model> {
         init()?;
-        let c_xml = CString::new(xml).map_err(|_| Error::Load {
-            path: None,
-            message: "the document contains a NUL byte".into(),
-        })?;
+        let c_xml = CString::new(xml)
+            .map_err(|_| Error::Load { path: None, message: "the document contains a NUL byte".into() })?;
         let mut spec = std::ptr::null_mut();
         let mut err = [0 as c_char; 1024];
         // SAFETY: c_xml is NUL-terminated; `spec` and `err` outlive the call.
-        let rc = unsafe {
-            ffi::twin_parse_xml_string(
-                c_xml.as_ptr(),
-                &mut spec,
-                err.as_mut_ptr(),
-                err.len() as c_int,
-            )
-        };
+        let rc = unsafe { ffi::twin_parse_xml_string(c_xml.as_ptr(), &mut spec, err.as_mut_ptr(), err.len() as c_int) };
         let raised = if rc == 0 {
             Ok(())
         } else {
-            Err(Error::MuJoCo {
-                call: "mj_parseXMLString",
-                message: buf_to_string(&err),
-            })
+            Err(Error::MuJoCo { call: "mj_parseXMLString", message: buf_to_string(&err) })
         };
         if spec.is_null() {
             return Self::finish_load(std::ptr::null_mut(), raised, &err, None);
@@ -362,9 +333,7 @@ impl Model {
         });
         if out.is_null() && raised.is_ok() {
             // SAFETY: spec is live; mjs_getError returns a NUL-terminated string owned by it.
-            let msg = unsafe { CStr::from_ptr(sys::mjs_getError(spec)) }
-                .to_string_lossy()
-                .into_owned();
+            let msg = unsafe { CStr::from_ptr(sys::mjs_getError(spec)) }.to_string_lossy().into_owned();
             let n = msg.len().min(err.len() - 1);
             for (dst, src) in err.iter_mut().zip(msg.bytes().take(n)) {
                 *dst = src as c_char;
@@ -376,12 +345,7 @@ impl Model {
         Self::finish_load(out, raised, &err, None)
     }
 
-    fn finish_load(
-        out: *mut sys::mjModel,
-        raised: Result<()>,
-        err: &[c_char],
-        path: Option<&Path>,
-    ) -> Result<Model> {
+    fn finish_load(out: *mut sys::mjModel, raised: Result<()>, err: &[c_char], path: Option<&Path>) -> Result<Model> {
         let path = path.map(Path::to_path_buf);
         if let Err(Error::MuJoCo { message, .. }) = raised {
             if !out.is_null() {
@@ -394,11 +358,7 @@ impl Model {
             Some(ptr) => Ok(Model { ptr }),
             None => {
                 let message = buf_to_string(err);
-                let message = if message.is_empty() {
-                    "unknown error".to_string()
-                } else {
-                    message
-                };
+                let message = if message.is_empty() { "unknown error".to_string() } else { message };
                 Err(Error::Load { path, message })
             }
         }
@@ -416,10 +376,7 @@ impl Model {
         })?;
         NonNull::new(out)
             .map(|ptr| Model { ptr })
-            .ok_or(Error::MuJoCo {
-                call: "mj_copyModel",
-                message: "returned no model".into(),
-            })
+            .ok_or(Error::MuJoCo { call: "mj_copyModel", message: "returned no model".into() })
     }
 
     /// Starts an edit of a copy of this model; see [`ModelEdit`].
@@ -523,10 +480,7 @@ impl Model {
     /// # Errors
     /// [`Error::NotFound`].
     pub fn require_id(&self, obj: ObjType, name: &str) -> Result<usize> {
-        self.id(obj, name).ok_or_else(|| Error::NotFound {
-            kind: obj.label(),
-            name: name.to_string(),
-        })
+        self.id(obj, name).ok_or_else(|| Error::NotFound { kind: obj.label(), name: name.to_string() })
     }
 
     /// Name of object `id` of kind `obj`; empty for unnamed objects or out-of-range ids.
