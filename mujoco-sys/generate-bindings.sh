@@ -6,6 +6,8 @@
 # Headers come from MUJOCO_DIR, or from the cache the build script fills (built first if needed).
 set -euo pipefail
 here=$(cd "$(dirname "$0")" && pwd)
+# bindgen formats with rustfmt, which reads the workspace rustfmt.toml found from the cwd.
+cd "$here"
 out="$here/src/bindings.rs"
 if [[ -n "${MUJOCO_DIR:-}" ]]; then
   inc="$MUJOCO_DIR/include"

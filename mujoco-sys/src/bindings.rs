@@ -1569,8 +1569,7 @@ pub struct mjData_ {
     pub signature: u64,
 }
 pub type mjData = mjData_;
-pub type mjfGeneric =
-    ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *mut mjData)>;
+pub type mjfGeneric = ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *mut mjData)>;
 pub type mjfConFilt = ::core::option::Option<
     unsafe extern "C" fn(
         m: *const mjModel,
@@ -1579,13 +1578,11 @@ pub type mjfConFilt = ::core::option::Option<
         geom2: ::core::ffi::c_int,
     ) -> ::core::ffi::c_int,
 >;
-pub type mjfSensor = ::core::option::Option<
-    unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, stage: ::core::ffi::c_int),
->;
+pub type mjfSensor =
+    ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, stage: ::core::ffi::c_int)>;
 pub type mjfTime = ::core::option::Option<unsafe extern "C" fn() -> mjtNum>;
-pub type mjfAct = ::core::option::Option<
-    unsafe extern "C" fn(m: *const mjModel, d: *const mjData, id: ::core::ffi::c_int) -> mjtNum,
->;
+pub type mjfAct =
+    ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *const mjData, id: ::core::ffi::c_int) -> mjtNum>;
 pub type mjfCollision = ::core::option::Option<
     unsafe extern "C" fn(
         m: *const mjModel,
@@ -2648,10 +2645,7 @@ pub type mjResource = mjResource_;
 pub type mjfOpenResource =
     ::core::option::Option<unsafe extern "C" fn(resource: *mut mjResource) -> ::core::ffi::c_int>;
 pub type mjfReadResource = ::core::option::Option<
-    unsafe extern "C" fn(
-        resource: *mut mjResource,
-        buffer: *mut *const ::core::ffi::c_void,
-    ) -> ::core::ffi::c_int,
+    unsafe extern "C" fn(resource: *mut mjResource, buffer: *mut *const ::core::ffi::c_void) -> ::core::ffi::c_int,
 >;
 pub type mjfCloseResource = ::core::option::Option<unsafe extern "C" fn(resource: *mut mjResource)>;
 pub type mjfMountResource =
@@ -2659,17 +2653,10 @@ pub type mjfMountResource =
 pub type mjfUnmountResource =
     ::core::option::Option<unsafe extern "C" fn(resource: *mut mjResource) -> ::core::ffi::c_int>;
 pub type mjfResourceModified = ::core::option::Option<
-    unsafe extern "C" fn(
-        resource: *const mjResource,
-        timestamp: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int,
+    unsafe extern "C" fn(resource: *const mjResource, timestamp: *const ::core::ffi::c_char) -> ::core::ffi::c_int,
 >;
 pub type mjfWriteResource = ::core::option::Option<
-    unsafe extern "C" fn(
-        resource: *mut mjResource,
-        buffer: *const ::core::ffi::c_void,
-        nbytes: mjtSize,
-    ) -> mjtSize,
+    unsafe extern "C" fn(resource: *mut mjResource, buffer: *const ::core::ffi::c_void, nbytes: mjtSize) -> mjtSize,
 >;
 #[repr(C)]
 #[derive(Debug, Copy, Clone)]
@@ -2692,8 +2679,7 @@ pub type mjfDecode = ::core::option::Option<
         error_sz: ::core::ffi::c_int,
     ) -> *mut mjSpec,
 >;
-pub type mjfCanDecode =
-    ::core::option::Option<unsafe extern "C" fn(resource: *const mjResource) -> ::core::ffi::c_int>;
+pub type mjfCanDecode = ::core::option::Option<unsafe extern "C" fn(resource: *const mjResource) -> ::core::ffi::c_int>;
 #[repr(C)]
 #[derive(Debug, Copy, Clone)]
 pub struct mjpDecoder {
@@ -2703,12 +2689,7 @@ pub struct mjpDecoder {
     pub decode: mjfDecode,
 }
 pub type mjfEncode = ::core::option::Option<
-    unsafe extern "C" fn(
-        s: *const mjSpec,
-        m: *const mjModel,
-        vfs: *const mjVFS,
-        resource: *mut mjResource,
-    ) -> mjtSize,
+    unsafe extern "C" fn(s: *const mjSpec, m: *const mjModel, vfs: *const mjVFS, resource: *mut mjResource) -> mjtSize,
 >;
 #[repr(C)]
 #[derive(Debug, Copy, Clone)]
@@ -2743,21 +2724,11 @@ pub struct mjpPlugin_ {
         ) -> ::core::ffi::c_int,
     >,
     pub init: ::core::option::Option<
-        unsafe extern "C" fn(
-            m: *const mjModel,
-            d: *mut mjData,
-            instance: ::core::ffi::c_int,
-        ) -> ::core::ffi::c_int,
+        unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, instance: ::core::ffi::c_int) -> ::core::ffi::c_int,
     >,
-    pub destroy:
-        ::core::option::Option<unsafe extern "C" fn(d: *mut mjData, instance: ::core::ffi::c_int)>,
+    pub destroy: ::core::option::Option<unsafe extern "C" fn(d: *mut mjData, instance: ::core::ffi::c_int)>,
     pub copy: ::core::option::Option<
-        unsafe extern "C" fn(
-            dest: *mut mjData,
-            m: *const mjModel,
-            src: *const mjData,
-            instance: ::core::ffi::c_int,
-        ),
+        unsafe extern "C" fn(dest: *mut mjData, m: *const mjModel, src: *const mjData, instance: ::core::ffi::c_int),
     >,
     pub reset: ::core::option::Option<
         unsafe extern "C" fn(
@@ -2775,9 +2746,8 @@ pub struct mjpPlugin_ {
             capability_bit: ::core::ffi::c_int,
         ),
     >,
-    pub advance: ::core::option::Option<
-        unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, instance: ::core::ffi::c_int),
-    >,
+    pub advance:
+        ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, instance: ::core::ffi::c_int)>,
     pub visualize: ::core::option::Option<
         unsafe extern "C" fn(
             m: *const mjModel,
@@ -2787,15 +2757,10 @@ pub struct mjpPlugin_ {
             instance: ::core::ffi::c_int,
         ),
     >,
-    pub actuator_act_dot: ::core::option::Option<
-        unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, instance: ::core::ffi::c_int),
-    >,
+    pub actuator_act_dot:
+        ::core::option::Option<unsafe extern "C" fn(m: *const mjModel, d: *mut mjData, instance: ::core::ffi::c_int)>,
     pub sdf_distance: ::core::option::Option<
-        unsafe extern "C" fn(
-            point: *const mjtNum,
-            d: *const mjData,
-            instance: ::core::ffi::c_int,
-        ) -> mjtNum,
+        unsafe extern "C" fn(point: *const mjtNum, d: *const mjData, instance: ::core::ffi::c_int) -> mjtNum,
     >,
     pub sdf_gradient: ::core::option::Option<
         unsafe extern "C" fn(
@@ -2805,9 +2770,8 @@ pub struct mjpPlugin_ {
             instance: ::core::ffi::c_int,
         ),
     >,
-    pub sdf_staticdistance: ::core::option::Option<
-        unsafe extern "C" fn(point: *const mjtNum, attributes: *const mjtNum) -> mjtNum,
-    >,
+    pub sdf_staticdistance:
+        ::core::option::Option<unsafe extern "C" fn(point: *const mjtNum, attributes: *const mjtNum) -> mjtNum>,
     pub sdf_attribute: ::core::option::Option<
         unsafe extern "C" fn(
             attribute: *mut mjtNum,
@@ -2815,8 +2779,7 @@ pub struct mjpPlugin_ {
             value: *mut *const ::core::ffi::c_char,
         ),
     >,
-    pub sdf_aabb:
-        ::core::option::Option<unsafe extern "C" fn(aabb: *mut mjtNum, attributes: *const mjtNum)>,
+    pub sdf_aabb: ::core::option::Option<unsafe extern "C" fn(aabb: *mut mjtNum, attributes: *const mjtNum)>,
 }
 pub type mjpPlugin = mjpPlugin_;
 #[repr(C)]
@@ -2831,11 +2794,7 @@ pub struct mjSDF_ {
 }
 pub type mjSDF = mjSDF_;
 pub type mjfPluginLibraryLoadCallback = ::core::option::Option<
-    unsafe extern "C" fn(
-        filename: *const ::core::ffi::c_char,
-        first: ::core::ffi::c_int,
-        count: ::core::ffi::c_int,
-    ),
+    unsafe extern "C" fn(filename: *const ::core::ffi::c_char, first: ::core::ffi::c_int, count: ::core::ffi::c_int),
 >;
 pub const mjtGridPos__mjGRID_TOPLEFT: mjtGridPos_ = 0;
 pub const mjtGridPos__mjGRID_TOPRIGHT: mjtGridPos_ = 1;
@@ -3029,10 +2988,7 @@ pub const mjtSection_mjSECT_OPEN: mjtSection = 1;
 pub const mjtSection_mjSECT_FIXED: mjtSection = 2;
 pub type mjtSection = ::core::ffi::c_uint;
 pub type mjfItemEnable = ::core::option::Option<
-    unsafe extern "C" fn(
-        category: ::core::ffi::c_int,
-        data: *mut ::core::ffi::c_void,
-    ) -> ::core::ffi::c_int,
+    unsafe extern "C" fn(category: ::core::ffi::c_int, data: *mut ::core::ffi::c_void) -> ::core::ffi::c_int,
 >;
 #[repr(C)]
 #[derive(Debug, Copy, Clone)]
@@ -3223,16 +3179,13 @@ unsafe extern "C" {
         ::core::option::Option<unsafe extern "C" fn(arg1: usize) -> *mut ::core::ffi::c_void>;
 }
 unsafe extern "C" {
-    pub static mut mju_user_free:
-        ::core::option::Option<unsafe extern "C" fn(arg1: *mut ::core::ffi::c_void)>;
+    pub static mut mju_user_free: ::core::option::Option<unsafe extern "C" fn(arg1: *mut ::core::ffi::c_void)>;
 }
 unsafe extern "C" {
-    pub static mut mju_user_error:
-        ::core::option::Option<unsafe extern "C" fn(arg1: *const ::core::ffi::c_char)>;
+    pub static mut mju_user_error: ::core::option::Option<unsafe extern "C" fn(arg1: *const ::core::ffi::c_char)>;
 }
 unsafe extern "C" {
-    pub static mut mju_user_warning:
-        ::core::option::Option<unsafe extern "C" fn(arg1: *const ::core::ffi::c_char)>;
+    pub static mut mju_user_warning: ::core::option::Option<unsafe extern "C" fn(arg1: *const ::core::ffi::c_char)>;
 }
 unsafe extern "C" {
     pub static mut mjcb_passive: mjfGeneric;
@@ -3296,10 +3249,7 @@ unsafe extern "C" {
     ) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_unmountVFS(
-        vfs: *mut mjVFS,
-        filename: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int;
+    pub fn mj_unmountVFS(vfs: *mut mjVFS, filename: *const ::core::ffi::c_char) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mj_addFileVFS(
@@ -3317,16 +3267,10 @@ unsafe extern "C" {
     ) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_deleteFileVFS(
-        vfs: *mut mjVFS,
-        filename: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int;
+    pub fn mj_deleteFileVFS(vfs: *mut mjVFS, filename: *const ::core::ffi::c_char) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_containsBufferVFS(
-        vfs: *mut mjVFS,
-        name: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int;
+    pub fn mj_containsBufferVFS(vfs: *mut mjVFS, name: *const ::core::ffi::c_char) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mj_containsFileVFS(
@@ -3404,12 +3348,7 @@ unsafe extern "C" {
     pub fn mj_copyBack(s: *mut mjSpec, m: *const mjModel) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_recompile(
-        s: *mut mjSpec,
-        vfs: *const mjVFS,
-        m: *mut mjModel,
-        d: *mut mjData,
-    ) -> ::core::ffi::c_int;
+    pub fn mj_recompile(s: *mut mjSpec, vfs: *const mjVFS, m: *mut mjModel, d: *mut mjData) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mj_loadTexture(
@@ -3459,10 +3398,7 @@ unsafe extern "C" {
     ) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mju_getXMLDependencies(
-        filename: *const ::core::ffi::c_char,
-        dependencies: *mut mjStringVec,
-    );
+    pub fn mju_getXMLDependencies(filename: *const ::core::ffi::c_char, dependencies: *mut mjStringVec);
 }
 unsafe extern "C" {
     pub fn mj_step(m: *const mjModel, d: *mut mjData);
@@ -3522,10 +3458,7 @@ unsafe extern "C" {
     pub fn mj_loadModel(filename: *const ::core::ffi::c_char, vfs: *const mjVFS) -> *mut mjModel;
 }
 unsafe extern "C" {
-    pub fn mj_loadModelBuffer(
-        buffer: *const ::core::ffi::c_void,
-        buffer_sz: mjtSize,
-    ) -> *mut mjModel;
+    pub fn mj_loadModelBuffer(buffer: *const ::core::ffi::c_void, buffer_sz: mjtSize) -> *mut mjModel;
 }
 unsafe extern "C" {
     pub fn mj_deleteModel(m: *mut mjModel);
@@ -3561,11 +3494,7 @@ unsafe extern "C" {
     pub fn mj_freeStack(d: *mut mjData);
 }
 unsafe extern "C" {
-    pub fn mj_stackAllocByte(
-        d: *mut mjData,
-        bytes: usize,
-        alignment: usize,
-    ) -> *mut ::core::ffi::c_void;
+    pub fn mj_stackAllocByte(d: *mut mjData, bytes: usize, alignment: usize) -> *mut ::core::ffi::c_void;
 }
 unsafe extern "C" {
     pub fn mj_stackAllocNum(d: *mut mjData, size: usize) -> *mut mjtNum;
@@ -3602,10 +3531,7 @@ unsafe extern "C" {
     pub fn mj_deleteSpec(s: *mut mjSpec);
 }
 unsafe extern "C" {
-    pub fn mjs_activatePlugin(
-        s: *mut mjSpec,
-        name: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int;
+    pub fn mjs_activatePlugin(s: *mut mjSpec, name: *const ::core::ffi::c_char) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mjs_setDeepCopy(s: *mut mjSpec, deepcopy: ::core::ffi::c_int) -> ::core::ffi::c_int;
@@ -3753,13 +3679,7 @@ unsafe extern "C" {
     pub fn mj_factorM(m: *const mjModel, d: *mut mjData);
 }
 unsafe extern "C" {
-    pub fn mj_solveM(
-        m: *const mjModel,
-        d: *mut mjData,
-        x: *mut mjtNum,
-        y: *const mjtNum,
-        n: ::core::ffi::c_int,
-    );
+    pub fn mj_solveM(m: *const mjModel, d: *mut mjData, x: *mut mjtNum, y: *const mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mj_solveM2(
@@ -3781,12 +3701,7 @@ unsafe extern "C" {
     pub fn mj_subtreeVel(m: *const mjModel, d: *mut mjData);
 }
 unsafe extern "C" {
-    pub fn mj_rne(
-        m: *const mjModel,
-        d: *mut mjData,
-        flg_acc: ::core::ffi::c_int,
-        result: *mut mjtNum,
-    );
+    pub fn mj_rne(m: *const mjModel, d: *mut mjData, flg_acc: ::core::ffi::c_int, result: *mut mjtNum);
 }
 unsafe extern "C" {
     pub fn mj_rnePostConstraint(m: *const mjModel, d: *mut mjData);
@@ -3827,12 +3742,7 @@ unsafe extern "C" {
     pub fn mj_stateSize(m: *const mjModel, sig: ::core::ffi::c_int) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_getState(
-        m: *const mjModel,
-        d: *const mjData,
-        state: *mut mjtNum,
-        sig: ::core::ffi::c_int,
-    );
+    pub fn mj_getState(m: *const mjModel, d: *const mjData, state: *mut mjtNum, sig: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mj_extractState(
@@ -3844,20 +3754,10 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mj_setState(
-        m: *const mjModel,
-        d: *mut mjData,
-        state: *const mjtNum,
-        sig: ::core::ffi::c_int,
-    );
+    pub fn mj_setState(m: *const mjModel, d: *mut mjData, state: *const mjtNum, sig: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mj_copyState(
-        m: *const mjModel,
-        src: *const mjData,
-        dst: *mut mjData,
-        sig: ::core::ffi::c_int,
-    );
+    pub fn mj_copyState(m: *const mjModel, src: *const mjData, dst: *mut mjData, sig: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mj_readCtrl(
@@ -3902,11 +3802,7 @@ unsafe extern "C" {
     pub fn mj_setKeyframe(m: *mut mjModel, d: *const mjData, k: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mj_addContact(
-        m: *const mjModel,
-        d: *mut mjData,
-        con: *const mjContact,
-    ) -> ::core::ffi::c_int;
+    pub fn mj_addContact(m: *const mjModel, d: *mut mjData, con: *const mjContact) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mj_isPyramidal(m: *const mjModel) -> ::core::ffi::c_int;
@@ -3952,12 +3848,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mj_jacSubtreeCom(
-        m: *const mjModel,
-        d: *mut mjData,
-        jacp: *mut mjtNum,
-        body: ::core::ffi::c_int,
-    );
+    pub fn mj_jacSubtreeCom(m: *const mjModel, d: *mut mjData, jacp: *mut mjtNum, body: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mj_jacGeom(
@@ -3999,12 +3890,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mj_angmomMat(
-        m: *const mjModel,
-        d: *mut mjData,
-        mat: *mut mjtNum,
-        body: ::core::ffi::c_int,
-    );
+    pub fn mj_angmomMat(m: *const mjModel, d: *mut mjData, mat: *mut mjtNum, body: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mj_name2id(
@@ -4096,12 +3982,7 @@ unsafe extern "C" {
     ) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mj_contactForce(
-        m: *const mjModel,
-        d: *const mjData,
-        id: ::core::ffi::c_int,
-        result: *mut mjtNum,
-    );
+    pub fn mj_contactForce(m: *const mjModel, d: *const mjData, id: ::core::ffi::c_int, result: *mut mjtNum);
 }
 unsafe extern "C" {
     pub fn mj_differentiatePos(
@@ -4146,10 +4027,7 @@ unsafe extern "C" {
     pub fn mj_loadPluginLibrary(path: *const ::core::ffi::c_char);
 }
 unsafe extern "C" {
-    pub fn mj_loadAllPluginLibraries(
-        directory: *const ::core::ffi::c_char,
-        callback: mjfPluginLibraryLoadCallback,
-    );
+    pub fn mj_loadAllPluginLibraries(directory: *const ::core::ffi::c_char, callback: mjfPluginLibraryLoadCallback);
 }
 unsafe extern "C" {
     pub fn mj_version() -> ::core::ffi::c_int;
@@ -4272,20 +4150,10 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mjv_cameraInModel(
-        headpos: *mut mjtNum,
-        forward: *mut mjtNum,
-        up: *mut mjtNum,
-        scn: *const mjvScene,
-    );
+    pub fn mjv_cameraInModel(headpos: *mut mjtNum, forward: *mut mjtNum, up: *mut mjtNum, scn: *const mjvScene);
 }
 unsafe extern "C" {
-    pub fn mjv_cameraInRoom(
-        headpos: *mut mjtNum,
-        forward: *mut mjtNum,
-        up: *mut mjtNum,
-        scn: *const mjvScene,
-    );
+    pub fn mjv_cameraInRoom(headpos: *mut mjtNum, forward: *mut mjtNum, up: *mut mjtNum, scn: *const mjvScene);
 }
 unsafe extern "C" {
     pub fn mjv_frustumHeight(scn: *const mjvScene) -> mjtNum;
@@ -4324,12 +4192,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mjv_initPerturb(
-        m: *const mjModel,
-        d: *mut mjData,
-        scn: *const mjvScene,
-        pert: *mut mjvPerturb,
-    );
+    pub fn mjv_initPerturb(m: *const mjModel, d: *mut mjData, scn: *const mjvScene, pert: *mut mjvPerturb);
 }
 unsafe extern "C" {
     pub fn mjv_applyPerturbPose(
@@ -4346,11 +4209,8 @@ unsafe extern "C" {
     pub fn mjv_averageCamera(cam1: *const mjvGLCamera, cam2: *const mjvGLCamera) -> mjvGLCamera;
 }
 unsafe extern "C" {
-    pub fn mjv_camera2GLCamera(
-        model: *const mjModel,
-        data: *const mjData,
-        mjv_camera: *const mjvCamera,
-    ) -> mjvGLCamera;
+    pub fn mjv_camera2GLCamera(model: *const mjModel, data: *const mjData, mjv_camera: *const mjvCamera)
+    -> mjvGLCamera;
 }
 unsafe extern "C" {
     pub fn mjv_select(
@@ -4429,12 +4289,7 @@ unsafe extern "C" {
     pub fn mjv_makeLights(m: *const mjModel, d: *const mjData, scn: *mut mjvScene);
 }
 unsafe extern "C" {
-    pub fn mjv_updateCamera(
-        m: *const mjModel,
-        d: *const mjData,
-        cam: *mut mjvCamera,
-        scn: *mut mjvScene,
-    );
+    pub fn mjv_updateCamera(m: *const mjModel, d: *const mjData, cam: *mut mjvCamera, scn: *mut mjvScene);
 }
 unsafe extern "C" {
     pub fn mjv_updateSkin(m: *const mjModel, d: *const mjData, scn: *mut mjvScene);
@@ -4450,13 +4305,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mjv_cameraFrustum(
-        zver: *mut f32,
-        zhor: *mut f32,
-        zclip: *mut f32,
-        m: *const mjModel,
-        cam: *const mjvCamera,
-    );
+    pub fn mjv_cameraFrustum(zver: *mut f32, zhor: *mut f32, zclip: *mut f32, m: *const mjModel, cam: *const mjvCamera);
 }
 unsafe extern "C" {
     pub fn mjr_defaultContext(con: *mut mjrContext);
@@ -4486,11 +4335,7 @@ unsafe extern "C" {
     pub fn mjr_freeContext(con: *mut mjrContext);
 }
 unsafe extern "C" {
-    pub fn mjr_resizeOffscreen(
-        width: ::core::ffi::c_int,
-        height: ::core::ffi::c_int,
-        con: *mut mjrContext,
-    );
+    pub fn mjr_resizeOffscreen(width: ::core::ffi::c_int, height: ::core::ffi::c_int, con: *mut mjrContext);
 }
 unsafe extern "C" {
     pub fn mjr_uploadTexture(m: *const mjModel, con: *const mjrContext, texid: ::core::ffi::c_int);
@@ -4499,11 +4344,7 @@ unsafe extern "C" {
     pub fn mjr_uploadMesh(m: *const mjModel, con: *const mjrContext, meshid: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mjr_uploadHField(
-        m: *const mjModel,
-        con: *const mjrContext,
-        hfieldid: ::core::ffi::c_int,
-    );
+    pub fn mjr_uploadHField(m: *const mjModel, con: *const mjrContext, hfieldid: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mjr_restoreBuffer(con: *const mjrContext);
@@ -4512,12 +4353,7 @@ unsafe extern "C" {
     pub fn mjr_setBuffer(framebuffer: ::core::ffi::c_int, con: *mut mjrContext);
 }
 unsafe extern "C" {
-    pub fn mjr_readPixels(
-        rgb: *mut ::core::ffi::c_uchar,
-        depth: *mut f32,
-        viewport: mjrRect,
-        con: *const mjrContext,
-    );
+    pub fn mjr_readPixels(rgb: *mut ::core::ffi::c_uchar, depth: *mut f32, viewport: mjrRect, con: *const mjrContext);
 }
 unsafe extern "C" {
     pub fn mjr_drawPixels(
@@ -4636,11 +4472,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mjui_event(
-        ui: *mut mjUI,
-        state: *mut mjuiState,
-        con: *const mjrContext,
-    ) -> *mut mjuiItem;
+    pub fn mjui_event(ui: *mut mjUI, state: *mut mjuiState, con: *const mjrContext) -> *mut mjuiItem;
 }
 unsafe extern "C" {
     pub fn mjui_render(ui: *mut mjUI, state: *const mjuiState, con: *const mjrContext);
@@ -4694,10 +4526,7 @@ unsafe extern "C" {
     pub fn mjs_numWarnings(spec: *const mjSpec) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mjs_getWarning(
-        spec: *const mjSpec,
-        index: ::core::ffi::c_int,
-    ) -> *const ::core::ffi::c_char;
+    pub fn mjs_getWarning(spec: *const mjSpec, index: ::core::ffi::c_int) -> *const ::core::ffi::c_char;
 }
 unsafe extern "C" {
     pub fn mju_zero3(res: *mut mjtNum);
@@ -4778,20 +4607,10 @@ unsafe extern "C" {
     pub fn mju_scl(res: *mut mjtNum, vec: *const mjtNum, scl: mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mju_add(
-        res: *mut mjtNum,
-        vec1: *const mjtNum,
-        vec2: *const mjtNum,
-        n: ::core::ffi::c_int,
-    );
+    pub fn mju_add(res: *mut mjtNum, vec1: *const mjtNum, vec2: *const mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mju_sub(
-        res: *mut mjtNum,
-        vec1: *const mjtNum,
-        vec2: *const mjtNum,
-        n: ::core::ffi::c_int,
-    );
+    pub fn mju_sub(res: *mut mjtNum, vec1: *const mjtNum, vec2: *const mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mju_addTo(res: *mut mjtNum, vec: *const mjtNum, n: ::core::ffi::c_int);
@@ -4803,13 +4622,7 @@ unsafe extern "C" {
     pub fn mju_addToScl(res: *mut mjtNum, vec: *const mjtNum, scl: mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mju_addScl(
-        res: *mut mjtNum,
-        vec1: *const mjtNum,
-        vec2: *const mjtNum,
-        scl: mjtNum,
-        n: ::core::ffi::c_int,
-    );
+    pub fn mju_addScl(res: *mut mjtNum, vec1: *const mjtNum, vec2: *const mjtNum, scl: mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mju_normalize(res: *mut mjtNum, n: ::core::ffi::c_int) -> mjtNum;
@@ -4847,12 +4660,7 @@ unsafe extern "C" {
     ) -> mjtNum;
 }
 unsafe extern "C" {
-    pub fn mju_transpose(
-        res: *mut mjtNum,
-        mat: *const mjtNum,
-        nr: ::core::ffi::c_int,
-        nc: ::core::ffi::c_int,
-    );
+    pub fn mju_transpose(res: *mut mjtNum, mat: *const mjtNum, nr: ::core::ffi::c_int, nc: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mju_symmetrize(res: *mut mjtNum, mat: *const mjtNum, n: ::core::ffi::c_int);
@@ -4995,35 +4803,16 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mju_negPose(
-        posres: *mut mjtNum,
-        quatres: *mut mjtNum,
-        pos: *const mjtNum,
-        quat: *const mjtNum,
-    );
+    pub fn mju_negPose(posres: *mut mjtNum, quatres: *mut mjtNum, pos: *const mjtNum, quat: *const mjtNum);
 }
 unsafe extern "C" {
-    pub fn mju_trnVecPose(
-        res: *mut mjtNum,
-        pos: *const mjtNum,
-        quat: *const mjtNum,
-        vec: *const mjtNum,
-    );
+    pub fn mju_trnVecPose(res: *mut mjtNum, pos: *const mjtNum, quat: *const mjtNum, vec: *const mjtNum);
 }
 unsafe extern "C" {
-    pub fn mju_cholFactor(
-        mat: *mut mjtNum,
-        n: ::core::ffi::c_int,
-        mindiag: mjtNum,
-    ) -> ::core::ffi::c_int;
+    pub fn mju_cholFactor(mat: *mut mjtNum, n: ::core::ffi::c_int, mindiag: mjtNum) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mju_cholSolve(
-        res: *mut mjtNum,
-        mat: *const mjtNum,
-        vec: *const mjtNum,
-        n: ::core::ffi::c_int,
-    );
+    pub fn mju_cholSolve(res: *mut mjtNum, mat: *const mjtNum, vec: *const mjtNum, n: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mju_cholUpdate(
@@ -5134,40 +4923,19 @@ unsafe extern "C" {
     ) -> mjtNum;
 }
 unsafe extern "C" {
-    pub fn mju_muscleBias(
-        len: mjtNum,
-        lengthrange: *const mjtNum,
-        acc0: mjtNum,
-        prm: *const mjtNum,
-    ) -> mjtNum;
+    pub fn mju_muscleBias(len: mjtNum, lengthrange: *const mjtNum, acc0: mjtNum, prm: *const mjtNum) -> mjtNum;
 }
 unsafe extern "C" {
     pub fn mju_muscleDynamics(ctrl: mjtNum, act: mjtNum, prm: *const mjtNum) -> mjtNum;
 }
 unsafe extern "C" {
-    pub fn mju_encodePyramid(
-        pyramid: *mut mjtNum,
-        force: *const mjtNum,
-        mu: *const mjtNum,
-        dim: ::core::ffi::c_int,
-    );
+    pub fn mju_encodePyramid(pyramid: *mut mjtNum, force: *const mjtNum, mu: *const mjtNum, dim: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mju_decodePyramid(
-        force: *mut mjtNum,
-        pyramid: *const mjtNum,
-        mu: *const mjtNum,
-        dim: ::core::ffi::c_int,
-    );
+    pub fn mju_decodePyramid(force: *mut mjtNum, pyramid: *const mjtNum, mu: *const mjtNum, dim: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mju_springDamper(
-        pos0: mjtNum,
-        vel0: mjtNum,
-        Kp: mjtNum,
-        Kv: mjtNum,
-        dt: mjtNum,
-    ) -> mjtNum;
+    pub fn mju_springDamper(pos0: mjtNum, vel0: mjtNum, Kp: mjtNum, Kv: mjtNum, dt: mjtNum) -> mjtNum;
 }
 unsafe extern "C" {
     pub fn mju_min(a: mjtNum, b: mjtNum) -> mjtNum;
@@ -5240,21 +5008,10 @@ unsafe extern "C" {
     pub fn mjc_getSDF(m: *const mjModel, id: ::core::ffi::c_int) -> *const mjpPlugin;
 }
 unsafe extern "C" {
-    pub fn mjc_distance(
-        m: *const mjModel,
-        d: *const mjData,
-        s: *const mjSDF,
-        x: *const mjtNum,
-    ) -> mjtNum;
+    pub fn mjc_distance(m: *const mjModel, d: *const mjData, s: *const mjSDF, x: *const mjtNum) -> mjtNum;
 }
 unsafe extern "C" {
-    pub fn mjc_gradient(
-        m: *const mjModel,
-        d: *const mjData,
-        s: *const mjSDF,
-        gradient: *mut mjtNum,
-        x: *const mjtNum,
-    );
+    pub fn mjc_gradient(m: *const mjModel, d: *const mjData, s: *const mjSDF, gradient: *mut mjtNum, x: *const mjtNum);
 }
 unsafe extern "C" {
     pub fn mjd_transitionFD(
@@ -5305,10 +5062,7 @@ unsafe extern "C" {
     pub fn mjp_pluginCount() -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mjp_getPlugin(
-        name: *const ::core::ffi::c_char,
-        slot: *mut ::core::ffi::c_int,
-    ) -> *const mjpPlugin;
+    pub fn mjp_getPlugin(name: *const ::core::ffi::c_char, slot: *mut ::core::ffi::c_int) -> *const mjpPlugin;
 }
 unsafe extern "C" {
     pub fn mjp_getPluginAtSlot(slot: ::core::ffi::c_int) -> *const mjpPlugin;
@@ -5323,9 +5077,7 @@ unsafe extern "C" {
     pub fn mjp_providerCount() -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mjp_findProvider(
-        resource_name: *const ::core::ffi::c_char,
-    ) -> *const mjpResourceProvider;
+    pub fn mjp_findProvider(resource_name: *const ::core::ffi::c_char) -> *const mjpResourceProvider;
 }
 unsafe extern "C" {
     pub fn mjp_getProviderAtSlot(slot: ::core::ffi::c_int) -> *const mjpResourceProvider;
@@ -5337,10 +5089,7 @@ unsafe extern "C" {
     pub fn mjp_defaultDecoder(decoder: *mut mjpDecoder);
 }
 unsafe extern "C" {
-    pub fn mjp_findDecoder(
-        resource: *const mjResource,
-        content_type: *const ::core::ffi::c_char,
-    ) -> *const mjpDecoder;
+    pub fn mjp_findDecoder(resource: *const mjResource, content_type: *const ::core::ffi::c_char) -> *const mjpDecoder;
 }
 unsafe extern "C" {
     pub fn mjp_registerEncoder(encoder: *const mjpEncoder);
@@ -5358,9 +5107,7 @@ unsafe extern "C" {
     pub fn mjp_registerArchiveProvider(provider: *const mjpResourceProvider);
 }
 unsafe extern "C" {
-    pub fn mjp_findArchiveProvider(
-        resource_name: *const ::core::ffi::c_char,
-    ) -> *const mjpResourceProvider;
+    pub fn mjp_findArchiveProvider(resource_name: *const ::core::ffi::c_char) -> *const mjpResourceProvider;
 }
 unsafe extern "C" {
     pub fn mjp_archiveProviderCount() -> ::core::ffi::c_int;
@@ -5378,10 +5125,7 @@ unsafe extern "C" {
     pub fn mju_closeResource(resource: *mut mjResource);
 }
 unsafe extern "C" {
-    pub fn mju_readResource(
-        resource: *mut mjResource,
-        buffer: *mut *const ::core::ffi::c_void,
-    ) -> ::core::ffi::c_int;
+    pub fn mju_readResource(resource: *mut mjResource, buffer: *mut *const ::core::ffi::c_void) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
     pub fn mju_writeResource(
@@ -5510,11 +5254,7 @@ unsafe extern "C" {
     ) -> *mut mjsWrap;
 }
 unsafe extern "C" {
-    pub fn mjs_wrapJoint(
-        tendon: *mut mjsTendon,
-        name: *const ::core::ffi::c_char,
-        coef: f64,
-    ) -> *mut mjsWrap;
+    pub fn mjs_wrapJoint(tendon: *mut mjsTendon, name: *const ::core::ffi::c_char, coef: f64) -> *mut mjsWrap;
 }
 unsafe extern "C" {
     pub fn mjs_wrapPulley(tendon: *mut mjsTendon, divisor: f64) -> *mut mjsWrap;
@@ -5673,11 +5413,7 @@ unsafe extern "C" {
     pub fn mjs_findBody(s: *const mjSpec, name: *const ::core::ffi::c_char) -> *mut mjsBody;
 }
 unsafe extern "C" {
-    pub fn mjs_findElement(
-        s: *const mjSpec,
-        type_: mjtObj,
-        name: *const ::core::ffi::c_char,
-    ) -> *mut mjsElement;
+    pub fn mjs_findElement(s: *const mjSpec, type_: mjtObj, name: *const ::core::ffi::c_char) -> *mut mjsElement;
 }
 unsafe extern "C" {
     pub fn mjs_findChild(body: *const mjsBody, name: *const ::core::ffi::c_char) -> *mut mjsBody;
@@ -5695,10 +5431,7 @@ unsafe extern "C" {
     pub fn mjs_getDefault(element: *const mjsElement) -> *mut mjsDefault;
 }
 unsafe extern "C" {
-    pub fn mjs_findDefault(
-        s: *const mjSpec,
-        classname: *const ::core::ffi::c_char,
-    ) -> *mut mjsDefault;
+    pub fn mjs_findDefault(s: *const mjSpec, classname: *const ::core::ffi::c_char) -> *mut mjsDefault;
 }
 unsafe extern "C" {
     pub fn mjs_getSpecDefault(s: *const mjSpec) -> *mut mjsDefault;
@@ -5707,11 +5440,7 @@ unsafe extern "C" {
     pub fn mjs_getId(element: *const mjsElement) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mjs_firstChild(
-        body: *const mjsBody,
-        type_: mjtObj,
-        recurse: ::core::ffi::c_int,
-    ) -> *mut mjsElement;
+    pub fn mjs_firstChild(body: *const mjsBody, type_: mjtObj, recurse: ::core::ffi::c_int) -> *mut mjsElement;
 }
 unsafe extern "C" {
     pub fn mjs_nextChild(
@@ -5739,17 +5468,10 @@ unsafe extern "C" {
     pub fn mjs_getWrapCoef(wrap: *const mjsWrap) -> f64;
 }
 unsafe extern "C" {
-    pub fn mjs_setName(
-        element: *mut mjsElement,
-        name: *const ::core::ffi::c_char,
-    ) -> ::core::ffi::c_int;
+    pub fn mjs_setName(element: *mut mjsElement, name: *const ::core::ffi::c_char) -> ::core::ffi::c_int;
 }
 unsafe extern "C" {
-    pub fn mjs_setBuffer(
-        dest: *mut mjByteVec,
-        array: *const ::core::ffi::c_void,
-        size: ::core::ffi::c_int,
-    );
+    pub fn mjs_setBuffer(dest: *mut mjByteVec, array: *const ::core::ffi::c_void, size: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mjs_setString(dest: *mut mjString, text: *const ::core::ffi::c_char);
@@ -5768,28 +5490,16 @@ unsafe extern "C" {
     pub fn mjs_appendString(dest: *mut mjStringVec, text: *const ::core::ffi::c_char);
 }
 unsafe extern "C" {
-    pub fn mjs_setInt(
-        dest: *mut mjIntVec,
-        array: *const ::core::ffi::c_int,
-        size: ::core::ffi::c_int,
-    );
+    pub fn mjs_setInt(dest: *mut mjIntVec, array: *const ::core::ffi::c_int, size: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mjs_appendIntVec(
-        dest: *mut mjIntVecVec,
-        array: *const ::core::ffi::c_int,
-        size: ::core::ffi::c_int,
-    );
+    pub fn mjs_appendIntVec(dest: *mut mjIntVecVec, array: *const ::core::ffi::c_int, size: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mjs_setFloat(dest: *mut mjFloatVec, array: *const f32, size: ::core::ffi::c_int);
 }
 unsafe extern "C" {
-    pub fn mjs_appendFloatVec(
-        dest: *mut mjFloatVecVec,
-        array: *const f32,
-        size: ::core::ffi::c_int,
-    );
+    pub fn mjs_appendFloatVec(dest: *mut mjFloatVecVec, array: *const f32, size: ::core::ffi::c_int);
 }
 unsafe extern "C" {
     pub fn mjs_setDouble(dest: *mut mjDoubleVec, array: *const f64, size: ::core::ffi::c_int);
@@ -5804,10 +5514,7 @@ unsafe extern "C" {
     pub fn mjs_getString(source: *const mjString) -> *const ::core::ffi::c_char;
 }
 unsafe extern "C" {
-    pub fn mjs_getInStringVec(
-        source: *const mjStringVec,
-        i: ::core::ffi::c_int,
-    ) -> *const ::core::ffi::c_char;
+    pub fn mjs_getInStringVec(source: *const mjStringVec, i: ::core::ffi::c_int) -> *const ::core::ffi::c_char;
 }
 unsafe extern "C" {
     pub fn mjs_getDouble(source: *const mjDoubleVec, size: *mut ::core::ffi::c_int) -> *const f64;
@@ -5866,10 +5573,7 @@ unsafe extern "C" {
     );
 }
 unsafe extern "C" {
-    pub fn mjs_getUserValue(
-        element: *mut mjsElement,
-        key: *const ::core::ffi::c_char,
-    ) -> *const ::core::ffi::c_void;
+    pub fn mjs_getUserValue(element: *mut mjsElement, key: *const ::core::ffi::c_char) -> *const ::core::ffi::c_void;
 }
 unsafe extern "C" {
     pub fn mjs_deleteUserValue(element: *mut mjsElement, key: *const ::core::ffi::c_char);
