@@ -96,6 +96,16 @@ pub enum Error {
         got: usize,
     },
 
+    /// Writing a rerun recording failed.
+    #[cfg(feature = "rerun")]
+    #[error("{}: rerun recording failed: {message}", path.as_deref().map_or_else(|| "<viewer>".into(), |p| p.display().to_string()))]
+    Rerun {
+        /// The `.rrd` file, `None` when streaming to a viewer.
+        path: Option<PathBuf>,
+        /// What rerun said.
+        message: String,
+    },
+
     /// A model edit would make the model physically invalid (e.g. negative mass).
     #[error("invalid model edit: {0}")]
     InvalidEdit(String),

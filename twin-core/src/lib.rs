@@ -19,5 +19,7 @@
 pub mod error;
 pub mod mj;
 pub mod urdf;
+#[cfg(feature = "rerun")]
+pub mod viz;
 
 pub use error::{Error, Result};

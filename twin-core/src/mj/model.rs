@@ -274,6 +274,41 @@ model_arrays! {
     sensor_objid: i32 = nsensor;
     /// Noise standard deviation stored with each sensor (MuJoCo does not apply it) (len `nsensor`).
     sensor_noise: f64 = nsensor;
+    /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
+    geom_type: i32 = ngeom;
+    /// Contact type bits of each geom (len `ngeom`).
+    geom_contype: i32 = ngeom;
+    /// Contact affinity bits of each geom (len `ngeom`).
+    geom_conaffinity: i32 = ngeom;
+    /// Mesh (or height field) id of each geom, -1 for none (len `ngeom`).
+    geom_dataid: i32 = ngeom;
+    /// Material id of each geom, -1 for none (len `ngeom`).
+    geom_matid: i32 = ngeom;
+    /// Visibility group of each geom (len `ngeom`).
+    geom_group: i32 = ngeom;
+    /// Type-specific sizes of each geom, metres (half sizes for boxes; radius, half length for
+    /// capsules and cylinders) (len `ngeom`).
+    geom_size: [f64; 3] = ngeom;
+    /// Position of each geom in its body frame, metres (len `ngeom`).
+    geom_pos: [f64; 3] = ngeom;
+    /// Orientation of each geom in its body frame, quaternion w x y z (len `ngeom`).
+    geom_quat: [f64; 4] = ngeom;
+    /// Colour of each geom when it has no material (len `ngeom`).
+    geom_rgba: [f32; 4] = ngeom;
+    /// Colour of each material (len `nmat`).
+    mat_rgba: [f32; 4] = nmat;
+    /// First vertex of each mesh in [`Model::mesh_vert`] (len `nmesh`).
+    mesh_vertadr: i32 = nmesh;
+    /// Vertex count of each mesh (len `nmesh`).
+    mesh_vertnum: i32 = nmesh;
+    /// First face of each mesh in [`Model::mesh_face`] (len `nmesh`).
+    mesh_faceadr: i32 = nmesh;
+    /// Face count of each mesh (len `nmesh`).
+    mesh_facenum: i32 = nmesh;
+    /// Vertices of all meshes, in their geom's frame, metres (len `nmeshvert`).
+    mesh_vert: [f32; 3] = nmeshvert;
+    /// Triangles of all meshes as vertex indices relative to the mesh's first vertex (len `nmeshface`).
+    mesh_face: [i32; 3] = nmeshface;
 }
 
 impl Model {
