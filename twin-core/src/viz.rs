@@ -179,7 +179,7 @@ impl Recorder {
                             &pose as &dyn rerun::AsComponents,
                             &rerun::Mesh3D::new(vertices)
                                 .with_triangle_indices(faces)
-                                .with_albedo_factor(rerun::datatypes::Rgba32::from(color.0)),
+                                .with_albedo_factor(color.0),
                         ],
                     )
                 }
