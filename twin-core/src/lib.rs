@@ -16,6 +16,7 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
+pub mod check;
 pub mod convert;
 pub mod error;
 pub mod mj;

@@ -1372,6 +1372,15 @@ impl<'a> Converter<'a> {
         }
         let _ = writeln!(x, "  </asset>");
         let _ = writeln!(x, "  <worldbody>");
+        let root = self.tree.root;
+        if self.world_root {
+            // Children of the world link hang from the world body.
+            for &j in &self.tree.children[root] {
+                self.emit_body(&mut x, j, 2)?;
+            }
+        } else {
+            self.emit_root(&mut x, root, base_z)?;
+        }
         if scene {
             if let Some(w) = world {
                 let mut body = w.worldbody.clone();
@@ -1390,15 +1399,6 @@ impl<'a> Converter<'a> {
                     self.priority_of(1.0)
                 );
             }
-        }
-        let root = self.tree.root;
-        if self.world_root {
-            // Children of the world link hang from the world body.
-            for &j in &self.tree.children[root] {
-                self.emit_body(&mut x, j, 2)?;
-            }
-        } else {
-            self.emit_root(&mut x, root, base_z)?;
         }
         let _ = writeln!(x, "  </worldbody>");
 

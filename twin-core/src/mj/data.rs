@@ -225,6 +225,14 @@ impl Data {
         c.iter().map(|c| (c.dist, c.geom)).collect()
     }
 
+    /// World position of each active contact, metres.
+    pub fn contact_positions(&self) -> Vec<[f64; 3]> {
+        let n = self.ncon();
+        // SAFETY: d->contact holds at least ncon initialised contacts after a forward pass.
+        let c = unsafe { raw_slice(self.raw().contact as *const sys::mjContact, n) };
+        c.iter().map(|c| c.pos).collect()
+    }
+
     /// Potential and kinetic energy, joules (when the model enables the energy flag).
     pub fn energy(&self) -> [f64; 2] {
         self.raw().energy

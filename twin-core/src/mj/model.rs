@@ -339,6 +339,18 @@ impl Model {
                 other => other,
             });
         }
+        Self::from_mujoco_file(path)
+    }
+
+    /// Loads a file with MuJoCo's own parser (`mj_loadXML`): MJCF, or a URDF through MuJoCo's
+    /// URDF importer (no actuators, no sensors, welded root). Used to compare twin's converter
+    /// against MuJoCo's import.
+    ///
+    /// # Errors
+    /// [`Error::Load`] with MuJoCo's message.
+    pub fn from_mujoco_file(path: impl AsRef<Path>) -> Result<Model> {
+        init()?;
+        let path = path.as_ref();
         let c_path =
             CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
                 path: Some(path.to_path_buf()),
