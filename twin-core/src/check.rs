@@ -277,29 +277,36 @@ fn physics_step(
     }
     let fell = max_drop > opts.max_height_drift_m || max_tilt > opts.max_tilt_rad;
     let growing = vel_last > 2.0 * vel_first && vel_last > 0.05;
+    let com = com_start.map(|c| [c[0], c[1]]);
+    let outside = match (com, support) {
+        (Some(c), Some((_, hi))) if c[0] > hi[0] => Some(format!(
+            "falls forward: centre of mass x = {:.3} m is ahead of the support polygon (feet up to x = {:.3} m)",
+            c[0], hi[0]
+        )),
+        (Some(c), Some((lo, _))) if c[0] < lo[0] => Some(format!(
+            "falls backward: centre of mass x = {:.3} m is behind the support polygon (from x = {:.3} m)",
+            c[0], lo[0]
+        )),
+        (Some(c), Some((lo, hi))) if c[1] < lo[1] || c[1] > hi[1] => Some(format!(
+            "falls sideways: centre of mass y = {:.3} m is outside the support polygon ({:.3} … {:.3} m)",
+            c[1], lo[1], hi[1]
+        )),
+        _ => None,
+    };
     let cause = if diverged {
         Some("the simulation diverged (NaN): growing oscillation — gains too high or timestep too large".to_string())
+    } else if fell && outside.is_some() {
+        outside
     } else if growing {
         Some(format!(
             "growing oscillation (joint speed RMS {vel_first:.3} → {vel_last:.3} rad/s): gains too high"
         ))
     } else if fell {
-        let com = com_start.map(|c| [c[0], c[1]]);
-        Some(match (com, support) {
-            (Some(c), Some((_, hi))) if c[0] > hi[0] => format!(
-                "falls forward: centre of mass x = {:.3} m is ahead of the support polygon (feet up to x = {:.3} m)",
-                c[0], hi[0]
-            ),
-            (Some(c), Some((lo, _))) if c[0] < lo[0] => format!(
-                "falls backward: centre of mass x = {:.3} m is behind the support polygon (from x = {:.3} m)",
-                c[0], lo[0]
-            ),
-            (Some(c), Some((lo, hi))) if c[1] < lo[1] || c[1] > hi[1] => format!(
-                "falls sideways: centre of mass y = {:.3} m is outside the support polygon ({:.3} … {:.3} m)",
-                c[1], lo[1], hi[1]
-            ),
-            (_, None) => "falls: nothing touches the ground after touchdown (robot not placed on the floor?)".to_string(),
-            _ => "falls although the centre of mass is over the support polygon: the PD hold is too weak (effort limits too low)".to_string(),
+        Some(if support.is_none() {
+            "falls: nothing touches the ground after touchdown (robot not placed on the floor?)"
+                .to_string()
+        } else {
+            "falls although the centre of mass is over the support polygon: the PD hold is too weak (effort limits too low)".to_string()
         })
     } else if max_slide > opts.max_slide_m {
         Some(format!(

@@ -50,10 +50,20 @@ pub(crate) struct Inertial {
 #[derive(Debug, Clone)]
 pub(crate) enum Shape {
     Box([f64; 3]),
-    Cylinder { radius: f64, length: f64 },
-    Capsule { radius: f64, length: f64 },
+    Cylinder {
+        radius: f64,
+        length: f64,
+    },
+    Capsule {
+        radius: f64,
+        length: f64,
+    },
     Sphere(f64),
-    Mesh { filename: String, scale: [f64; 3] },
+    Mesh {
+        filename: String,
+        scale: [f64; 3],
+        line: u32,
+    },
 }
 
 #[derive(Debug, Clone)]
@@ -373,7 +383,11 @@ fn parse_geometry(ctx: &Ctx<'_, '_>, g: Node<'_, '_>) -> Result<Shape> {
                     },
                 },
             };
-            Shape::Mesh { filename, scale }
+            Shape::Mesh {
+                filename,
+                scale,
+                line: ctx.line(shape),
+            }
         }
         other => {
             return Err(ctx.err(

@@ -469,6 +469,7 @@ struct Converter<'a> {
     joint_meta: Vec<JointMeta>,
     notes: Vec<String>,
     converted: Vec<PathBuf>,
+    converted_from: HashMap<PathBuf, PathBuf>,
     /// Per link: sites (XML lines) to put in its body.
     sites: Vec<Vec<String>>,
     /// Per link: cameras.
@@ -618,6 +619,7 @@ impl<'a> Converter<'a> {
             joint_meta: Vec::new(),
             notes: Vec::new(),
             converted: Vec::new(),
+            converted_from: HashMap::new(),
             sites: vec![Vec::new(); n],
             cameras: vec![Vec::new(); n],
             sensor_xml: Vec::new(),
@@ -743,11 +745,16 @@ impl<'a> Converter<'a> {
             };
             for (visual, geoms) in [(false, &link.collisions[..]), (true, visuals)] {
                 for (gi, g) in geoms.iter().enumerate() {
-                    let Shape::Mesh { filename, scale } = &g.shape else {
+                    let Shape::Mesh {
+                        filename,
+                        scale,
+                        line,
+                    } = &g.shape
+                    else {
                         continue;
                     };
                     let file = mesh::resolve(filename, &abs_dir, &search)
-                        .map_err(|m| self.urdf_err(g.line, "mesh", &link.name, m))?;
+                        .map_err(|m| self.urdf_err(*line, "mesh", &link.name, m))?;
                     let file = std::path::absolute(&file).unwrap_or(file);
                     let key = (file.clone(), scale.map(f64::to_bits));
                     let idx = match by_key.get(&key) {
@@ -755,7 +762,7 @@ impl<'a> Converter<'a> {
                         None => {
                             let file = self
                                 .native_mesh(&file)
-                                .map_err(|m| self.urdf_err(g.line, "mesh", &link.name, m))?;
+                                .map_err(|m| self.urdf_err(*line, "mesh", &link.name, m))?;
                             let stem: String = key
                                 .0
                                 .file_stem()
@@ -919,6 +926,9 @@ impl<'a> Converter<'a> {
         if kind == mesh::MeshKind::Native {
             return Ok(file.to_path_buf());
         }
+        if let Some(done) = self.converted_from.get(file) {
+            return Ok(done.clone());
+        }
         let bytes = std::fs::read(file).map_err(|e| format!("{}: {e}", file.display()))?;
         let mut key = file.as_os_str().as_encoded_bytes().to_vec();
         key.extend_from_slice(&bytes);
@@ -950,6 +960,7 @@ impl<'a> Converter<'a> {
             tris.len()
         ));
         self.converted.push(out.clone());
+        self.converted_from.insert(file.to_path_buf(), out.clone());
         Ok(out)
     }
 
@@ -1211,7 +1222,9 @@ impl<'a> Converter<'a> {
                             ("capsule", vec![radius * 1.05, length * 0.525])
                         }
                         Shape::Mesh { .. } => {
-                            self.notes.push(format!("contact sensor \"{}\": mesh collision approximated by a 10 cm sphere site", s.name));
+                            self.notes.push(format!("contact sensor \"{}\": mesh collision (line {}) approximated by a 10 cm sphere site",
+                                s.name, g.line
+                            ));
                             ("sphere", vec![0.1])
                         }
                     };

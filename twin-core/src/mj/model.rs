@@ -220,6 +220,8 @@ model_arrays! {
     body_iquat: [f64; 4] = nbody;
     /// Mass of each body's subtree, kg (len `nbody`; derived, set by `mj_setConst`).
     body_subtreemass: f64 = nbody;
+    /// First joint of each body, -1 if none (len `nbody`).
+    body_jntadr: i32 = nbody;
     /// Number of joints of each body (len `nbody`).
     body_jntnum: i32 = nbody;
     /// Type of each joint (`mjtJoint`) (len `njnt`).
