@@ -484,12 +484,23 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
         };
         let mut visuals = Vec::new();
         for v in children(l, "visual") {
-            visuals.push(GeomIr {
-                pose: ctx.origin(v)?,
-                shape: parse_geometry(ctx, v)?,
-                rgba: geom_rgba(v)?,
-                line: ctx.line(v),
-            });
+            match parse_geometry(ctx, v) {
+                Ok(shape) => visuals.push(GeomIr {
+                    pose: ctx.origin(v)?,
+                    shape,
+                    rgba: geom_rgba(v)?,
+                    line: ctx.line(v),
+                }),
+                // A degenerate visual (zero size, a "virtual link" marker) shows nothing: skip.
+                Err(Error::Urdf { message, line, .. })
+                    if message.contains("must be > 0") || message.contains("three positive") =>
+                {
+                    notes.push(format!(
+                        "link \"{name}\" (line {line}): degenerate visual skipped ({message})"
+                    ));
+                }
+                Err(e) => return Err(e),
+            }
         }
         let mut collisions = Vec::new();
         for c in children(l, "collision") {

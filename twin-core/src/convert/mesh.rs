@@ -1,5 +1,5 @@
 //! Mesh files: `package://` resolution and conversion of what MuJoCo cannot read (ASCII STL,
-//! Collada) into binary STL.
+//! Collada) into OBJ.
 
 use nalgebra::{Matrix4, Vector3, Vector4};
 use std::path::{Path, PathBuf};
@@ -100,9 +100,9 @@ pub(crate) fn resolve(
 pub(crate) enum MeshKind {
     /// Binary STL or OBJ (or MuJoCo's MSH): MuJoCo reads it directly.
     Native,
-    /// ASCII STL: converted to binary STL.
+    /// ASCII STL: converted to OBJ.
     AsciiStl,
-    /// Collada: converted to binary STL.
+    /// Collada: converted to OBJ.
     Collada,
 }
 
@@ -404,7 +404,25 @@ pub(crate) fn read_collada(path: &Path) -> std::result::Result<Triangles, String
     Ok(tris)
 }
 
+/// Wavefront OBJ text of `tris` (MuJoCo's STL reader caps meshes at 200 000 faces; OBJ has no
+/// such cap).
+pub(crate) fn obj(tris: &Triangles) -> Vec<u8> {
+    use std::fmt::Write as _;
+    let mut s = String::with_capacity(tris.len() * 100);
+    s.push_str("# twin: converted mesh\n");
+    for t in tris {
+        for v in t {
+            let _ = writeln!(s, "v {} {} {}", v.x as f32, v.y as f32, v.z as f32);
+        }
+    }
+    for k in 0..tris.len() {
+        let _ = writeln!(s, "f {} {} {}", 3 * k + 1, 3 * k + 2, 3 * k + 3);
+    }
+    s.into_bytes()
+}
+
 /// Binary STL bytes of `tris`.
+#[cfg(test)]
 pub(crate) fn binary_stl(tris: &Triangles) -> Vec<u8> {
     let mut out = Vec::with_capacity(84 + 50 * tris.len());
     let mut header = [0u8; 80];

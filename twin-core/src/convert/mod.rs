@@ -74,7 +74,7 @@ pub struct ConvertOptions {
     /// smallest change of principal moments, reported in the notes; otherwise they are errors
     /// (default: false).
     pub repair_inertia: bool,
-    /// Where meshes converted to binary STL are written (default: `None`: a cache folder in the
+    /// Where meshes converted to OBJ are written (default: `None`: a cache folder in the
     /// system temp dir, keyed by the source file).
     pub mesh_dir: Option<PathBuf>,
     /// Gazebo SDF world or MJCF file composed with the robot (default: `None`: a floor plane and
@@ -211,7 +211,7 @@ pub struct ConvertedModel {
     pub joints: Vec<JointMeta>,
     /// Everything that was approximated, repaired or dropped, one line each.
     pub notes: Vec<String>,
-    /// Mesh files written by the conversion (ASCII STL / Collada → binary STL).
+    /// Mesh files written by the conversion (ASCII STL / Collada → OBJ).
     pub converted_meshes: Vec<PathBuf>,
 }
 
@@ -253,6 +253,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
         let model = conv.compile(&probe)?;
         let lowest = lowest_collision_z(&model)?;
         match lowest {
+            Some(z) if conv.world_root => (-z).max(0.0),
             Some(z) => -z,
             None => 0.0,
         }
@@ -262,7 +263,12 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     // Pass 2: the real model; its qpos0 is the home pose.
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), None)?;
     let model = conv.compile(&mjcf)?;
-    let mjcf = conv.emit(base_height_m, true, world.as_ref(), Some(model.qpos0()))?;
+    let mjcf = conv.emit(
+        base_height_m,
+        true,
+        world.as_ref(),
+        Some(&home_pose(&model)),
+    )?;
     let mut notes = robot.notes.clone();
     notes.append(&mut conv.notes);
     if let Some(w) = &world {
@@ -281,10 +287,28 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     })
 }
 
+/// `qpos0` with every limited hinge and slide clamped into its range (some URDFs put 0
+/// outside the range, e.g. knees of quadrupeds): the nominal pose of keyframe `home`.
+fn home_pose(model: &Model) -> Vec<f64> {
+    let mut q = model.qpos0().to_vec();
+    for j in 0..model.njnt() {
+        if model.jnt_limited()[j] != 0
+            && matches!(model.joint_type(j), JointType::Hinge | JointType::Slide)
+        {
+            let [lo, hi] = model.jnt_range()[j];
+            let a = model.jnt_qposadr()[j] as usize;
+            q[a] = q[a].clamp(lo, hi);
+        }
+    }
+    q
+}
+
 /// Lowest world z of any collision geom of the robot at the model's `qpos0` (planes ignored).
 fn lowest_collision_z(model: &Model) -> Result<Option<f64>> {
     let model = std::sync::Arc::new(model.try_clone()?);
     let mut data = crate::mj::Data::new(model.clone())?;
+    let home = home_pose(&model);
+    data.qpos_mut().copy_from_slice(&home);
     data.forward()?;
     let mut lowest: Option<f64> = None;
     let m = &model;
@@ -470,6 +494,7 @@ struct Converter<'a> {
     notes: Vec<String>,
     converted: Vec<PathBuf>,
     converted_from: HashMap<PathBuf, PathBuf>,
+    sensor_names: std::collections::HashSet<String>,
     /// Per link: sites (XML lines) to put in its body.
     sites: Vec<Vec<String>>,
     /// Per link: cameras.
@@ -608,7 +633,7 @@ impl<'a> Converter<'a> {
             opts,
             world_root,
             floating,
-            placed: !world_root,
+            placed: true,
             inertials: vec![None; n],
             mesh_of: HashMap::new(),
             meshes: Vec::new(),
@@ -620,6 +645,7 @@ impl<'a> Converter<'a> {
             notes: Vec::new(),
             converted: Vec::new(),
             converted_from: HashMap::new(),
+            sensor_names: std::collections::HashSet::new(),
             sites: vec![Vec::new(); n],
             cameras: vec![Vec::new(); n],
             sensor_xml: Vec::new(),
@@ -892,6 +918,25 @@ impl<'a> Converter<'a> {
                 mimic_of: j.mimic.as_ref().map(|m| m.joint.clone()),
             });
         }
+        for j in &robot.joints {
+            if let Some(m) = &j.mimic {
+                let movable = |n: &str| {
+                    robot.joints.iter().any(|k| {
+                        k.name == n
+                            && matches!(
+                                k.kind,
+                                JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic
+                            )
+                    })
+                };
+                if !movable(&j.name) || !movable(&m.joint) {
+                    self.notes.push(format!(
+                        "mimic of joint \"{}\" (line {}) on \"{}\": one of them is not a 1-DOF joint; no equality added",
+                        j.name, m.line, m.joint
+                    ));
+                }
+            }
+        }
         if !passive.is_empty() {
             self.notes.push(format!(
                 "{} movable joint(s) have no transmission or ros2_control entry and stay passive (no actuator): {}",
@@ -920,7 +965,7 @@ impl<'a> Converter<'a> {
             .sum::<f64>()
     }
 
-    /// Path of a mesh MuJoCo can read: the file itself, or a converted binary STL.
+    /// Path of a mesh MuJoCo can read: the file itself, or a converted OBJ.
     fn native_mesh(&mut self, file: &Path) -> std::result::Result<PathBuf, String> {
         let kind = mesh::classify(file)?;
         if kind == mesh::MeshKind::Native {
@@ -938,7 +983,7 @@ impl<'a> Converter<'a> {
             Some(d) => d.clone(),
             None => std::env::temp_dir().join("twin-meshes"),
         };
-        let out = dir.join(format!("{stem}-{hash:016x}.stl"));
+        let out = dir.join(format!("{stem}-{hash:016x}.obj"));
         if self.opts.mesh_dir.is_none() && out.is_file() {
             return Ok(out);
         }
@@ -946,10 +991,10 @@ impl<'a> Converter<'a> {
             mesh::MeshKind::AsciiStl => mesh::read_ascii_stl(file)?,
             _ => mesh::read_collada(file)?,
         };
-        mesh::write_atomic(&out, &mesh::binary_stl(&tris))
+        mesh::write_atomic(&out, &mesh::obj(&tris))
             .map_err(|e| format!("writing converted mesh {}: {e}", out.display()))?;
         self.notes.push(format!(
-            "mesh {} ({}) converted to binary STL {} ({} triangles)",
+            "mesh {} ({}) converted to OBJ {} ({} triangles)",
             file.display(),
             if kind == mesh::MeshKind::AsciiStl {
                 "ASCII STL"
@@ -986,6 +1031,16 @@ impl<'a> Converter<'a> {
         (self.tree.link_index[&j.child], Pose::IDENTITY)
     }
 
+    fn unique_sensor_name(&mut self, base: &str) -> String {
+        let mut name = base.to_string();
+        let mut k = 1;
+        while !self.sensor_names.insert(name.clone()) {
+            k += 1;
+            name = format!("{base}_{k}");
+        }
+        name
+    }
+
     fn sensors(&mut self) -> Result<()> {
         let robot = self.robot;
         for s in &robot.sensors {
@@ -993,7 +1048,14 @@ impl<'a> Converter<'a> {
             let (link, frame) = self.sensor_link(s);
             let pose = frame.then(&s.pose);
             let link_name = robot.links[link].name.clone();
-            let name = esc(&s.name);
+            let unique = self.unique_sensor_name(&s.name);
+            if unique != s.name {
+                self.notes.push(format!(
+                    "sensor \"{}\" (line {}) repeats an earlier sensor's name: converted as \"{unique}\"",
+                    s.name, s.line
+                ));
+            }
+            let name = esc(&unique);
             let topic = resolve_topic(node);
             match s.kind.as_str() {
                 "imu" => {
@@ -1389,7 +1451,7 @@ impl<'a> Converter<'a> {
         if self.world_root {
             // Children of the world link hang from the world body.
             for &j in &self.tree.children[root] {
-                self.emit_body(&mut x, j, 2)?;
+                self.emit_body(&mut x, j, 2, base_z)?;
             }
         } else {
             self.emit_root(&mut x, root, base_z)?;
@@ -1415,7 +1477,24 @@ impl<'a> Converter<'a> {
         }
         let _ = writeln!(x, "  </worldbody>");
 
-        let mimics: Vec<&JointIr> = robot.joints.iter().filter(|j| j.mimic.is_some()).collect();
+        let one_dof = |name: &str| {
+            robot.joints.iter().any(|j| {
+                j.name == name
+                    && matches!(
+                        j.kind,
+                        JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic
+                    )
+            })
+        };
+        let mimics: Vec<&JointIr> = robot
+            .joints
+            .iter()
+            .filter(|j| {
+                j.mimic
+                    .as_ref()
+                    .is_some_and(|m| one_dof(&j.name) && one_dof(&m.joint))
+            })
+            .collect();
         if !mimics.is_empty() {
             let _ = writeln!(x, "  <equality>");
             for j in mimics {
@@ -1545,15 +1624,17 @@ impl<'a> Converter<'a> {
         Ok(())
     }
 
-    fn emit_body(&self, x: &mut String, joint: usize, depth: usize) -> Result<()> {
+    fn emit_body(&self, x: &mut String, joint: usize, depth: usize, lift_z: f64) -> Result<()> {
         let j = &self.robot.joints[joint];
         let link = self.tree.link_index[&j.child];
         let ind = "  ".repeat(depth);
+        let mut origin = j.origin;
+        origin.xyz.z += lift_z;
         let _ = writeln!(
             x,
             "{ind}<body name=\"{}\"{}>",
             esc(&j.child),
-            pose_attrs(&j.origin)
+            pose_attrs(&origin)
         );
         let ji = format!("{ind}  ");
         let n = esc(&j.name);
@@ -1717,7 +1798,7 @@ impl<'a> Converter<'a> {
             let _ = writeln!(x, "{ind}{c}");
         }
         for &j in &self.tree.children[li] {
-            self.emit_body(x, j, depth)?;
+            self.emit_body(x, j, depth, 0.0)?;
         }
         Ok(())
     }
