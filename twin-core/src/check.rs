@@ -111,7 +111,10 @@ fn metric(name: impl Into<String>, value: f64, unit: &'static str) -> Metric {
 
 /// The model with every joint actuator turned into a PD servo; returns also, per servo, the
 /// actuator id, joint id and gear.
-fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<(usize, usize, f64)>)> {
+/// A servo: actuator id, joint id, gear.
+type Servo = (usize, usize, f64);
+
+fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)> {
     let dt = model.timestep_secs();
     let mut edit = model.edit()?;
     let mut servos = Vec::new();

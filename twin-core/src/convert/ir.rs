@@ -345,7 +345,7 @@ fn parse_geometry(ctx: &Ctx<'_, '_>, g: Node<'_, '_>) -> Result<Shape> {
     Ok(match shape.tag_name().name() {
         "box" => {
             let size = ctx.vec(shape, "size", [f64::NAN; 3])?;
-            if size.iter().any(|s| !(*s > 0.0)) {
+            if size.iter().any(|s| s.is_nan() || *s <= 0.0) {
                 return Err(ctx.err(
                     shape,
                     "box needs size=\"x y z\" with three positive lengths (metres)",
@@ -656,19 +656,19 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
         });
     }
     for j in &joints {
-        if let Some(m) = &j.mimic {
-            if !seen_joints.contains_key(&m.joint) {
-                return Err(Error::Urdf {
-                    path: ctx.path.to_path_buf(),
-                    line: m.line,
-                    element: "mimic".into(),
-                    name: Some(j.name.clone()),
-                    message: format!(
-                        "mimic names joint \"{}\", which does not exist: fix the name",
-                        m.joint
-                    ),
-                });
-            }
+        if let Some(m) = &j.mimic
+            && !seen_joints.contains_key(&m.joint)
+        {
+            return Err(Error::Urdf {
+                path: ctx.path.to_path_buf(),
+                line: m.line,
+                element: "mimic".into(),
+                name: Some(j.name.clone()),
+                message: format!(
+                    "mimic names joint \"{}\", which does not exist: fix the name",
+                    m.joint
+                ),
+            });
         }
     }
 

@@ -24,16 +24,14 @@ pub(crate) fn find_package(pkg: &str, search: &[PathBuf]) -> Option<PathBuf> {
         entries.sort();
         for e in entries {
             let manifest = e.join("package.xml");
-            if let Ok(text) = std::fs::read_to_string(&manifest) {
-                if let Some(name) = text
+            if let Ok(text) = std::fs::read_to_string(&manifest)
+                && let Some(name) = text
                     .split_once("<name>")
                     .and_then(|(_, r)| r.split_once("</name>"))
                     .map(|(n, _)| n.trim())
-                {
-                    if name == pkg {
-                        return Some(e);
-                    }
-                }
+                && name == pkg
+            {
+                return Some(e);
             }
         }
     }

@@ -470,6 +470,9 @@ struct MeshAsset {
     scale: [f64; 3],
 }
 
+/// Centre of mass (body frame), `fullinertia` (Ixx Iyy Izz Ixy Ixz Iyz, body frame), mass.
+type BodyInertial = ([f64; 3], [f64; 6], f64);
+
 struct Converter<'a> {
     robot: &'a RobotIr,
     tree: &'a Tree,
@@ -481,7 +484,7 @@ struct Converter<'a> {
     /// Whether the root is placed on the floor.
     placed: bool,
     /// Per link: inertial as `(pos, fullinertia [Ixx Iyy Izz Ixy Ixz Iyz], mass)`.
-    inertials: Vec<Option<([f64; 3], [f64; 6], f64)>>,
+    inertials: Vec<Option<BodyInertial>>,
     /// Mesh asset index per (link, visual?, geom index).
     mesh_of: HashMap<(usize, bool, usize), usize>,
     meshes: Vec<MeshAsset>,
@@ -1649,15 +1652,15 @@ impl<'a> Converter<'a> {
         if self.opts.armature > 0.0 {
             let _ = write!(dyn_attrs, " armature=\"{}\"", f(self.opts.armature));
         }
-        if let Some(l) = &j.limit {
-            if l.effort > 0.0 {
-                let _ = write!(
-                    dyn_attrs,
-                    " actuatorfrcrange=\"{} {}\"",
-                    f(-l.effort),
-                    f(l.effort)
-                );
-            }
+        if let Some(l) = &j.limit
+            && l.effort > 0.0
+        {
+            let _ = write!(
+                dyn_attrs,
+                " actuatorfrcrange=\"{} {}\"",
+                f(-l.effort),
+                f(l.effort)
+            );
         }
         match j.kind {
             JointKind::Fixed => {}
@@ -1876,10 +1879,10 @@ fn resolve_topic(sensor: roxmltree::Node<'_, '_>) -> Option<String> {
             let mut out = None;
             for r in ir::children(ros, "remapping") {
                 let t = r.text().unwrap_or("").trim();
-                if let Some((from, to)) = t.split_once(":=") {
-                    if from == "~/out" || from == "out" {
-                        out = Some(to.to_string());
-                    }
+                if let Some((from, to)) = t.split_once(":=")
+                    && (from == "~/out" || from == "out")
+                {
+                    out = Some(to.to_string());
                 }
             }
             let topic = match out {

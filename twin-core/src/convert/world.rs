@@ -50,14 +50,14 @@ fn mjcf(path: &Path, text: &str, root: roxmltree::Node<'_, '_>) -> Result<World>
     let slice = |n: roxmltree::Node<'_, '_>| -> String {
         let mut s = text[n.range()].to_string();
         // Relative asset files resolve against the world file's folder.
-        if let Some(file) = n.attribute("file") {
-            if !Path::new(file).is_absolute() {
-                s = s.replacen(
-                    &format!("file=\"{file}\""),
-                    &format!("file=\"{}\"", esc(&dir.join(file).display().to_string())),
-                    1,
-                );
-            }
+        if let Some(file) = n.attribute("file")
+            && !Path::new(file).is_absolute()
+        {
+            s = s.replacen(
+                &format!("file=\"{file}\""),
+                &format!("file=\"{}\"", esc(&dir.join(file).display().to_string())),
+                1,
+            );
         }
         s
     };
