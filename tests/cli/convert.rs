@@ -107,24 +107,23 @@ fn check_passes_the_humanoid_and_fails_a_falling_one() {
     ] {
         assert!(out.contains(step), "{out}");
     }
-    // Same robot with feet that slide: friction 0.01 on the soles.
+    // The torso's mass moved 0.6 m forward: the centre of mass leaves the feet.
     let dir = tempfile::tempdir().unwrap();
     let t = std::fs::read_to_string(repo().join("models/humanoid.urdf")).unwrap();
-    let t = t
-        .replace("<mu1>1.0</mu1>", "<mu1>0.0</mu1>")
-        .replace("<mu2>1.0</mu2>", "<mu2>0.0</mu2>");
-    // Lean the torso so gravity pushes the feet sideways.
     let t = t.replacen(
-        "<origin xyz=\"0 0 0.05\" rpy=\"0 0 0\"/>\n    <parent link=\"pelvis\"/>",
-        "<origin xyz=\"0 0 0.05\" rpy=\"0 0.05 0\"/>\n    <parent link=\"pelvis\"/>",
+        "<origin xyz=\"0 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
+        "<origin xyz=\"0.6 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
         1,
     );
-    std::fs::write(dir.path().join("slippery.urdf"), t).unwrap();
-    let o = twin(&["check", "slippery.urdf", "--hold-secs", "3"], dir.path());
+    std::fs::write(dir.path().join("heavy_front.urdf"), t).unwrap();
+    let o = twin(
+        &["check", "heavy_front.urdf", "--hold-secs", "2"],
+        dir.path(),
+    );
     let out = text(&o);
     assert!(!o.status.success(), "{out}");
     assert!(out.contains("FAIL physics"), "{out}");
-    assert!(out.contains("likely cause:"), "{out}");
+    assert!(out.contains("likely cause: falls forward"), "{out}");
 }
 
 /// Real robot descriptions from PyPI (example-robot-data ships URDFs with package:// meshes,

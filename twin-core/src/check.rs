@@ -180,8 +180,22 @@ pub fn check(floating: &Model, fixed: Option<&Model>, opts: &CheckOptions) -> Re
     let servo = Arc::new(servo);
     let mut steps = Vec::new();
     let (physics, mut data) = physics_step(&servo, &servos, opts)?;
+    let diverged = physics
+        .cause
+        .as_deref()
+        .is_some_and(|c| c.contains("diverged"));
     steps.push(physics);
-    steps.push(sensors_step(&mut data)?);
+    steps.push(if diverged {
+        StepReport {
+            name: "sensors",
+            passed: false,
+            metrics: vec![],
+            details: vec![],
+            cause: Some("not checked: the physics step diverged".into()),
+        }
+    } else {
+        sensors_step(&mut data)?
+    });
     let control = match fixed {
         Some(f) => {
             let (fm, fs) = servo_model(f, opts)?;

@@ -1767,13 +1767,15 @@ impl<'a> Converter<'a> {
             String::new()
         };
         let rgba_c = link.visuals.first().and_then(|v| v.rgba).or(gz_rgba);
+        // Zero friction: frictionless contacts (a zero-width friction cone is degenerate).
+        let condim = if mu <= 0.0 { " condim=\"1\"" } else { "" };
         for (gi, g) in link.collisions.iter().enumerate() {
             let rgba = rgba_c
                 .map(|c| format!(" rgba=\"{}\"", fv(&c)))
                 .unwrap_or_default();
             let _ = writeln!(
                 x,
-                "{ind}<geom name=\"{}_collision_{gi}\"{} contype=\"{ct}\" conaffinity=\"{ca}\" group=\"3\" friction=\"{} 0.005 0.0001\"{prio}{rgba}/>",
+                "{ind}<geom name=\"{}_collision_{gi}\"{} contype=\"{ct}\" conaffinity=\"{ca}\" group=\"3\" friction=\"{} 0.005 0.0001\"{condim}{prio}{rgba}/>",
                 esc(&link.name),
                 self.geom_attrs(li, false, gi, g),
                 f(mu)
