@@ -15,4 +15,9 @@ pub struct Cli {
 pub enum Command {
     /// Print a model's bodies, joints, actuators, sensors and total mass.
     Info(crate::commands::info::Args),
+    /// Convert a URDF (+ Gazebo tags, transmissions, ros2_control) into a MuJoCo MJCF with
+    /// actuators and sensors.
+    Convert(crate::commands::convert::Args),
+    /// Validate a model step by step: physics, sensors, control, integration speed.
+    Check(crate::commands::check::Args),
 }

@@ -2,5 +2,7 @@
 
 #[path = "cli/common.rs"]
 mod common;
+#[path = "cli/convert.rs"]
+mod convert;
 #[path = "cli/info.rs"]
 mod info;

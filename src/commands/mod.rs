@@ -1,5 +1,7 @@
 //! One module per subcommand, each with `run(args) -> anyhow::Result<()>`.
 
+pub mod check;
+pub mod convert;
 pub mod info;
 
 use crate::cli::{Cli, Command};
@@ -12,6 +14,8 @@ pub const VERSION_LINE: &str = concat!(env!("CARGO_PKG_VERSION"), " (MuJoCo 4.0.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(args) => info::run(args),
+        Command::Convert(args) => convert::run(args),
+        Command::Check(args) => check::run(args),
     }
 }
 

@@ -177,9 +177,7 @@ impl Recorder {
                         entity.as_str(),
                         &[
                             &pose as &dyn rerun::AsComponents,
-                            &rerun::Mesh3D::new(vertices)
-                                .with_triangle_indices(faces)
-                                .with_albedo_factor(color.0),
+                            &rerun::Mesh3D::new(vertices).with_triangle_indices(faces).with_albedo_factor(color.0),
                         ],
                     )
                 }

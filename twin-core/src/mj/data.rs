@@ -124,6 +124,8 @@ data_arrays! {
     subtree_com, subtree_com_mut: [f64; 3] = nbody;
     /// Geom positions, world frame (len `ngeom`).
     geom_xpos, geom_xpos_mut: [f64; 3] = ngeom;
+    /// Geom orientations as row-major 3×3 matrices, world frame (len `ngeom`).
+    geom_xmat, geom_xmat_mut: [f64; 9] = ngeom;
     /// Site positions, world frame (len `nsite`).
     site_xpos, site_xpos_mut: [f64; 3] = nsite;
     /// Site orientations as row-major 3×3 matrices (len `nsite`).
@@ -198,6 +200,23 @@ impl Data {
     /// Number of active contacts after the last forward pass.
     pub fn ncon(&self) -> usize {
         self.raw().ncon.max(0) as usize
+    }
+
+    /// Signed distance of each active contact, metres (negative: penetration), with the two
+    /// geom ids.
+    pub fn contacts(&self) -> Vec<(f64, [i32; 2])> {
+        let n = self.ncon();
+        // SAFETY: d->contact holds at least ncon initialised contacts after a forward pass.
+        let c = unsafe { raw_slice(self.raw().contact as *const sys::mjContact, n) };
+        c.iter().map(|c| (c.dist, c.geom)).collect()
+    }
+
+    /// World position of each active contact, metres.
+    pub fn contact_positions(&self) -> Vec<[f64; 3]> {
+        let n = self.ncon();
+        // SAFETY: d->contact holds at least ncon initialised contacts after a forward pass.
+        let c = unsafe { raw_slice(self.raw().contact as *const sys::mjContact, n) };
+        c.iter().map(|c| c.pos).collect()
     }
 
     /// Potential and kinetic energy, joules (when the model enables the energy flag).

@@ -172,6 +172,44 @@ impl ModelEdit {
         self.set_dof("armature", dof, armature, |m| m.dof_armature)
     }
 
+    /// Turns actuator `act` into a joint-space PD servo: force = kp·(ctrl − q) − kv·q̇, the
+    /// form of MuJoCo's `position` actuator (its velocity term is integrated implicitly by the
+    /// `implicitfast` integrator). The force range and gear are kept.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for negative or non-finite gains; [`Error::Size`] for a bad id.
+    pub fn set_actuator_servo(&mut self, act: usize, kp: f64, kv: f64) -> Result<&mut Self> {
+        check("actuator id", act, self.model.nu())?;
+        finite("servo gains", &[kp, kv])?;
+        if kp < 0.0 || kv < 0.0 {
+            return Err(Error::InvalidEdit(format!("actuator {act}: servo gains must be ≥ 0, got kp {kp}, kv {kv}")));
+        }
+        let n = self.model.nu();
+        let m = self.raw_mut();
+        // SAFETY: each actuator_* array below has nu rows of the row size used; exclusive access.
+        unsafe {
+            raw_slice_mut(m.actuator_gaintype, n)[act] = mujoco_sys::mjtGain_mjGAIN_FIXED as i32;
+            raw_slice_mut(m.actuator_biastype, n)[act] = mujoco_sys::mjtBias_mjBIAS_AFFINE as i32;
+            let gain = &mut raw_slice_mut(m.actuator_gainprm.cast::<[f64; 10]>(), n)[act];
+            *gain = [0.0; 10];
+            gain[0] = kp;
+            let bias = &mut raw_slice_mut(m.actuator_biasprm.cast::<[f64; 10]>(), n)[act];
+            *bias = [0.0; 10];
+            bias[1] = -kp;
+            bias[2] = -kv;
+            // The servo's control is a position target: leave it unclamped (the force range
+            // still limits the effort).
+            raw_slice_mut(m.actuator_ctrllimited, n)[act] = false;
+        }
+        Ok(self)
+    }
+
+    /// Sets the integrator (`mjtIntegrator`: 0 Euler, 1 RK4, 2 implicit, 3 implicitfast).
+    pub fn set_integrator(&mut self, integrator: i32) -> &mut Self {
+        self.raw_mut().opt.integrator = integrator;
+        self
+    }
+
     /// Recomputes derived quantities with `mj_setConst` and returns the edited model.
     ///
     /// # Errors

@@ -220,6 +220,8 @@ model_arrays! {
     body_iquat: [f64; 4] = nbody;
     /// Mass of each body's subtree, kg (len `nbody`; derived, set by `mj_setConst`).
     body_subtreemass: f64 = nbody;
+    /// First joint of each body, -1 if none (len `nbody`).
+    body_jntadr: i32 = nbody;
     /// Number of joints of each body (len `nbody`).
     body_jntnum: i32 = nbody;
     /// Type of each joint (`mjtJoint`) (len `njnt`).
@@ -276,6 +278,10 @@ model_arrays! {
     sensor_noise: f64 = nsensor;
     /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
     geom_type: i32 = ngeom;
+    /// Whether each joint's actuator force is clamped (len `njnt`).
+    jnt_actfrclimited: u8 = njnt;
+    /// Range of the total actuator force on each joint, N·m or N (len `njnt`).
+    jnt_actfrcrange: [f64; 2] = njnt;
     /// Contact type bits of each geom (len `ngeom`).
     geom_contype: i32 = ngeom;
     /// Contact affinity bits of each geom (len `ngeom`).
@@ -309,11 +315,26 @@ model_arrays! {
     mesh_vert: [f32; 3] = nmeshvert;
     /// Triangles of all meshes as vertex indices relative to the mesh's first vertex (len `nmeshface`).
     mesh_face: [i32; 3] = nmeshface;
+    /// Contact priority of each geom (len `ngeom`).
+    geom_priority: i32 = ngeom;
+    /// Body each site belongs to (len `nsite`).
+    site_bodyid: i32 = nsite;
+    /// Id of the body each body is welded to (itself when it has joints) (len `nbody`).
+    body_weldid: i32 = nbody;
+    /// Whether each actuator's force is clamped (len `nu`).
+    actuator_forcelimited: u8 = nu;
+    /// Force range of each actuator (len `nu`).
+    actuator_forcerange: [f64; 2] = nu;
+    /// Gain type of each actuator (`mjtGain`) (len `nu`).
+    actuator_gaintype: i32 = nu;
+    /// Bias type of each actuator (`mjtBias`) (len `nu`).
+    actuator_biastype: i32 = nu;
 }
 
 impl Model {
-    /// Loads an MJCF or URDF file. URDF files are checked first (inertias, mesh files) so that
-    /// errors name the file, element and line; then MuJoCo compiles the file.
+    /// Loads an MJCF or URDF file. A URDF (root `<robot>`) goes through twin's converter
+    /// ([`crate::convert`]) with default options: free-floating base placed on a floor, one
+    /// actuator per transmission, IMU and joint sensors, keyframe `home`.
     ///
     /// # Errors
     /// [`Error::Io`] if the file can't be read, [`Error::Urdf`]/[`Error::Xml`] for an invalid
@@ -323,8 +344,24 @@ impl Model {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         if crate::urdf::is_urdf(&text) {
-            crate::urdf::validate(path, &text)?;
+            let converted = crate::convert::convert_urdf_str(path, &text, &crate::convert::ConvertOptions::default())?;
+            return Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
+                Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
+                other => other,
+            });
         }
+        Self::from_mujoco_file(path)
+    }
+
+    /// Loads a file with MuJoCo's own parser (`mj_loadXML`): MJCF, or a URDF through MuJoCo's
+    /// URDF importer (no actuators, no sensors, welded root). Used to compare twin's converter
+    /// against MuJoCo's import.
+    ///
+    /// # Errors
+    /// [`Error::Load`] with MuJoCo's message.
+    pub fn from_mujoco_file(path: impl AsRef<Path>) -> Result<Model> {
+        init()?;
+        let path = path.as_ref();
         let c_path = CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
             path: Some(path.to_path_buf()),
             message: "the path contains a NUL byte".into(),
@@ -338,6 +375,19 @@ impl Model {
         let raised =
             if rc == 0 { Ok(()) } else { Err(Error::MuJoCo { call: "mj_loadXML", message: buf_to_string(&err) }) };
         Self::finish_load(out, raised, &err, Some(path))
+    }
+
+    /// Converts the URDF at `path` with `opts` ([`crate::convert::convert_urdf`]) and compiles it.
+    ///
+    /// # Errors
+    /// As [`crate::convert::convert_urdf`].
+    pub fn from_urdf(path: impl AsRef<Path>, opts: &crate::convert::ConvertOptions) -> Result<Model> {
+        let path = path.as_ref();
+        let converted = crate::convert::convert_urdf(path, opts)?;
+        Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
+            Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
+            other => other,
+        })
     }
 
     /// Loads an MJCF (or URDF) document from a string. Relative file references (meshes)
@@ -477,6 +527,36 @@ impl Model {
     /// Number of keyframes.
     pub fn nkey(&self) -> usize {
         self.raw().nkey as usize
+    }
+    /// Number of meshes.
+    pub fn nmesh(&self) -> usize {
+        self.raw().nmesh as usize
+    }
+    /// Number of equality constraints.
+    pub fn neq(&self) -> usize {
+        self.raw().neq as usize
+    }
+    /// Number of cameras.
+    pub fn ncam(&self) -> usize {
+        self.raw().ncam as usize
+    }
+
+    /// Diagonal of the joint-space inertia at `qpos0`, kg·m² or kg (`dof_M0`, len `nv`).
+    pub fn dof_m0(&self) -> &[f64] {
+        // SAFETY: dof_M0 has nv entries; model immutable while self is borrowed.
+        unsafe { raw_slice(self.raw().dof_M0 as *const f64, self.nv()) }
+    }
+
+    /// Joint positions of keyframe `key` (len `nq`), `None` for a bad index.
+    pub fn key_qpos(&self, key: usize) -> Option<&[f64]> {
+        if key >= self.nkey() {
+            return None;
+        }
+        let nq = self.nq();
+        // SAFETY: key_qpos has nkey rows of nq entries; key checked above; model immutable
+        // while self is borrowed.
+        let all = unsafe { raw_slice(self.raw().key_qpos as *const f64, self.nkey() * nq) };
+        Some(&all[key * nq..(key + 1) * nq])
     }
     /// Simulation timestep in seconds.
     pub fn timestep_secs(&self) -> f64 {

@@ -1,0 +1,78 @@
+//! `twin check [MODEL]`: incremental validation (physics, sensors, control, integration), each
+//! step PASS/FAIL with numbers and the likely cause of a failure. Exits non-zero on a failure.
+
+use anyhow::Context;
+use std::io::Write;
+use std::path::PathBuf;
+use twin_core::check::{CheckOptions, check};
+use twin_core::convert::{ConvertOptions, Interface};
+use twin_core::mj::Model;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// MJCF (.xml) or URDF (.urdf) file (default: the shipped humanoid).
+    pub model: Option<PathBuf>,
+    /// Folder containing ROS packages for `package://` meshes (repeatable).
+    #[arg(long = "package-path", value_name = "DIR")]
+    pub package_paths: Vec<PathBuf>,
+    /// Convert a URDF with a fixed base (for arms bolted to a table).
+    #[arg(long)]
+    pub fixed_base: bool,
+    /// Fix invalid inertias by the smallest change instead of failing.
+    #[arg(long)]
+    pub repair_inertia: bool,
+    /// Duration of the standing hold, seconds.
+    #[arg(long, default_value_t = 5.0)]
+    pub hold_secs: f64,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let path = args.model.clone().unwrap_or_else(super::default_model);
+    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let mut out = std::io::stdout().lock();
+    let (floating, fixed) = if twin_core::urdf::is_urdf(&text) {
+        // Joints that no transmission names get a motor so the PD hold can act on them.
+        let opts = ConvertOptions {
+            fixed_base: args.fixed_base,
+            package_paths: args.package_paths.clone(),
+            repair_inertia: args.repair_inertia,
+            untransmitted: Some(Interface::Effort),
+            ..ConvertOptions::default()
+        };
+        let floating = Model::from_urdf(&path, &opts)?;
+        let fixed = Model::from_urdf(&path, &ConvertOptions { fixed_base: true, floor: false, ..opts })?;
+        (floating, Some(fixed))
+    } else {
+        (Model::from_file(&path)?, None)
+    };
+    writeln!(
+        out,
+        "checking {} ({} joints, {} actuators, {} sensors, {:.3} kg)",
+        path.display(),
+        floating.njnt(),
+        floating.nu(),
+        floating.nsensor(),
+        floating.total_mass_kg()
+    )?;
+    let opts = CheckOptions { hold_secs: args.hold_secs, ..CheckOptions::default() };
+    let report = check(&floating, fixed.as_ref(), &opts)?;
+    for step in &report.steps {
+        writeln!(out, "{} {}", if step.passed { "PASS" } else { "FAIL" }, step.name)?;
+        for m in &step.metrics {
+            writeln!(out, "     {:<42} {:>12.6} {}", m.name, m.value, m.unit)?;
+        }
+        for d in &step.details {
+            writeln!(out, "     {d}")?;
+        }
+        if let Some(c) = &step.cause {
+            writeln!(out, "     likely cause: {c}")?;
+        }
+    }
+    out.flush()?;
+    if report.passed() {
+        Ok(())
+    } else {
+        let failed: Vec<&str> = report.steps.iter().filter(|s| !s.passed).map(|s| s.name).collect();
+        anyhow::bail!("check failed: {}", failed.join(", "))
+    }
+}

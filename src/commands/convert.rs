@@ -1,0 +1,140 @@
+//! `twin convert ROBOT.urdf`: URDF (+ Gazebo tags, transmissions, ros2_control) → MuJoCo MJCF
+//! with actuators and sensors, optionally composed with a world.
+
+use anyhow::Context;
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use twin_core::convert::{ConvertOptions, ConvertedModel, convert_urdf};
+use twin_core::mj::Model;
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The robot's URDF file.
+    pub urdf: PathBuf,
+    /// Output MJCF file (default: `<robot name>.xml` next to the URDF).
+    #[arg(short, long)]
+    pub output: Option<PathBuf>,
+    /// Weld the root link to the world instead of a free-floating base.
+    #[arg(long)]
+    pub fixed_base: bool,
+    /// Folder containing ROS packages, for `package://` mesh URIs (repeatable; searched before
+    /// ROS_PACKAGE_PATH).
+    #[arg(long = "package-path", value_name = "DIR")]
+    pub package_paths: Vec<PathBuf>,
+    /// Fix invalid inertias by the smallest change (reported) instead of failing.
+    #[arg(long)]
+    pub repair_inertia: bool,
+    /// Gazebo SDF world or MJCF file to compose the robot into (default: a floor and a light).
+    #[arg(long, value_name = "FILE")]
+    pub world: Option<PathBuf>,
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    // Peek at the robot name for the default output path.
+    let output = match &args.output {
+        Some(o) => o.clone(),
+        None => {
+            let text =
+                std::fs::read_to_string(&args.urdf).with_context(|| format!("reading {}", args.urdf.display()))?;
+            let name = robot_name(&text)
+                .unwrap_or_else(|| args.urdf.file_stem().and_then(|s| s.to_str()).unwrap_or("robot").to_string());
+            args.urdf.parent().unwrap_or(Path::new(".")).join(format!("{name}.xml"))
+        }
+    };
+    let out_dir = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
+    let opts = ConvertOptions {
+        fixed_base: args.fixed_base,
+        package_paths: args.package_paths.clone(),
+        repair_inertia: args.repair_inertia,
+        mesh_dir: Some(out_dir.join(format!("{stem}_meshes"))),
+        world: args.world.clone(),
+        ..ConvertOptions::default()
+    };
+    let converted = convert_urdf(&args.urdf, &opts)?;
+    let model = Model::from_xml_str(&converted.mjcf)
+        .with_context(|| format!("compiling the converted {}", args.urdf.display()))?;
+    write_atomic(&output, converted.mjcf.as_bytes())?;
+    let mut out = std::io::stdout().lock();
+    summary(&mut out, &output, &converted, &model)?;
+    Ok(())
+}
+
+fn robot_name(text: &str) -> Option<String> {
+    let doc = roxml_name(text)?;
+    Some(doc)
+}
+
+/// `<robot name="…">` without a full parse (the converter reports XML errors properly).
+fn roxml_name(text: &str) -> Option<String> {
+    let start = text.find("<robot")?;
+    let rest = &text[start..];
+    let tag = &rest[..rest.find('>')?];
+    let at = tag.find("name=")? + 5;
+    let quote = tag[at..].chars().next()?;
+    let value = &tag[at + 1..];
+    let end = value.find(quote)?;
+    let name: String =
+        value[..end].chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
+    (!name.is_empty()).then_some(name)
+}
+
+/// Writes `bytes` to `path` through a temp file and a rename; an existing file is kept as
+/// `path.bak`.
+fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
+    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    let mut tmp =
+        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("creating a temp file in {}", dir.display()))?;
+    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
+    if path.is_file() {
+        let mut bak = path.as_os_str().to_owned();
+        bak.push(".bak");
+        std::fs::copy(path, &bak).with_context(|| format!("backing up {} to .bak", path.display()))?;
+    }
+    tmp.persist(path).with_context(|| format!("renaming into {}", path.display()))?;
+    Ok(())
+}
+
+fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -> std::io::Result<()> {
+    writeln!(out, "wrote {}", output.display())?;
+    writeln!(
+        out,
+        "robot {}: {} bodies, {} joints, {} actuators, {} sensors, {} cameras, total mass {:.3} kg",
+        c.robot_name,
+        m.nbody() - 1,
+        m.njnt(),
+        m.nu(),
+        m.nsensor(),
+        m.ncam(),
+        m.total_mass_kg()
+    )?;
+    writeln!(
+        out,
+        "base: {} (root at z = {:.4} m in keyframe `home`)",
+        if c.floating_base { "free-floating" } else { "fixed" },
+        c.base_height_m
+    )?;
+    for imu in &c.imus {
+        writeln!(
+            out,
+            "imu {} on {}: sensors {0}_quat/{0}_gyro/{0}_accel, rate {} Hz, gyro σ {} rad/s, accel σ {} m/s², topic {}",
+            imu.name,
+            imu.link,
+            imu.update_rate_hz.map_or("-".into(), |r| r.to_string()),
+            imu.gyro_noise_std,
+            imu.accel_noise_std,
+            imu.topic.as_deref().unwrap_or("-")
+        )?;
+    }
+    for s in &c.sensors {
+        writeln!(out, "sensor {} ({}) on {}: {}", s.name, s.kind, s.reference, s.mujoco.join(", "))?;
+    }
+    if !c.notes.is_empty() {
+        writeln!(out, "notes:")?;
+        for n in &c.notes {
+            writeln!(out, "  - {n}")?;
+        }
+    }
+    Ok(())
+}

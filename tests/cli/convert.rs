@@ -1,0 +1,164 @@
+//! `twin convert` and `twin check` end to end, including real public URDFs fetched from PyPI.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn twin(args: &[&str], cwd: &Path) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twin")).args(args).current_dir(cwd).output().expect("run twin")
+}
+
+fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+fn text(o: &Output) -> String {
+    format!("{}{}", String::from_utf8_lossy(&o.stdout), String::from_utf8_lossy(&o.stderr))
+}
+
+#[test]
+fn convert_writes_mjcf_next_to_the_urdf_with_summary_and_backup() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = dir.path().join("humanoid.urdf");
+    std::fs::copy(repo().join("models/humanoid.urdf"), &urdf).unwrap();
+    let o = twin(&["convert", "humanoid.urdf"], dir.path());
+    let out = text(&o);
+    assert!(o.status.success(), "{out}");
+    assert!(out.contains("23 actuators"), "{out}");
+    assert!(out.contains("total mass 35.710 kg"), "{out}");
+    assert!(out.contains("/humanoid/imu/data"), "{out}");
+    let xml = dir.path().join("humanoid.xml");
+    let first = std::fs::read_to_string(&xml).unwrap();
+    assert!(first.contains("<freejoint name=\"floating_base\"/>"));
+    // Converting again keeps the previous file as a backup; info loads the result.
+    let o = twin(&["convert", "humanoid.urdf", "--fixed-base"], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    assert_eq!(std::fs::read_to_string(dir.path().join("humanoid.xml.bak")).unwrap(), first);
+    let o = twin(&["info", "humanoid.xml"], dir.path());
+    let info = text(&o);
+    assert!(o.status.success(), "{info}");
+    assert!(!info.contains(" free "), "fixed base has no free joint: {info}");
+}
+
+#[test]
+fn convert_with_table_cup_world() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("scene.xml");
+    let o = twin(
+        &["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap(), "--world", "models/table_cup.world"],
+        &repo(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("total mass 35.910 kg"), "{}", text(&o));
+    let xml = std::fs::read_to_string(&out).unwrap();
+    assert!(xml.contains("<body name=\"cup\""));
+    assert!(xml.contains("name=\"table_top_collision\""));
+}
+
+#[test]
+fn convert_reports_bad_input_with_file_line_and_fix() {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::write(
+        dir.path().join("bad.urdf"),
+        "<robot name=\"r\">\n<link name=\"a\">\n<inertial>\n<mass value=\"-1\"/>\n</inertial>\n</link>\n</robot>\n",
+    )
+    .unwrap();
+    let o = twin(&["convert", "bad.urdf"], dir.path());
+    let out = text(&o);
+    assert!(!o.status.success());
+    assert!(out.contains("bad.urdf:4: <mass name=\"a\">: negative mass"), "{out}");
+    assert!(!out.contains("panicked"), "{out}");
+    assert!(!dir.path().join("r.xml").exists());
+}
+
+#[test]
+fn check_passes_the_humanoid_and_fails_a_falling_one() {
+    let o = twin(&["check"], &repo());
+    let out = text(&o);
+    assert!(o.status.success(), "{out}");
+    for step in ["PASS physics", "PASS sensors", "PASS control", "PASS integration"] {
+        assert!(out.contains(step), "{out}");
+    }
+    // The torso's mass moved 0.6 m forward: the centre of mass leaves the feet.
+    let dir = tempfile::tempdir().unwrap();
+    let t = std::fs::read_to_string(repo().join("models/humanoid.urdf")).unwrap();
+    let t = t.replacen(
+        "<origin xyz=\"0 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
+        "<origin xyz=\"0.6 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
+        1,
+    );
+    std::fs::write(dir.path().join("heavy_front.urdf"), t).unwrap();
+    let o = twin(&["check", "heavy_front.urdf", "--hold-secs", "2"], dir.path());
+    let out = text(&o);
+    assert!(!o.status.success(), "{out}");
+    assert!(out.contains("FAIL physics"), "{out}");
+    assert!(out.contains("likely cause: falls forward"), "{out}");
+}
+
+/// Real robot descriptions from PyPI (example-robot-data ships URDFs with package:// meshes,
+/// Collada, Gazebo tags, transmissions and mimic joints). Downloaded once into a cache; the test
+/// skips with a note when pip or the network is unavailable.
+#[test]
+fn real_public_urdfs_convert_load_and_stand() {
+    let cache = std::env::var_os("TWIN_URDF_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
+    let robots = cache.join("cmeel.prefix/share/example-robot-data/robots");
+    if !robots.join("talos_data/robots/talos_reduced.urdf").is_file() {
+        let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+        std::fs::create_dir_all(&cache).unwrap();
+        let script = r#"
+import subprocess, sys, zipfile, glob
+cache = sys.argv[1]
+subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "-q",
+                "example-robot-data==6.0.0", "-d", cache], check=True, timeout=900)
+keep = ["talos_data", "anymal_b_simple_description", "ur_description", "solo_description",
+        "baxter_description", "panda_description"]
+for whl in glob.glob(cache + "/example_robot_data-*.whl"):
+    with zipfile.ZipFile(whl) as z:
+        for n in z.namelist():
+            if any("/robots/" + k + "/" in n for k in keep):
+                z.extract(n, cache)
+"#;
+        let ok =
+            Command::new(&python).args(["-c", script, cache.to_str().unwrap()]).status().is_ok_and(|s| s.success());
+        if !ok {
+            eprintln!("note: skipping real_public_urdfs: could not fetch example-robot-data from PyPI with {python}");
+            return;
+        }
+    }
+    let pkg = robots.to_str().unwrap();
+    // (URDF, extra flags): a humanoid with Gazebo tags, mimic joints and package:// meshes;
+    // a quadruped with Collada meshes; arms on a world link or welded.
+    let cases: [(&str, &[&str]); 6] = [
+        ("talos_data/robots/talos_reduced.urdf", &["--repair-inertia"]),
+        ("anymal_b_simple_description/robots/anymal.urdf", &["--repair-inertia"]),
+        ("solo_description/robots/solo12.urdf", &["--repair-inertia"]),
+        ("ur_description/urdf/ur5_robot.urdf", &[]),
+        ("baxter_description/urdf/baxter.urdf", &["--repair-inertia"]),
+        ("panda_description/urdf/panda.urdf", &["--fixed-base"]),
+    ];
+    let dir = tempfile::tempdir().unwrap();
+    for (rel, flags) in cases {
+        let urdf = robots.join(rel);
+        let out = dir.path().join(format!("{}.xml", urdf.file_stem().unwrap().to_str().unwrap()));
+        let mut args = vec!["convert", urdf.to_str().unwrap(), "-o", out.to_str().unwrap(), "--package-path", pkg];
+        args.extend_from_slice(flags);
+        let o = twin(&args, dir.path());
+        assert!(o.status.success(), "{rel}: {}", text(&o));
+        let o = twin(&["info", out.to_str().unwrap()], dir.path());
+        assert!(o.status.success(), "{rel} does not load: {}", text(&o));
+        let mut args = vec!["check", urdf.to_str().unwrap(), "--package-path", pkg];
+        args.extend_from_slice(flags);
+        let o = twin(&args, dir.path());
+        let out = text(&o);
+        assert!(out.contains("PASS physics"), "{rel}: {out}");
+        if rel.contains("talos") {
+            // Mimic joints, Gazebo IMU and transmissions all made it through.
+            let xml = std::fs::read_to_string(dir.path().join("talos_reduced.xml")).unwrap();
+            assert!(xml.contains("<position name=\"leg_left_4_joint\""));
+            assert!(xml.contains("imu_sensor_accel"));
+        }
+    }
+    let panda = std::fs::read_to_string(dir.path().join("panda.xml")).unwrap();
+    assert!(panda.contains("<equality>"), "panda's finger mimic");
+}

@@ -1,0 +1,589 @@
+//! `twin check`: incremental validation of a robot model, each step PASS/FAIL with numbers and,
+//! on failure, the likely cause from the workflow's troubleshooting table.
+//!
+//! 1. **physics**: the free-floating model, reset to keyframe `home` (else `qpos0`), holds that
+//!    pose for [`CheckOptions::hold_secs`] with PD servos: base height drift, tilt, horizontal
+//!    slide, deepest penetration, no divergence.
+//! 2. **sensors**: after the hold, each accelerometer reads −gravity in its site frame (+9.81 up),
+//!    each `framequat` matches its site's orientation, each `jointpos`/`jointvel` matches
+//!    `qpos`/`qvel`.
+//! 3. **control**: on a fixed-base copy (or with the base pinned), each actuated joint tracks a
+//!    step and a 1 Hz sine: final error, overshoot, settling time, RMS error.
+//! 4. **integration**: real-time factor of the physics step.
+//!
+//! The PD hold turns every joint actuator into a servo (`ModelEdit::set_actuator_servo`) with
+//! kp = effort limit / [`CheckOptions::full_effort_error_rad`] (or, without an effort limit, a
+//! 5 Hz natural frequency on the joint's inertia) and critical damping; the velocity term runs in
+//! MuJoCo's implicit integrator, which keeps stiff damping on light joints stable.
+
+use crate::convert::actuated_joints;
+use crate::error::Result;
+use crate::mj::{Data, JointType, Model, ObjType};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
+use std::sync::Arc;
+
+/// Options of [`check`]. Every field documents its default.
+#[derive(Debug, Clone)]
+pub struct CheckOptions {
+    /// Duration of the standing hold, seconds (default: 5).
+    pub hold_secs: f64,
+    /// Largest allowed base height change during the hold, metres (default: 0.05).
+    pub max_height_drift_m: f64,
+    /// Largest allowed horizontal base motion during the hold, metres (default: 0.05).
+    pub max_slide_m: f64,
+    /// Largest allowed base tilt during the hold, radians (default: 0.25).
+    pub max_tilt_rad: f64,
+    /// Deepest allowed contact penetration, metres (default: 0.01).
+    pub max_penetration_m: f64,
+    /// Joint error at which a servo gives its full effort limit, radians (default: 0.1).
+    pub full_effort_error_rad: f64,
+    /// Servo natural frequency for joints without an effort limit, Hz (default: 5).
+    pub fallback_freq_hz: f64,
+    /// Largest control step, radians or metres (default: 0.2).
+    pub step_amplitude: f64,
+    /// Simulated seconds timed for the real-time factor (default: 2).
+    pub timing_secs: f64,
+}
+
+impl Default for CheckOptions {
+    fn default() -> Self {
+        CheckOptions {
+            hold_secs: 5.0,
+            max_height_drift_m: 0.05,
+            max_slide_m: 0.05,
+            max_tilt_rad: 0.25,
+            max_penetration_m: 0.01,
+            full_effort_error_rad: 0.1,
+            fallback_freq_hz: 5.0,
+            step_amplitude: 0.2,
+            timing_secs: 2.0,
+        }
+    }
+}
+
+/// One measured number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Metric {
+    /// What it is.
+    pub name: String,
+    /// Its value.
+    pub value: f64,
+    /// Its unit.
+    pub unit: &'static str,
+}
+
+/// Result of one step.
+#[derive(Debug, Clone)]
+pub struct StepReport {
+    /// `physics`, `sensors`, `control` or `integration`.
+    pub name: &'static str,
+    /// Whether the step passed.
+    pub passed: bool,
+    /// Measurements.
+    pub metrics: Vec<Metric>,
+    /// Extra lines (per-joint failures, what was skipped).
+    pub details: Vec<String>,
+    /// Likely cause when it failed.
+    pub cause: Option<String>,
+}
+
+/// Result of [`check`].
+#[derive(Debug, Clone)]
+pub struct CheckReport {
+    /// The steps in order.
+    pub steps: Vec<StepReport>,
+}
+
+impl CheckReport {
+    /// Whether every step passed.
+    pub fn passed(&self) -> bool {
+        self.steps.iter().all(|s| s.passed)
+    }
+}
+
+fn metric(name: impl Into<String>, value: f64, unit: &'static str) -> Metric {
+    Metric { name: name.into(), value, unit }
+}
+
+/// The model with every joint actuator turned into a PD servo; returns also, per servo, the
+/// actuator id, joint id and gear.
+/// A servo: actuator id, joint id, gear.
+type Servo = (usize, usize, f64);
+
+fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)> {
+    let dt = model.timestep_secs();
+    let mut edit = model.edit()?;
+    let mut servos = Vec::new();
+    for (j, a) in actuated_joints(model) {
+        let dof = model.jnt_dofadr()[j] as usize;
+        let gear = model.actuator_gear()[a][0];
+        let effort = if model.actuator_forcelimited()[a] != 0 {
+            let [lo, hi] = model.actuator_forcerange()[a];
+            Some(lo.abs().min(hi.abs()) * gear.abs())
+        } else if model.jnt_actfrclimited()[j] != 0 {
+            let [lo, hi] = model.jnt_actfrcrange()[j];
+            Some(lo.abs().min(hi.abs()))
+        } else {
+            None
+        };
+        let inertia = model.dof_m0()[dof] + model.dof_armature()[dof];
+        let omega = 2.0 * std::f64::consts::PI * opts.fallback_freq_hz;
+        // Joint-space gains, then expressed for the actuator (force = gear · actuator force,
+        // length = gear · q).
+        let kp_joint = match effort {
+            Some(e) if e > 0.0 => e / opts.full_effort_error_rad,
+            _ => inertia * omega * omega,
+        };
+        // Explicit stiffness must keep ω·dt below 1 on the joint's own inertia.
+        let kp_joint = kp_joint.min(inertia / (dt * dt)).max(inertia * omega * omega);
+        let kv_joint = 2.0 * (kp_joint * inertia).sqrt();
+        let g2 = gear * gear;
+        edit.set_actuator_servo(a, kp_joint / g2, kv_joint / g2)?;
+        servos.push((a, j, gear));
+    }
+    edit.set_integrator(mujoco_sys::mjtIntegrator_mjINT_IMPLICITFAST as i32);
+    Ok((edit.finish()?, servos))
+}
+
+fn home_qpos(model: &Model) -> Vec<f64> {
+    (0..model.nkey())
+        .find(|&k| model.name(ObjType::Key, k) == "home")
+        .and_then(|k| model.key_qpos(k))
+        .unwrap_or(model.qpos0())
+        .to_vec()
+}
+
+fn free_joint(model: &Model) -> Option<usize> {
+    (0..model.njnt()).find(|&j| model.joint_type(j) == JointType::Free)
+}
+
+fn set_targets(data: &mut Data, servos: &[(usize, usize, f64)], q: &[f64]) {
+    let m = data.model().clone();
+    for &(a, j, gear) in servos {
+        data.ctrl_mut()[a] = gear * q[m.jnt_qposadr()[j] as usize];
+    }
+}
+
+/// Runs every step on `floating`; `fixed` is a fixed-base copy for the control step (else the
+/// base is pinned to its home pose each step).
+///
+/// # Errors
+/// [`crate::Error::MuJoCo`] if MuJoCo raises during the simulation.
+pub fn check(floating: &Model, fixed: Option<&Model>, opts: &CheckOptions) -> Result<CheckReport> {
+    let (servo, servos) = servo_model(floating, opts)?;
+    let servo = Arc::new(servo);
+    let mut steps = Vec::new();
+    let (physics, mut data) = physics_step(&servo, &servos, opts)?;
+    let diverged = physics.cause.as_deref().is_some_and(|c| c.contains("diverged"));
+    steps.push(physics);
+    steps.push(if diverged {
+        StepReport {
+            name: "sensors",
+            passed: false,
+            metrics: vec![],
+            details: vec![],
+            cause: Some("not checked: the physics step diverged".into()),
+        }
+    } else {
+        sensors_step(&mut data)?
+    });
+    let control = match fixed {
+        Some(f) => {
+            let (fm, fs) = servo_model(f, opts)?;
+            control_step(Arc::new(fm), &fs, opts)?
+        }
+        None => control_step(servo.clone(), &servos, opts)?,
+    };
+    steps.push(control);
+    steps.push(integration_step(&servo, &servos, opts)?);
+    Ok(CheckReport { steps })
+}
+
+fn physics_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<(StepReport, Data)> {
+    let mut data = Data::new(model.clone())?;
+    let home = home_qpos(model);
+    data.qpos_mut().copy_from_slice(&home);
+    set_targets(&mut data, servos, &home);
+    data.forward()?;
+    let free = free_joint(model);
+    let base_body = free.map(|j| model.jnt_bodyid()[j] as usize);
+    let base_pos = |d: &Data| base_body.map_or([0.0; 3], |b| d.xpos()[b]);
+    let start = base_pos(&data);
+    let start_quat = base_body.map(|b| data.xquat()[b]);
+    let n = (opts.hold_secs / model.timestep_secs()).round() as usize;
+    let mut deepest = 0.0f64;
+    let mut max_tilt = 0.0f64;
+    let mut max_drop = 0.0f64;
+    let mut max_slide = 0.0f64;
+    let mut vel_first = 0.0;
+    let mut vel_last = 0.0;
+    let window = (1.0 / model.timestep_secs()) as usize;
+    let mut support: Option<([f64; 2], [f64; 2])> = None;
+    let mut com_start = None;
+    let mut diverged = false;
+    let mut joint_drift = 0.0f64;
+    for i in 0..n {
+        data.step()?;
+        if data.diverged() || data.qpos().iter().any(|v| !v.is_finite()) {
+            diverged = true;
+            break;
+        }
+        for (dist, _) in data.contacts() {
+            deepest = deepest.max(-dist);
+        }
+        if i == 10 {
+            // Support polygon (as a box) from the contacts after touchdown, and the CoM then.
+            let c = contact_box(&data);
+            support = c;
+            if let Some(b) = base_body {
+                com_start = Some(data.subtree_com()[b]);
+            }
+        }
+        let p = base_pos(&data);
+        max_drop = max_drop.max((start[2] - p[2]).abs());
+        max_slide = max_slide.max(((p[0] - start[0]).powi(2) + (p[1] - start[1]).powi(2)).sqrt());
+        if let (Some(b), Some(q0)) = (base_body, start_quat) {
+            let q = data.xquat()[b];
+            let a = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q0[0], q0[1], q0[2], q0[3]));
+            let bq = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]));
+            max_tilt = max_tilt.max((a.inverse() * bq).angle());
+        }
+        for &(_, j, _) in servos {
+            let adr = model.jnt_qposadr()[j] as usize;
+            joint_drift = joint_drift.max((data.qpos()[adr] - home[adr]).abs());
+        }
+        let v2: f64 = servos.iter().map(|&(_, j, _)| data.qvel()[model.jnt_dofadr()[j] as usize].powi(2)).sum();
+        if i < window {
+            vel_first += v2;
+        }
+        if i + window >= n {
+            vel_last += v2;
+        }
+    }
+    let rms = |s: f64| (s / (window.max(1) * servos.len().max(1)) as f64).sqrt();
+    let (vel_first, vel_last) = (rms(vel_first), rms(vel_last));
+    let mut metrics = vec![
+        metric("base height drift", max_drop, "m"),
+        metric("base horizontal slide", max_slide, "m"),
+        metric("base tilt", max_tilt, "rad"),
+        metric("deepest penetration", deepest, "m"),
+        metric("largest joint drift", joint_drift, "rad"),
+        metric("joint speed RMS, last second", vel_last, "rad/s"),
+    ];
+    if free.is_none() {
+        metrics.retain(|m| !m.name.starts_with("base"));
+    }
+    let fell = max_drop > opts.max_height_drift_m || max_tilt > opts.max_tilt_rad;
+    let growing = vel_last > 2.0 * vel_first && vel_last > 0.05;
+    let com = com_start.map(|c| [c[0], c[1]]);
+    let outside = match (com, support) {
+        (Some(c), Some((_, hi))) if c[0] > hi[0] => Some(format!(
+            "falls forward: centre of mass x = {:.3} m is ahead of the support polygon (feet up to x = {:.3} m)",
+            c[0], hi[0]
+        )),
+        (Some(c), Some((lo, _))) if c[0] < lo[0] => Some(format!(
+            "falls backward: centre of mass x = {:.3} m is behind the support polygon (from x = {:.3} m)",
+            c[0], lo[0]
+        )),
+        (Some(c), Some((lo, hi))) if c[1] < lo[1] || c[1] > hi[1] => Some(format!(
+            "falls sideways: centre of mass y = {:.3} m is outside the support polygon ({:.3} … {:.3} m)",
+            c[1], lo[1], hi[1]
+        )),
+        _ => None,
+    };
+    let cause = if diverged {
+        Some("the simulation diverged (NaN): growing oscillation — gains too high or timestep too large".to_string())
+    } else if fell && outside.is_some() {
+        outside
+    } else if growing {
+        Some(format!("growing oscillation (joint speed RMS {vel_first:.3} → {vel_last:.3} rad/s): gains too high"))
+    } else if fell {
+        Some(if support.is_none() {
+            "falls: nothing touches the ground after touchdown (robot not placed on the floor?)".to_string()
+        } else {
+            "falls although the centre of mass is over the support polygon: the PD hold is too weak (effort limits too low)".to_string()
+        })
+    } else if max_slide > opts.max_slide_m {
+        Some(format!("foot sliding while commanded still ({max_slide:.3} m): friction too low"))
+    } else if deepest > opts.max_penetration_m {
+        Some(format!("deep penetration ({deepest:.4} m): contacts too soft or timestep too large"))
+    } else {
+        None
+    };
+    Ok((
+        StepReport {
+            name: "physics",
+            passed: cause.is_none(),
+            metrics,
+            details: vec![format!("PD hold of the home pose for {} s with {} servos", opts.hold_secs, servos.len())],
+            cause,
+        },
+        data,
+    ))
+}
+
+/// Axis-aligned box of the contact points' x, y (world), if any.
+fn contact_box(data: &Data) -> Option<([f64; 2], [f64; 2])> {
+    let n = data.ncon();
+    if n == 0 {
+        return None;
+    }
+    let mut lo = [f64::INFINITY; 2];
+    let mut hi = [f64::NEG_INFINITY; 2];
+    for p in data.contact_positions() {
+        for k in 0..2 {
+            lo[k] = lo[k].min(p[k]);
+            hi[k] = hi[k].max(p[k]);
+        }
+    }
+    Some((lo, hi))
+}
+
+fn sensors_step(data: &mut Data) -> Result<StepReport> {
+    let model = data.model().clone();
+    data.forward()?;
+    let g = Vector3::from(model.gravity());
+    let mut metrics = Vec::new();
+    let mut details = Vec::new();
+    let mut worst_acc = 0.0f64;
+    let mut worst_quat = 0.0f64;
+    let mut worst_joint = 0.0f64;
+    let mut n_imu = 0;
+    let mut n_joint = 0;
+    let sd = data.sensordata().to_vec();
+    for s in 0..model.nsensor() {
+        let adr = model.sensor_adr()[s] as usize;
+        let obj = model.sensor_objid()[s].max(0) as usize;
+        let ty = model.sensor_type()[s] as u32;
+        match ty {
+            mujoco_sys::mjtSensor_mjSENS_ACCELEROMETER => {
+                let r = Matrix3::from_row_slice(&data.site_xmat()[obj]);
+                let expected = r.transpose() * (-g);
+                let got = Vector3::new(sd[adr], sd[adr + 1], sd[adr + 2]);
+                let err = (got - expected).norm();
+                worst_acc = worst_acc.max(err);
+                n_imu += 1;
+                details.push(format!(
+                    "{}: reads ({:.3}, {:.3}, {:.3}) m/s², gravity in its frame ({:.3}, {:.3}, {:.3})",
+                    model.name(ObjType::Sensor, s),
+                    got.x,
+                    got.y,
+                    got.z,
+                    expected.x,
+                    expected.y,
+                    expected.z
+                ));
+            }
+            mujoco_sys::mjtSensor_mjSENS_FRAMEQUAT
+                if model.sensor_objtype()[s] as u32 == mujoco_sys::mjtObj_mjOBJ_SITE =>
+            {
+                let r = Matrix3::from_row_slice(&data.site_xmat()[obj]);
+                let site = UnitQuaternion::from_matrix(&r);
+                let got = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                    sd[adr],
+                    sd[adr + 1],
+                    sd[adr + 2],
+                    sd[adr + 3],
+                ));
+                worst_quat = worst_quat.max((site.inverse() * got).angle());
+            }
+            mujoco_sys::mjtSensor_mjSENS_JOINTPOS => {
+                let q = data.qpos()[model.jnt_qposadr()[obj] as usize];
+                worst_joint = worst_joint.max((sd[adr] - q).abs());
+                n_joint += 1;
+            }
+            mujoco_sys::mjtSensor_mjSENS_JOINTVEL => {
+                let v = data.qvel()[model.jnt_dofadr()[obj] as usize];
+                worst_joint = worst_joint.max((sd[adr] - v).abs());
+            }
+            _ => {}
+        }
+    }
+    metrics.push(metric("accelerometer error vs gravity", worst_acc, "m/s²"));
+    metrics.push(metric("orientation error vs body", worst_quat, "rad"));
+    metrics.push(metric("joint sensor error", worst_joint, "rad"));
+    if n_imu == 0 {
+        details.push("no accelerometer in the model: IMU not checked".into());
+    }
+    if n_joint == 0 {
+        details.push("no jointpos sensors in the model".into());
+    }
+    let cause = if worst_acc > 0.2 {
+        Some("the accelerometer does not read gravity at rest: the IMU site is mis-oriented or the robot is still moving".to_string())
+    } else if worst_quat > 1e-6 {
+        Some("framequat disagrees with its site: wrong frame in the sensor definition".to_string())
+    } else if worst_joint > 1e-9 {
+        Some("joint sensors disagree with the joint state".to_string())
+    } else {
+        None
+    };
+    Ok(StepReport { name: "sensors", passed: cause.is_none(), metrics, details, cause })
+}
+
+fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<StepReport> {
+    let home = home_qpos(&model);
+    let free = free_joint(&model);
+    let dt = model.timestep_secs();
+    let mut data = Data::new(model.clone())?;
+    let mut details = Vec::new();
+    let (mut worst_err, mut worst_over, mut worst_settle, mut worst_rms) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+    let mut failures = 0;
+    let mut growing_any = false;
+    let pin = |d: &mut Data| {
+        if let Some(f) = free {
+            let qa = model.jnt_qposadr()[f] as usize;
+            let va = model.jnt_dofadr()[f] as usize;
+            d.qpos_mut()[qa..qa + 7].copy_from_slice(&home[qa..qa + 7]);
+            d.qvel_mut()[va..va + 6].fill(0.0);
+        }
+    };
+    for &(a, j, gear) in servos {
+        let adr = model.jnt_qposadr()[j] as usize;
+        let dof = model.jnt_dofadr()[j] as usize;
+        let q0 = home[adr];
+        let amp = if model.jnt_limited()[j] != 0 {
+            let [lo, hi] = model.jnt_range()[j];
+            let width = hi - lo;
+            let a = opts.step_amplitude.min(0.25 * width);
+            if q0 + a <= hi { a } else { -a }
+        } else {
+            opts.step_amplitude
+        };
+        // Step.
+        data.reset()?;
+        data.qpos_mut().copy_from_slice(&home);
+        let mut target = home.clone();
+        target[adr] = q0 + amp;
+        let n = (1.5 / dt) as usize;
+        let mut peak = 0.0f64;
+        let mut settle = 0.0;
+        let mut tail_err = 0.0f64;
+        let mut env_a = 0.0f64;
+        let mut env_b = 0.0f64;
+        set_targets(&mut data, servos, &target);
+        let _ = a;
+        for i in 0..n {
+            pin(&mut data);
+            data.step()?;
+            let e = data.qpos()[adr] - target[adr];
+            let over = (data.qpos()[adr] - q0) / amp - 1.0;
+            peak = peak.max(over);
+            if e.abs() > 0.05 * amp.abs() {
+                settle = (i + 1) as f64 * dt;
+            }
+            if i + (0.1 / dt) as usize >= n {
+                tail_err = tail_err.max(e.abs());
+            }
+            let t = i as f64 * dt;
+            if (1.0..1.25).contains(&t) {
+                env_a = env_a.max(e.abs());
+            }
+            if t >= 1.25 {
+                env_b = env_b.max(e.abs());
+            }
+        }
+        let growing = env_b > 1.5 * env_a && env_b > 0.05 * amp.abs();
+        // Sine, 1 Hz, 2 s.
+        data.reset()?;
+        data.qpos_mut().copy_from_slice(&home);
+        let n = (2.0 / dt) as usize;
+        let mut sq = 0.0;
+        let w = 2.0 * std::f64::consts::PI;
+        let mut cnt = 0;
+        for i in 0..n {
+            let t = i as f64 * dt;
+            let mut tgt = home.clone();
+            tgt[adr] = q0 + 0.5 * amp * (w * t).sin();
+            set_targets(&mut data, servos, &tgt);
+            pin(&mut data);
+            data.step()?;
+            if t >= 0.5 {
+                let e = data.qpos()[adr] - (q0 + 0.5 * amp * (w * (t + dt)).sin());
+                sq += e * e;
+                cnt += 1;
+            }
+        }
+        let rms = (sq / cnt.max(1) as f64).sqrt() / (0.5 * amp.abs());
+        let rel_err = tail_err / amp.abs();
+        worst_err = worst_err.max(rel_err);
+        worst_over = worst_over.max(peak);
+        worst_settle = worst_settle.max(settle);
+        worst_rms = worst_rms.max(rms);
+        let ok = rel_err <= 0.2 && peak <= 0.3 && rms <= 0.5 && !growing && !data.diverged();
+        growing_any |= growing || data.diverged();
+        let _ = dof;
+        if !ok {
+            failures += 1;
+            details.push(format!(
+                "{}: step error {:.0} %, overshoot {:.0} %, settling {:.2} s, sine RMS error {:.0} %{}",
+                model.name(ObjType::Joint, j),
+                rel_err * 100.0,
+                peak * 100.0,
+                settle,
+                rms * 100.0,
+                if growing { ", growing oscillation" } else { "" }
+            ));
+        }
+        let _ = gear;
+    }
+    details.insert(
+        0,
+        format!(
+            "{} actuated joints, step of ±{} and 1 Hz sine of half that, on a {} base",
+            servos.len(),
+            opts.step_amplitude,
+            if free.is_some() { "pinned" } else { "fixed" }
+        ),
+    );
+    let cause = if failures == 0 {
+        None
+    } else if growing_any {
+        Some("growing oscillation: gains too high".to_string())
+    } else if worst_over > 0.3 {
+        Some("overshoot: damping too low for the gains".to_string())
+    } else {
+        Some("tracking error: effort limits or gains too low for the load".to_string())
+    };
+    Ok(StepReport {
+        name: "control",
+        passed: failures == 0 && !servos.is_empty() || servos.is_empty(),
+        metrics: vec![
+            metric("worst step error (last 0.1 s, of step)", worst_err * 100.0, "%"),
+            metric("worst overshoot", worst_over.max(0.0) * 100.0, "%"),
+            metric("worst settling time (5 % band)", worst_settle, "s"),
+            metric("worst sine RMS error (of amplitude)", worst_rms * 100.0, "%"),
+            metric("joints failing", failures as f64, ""),
+        ],
+        details,
+        cause,
+    })
+}
+
+fn integration_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<StepReport> {
+    let mut data = Data::new(model.clone())?;
+    let home = home_qpos(model);
+    data.qpos_mut().copy_from_slice(&home);
+    set_targets(&mut data, servos, &home);
+    let n = (opts.timing_secs / model.timestep_secs()).round().max(1.0) as u64;
+    let start = std::time::Instant::now();
+    data.step_n(n)?;
+    let wall = start.elapsed().as_secs_f64().max(1e-9);
+    let rtf = opts.timing_secs / wall;
+    let cause = (rtf < 1.0).then(|| {
+        format!(
+            "real-time factor {rtf:.2} < 1: timestep too small ({} s) for this machine, or too many contacts",
+            model.timestep_secs()
+        )
+    });
+    Ok(StepReport {
+        name: "integration",
+        passed: cause.is_none(),
+        metrics: vec![
+            metric("real-time factor", rtf, "×"),
+            metric("step time", wall / n as f64 * 1e6, "µs"),
+            metric("timestep", model.timestep_secs(), "s"),
+        ],
+        details: vec![],
+        cause,
+    })
+}
