@@ -15,4 +15,6 @@ pub struct Cli {
 pub enum Command {
     /// Print a model's bodies, joints, actuators, sensors and total mass.
     Info(crate::commands::info::Args),
+    /// Inspect ROS 2 MCAP logs (`twin log info FILE`).
+    Log(crate::commands::log::Args),
 }

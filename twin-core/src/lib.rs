@@ -17,6 +17,7 @@
 //! ```
 
 pub mod error;
+pub mod log;
 pub mod mj;
 pub mod urdf;
 
