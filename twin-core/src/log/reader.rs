@@ -19,6 +19,9 @@ use std::sync::Arc;
 /// The 8 bytes at the start and end of every MCAP file.
 pub const MAGIC: &[u8; 8] = b"\x89MCAP0\r\n";
 
+/// A partial chunk's log-time range and (messages, uncompressed bytes) recovered from it.
+type Salvage = Option<(u64, u64, (u64, usize))>;
+
 /// Chunks claiming more than this uncompressed are treated as corrupt rather than allocated.
 const MAX_CHUNK_BYTES: u64 = 1 << 31;
 
@@ -94,7 +97,8 @@ pub struct Damage {
     pub offset: u64,
     /// What kind.
     pub kind: DamageKind,
-    /// Bytes of the file that could not be used.
+    /// Bytes of the file that could not be used (for a cut chunk some of whose messages were
+    /// salvaged: the bytes missing from it).
     pub lost_bytes: u64,
     /// Messages lost, when the file says (message indexes after a chunk, statistics).
     pub lost_messages: Option<u64>,
@@ -272,7 +276,7 @@ impl<'f> Scanner<'f> {
             let len = u64::from_le_bytes(head[1..9].try_into().expect("8 bytes"));
             let available = file_len - offset - 9;
             if len > available {
-                self.truncated_record(&mut r, offset, opcode, len, available, &mut body)?;
+                self.truncated_record(&mut r, offset, opcode, len, available, &mut body, f)?;
                 break;
             }
             body.resize(len as usize, 0);
@@ -347,7 +351,10 @@ impl<'f> Scanner<'f> {
         Ok(self.report)
     }
 
-    /// A record that runs past the end of the file: the recording was cut during it.
+    /// A record that runs past the end of the file: the recording was cut during it. For a
+    /// chunk, the complete messages at the start of its partial compressed stream are
+    /// salvaged (zstd and lz4 decode block by block; uncompressed chunks record by record).
+    #[allow(clippy::too_many_arguments)]
     fn truncated_record(
         &mut self,
         r: &mut BufReader<File>,
@@ -356,11 +363,12 @@ impl<'f> Scanner<'f> {
         len: u64,
         available: u64,
         body: &mut Vec<u8>,
+        f: &mut dyn FnMut(RawMessage<'_>) -> Result<()>,
     ) -> Result<()> {
         let mut message = if len == u64::MAX {
             format!(
                 "file cut off inside a chunk that was being written ({available} bytes of it \
-                 present); its messages are lost"
+                 present)"
             )
         } else {
             format!(
@@ -368,18 +376,28 @@ impl<'f> Scanner<'f> {
                  present"
             )
         };
-        if opcode == op::CHUNK {
-            // The chunk header tells which stretch of log time is lost.
-            body.resize(available.min(4096) as usize, 0);
+        let mut lost_bytes = available + 9;
+        if opcode == op::CHUNK && available <= MAX_CHUNK_BYTES {
+            body.resize(available as usize, 0);
             let n = read_up_to(r, body).map_err(|e| self.io(e))?;
-            if n >= 32 {
-                let start = u64::from_le_bytes(body[0..8].try_into().expect("8"));
-                let end = u64::from_le_bytes(body[8..16].try_into().expect("8"));
-                if len != u64::MAX && end >= start {
+            body.truncate(n);
+            if let Some((start, end, salvaged)) = self.salvage_chunk(offset, body, f)? {
+                if len != u64::MAX {
                     message = format!(
-                        "file cut off inside a chunk of {len} bytes ({available} present); its \
-                         messages with log times {start}..={end} ns are lost"
+                        "file cut off inside a chunk of {len} bytes ({available} present), \
+                         holding messages with log times {start}..={end} ns"
                     );
+                }
+                message.push_str(&format!(
+                    "; {} complete messages ({} bytes uncompressed) recovered from it, the rest \
+                     of it is lost",
+                    salvaged.0, salvaged.1
+                ));
+                if salvaged.0 > 0 {
+                    lost_bytes = len.saturating_sub(available).min(lost_bytes);
+                    if len == u64::MAX {
+                        lost_bytes = 0;
+                    }
                 }
             }
         }
@@ -387,10 +405,82 @@ impl<'f> Scanner<'f> {
             path: self.path.clone(),
             offset,
             kind: DamageKind::Truncated,
-            lost_bytes: available + 9,
+            lost_bytes,
             lost_messages: None,
             message,
         })
+    }
+
+    /// Decodes what it can of a partial chunk record body. Returns the chunk's log-time range
+    /// and (messages, uncompressed bytes) recovered, or `None` if even its header is cut.
+    fn salvage_chunk(
+        &mut self,
+        offset: u64,
+        body: &[u8],
+        f: &mut dyn FnMut(RawMessage<'_>) -> Result<()>,
+    ) -> Result<Salvage> {
+        let u64_at = |p: usize| {
+            body.get(p..p + 8)
+                .map(|b| u64::from_le_bytes(b.try_into().expect("8")))
+        };
+        let (Some(start), Some(end)) = (u64_at(0), u64_at(8)) else {
+            return Ok(None);
+        };
+        let Some(name_len) = body
+            .get(28..32)
+            .map(|b| u32::from_le_bytes(b.try_into().expect("4")) as usize)
+        else {
+            return Ok(None);
+        };
+        let data_at = 32 + name_len + 8;
+        if body.len() < data_at {
+            return Ok(None);
+        }
+        let compression = String::from_utf8_lossy(&body[32..32 + name_len]).into_owned();
+        let data = &body[data_at..];
+        let mut out = Vec::new();
+        let mut pull = |mut rd: Box<dyn Read + '_>| {
+            // Keep every block that decodes; the cut one ends the stream with an error.
+            let mut buf = vec![0u8; 1 << 16];
+            while let Ok(n) = rd.read(&mut buf) {
+                if n == 0 || out.len() as u64 > MAX_CHUNK_BYTES {
+                    break;
+                }
+                out.extend_from_slice(&buf[..n]);
+            }
+        };
+        match compression.as_str() {
+            "" => out.extend_from_slice(data),
+            "zstd" => {
+                if let Ok(d) = zstd::stream::read::Decoder::new(data) {
+                    pull(Box::new(d));
+                }
+            }
+            "lz4" => {
+                if let Ok(d) = lz4::Decoder::new(data) {
+                    pull(Box::new(d));
+                }
+            }
+            _ => return Ok(Some((start, end, (0, 0)))),
+        }
+        let before = self.report.messages_seen;
+        // Only whole records are used; the partial one at the end is dropped.
+        let mut pos = 0usize;
+        while out.len() - pos >= 9 {
+            let opcode = out[pos];
+            let len = u64::from_le_bytes(out[pos + 1..pos + 9].try_into().expect("8"));
+            if len > (out.len() - pos - 9) as u64 {
+                break;
+            }
+            let rec_end = pos + 9 + len as usize;
+            self.record(offset, opcode, &out[pos + 9..rec_end], pos as u64 + 1, f)?;
+            pos = rec_end;
+        }
+        Ok(Some((
+            start,
+            end,
+            (self.report.messages_seen - before, pos),
+        )))
     }
 
     /// Returns `false` when the chunk was damaged and skipped.

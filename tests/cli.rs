@@ -1,0 +1,4 @@
+//! End-to-end tests of the `twin` binary, one module per area.
+
+#[path = "cli/log.rs"]
+mod log;
