@@ -5,8 +5,8 @@
 //! Memory is bounded by one chunk: each chunk is built in memory and written whole once it
 //! reaches [`WriterOptions::chunk_size_bytes`], so a run that is killed leaves a file whose
 //! complete chunks [`super::Log`] recovers (only the chunk being filled is lost).
-//! Encoding a message reuses one buffer: a simulation loop can call [`LogWriter::write`] every
-//! step without allocating.
+//! The caller's thread only encodes (into recycled buffers); compression and I/O run on a
+//! writer thread, so a simulation loop can call [`LogWriter::write`] every step cheaply.
 
 use super::cdr::CdrWriter;
 use super::typed::{RosMessage, schema_text};
@@ -16,6 +16,7 @@ use std::fs::File;
 use std::io::BufWriter;
 use std::marker::PhantomData;
 use std::path::{Path, PathBuf};
+use std::sync::mpsc;
 
 /// Stamped in every MCAP header twin writes.
 pub const LIBRARY_IDENTIFIER: &str = concat!("twin/", env!("CARGO_PKG_VERSION"));
@@ -77,14 +78,40 @@ pub struct WriteSummary {
     pub bytes: u64,
 }
 
+/// Work for the writer thread.
+enum Job {
+    AddTopic {
+        type_name: &'static str,
+        schema: String,
+        topic: String,
+        metadata: BTreeMap<String, String>,
+        reply: mpsc::Sender<Result<u16>>,
+    },
+    Message {
+        header: mcap::records::MessageHeader,
+        bytes: Vec<u8>,
+    },
+    Flush(mpsc::Sender<Result<()>>),
+}
+
 /// Streams messages into an MCAP file.
+///
+/// The calling thread only encodes CDR into a recycled buffer and hands it over; compression
+/// and file writes run on one writer thread, so a simulation loop pays a few hundred
+/// nanoseconds per message. At most [`QUEUE_MESSAGES`] messages wait in memory: a caller
+/// faster than the disk is slowed down, never made to buffer without bound.
 pub struct LogWriter {
     path: PathBuf,
-    inner: Option<mcap::Writer<BufWriter<File>>>,
+    tx: Option<mpsc::SyncSender<Job>>,
+    recycled: mpsc::Receiver<Vec<u8>>,
+    thread: Option<std::thread::JoinHandle<Result<WriteSummary>>>,
     cdr: CdrWriter,
     sequences: BTreeMap<u16, u32>,
     messages: u64,
 }
+
+/// Messages that may wait for the writer thread.
+pub const QUEUE_MESSAGES: usize = 4096;
 
 impl std::fmt::Debug for LogWriter {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -95,9 +122,63 @@ impl std::fmt::Debug for LogWriter {
     }
 }
 
+fn writer_thread(
+    path: PathBuf,
+    mut w: mcap::Writer<BufWriter<File>>,
+    rx: mpsc::Receiver<Job>,
+    recycle: mpsc::Sender<Vec<u8>>,
+) -> Result<WriteSummary> {
+    let err = |source| Error::McapWrite {
+        path: path.clone(),
+        source,
+    };
+    let mut messages = 0u64;
+    for job in rx {
+        match job {
+            Job::Message { header, bytes } => {
+                w.write_to_known_channel(&header, &bytes).map_err(err)?;
+                messages += 1;
+                let _ = recycle.send(bytes); // the caller may be gone: nothing to do
+            }
+            Job::AddTopic {
+                type_name,
+                schema,
+                topic,
+                metadata,
+                reply,
+            } => {
+                let id = w
+                    .add_schema(type_name, "ros2msg", schema.as_bytes())
+                    .and_then(|sid| w.add_channel(sid, &topic, "cdr", &metadata))
+                    .map_err(err);
+                let _ = reply.send(id);
+            }
+            Job::Flush(reply) => {
+                let _ = reply.send(w.flush().map_err(err));
+            }
+        }
+    }
+    let summary = w.finish().map_err(err)?;
+    let file = w.into_inner().into_inner().map_err(|e| Error::Io {
+        path: path.clone(),
+        source: e.into_error(),
+    })?;
+    let io = |source| Error::Io {
+        path: path.clone(),
+        source,
+    };
+    file.sync_all().map_err(io)?;
+    let bytes = file.metadata().map_err(io)?.len();
+    Ok(WriteSummary {
+        messages,
+        chunks: summary.chunk_indexes.len(),
+        bytes,
+    })
+}
+
 impl LogWriter {
     /// Creates the file (an existing one is kept as `<name>.bak`, see
-    /// [`WriterOptions::backup_existing`]).
+    /// [`WriterOptions::backup_existing`]) and starts the writer thread.
     ///
     /// # Errors
     /// [`Error::Io`] when the file cannot be created; [`Error::LogFormat`] when it exists and
@@ -128,7 +209,7 @@ impl LogWriter {
             .library(LIBRARY_IDENTIFIER)
             .compression(options.compress.then_some(mcap::Compression::Zstd))
             .compression_level(options.zstd_level)
-            // One thread: output identical whatever the machine, no pool to start.
+            // Single-threaded zstd: output identical whatever the machine.
             .compression_threads(0)
             .chunk_size(Some(options.chunk_size_bytes))
             // Build each chunk in memory and write it whole: a killed run never leaves a
@@ -140,26 +221,44 @@ impl LogWriter {
                 path: path.clone(),
                 source,
             })?;
+        let (tx, rx) = mpsc::sync_channel(QUEUE_MESSAGES);
+        let (recycle, recycled) = mpsc::channel();
+        let thread_path = path.clone();
+        let thread = std::thread::Builder::new()
+            .name("twin-mcap-writer".into())
+            .spawn(move || writer_thread(thread_path, inner, rx, recycle))
+            .map_err(|source| Error::Io {
+                path: path.clone(),
+                source,
+            })?;
         Ok(Self {
             path,
-            inner: Some(inner),
+            tx: Some(tx),
+            recycled,
+            thread: Some(thread),
             cdr: CdrWriter::new(),
             sequences: BTreeMap::new(),
             messages: 0,
         })
     }
 
-    fn mcap_err(&self, source: mcap::McapError) -> Error {
-        Error::McapWrite {
-            path: self.path.clone(),
-            source,
+    /// The writer thread stopped (an I/O error): its error.
+    fn thread_error(&mut self) -> Error {
+        self.tx = None;
+        match self.thread.take().map(std::thread::JoinHandle::join) {
+            Some(Ok(Err(e))) => e,
+            _ => Error::Io {
+                path: self.path.clone(),
+                source: std::io::Error::other("the MCAP writer thread stopped"),
+            },
         }
     }
 
-    fn inner(&mut self) -> &mut mcap::Writer<BufWriter<File>> {
-        self.inner
-            .as_mut()
-            .expect("the writer is only taken by finish(self)")
+    fn send(&mut self, job: Job) -> Result<()> {
+        match &self.tx {
+            Some(tx) if tx.send(job).is_ok() => Ok(()),
+            _ => Err(self.thread_error()),
+        }
     }
 
     /// Registers a topic of type `T` and returns its handle. Adding the same topic twice
@@ -179,11 +278,18 @@ impl LogWriter {
             QOS_VOLATILE.to_string()
         };
         metadata.insert("offered_qos_profiles".to_string(), qos);
-        let w = self.inner();
-        let schema_id = w.add_schema(T::TYPE_NAME, "ros2msg", schema.as_bytes());
-        let channel_id = schema_id
-            .and_then(|sid| w.add_channel(sid, topic, "cdr", &metadata))
-            .map_err(|e| self.mcap_err(e))?;
+        let (reply, answer) = mpsc::channel();
+        self.send(Job::AddTopic {
+            type_name: T::TYPE_NAME,
+            schema,
+            topic: topic.to_string(),
+            metadata,
+            reply,
+        })?;
+        let channel_id = match answer.recv() {
+            Ok(id) => id?,
+            Err(_) => return Err(self.thread_error()),
+        };
         Ok(Topic {
             channel_id,
             _type: PhantomData,
@@ -193,7 +299,8 @@ impl LogWriter {
     /// Writes one message, stamped `log_time_nanos` (also its publish time).
     ///
     /// # Errors
-    /// [`Error::McapWrite`] when the file cannot be written.
+    /// [`Error::McapWrite`] / [`Error::Io`] when the file cannot be written (reported by the
+    /// first call after the writer thread met the error).
     pub fn write<T: RosMessage>(
         &mut self,
         topic: Topic<T>,
@@ -210,12 +317,10 @@ impl LogWriter {
             log_time: log_time_nanos,
             publish_time: log_time_nanos,
         };
-        let Self { inner, cdr, .. } = self;
-        let w = inner
-            .as_mut()
-            .expect("the writer is only taken by finish(self)");
-        w.write_to_known_channel(&header, cdr.bytes())
-            .map_err(|e| self.mcap_err(e))?;
+        let mut bytes = self.recycled.try_recv().unwrap_or_default();
+        bytes.clear();
+        bytes.extend_from_slice(self.cdr.bytes());
+        self.send(Job::Message { header, bytes })?;
         self.messages += 1;
         Ok(())
     }
@@ -225,7 +330,12 @@ impl LogWriter {
     /// # Errors
     /// [`Error::McapWrite`] when the file cannot be written.
     pub fn flush(&mut self) -> Result<()> {
-        self.inner().flush().map_err(|e| self.mcap_err(e))
+        let (reply, answer) = mpsc::channel();
+        self.send(Job::Flush(reply))?;
+        match answer.recv() {
+            Ok(r) => r,
+            Err(_) => Err(self.thread_error()),
+        }
     }
 
     /// Messages written so far.
@@ -238,31 +348,24 @@ impl LogWriter {
     /// # Errors
     /// [`Error::McapWrite`] / [`Error::Io`] when the file cannot be written.
     pub fn finish(mut self) -> Result<WriteSummary> {
-        let mut w = self
-            .inner
-            .take()
-            .expect("the writer is only taken by finish(self)");
-        let summary = w.finish().map_err(|e| self.mcap_err(e))?;
-        let buf = w.into_inner();
-        let file = buf.into_inner().map_err(|e| Error::Io {
-            path: self.path.clone(),
-            source: e.into_error(),
-        })?;
-        file.sync_all().map_err(|source| Error::Io {
-            path: self.path.clone(),
-            source,
-        })?;
-        let bytes = file
-            .metadata()
-            .map_err(|source| Error::Io {
+        self.tx = None;
+        match self.thread.take().map(std::thread::JoinHandle::join) {
+            Some(Ok(r)) => r,
+            _ => Err(Error::Io {
                 path: self.path.clone(),
-                source,
-            })?
-            .len();
-        Ok(WriteSummary {
-            messages: self.messages,
-            chunks: summary.chunk_indexes.len(),
-            bytes,
-        })
+                source: std::io::Error::other("the MCAP writer thread panicked"),
+            }),
+        }
+    }
+}
+
+impl Drop for LogWriter {
+    /// Closes the file properly (summary included) when the writer is dropped without
+    /// [`LogWriter::finish`], e.g. on an error path of the caller.
+    fn drop(&mut self) {
+        self.tx = None;
+        if let Some(t) = self.thread.take() {
+            let _ = t.join();
+        }
     }
 }
