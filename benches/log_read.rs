@@ -124,13 +124,14 @@ fn sim_with_logging(dir: &Path, names: &[String]) -> Option<(f64, f64, f64)> {
             if let Some((topic, w)) = &mut log
                 && i % steps_per_log == 0
             {
-                // The 23 hinge joints follow the 7 free-joint coordinates.
+                // The 23 hinge joints come last (after a free joint's 7/6 coordinates, if any).
                 let (q, v) = (data.qpos(), data.qvel());
+                let (qo, vo) = (q.len() - names.len(), v.len() - names.len());
                 js.header.stamp_nanos = (data.time_secs() * 1e9) as i64;
                 for k in 0..names.len() {
-                    js.position[k] = q[7 + k];
-                    js.velocity[k] = v[6 + k];
-                    js.effort[k] = data.qfrc_actuator()[6 + k];
+                    js.position[k] = q[qo + k];
+                    js.velocity[k] = v[vo + k];
+                    js.effort[k] = data.qfrc_actuator()[vo + k];
                 }
                 w.write(*topic, js.header.stamp_nanos as u64, &js).unwrap();
             }
