@@ -20,4 +20,6 @@ pub enum Command {
     Convert(crate::commands::convert::Args),
     /// Validate a model step by step: physics, sensors, control, integration speed.
     Check(crate::commands::check::Args),
+    /// Inspect ROS 2 MCAP logs (`twin log info FILE`).
+    Log(crate::commands::log::Args),
 }

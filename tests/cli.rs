@@ -6,3 +6,5 @@ mod common;
 mod convert;
 #[path = "cli/info.rs"]
 mod info;
+#[path = "cli/log.rs"]
+mod log;

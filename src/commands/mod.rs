@@ -3,6 +3,7 @@
 pub mod check;
 pub mod convert;
 pub mod info;
+pub mod log;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;
@@ -16,6 +17,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Info(args) => info::run(args),
         Command::Convert(args) => convert::run(args),
         Command::Check(args) => check::run(args),
+        Command::Log(args) => log::run(args),
     }
 }
 

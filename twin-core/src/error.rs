@@ -106,6 +106,65 @@ pub enum Error {
         message: String,
     },
 
+    /// A log file is not MCAP, or is damaged and strict reading was asked for. `offset` is the
+    /// byte offset of the offending record.
+    #[error("{}{}: {message}", path.display(), offset.map_or_else(String::new, |o| format!(" (byte {o})")))]
+    LogFormat {
+        /// The `.mcap` file or bag folder.
+        path: PathBuf,
+        /// Byte offset in the file, when known.
+        offset: Option<u64>,
+        /// What is wrong and what to do about it.
+        message: String,
+    },
+
+    /// A `ros2msg` schema text could not be parsed; `line` is 1-based within the schema text
+    /// (0 when not tied to a line).
+    #[error("message definition of {type_name}, line {line}: {message}")]
+    MsgDef {
+        /// The message type, e.g. `sensor_msgs/msg/JointState`.
+        type_name: String,
+        /// Line in the schema text.
+        line: usize,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// A message could not be decoded with its channel's schema.
+    #[error("{}: topic {topic} ({type_name}), message at log time {log_time_nanos} ns: {message}", path.display())]
+    Decode {
+        /// The file.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// The message type.
+        type_name: String,
+        /// Log time of the message.
+        log_time_nanos: u64,
+        /// What went wrong (with the byte offset in the message where known).
+        message: String,
+    },
+
+    /// A topic asked for is missing from a log or has an unexpected type.
+    #[error("{}: {message}", path.display())]
+    LogTopic {
+        /// The file or bag folder.
+        path: PathBuf,
+        /// The topic.
+        topic: String,
+        /// What is wrong, with the topics that are there.
+        message: String,
+    },
+
+    /// Writing an MCAP file failed.
+    #[error("{}: writing MCAP: {source}", path.display())]
+    McapWrite {
+        /// The file being written.
+        path: PathBuf,
+        /// The mcap crate's error.
+        source: mcap::McapError,
+    },
+
     /// A model edit would make the model physically invalid (e.g. negative mass).
     #[error("invalid model edit: {0}")]
     InvalidEdit(String),

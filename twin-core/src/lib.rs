@@ -20,6 +20,7 @@
 pub mod check;
 pub mod convert;
 pub mod error;
+pub mod log;
 pub mod mj;
 pub mod urdf;
 #[cfg(feature = "rerun")]
