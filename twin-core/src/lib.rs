@@ -1,4 +1,5 @@
-//! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]) and URDF checks ([`urdf`]).
+//! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]) and
+//! controllers ([`control`]).
 //!
 //! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
 //! a small C shim and comes back as [`Error::MuJoCo`].
@@ -16,6 +17,7 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
+pub mod control;
 pub mod error;
 pub mod mj;
 pub mod urdf;

@@ -127,6 +127,8 @@ data_arrays! {
     subtree_com, subtree_com_mut: [f64; 3] = nbody;
     /// Geom positions, world frame (len `ngeom`).
     geom_xpos, geom_xpos_mut: [f64; 3] = ngeom;
+    /// Geom orientations as row-major 3×3 matrices, world frame (len `ngeom`).
+    geom_xmat, geom_xmat_mut: [f64; 9] = ngeom;
     /// Site positions, world frame (len `nsite`).
     site_xpos, site_xpos_mut: [f64; 3] = nsite;
     /// Site orientations as row-major 3×3 matrices (len `nsite`).
@@ -179,6 +181,60 @@ impl Data {
             }
         })?;
         Ok(copy)
+    }
+
+    /// Moves this state over to `model`, an edited copy of its current model (same sizes, as
+    /// [`Model::edit`] makes), and resets it there (`mj_resetData`). Saves allocating a new
+    /// `mjData` per randomized episode.
+    ///
+    /// # Errors
+    /// [`Error::Size`] if `model` does not have the current model's sizes; [`Error::MuJoCo`] as
+    /// [`Data::reset`].
+    pub fn set_model(&mut self, model: Arc<Model>) -> Result<()> {
+        let sizes = |m: &Model| {
+            [
+                ("nq of the model given to Data::set_model", m.nq()),
+                ("nv of the model given to Data::set_model", m.nv()),
+                ("nu of the model given to Data::set_model", m.nu()),
+                (
+                    "na of the model given to Data::set_model",
+                    m.raw().na as usize,
+                ),
+                ("nbody of the model given to Data::set_model", m.nbody()),
+                ("njnt of the model given to Data::set_model", m.njnt()),
+                ("ngeom of the model given to Data::set_model", m.ngeom()),
+                ("nsite of the model given to Data::set_model", m.nsite()),
+                (
+                    "nsensordata of the model given to Data::set_model",
+                    m.nsensordata(),
+                ),
+                ("nbuffer of the model given to Data::set_model", m.nbuffer()),
+                ("narena of the model given to Data::set_model", m.narena()),
+            ]
+        };
+        if let Some(((what, expected), (_, got))) = sizes(&self.model)
+            .into_iter()
+            .zip(sizes(&model))
+            .find(|((_, a), (_, b))| a != b)
+        {
+            return Err(Error::Size {
+                what,
+                expected,
+                got,
+            });
+        }
+        self.model = model;
+        self.reset()
+    }
+
+    /// Geom ids of each active contact (`contact[i].geom`), after the last forward pass; -1
+    /// for flex contacts.
+    pub fn contact_geoms(&self) -> impl Iterator<Item = [i32; 2]> + '_ {
+        let d = self.raw();
+        // SAFETY: d.contact holds d.ncon initialised contacts after a forward pass; the borrow
+        // of self keeps them unmodified.
+        let contacts = unsafe { raw_slice(d.contact as *const sys::mjContact, self.ncon()) };
+        contacts.iter().map(|c| c.geom)
     }
 
     /// The model this state belongs to.

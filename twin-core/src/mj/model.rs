@@ -240,6 +240,13 @@ model_arrays! {
     dof_jntid: i32 = nv;
     /// Viscous damping per DOF, N·m·s/rad or N·s/m (len `nv`).
     dof_damping: f64 = nv;
+    /// Diagonal of the inverse inertia at `qpos0` per DOF (len `nv`; derived, set by
+    /// `mj_setConst`): 1 / effective inertia, 1/(kg·m²) or 1/kg.
+    dof_invweight0: f64 = nv;
+    /// Whether each joint's total actuator force is limited (len `njnt`).
+    jnt_actfrclimited: u8 = njnt;
+    /// Range of each joint's total actuator force, N·m or N (URDF `effort`) (len `njnt`).
+    jnt_actfrcrange: [f64; 2] = njnt;
     /// Dry friction loss per DOF, N·m or N (len `nv`).
     dof_frictionloss: f64 = nv;
     /// Armature (reflected rotor inertia) per DOF, kg·m² or kg (len `nv`).
@@ -248,6 +255,12 @@ model_arrays! {
     geom_bodyid: i32 = ngeom;
     /// Sliding, torsional and rolling friction of each geom (len `ngeom`).
     geom_friction: [f64; 3] = ngeom;
+    /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
+    geom_type: i32 = ngeom;
+    /// Type-specific size parameters of each geom, metres (len `ngeom`).
+    geom_size: [f64; 3] = ngeom;
+    /// Radius of each geom's bounding sphere, metres (len `ngeom`).
+    geom_rbound: f64 = ngeom;
     /// Transmission type of each actuator (`mjtTrn`) (len `nu`).
     actuator_trntype: i32 = nu;
     /// Transmission target ids of each actuator (len `nu`).
@@ -258,6 +271,10 @@ model_arrays! {
     actuator_ctrllimited: u8 = nu;
     /// Control range of each actuator (len `nu`).
     actuator_ctrlrange: [f64; 2] = nu;
+    /// Whether each actuator's force is clamped to its force range (len `nu`).
+    actuator_forcelimited: u8 = nu;
+    /// Force range of each actuator, N·m or N (len `nu`).
+    actuator_forcerange: [f64; 2] = nu;
     /// Gain parameters of each actuator (`kp` of position actuators is entry 0) (len `nu`).
     actuator_gainprm: [f64; 10] = nu;
     /// Bias parameters of each actuator (len `nu`).
@@ -493,6 +510,28 @@ impl Model {
     /// Gravity in the world frame, m/s².
     pub fn gravity(&self) -> [f64; 3] {
         self.raw().opt.gravity
+    }
+
+    /// Number of bytes of the model's buffer (all its arrays): equal for a model and its edited
+    /// copies.
+    pub fn nbuffer(&self) -> usize {
+        self.raw().nbuffer as usize
+    }
+    /// Number of bytes of each `mjData` arena made for this model.
+    pub fn narena(&self) -> usize {
+        self.raw().narena as usize
+    }
+
+    /// Joint positions of keyframe `key` (len `nq`), or `None` if there is no such keyframe.
+    pub fn key_qpos(&self, key: usize) -> Option<&[f64]> {
+        if key >= self.nkey() {
+            return None;
+        }
+        let m = self.raw();
+        let nq = self.nq();
+        // SAFETY: key_qpos has nkey rows of nq entries; key < nkey; immutable while borrowed.
+        let all = unsafe { raw_slice(m.key_qpos as *const f64, self.nkey() * nq) };
+        Some(&all[key * nq..(key + 1) * nq])
     }
 
     /// Total mass of all bodies, kg (the world body has none).
