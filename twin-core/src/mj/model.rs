@@ -549,6 +549,12 @@ impl Model {
         }
     }
 
+    /// Whether sensor `id` is an inertial one of an IMU (gyro or accelerometer).
+    pub fn sensor_is_imu(&self, id: usize) -> bool {
+        let ty = self.sensor_type()[id] as u32;
+        ty == sys::mjtSensor_mjSENS_GYRO || ty == sys::mjtSensor_mjSENS_ACCELEROMETER
+    }
+
     /// Id of the object of kind `obj` named `name`, if any.
     pub fn id(&self, obj: ObjType, name: &str) -> Option<usize> {
         let c_name = CString::new(name).ok()?;
