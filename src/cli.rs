@@ -15,4 +15,6 @@ pub struct Cli {
 pub enum Command {
     /// Print a model's bodies, joints, actuators, sensors and total mass.
     Info(crate::commands::info::Args),
+    /// Domain-randomized batch rollouts: how often and how the robot fails.
+    Randomize(crate::commands::randomize::Args),
 }

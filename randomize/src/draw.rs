@@ -75,6 +75,8 @@ pub struct Layout {
     /// Standing pose of the nominal model (`home` keyframe, else qpos0 placed on the floor).
     pub home_qpos: Vec<f64>,
     actuation: Actuation,
+    /// Pushed body and push duration, seconds (`None`: pushes set the base velocity).
+    pub push_body: Option<(usize, f64)>,
 }
 
 /// Parameters of one episode: the drawn numbers and what they turn into.
@@ -132,7 +134,18 @@ impl Layout {
             columns: Vec::new(),
             home_qpos,
             actuation,
+            push_body: None,
         };
+        if let Some(p) = &spec.push {
+            if let Some(name) = &p.body {
+                let body = model.id(ObjType::Body, name).ok_or_else(|| Error::Spec {
+                    path: None,
+                    key: "push".into(),
+                    message: format!("the model has no body named \"{name}\" to push"),
+                })?;
+                layout.push_body = Some((body, p.duration_secs.unwrap_or(0.1)));
+            }
+        }
         for (key, term) in spec.terms() {
             layout.bind(&key, term, model)?;
         }

@@ -370,6 +370,9 @@ impl Worker {
         };
         mark_contacts(data, &mut foot_down);
         let mut next_push = push_interval_secs;
+        let total_mass = model.total_mass_kg();
+        let mut push_force = [0.0; 2];
+        let mut push_until = f64::NEG_INFINITY;
         let mut oldest = 0usize;
 
         for step in 0..steps {
@@ -395,10 +398,28 @@ impl Worker {
             if let (Some(t), Some(adr)) = (next_push, free_adr) {
                 if data.time_secs() + 0.5 * dt >= t {
                     let angle = rng.random::<f64>() * std::f64::consts::TAU;
-                    data.qvel_mut()[adr] += push_speed_mps * angle.cos();
-                    data.qvel_mut()[adr + 1] += push_speed_mps * angle.sin();
+                    let (dx, dy) = (push_speed_mps * angle.cos(), push_speed_mps * angle.sin());
+                    match batch.layout.push_body {
+                        None => {
+                            data.qvel_mut()[adr] += dx;
+                            data.qvel_mut()[adr + 1] += dy;
+                        }
+                        Some((_, duration)) => {
+                            push_force = [dx * total_mass / duration, dy * total_mass / duration];
+                            push_until = data.time_secs() + duration;
+                        }
+                    }
                     next_push = Some(t + push_interval_secs.unwrap_or(f64::INFINITY));
                 }
+            }
+            if let Some((body, _)) = batch.layout.push_body {
+                let active = data.time_secs() + 0.5 * dt < push_until;
+                let f = &mut data.xfrc_applied_mut()[body];
+                (f[0], f[1]) = if active {
+                    (push_force[0], push_force[1])
+                } else {
+                    (0.0, 0.0)
+                };
             }
             if let Err(e) = data.step() {
                 result.unstable = true;

@@ -205,16 +205,27 @@ impl Term {
     }
 }
 
-/// Push disturbances: every `interval_secs` (drawn once per episode), the floating base's
-/// horizontal velocity changes by `speed_mps` (drawn once per episode) in a direction drawn per
-/// push. Nominal value of both is 0, so use `mode = "absolute"` (or `add`).
+/// Push disturbances: every `interval_secs` (drawn once per episode) a horizontal push of size
+/// `speed_mps` (drawn once per episode; the change of the whole robot's velocity it amounts
+/// to) in a direction drawn per push. Without `body`, the push sets the floating base's
+/// velocity at once (the whole robot moves as one); with `body`, it is a force on that body's
+/// centre of mass over `duration_secs` with impulse `total mass · speed_mps`, as a shove at
+/// that height: the rest of the robot, feet included, must follow through its joints and the
+/// ground. Nominal value of both draws is 0, so use `mode = "absolute"` (or `add`).
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Push {
     /// Time between pushes, seconds; the first push comes after one interval.
     pub interval_secs: Term,
-    /// Size of each velocity kick, m/s.
+    /// Size of each push as a velocity change of the whole robot, m/s.
     pub speed_mps: Term,
+    /// Body pushed (e.g. the torso); without it, the floating base's velocity is set.
+    /// (default: none)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub body: Option<String>,
+    /// How long a push on `body` lasts, seconds. (default: 0.1)
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_secs: Option<f64>,
 }
 
 /// The whole spec. Every field is optional: `None` / empty means not randomized.
@@ -287,6 +298,8 @@ impl Spec {
             push: Some(Push {
                 interval_secs: Term::uniform(Mode::Absolute, 1.5, 3.0),
                 speed_mps: Term::uniform(Mode::Absolute, 0.0, 0.6),
+                body: None,
+                duration_secs: None,
             }),
             ..Spec::default()
         }
@@ -368,6 +381,15 @@ impl Spec {
     pub fn validate(&self, path: Option<&Path>) -> Result<()> {
         for (key, term) in self.terms() {
             term.validate(&key, path)?;
+        }
+        if let Some(d) = self.push.as_ref().and_then(|p| p.duration_secs) {
+            if !(d > 0.0 && d.is_finite()) {
+                return Err(Error::Spec {
+                    path: path.map(Path::to_path_buf),
+                    key: "push".into(),
+                    message: format!("duration_secs must be a positive number, got {d}"),
+                });
+            }
         }
         for (i, t) in self.object_mass.iter().enumerate() {
             if t.select.is_empty() {

@@ -190,7 +190,7 @@ struct Loop {
     limits: [f64; 2],
 }
 
-/// Holds the pose the episode starts in with PD control on every actuated hinge/slide joint:
+/// Holds the nominal pose ([`nominal_pose`]) with PD control on every actuated hinge/slide joint:
 /// `τ = kp·(q_target − q) − kd·q̇`, clamped to the actuator's range / the joint's effort.
 /// With actuators, each joint-transmission actuator drives its joint (torque / gear);
 /// without, every hinge and slide joint gets `qfrc_applied`.
@@ -299,11 +299,12 @@ impl Controller for PdHold {
         "pd-hold"
     }
 
-    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
+    fn reset(&mut self, model: &Model, _observation: &Observation<'_>) -> Result<()> {
         // Gains follow the episode's model (effort limits, gear and inertia may be randomized).
         self.build(model);
+        let nominal = nominal_pose(model);
         for l in &mut self.loops {
-            l.target = observation.qpos[l.qpos_adr];
+            l.target = nominal[l.qpos_adr];
         }
         Ok(())
     }
@@ -352,6 +353,16 @@ pub fn by_name(name: &str, model: &Model) -> Result<Box<dyn Controller>> {
             name: name.to_string(),
         }),
     }
+}
+
+/// The pose a robot is meant to hold: keyframe `home` if the model has one, else `qpos0`
+/// (len `nq`).
+pub fn nominal_pose(model: &Model) -> Vec<f64> {
+    model
+        .id(ObjType::Key, "home")
+        .and_then(|k| model.key_qpos(k))
+        .unwrap_or_else(|| model.qpos0())
+        .to_vec()
 }
 
 /// The body of the model's free joint (the floating base, e.g. `pelvis`), if it has one.
