@@ -1,32 +1,23 @@
+//! Prints how the fixture humanoid stands under the PD hold with no randomization (debug aid).
+use randomize::{Batch, EpisodeOptions, Layout, Spec};
 use std::sync::Arc;
-use twin_core::control::*;
-use twin_core::mj::{Data, Model};
-fn main() {
-    let path = std::env::args().nth(1).unwrap();
-    let model = Arc::new(Model::from_file(&path).unwrap());
-    let mut data = Data::new(model.clone()).unwrap();
-    reset_to_home(&mut data).unwrap();
-    let act = Actuation::of(&model);
-    let mut c = PdHold::new(&model, PdHoldOptions::default());
-    c.reset(&model, &Observation::of(&data)).unwrap();
-    println!("gains {:?}", c.gains());
-    let mut cmd = vec![0.0; act.len(&model)];
-    let base = base_body(&model);
-    let t0 = std::time::Instant::now();
-    for i in 0..5000 {
-        c.compute(&model, &Observation::of(&data), &mut cmd);
-        act.apply(&mut data, &cmd);
-        data.step().unwrap();
-        if i % 500 == 0 {
-            if let Some(b) = base {
-                println!(
-                    "t {:.2} base {:?} ncon {}",
-                    data.time_secs(),
-                    data.xpos()[b],
-                    data.ncon()
-                );
-            }
-        }
+use twin_core::mj::Model;
+fn main() -> Result<(), randomize::Error> {
+    let path = std::env::args()
+        .nth(1)
+        .unwrap_or("randomize/tests/fixtures/humanoid.xml".into());
+    let model = Arc::new(Model::from_file(&path)?);
+    let layout = Layout::new(&Spec::default(), &model)?;
+    let options = EpisodeOptions {
+        duration_secs: 2.0,
+        ..EpisodeOptions::default()
+    };
+    let b = Batch::new(model, layout, options, 0)?;
+    let mut t = randomize::episode::Trajectory::default();
+    let r = randomize::Worker::new(&b)?.run(&b, 0, Some(&mut t))?;
+    for row in t.rows.iter().step_by(100) {
+        println!("{:?}", &row[..8]);
     }
-    println!("{:?} per step", t0.elapsed() / 5000);
+    println!("{r:?}");
+    Ok(())
 }

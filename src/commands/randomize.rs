@@ -193,7 +193,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if report.interrupted {
-        eprintln!("interrupted: {} of {} episodes finished", report.summary.episodes, requested);
+        eprintln!(
+            "interrupted: {} of {} episodes finished",
+            report.summary.episodes, requested
+        );
     }
     Ok(())
 }
