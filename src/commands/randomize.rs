@@ -94,6 +94,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     if args.print_config {
+        println!(
+            "# Default randomization spec of `twin randomize`: each entry draws x from `dist` and\n\
+             # combines it with the nominal value by `mode` (scale: v·x, add: v + x, absolute: x).\n\
+             # Entries left out are not randomized. Edit and pass with --config FILE.\n"
+        );
         print!("{}", Spec::default_spec().to_toml());
         return Ok(());
     }
