@@ -16,5 +16,5 @@ pub enum Command {
     /// Print a model's bodies, joints, actuators, sensors and total mass.
     Info(crate::commands::info::Args),
     /// Domain-randomized batch rollouts: how often and how the robot fails.
-    Randomize(crate::commands::randomize::Args),
+    Randomize(Box<crate::commands::randomize::Args>),
 }

@@ -136,15 +136,15 @@ impl Layout {
             actuation,
             push_body: None,
         };
-        if let Some(p) = &spec.push {
-            if let Some(name) = &p.body {
-                let body = model.id(ObjType::Body, name).ok_or_else(|| Error::Spec {
-                    path: None,
-                    key: "push".into(),
-                    message: format!("the model has no body named \"{name}\" to push"),
-                })?;
-                layout.push_body = Some((body, p.duration_secs.unwrap_or(0.1)));
-            }
+        if let Some(p) = &spec.push
+            && let Some(name) = &p.body
+        {
+            let body = model.id(ObjType::Body, name).ok_or_else(|| Error::Spec {
+                path: None,
+                key: "push".into(),
+                message: format!("the model has no body named \"{name}\" to push"),
+            })?;
+            layout.push_body = Some((body, p.duration_secs.unwrap_or(0.1)));
         }
         for (key, term) in spec.terms() {
             layout.bind(&key, term, model)?;
@@ -158,12 +158,7 @@ impl Layout {
             key: key.to_string(),
             message,
         };
-        let select = |names: &[String]| -> Vec<bool> {
-            names
-                .iter()
-                .map(|n| term.select.is_empty() || term.select.iter().any(|p| matches(p, n)))
-                .collect()
-        };
+        let select = |n: &str| term.select.is_empty() || term.select.iter().any(|p| matches(p, n));
         // (object id, name used for matching, name in column, nominal value, share group)
         let mut objects: Vec<(usize, String, f64, usize)> = Vec::new();
         let kind;
@@ -176,7 +171,7 @@ impl Layout {
                     let bname = model
                         .name(ObjType::Body, model.geom_bodyid()[g] as usize)
                         .to_string();
-                    if select(&[gname.clone()])[0] || (!bname.is_empty() && select(&[bname])[0]) {
+                    if select(&gname) || (!bname.is_empty() && select(&bname)) {
                         objects.push((g, gname, model.geom_friction()[g][0], 0));
                     }
                 }
@@ -185,7 +180,7 @@ impl Layout {
                 kind = Kind::Mass;
                 for b in 1..model.nbody() {
                     let name = name_or(model, ObjType::Body, b);
-                    if model.body_mass()[b] > 0.0 && select(&[name.clone()])[0] {
+                    if model.body_mass()[b] > 0.0 && select(&name) {
                         objects.push((b, name, model.body_mass()[b], 0));
                     }
                 }
@@ -194,7 +189,7 @@ impl Layout {
                 kind = Kind::Com;
                 for b in 1..model.nbody() {
                     let name = name_or(model, ObjType::Body, b);
-                    if model.body_mass()[b] > 0.0 && select(&[name.clone()])[0] {
+                    if model.body_mass()[b] > 0.0 && select(&name) {
                         for (axis, a) in ["x", "y", "z"].iter().enumerate() {
                             objects.push((
                                 b * 3 + axis,
@@ -216,7 +211,7 @@ impl Layout {
                 };
                 for j in (0..model.njnt()).filter(|&j| is_1dof(model, j)) {
                     let name = name_or(model, ObjType::Joint, j);
-                    if !select(&[name.clone()])[0] {
+                    if !select(&name) {
                         continue;
                     }
                     let dof = model.jnt_dofadr()[j] as usize;
@@ -237,7 +232,7 @@ impl Layout {
                     Actuation::Ctrl => {
                         for u in 0..model.nu() {
                             let name = name_or(model, ObjType::Actuator, u);
-                            if select(&[name.clone()])[0] {
+                            if select(&name) {
                                 objects.push((u, name, model.actuator_gear()[u][0], 0));
                             }
                         }
@@ -245,7 +240,7 @@ impl Layout {
                     Actuation::Qfrc => {
                         for j in (0..model.njnt()).filter(|&j| is_1dof(model, j)) {
                             let name = name_or(model, ObjType::Joint, j);
-                            if select(&[name.clone()])[0] {
+                            if select(&name) {
                                 objects.push((model.jnt_dofadr()[j] as usize, name, 1.0, 0));
                             }
                         }
@@ -268,7 +263,7 @@ impl Layout {
                     let chosen = if term.select.is_empty() {
                         imu
                     } else {
-                        select(&[name.clone()])[0]
+                        select(&name)
                     };
                     if !chosen {
                         continue;

@@ -395,22 +395,22 @@ impl Worker {
                 }
             }
             actuation.apply(data, &self.command);
-            if let (Some(t), Some(adr)) = (next_push, free_adr) {
-                if data.time_secs() + 0.5 * dt >= t {
-                    let angle = rng.random::<f64>() * std::f64::consts::TAU;
-                    let (dx, dy) = (push_speed_mps * angle.cos(), push_speed_mps * angle.sin());
-                    match batch.layout.push_body {
-                        None => {
-                            data.qvel_mut()[adr] += dx;
-                            data.qvel_mut()[adr + 1] += dy;
-                        }
-                        Some((_, duration)) => {
-                            push_force = [dx * total_mass / duration, dy * total_mass / duration];
-                            push_until = data.time_secs() + duration;
-                        }
+            if let (Some(t), Some(adr)) = (next_push, free_adr)
+                && data.time_secs() + 0.5 * dt >= t
+            {
+                let angle = rng.random::<f64>() * std::f64::consts::TAU;
+                let (dx, dy) = (push_speed_mps * angle.cos(), push_speed_mps * angle.sin());
+                match batch.layout.push_body {
+                    None => {
+                        data.qvel_mut()[adr] += dx;
+                        data.qvel_mut()[adr + 1] += dy;
                     }
-                    next_push = Some(t + push_interval_secs.unwrap_or(f64::INFINITY));
+                    Some((_, duration)) => {
+                        push_force = [dx * total_mass / duration, dy * total_mass / duration];
+                        push_until = data.time_secs() + duration;
+                    }
                 }
+                next_push = Some(t + push_interval_secs.unwrap_or(f64::INFINITY));
             }
             if let Some((body, _)) = batch.layout.push_body {
                 let active = data.time_secs() + 0.5 * dt < push_until;

@@ -382,14 +382,14 @@ impl Spec {
         for (key, term) in self.terms() {
             term.validate(&key, path)?;
         }
-        if let Some(d) = self.push.as_ref().and_then(|p| p.duration_secs) {
-            if !(d > 0.0 && d.is_finite()) {
-                return Err(Error::Spec {
-                    path: path.map(Path::to_path_buf),
-                    key: "push".into(),
-                    message: format!("duration_secs must be a positive number, got {d}"),
-                });
-            }
+        if let Some(d) = self.push.as_ref().and_then(|p| p.duration_secs)
+            && !(d > 0.0 && d.is_finite())
+        {
+            return Err(Error::Spec {
+                path: path.map(Path::to_path_buf),
+                key: "push".into(),
+                message: format!("duration_secs must be a positive number, got {d}"),
+            });
         }
         for (i, t) in self.object_mass.iter().enumerate() {
             if t.select.is_empty() {

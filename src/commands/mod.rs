@@ -13,7 +13,7 @@ pub const VERSION_LINE: &str = concat!(env!("CARGO_PKG_VERSION"), " (MuJoCo 4.0.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(args) => info::run(args),
-        Command::Randomize(args) => randomize::run(args),
+        Command::Randomize(args) => randomize::run(*args),
     }
 }
 

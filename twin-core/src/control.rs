@@ -235,7 +235,7 @@ impl PdHold {
         self.loops.clear();
         match actuation {
             Actuation::Ctrl => {
-                for u in 0..model.nu() {
+                for (u, &[lo, hi]) in limits.iter().enumerate() {
                     // Only joint transmissions on 1-DOF joints are PD-able; others get 0.
                     if model.actuator_trntype()[u] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
                         continue;
@@ -249,7 +249,6 @@ impl PdHold {
                         continue;
                     }
                     let dof = model.jnt_dofadr()[joint] as usize;
-                    let [lo, hi] = limits[u];
                     let mut effort = (hi.abs().min(lo.abs())) * gear.abs();
                     if model.actuator_forcelimited()[u] != 0 {
                         let [flo, fhi] = model.actuator_forcerange()[u];
