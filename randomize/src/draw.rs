@@ -124,6 +124,20 @@ impl Layout {
     /// [`Error::Spec`] when a `select` pattern matches nothing (listing some names that exist)
     /// or a term needs something the model lacks (pushes without a floating base).
     pub fn new(spec: &Spec, model: &Model) -> Result<Layout> {
+        Self::build(spec, model, false).map(|(layout, _)| layout)
+    }
+
+    /// Like [`Layout::new`], but terms whose objects the model lacks (e.g. IMU noise on a
+    /// model without IMU sensors) are left out instead of being an error; returns their keys.
+    /// For the default spec, which must work on any model.
+    ///
+    /// # Errors
+    /// As [`Layout::new`] for other problems.
+    pub fn new_skipping_missing(spec: &Spec, model: &Model) -> Result<(Layout, Vec<String>)> {
+        Self::build(spec, model, true)
+    }
+
+    fn build(spec: &Spec, model: &Model, skip_missing: bool) -> Result<(Layout, Vec<String>)> {
         let mut data = Data::new(std::sync::Arc::new(model.try_clone()?))?;
         reset_to_home(&mut data)?;
         let home_qpos = data.qpos().to_vec();
@@ -146,13 +160,17 @@ impl Layout {
             })?;
             layout.push_body = Some((body, p.duration_secs.unwrap_or(0.1)));
         }
+        let mut skipped = Vec::new();
         for (key, term) in spec.terms() {
-            layout.bind(&key, term, model)?;
+            if !layout.bind(&key, term, model, skip_missing)? {
+                skipped.push(key);
+            }
         }
-        Ok(layout)
+        Ok((layout, skipped))
     }
 
-    fn bind(&mut self, key: &str, term: &Term, model: &Model) -> Result<()> {
+    /// Binds one term; `Ok(false)` when it matched nothing and `skip_missing` is set.
+    fn bind(&mut self, key: &str, term: &Term, model: &Model, skip_missing: bool) -> Result<bool> {
         let spec_err = |message: String| Error::Spec {
             path: None,
             key: key.to_string(),
@@ -300,6 +318,9 @@ impl Layout {
             }
             other => unreachable!("Spec::terms yields no key {other}"),
         }
+        if objects.is_empty() && skip_missing {
+            return Ok(false);
+        }
         if objects.is_empty() {
             let what = match kind {
                 Kind::Friction => ("geom", ObjType::Geom),
@@ -366,7 +387,7 @@ impl Layout {
         });
         // Columns of one term are contiguous; remember which term draws them.
         self.terms.push(term.clone());
-        Ok(())
+        Ok(true)
     }
 
     /// Which term draws each column.

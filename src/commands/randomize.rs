@@ -110,9 +110,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = Arc::new(Model::from_file(&model_path)?);
     let spec = match &args.config {
         Some(path) => Spec::from_file(path)?,
-        None => Spec::default_spec(),
+        None => {
+            let mut spec = Spec::default_spec();
+            if twin_core::control::base_body(&model).is_none() {
+                spec.push = None;
+                eprintln!(
+                    "note: {} has no floating base (free joint): the default spec's pushes are \
+                     left out",
+                    model_path.display()
+                );
+            }
+            spec
+        }
     };
-    let layout = Layout::new(&spec, &model).map_err(|e| match (&args.config, e) {
+    let bound = if args.config.is_some() {
+        Layout::new(&spec, &model).map(|l| (l, Vec::new()))
+    } else {
+        Layout::new_skipping_missing(&spec, &model)
+    };
+    let (layout, skipped) = bound.map_err(|e| match (&args.config, e) {
         // Binding errors name the spec file the user wrote.
         (Some(path), randomize::Error::Spec { key, message, .. }) => randomize::Error::Spec {
             path: Some(path.clone()),
@@ -121,6 +137,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         (_, e) => e,
     })?;
+    if !skipped.is_empty() {
+        eprintln!(
+            "note: {} lacks what the default spec's {} apply to: left out",
+            model_path.display(),
+            skipped.join(", ")
+        );
+    }
     let options = EpisodeOptions {
         duration_secs: args.duration,
         fall_height_fraction: args.fall_height_fraction,
