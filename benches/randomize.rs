@@ -8,8 +8,10 @@
 //! - twin, same work: the randomize engine with an empty spec and the `passive` controller, so
 //!   it simulates exactly the C loop's trajectories; it still copies and re-derives the model
 //!   per episode (`mj_copyModel` + `mj_setConst`), reads observations, tracks contacts, tilt,
-//!   energy. The ratio to the C loop is twin's own overhead.
-//! - twin, real work: the default spec and the PD hold (what `twin randomize` runs).
+//!   energy; falls do not end episodes here, so both run every step. The ratio to the C loop is
+//!   twin's own overhead.
+//! - twin, real work: the default spec and the PD hold (what `twin randomize` runs); falls end
+//!   episodes, steps/s counts the steps simulated.
 //! - Python: `mujoco.rollout.rollout` on the same initial state, zero control, same steps,
 //!   1 and 2 threads, when `TWIN_PYTHON` (default `python3`) has `mujoco`; skipped otherwise.
 
@@ -29,10 +31,13 @@ const MODEL: &str = concat!(
 fn engine(spec: &Spec, controller: &str, episodes: u64, secs: f64, threads: usize) -> f64 {
     let model = Arc::new(Model::from_file(MODEL).expect("fixture"));
     let layout = Layout::new(spec, &model).expect("spec");
+    // Same work as the C loop: no early end on a fall, every episode runs all its steps.
+    let same_work = controller == "passive";
     let options = EpisodeOptions {
         duration_secs: secs,
         controller: controller.into(),
-        ..EpisodeOptions::default()
+        fall_height_fraction: if same_work { 0.0 } else { 0.6 },
+        fall_tilt_rad: if same_work { 4.0 } else { 1.0 },
     };
     let batch = Batch::new(model, layout, options, 1).expect("batch");
     let info = randomize::run_info(&batch, MODEL, spec, episodes, None);
@@ -45,8 +50,40 @@ fn engine(spec: &Spec, controller: &str, episodes: u64, secs: f64, threads: usiz
     let report = run_batch(&batch, info, &run, &AtomicBool::new(false), &|| {}).expect("run");
     let elapsed = t.elapsed().as_secs_f64();
     assert_eq!(report.summary.episodes, episodes);
-    let steps = episodes * batch.steps_per_episode();
-    steps as f64 / elapsed
+    if same_work {
+        assert_eq!(report.simulated_steps, episodes * batch.steps_per_episode());
+    }
+    report.simulated_steps as f64 / elapsed
+}
+
+/// Per-core comparison robust to background load: episode by episode, alternately the C loop
+/// and the engine's `Worker::run` (what each rayon worker does), on the same episode.
+fn paired(episodes: u64, secs: f64) -> (f64, f64) {
+    let model = Arc::new(Model::from_file(MODEL).expect("fixture"));
+    let layout = Layout::new(&Spec::default(), &model).expect("spec");
+    let options = EpisodeOptions {
+        duration_secs: secs,
+        controller: "passive".into(),
+        fall_height_fraction: 0.0,
+        fall_tilt_rad: 4.0,
+    };
+    let batch = Batch::new(model.clone(), layout, options, 1).expect("batch");
+    let steps = batch.steps_per_episode();
+    let mut worker = randomize::Worker::new(&batch).expect("worker");
+    let mut data = Data::new(model).expect("data");
+    let (mut c_secs, mut twin_secs) = (0.0, 0.0);
+    for i in 0..episodes {
+        let t = Instant::now();
+        reset_to_home(&mut data).expect("reset");
+        twin_core::mj::bench_c_step_loop(&mut data, steps);
+        c_secs += t.elapsed().as_secs_f64();
+        let t = Instant::now();
+        let r = worker.run(&batch, i, None).expect("episode");
+        twin_secs += t.elapsed().as_secs_f64();
+        assert_eq!((r.sim_secs / batch.nominal.timestep_secs()).round() as u64, steps);
+    }
+    let total = (episodes * steps) as f64;
+    (total / c_secs, total / twin_secs)
 }
 
 fn c_loop(episodes: u64, steps: u64) -> f64 {
@@ -109,18 +146,26 @@ fn main() {
     let mut c = Vec::new();
     let mut same1 = Vec::new();
     let mut same2 = Vec::new();
-    // Interleave repetitions so background load affects all rows alike; keep the best.
+    let mut real1 = Vec::new();
+    let mut real2 = Vec::new();
+    // Interleave repetitions so background load affects all rows alike; keep the best of 3.
     for _ in 0..3 {
         c.push(c_loop(episodes, steps));
         same1.push(engine(&empty, "passive", episodes, secs, 1));
         same2.push(engine(&empty, "passive", episodes, secs, 2));
+        real1.push(engine(&default, "pd-hold", episodes, secs, 1));
+        real2.push(engine(&default, "pd-hold", episodes, secs, 2));
     }
     let best = |v: &[f64]| v.iter().cloned().fold(0.0, f64::max);
     let (c, same1, same2) = (best(&c), best(&same1), best(&same2));
-    let real1 = engine(&default, "pd-hold", episodes, secs, 1);
-    let real2 = engine(&default, "pd-hold", episodes, secs, 2);
+    let (pc, pt) = paired(episodes, secs);
+    let (real1, real2) = (best(&real1), best(&real2));
     println!("| run | threads | steps/s | vs C loop |");
     println!("| --- | --- | --- | --- |");
+    println!(
+        "| paired, episode by episode: C loop {pc:.0} vs twin `Worker::run` | 1 | {pt:.0} | {:.3} |",
+        pt / pc
+    );
     println!("| plain C `mj_step` loop | 1 | {c:.0} | 1.00 |");
     println!(
         "| twin randomize, same work (empty spec, passive) | 1 | {same1:.0} | {:.3} |",

@@ -132,6 +132,8 @@ pub struct Report {
     pub worst: Vec<u64>,
     /// Whether a stop request ended the run early.
     pub interrupted: bool,
+    /// Simulation steps taken by the finished episodes (falls end episodes early).
+    pub simulated_steps: u64,
 }
 
 /// How bad an episode is, for `--record-worst`: diverged, then fell (earlier is worse), then
@@ -234,6 +236,8 @@ pub fn run_batch(
     // Enough episodes per chunk to keep every thread busy; small enough to stream.
     let chunk = (threads * 32).max(1);
     let mut interrupted = false;
+    let mut simulated_steps = 0u64;
+    let dt = batch.nominal.timestep_secs();
     for ids in indices.chunks(chunk) {
         if stop.load(Ordering::Relaxed) {
             interrupted = true;
@@ -263,6 +267,7 @@ pub fn run_batch(
                 continue;
             };
             let r = r?;
+            simulated_steps += (r.sim_secs / dt).round() as u64;
             builder.push(&r);
             if let Some(w) = csv_writer.as_mut() {
                 w.write_record(crate::summary::csv_record(&r))
@@ -317,6 +322,7 @@ pub fn run_batch(
         requested: indices.len() as u64,
         worst: worst.iter().map(|r| r.index).collect(),
         interrupted,
+        simulated_steps,
     })
 }
 

@@ -204,10 +204,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let secs = started.elapsed().as_secs_f64();
     print!("{}", report.summary.to_text(report.requested));
     eprintln!(
-        "\n{} episodes in {:.1} s ({:.1} episodes/s){}",
+        "\n{} episodes in {:.1} s ({:.1} episodes/s, {:.0} steps/s){}",
         report.summary.episodes,
         secs,
         report.summary.episodes as f64 / secs.max(1e-9),
+        report.simulated_steps as f64 / secs.max(1e-9),
         shard.map_or_else(String::new, |s| format!(", shard {s}"))
     );
     if let Some(out) = &args.out {
