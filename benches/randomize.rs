@@ -80,7 +80,10 @@ fn paired(episodes: u64, secs: f64) -> (f64, f64) {
         let t = Instant::now();
         let r = worker.run(&batch, i, None).expect("episode");
         twin_secs += t.elapsed().as_secs_f64();
-        assert_eq!((r.sim_secs / batch.nominal.timestep_secs()).round() as u64, steps);
+        assert_eq!(
+            (r.sim_secs / batch.nominal.timestep_secs()).round() as u64,
+            steps
+        );
     }
     let total = (episodes * steps) as f64;
     (total / c_secs, total / twin_secs)

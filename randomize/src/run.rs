@@ -491,6 +491,20 @@ pub fn merge(dirs: &[PathBuf], out_dir: Option<&Path>) -> Result<Merged> {
                 message: format!("episode {} does not belong to shard {shard}", r.index),
             });
         }
+        let expected = (0..file.run.episodes)
+            .filter(|&i| shard.contains(i))
+            .count();
+        if r.len() != expected {
+            return Err(Error::Results {
+                path: csv_path,
+                line: None,
+                message: format!(
+                    "shard {shard} is incomplete ({} of {expected} episodes, e.g. interrupted): \
+                     run it again before merging",
+                    r.len()
+                ),
+            });
+        }
         match &params {
             None => params = Some(p),
             Some(q) if *q != p => {

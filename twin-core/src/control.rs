@@ -437,3 +437,66 @@ fn geom_xmat_row_z(data: &Data, g: usize) -> [f64; 3] {
     let m = data.geom_xmat()[g];
     [m[6], m[7], m[8]]
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    const BOX: &str = r#"<mujoco><worldbody><geom type="plane" size="1 1 0.1"/>
+        <body name="base" pos="0 0 0.5"><freejoint/>
+          <geom type="box" size="0.1 0.2 0.05" euler="0 0.3 0"/>
+          <body name="leg" pos="0 0 -0.2"><joint name="hip" axis="0 1 0" range="-1 1"
+              actuatorfrcrange="-20 20"/><geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.04"/>
+          </body></body></worldbody></mujoco>"#;
+
+    #[test]
+    fn home_without_keyframe_puts_the_lowest_geom_on_the_floor() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        assert_eq!(base_body(&model), model.id(ObjType::Body, "base"));
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        // Capsule bottom: 0.2 + 0.3 + 0.04 below the base origin.
+        assert!((data.qpos()[2] - 0.54).abs() < 1e-9, "{}", data.qpos()[2]);
+        assert!(lowest_robot_point_z(&model, &data).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pd_hold_without_actuators_clamps_to_joint_effort() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        let actuation = Actuation::of(&model);
+        assert_eq!(actuation, Actuation::Qfrc);
+        assert_eq!(actuation.limits(&model)[6], [-20.0, 20.0]);
+        let mut pd = PdHold::new(&model, PdHoldOptions::default());
+        pd.reset(&model, &Observation::of(&data)).unwrap();
+        // kp = effort / saturation error.
+        assert!((pd.gains()[0].0 - 20.0 / 0.25).abs() < 1e-12);
+        data.qpos_mut()[7] = 0.1;
+        let mut command = vec![0.0; actuation.len(&model)];
+        pd.compute(&model, &Observation::of(&data), &mut command);
+        assert!((command[6] + 8.0).abs() < 1e-9, "{command:?}");
+        assert!(
+            command[..6].iter().all(|&c| c == 0.0),
+            "no force on the free joint"
+        );
+        data.qpos_mut()[7] = 0.9;
+        pd.compute(&model, &Observation::of(&data), &mut command);
+        assert_eq!(command[6], -20.0);
+        assert!(by_name("dance", &model).is_err());
+    }
+
+    #[test]
+    fn set_model_refuses_another_model() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        let edited = Arc::new(model.edit().unwrap().finish().unwrap());
+        data.set_model(edited).unwrap();
+        let other = Arc::new(
+            Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size=\"1\"/></body></worldbody></mujoco>")
+                .unwrap(),
+        );
+        assert!(matches!(data.set_model(other), Err(Error::Size { .. })));
+    }
+}

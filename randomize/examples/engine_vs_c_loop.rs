@@ -5,7 +5,9 @@ use std::sync::Arc;
 use std::time::Instant;
 use twin_core::mj::{Data, Model};
 fn main() -> Result<(), randomize::Error> {
-    let path = std::env::args().nth(1).unwrap_or("randomize/tests/fixtures/humanoid.xml".into());
+    let path = std::env::args()
+        .nth(1)
+        .unwrap_or("randomize/tests/fixtures/humanoid.xml".into());
     let model = Arc::new(Model::from_file(&path)?);
     let layout = Layout::new(&Spec::default(), &model)?;
     let options = EpisodeOptions {
