@@ -22,4 +22,6 @@ pub enum Command {
     Check(crate::commands::check::Args),
     /// Inspect ROS 2 MCAP logs (`twin log info FILE`).
     Log(crate::commands::log::Args),
+    /// Domain-randomized batch rollouts: how often and how the robot fails.
+    Randomize(Box<crate::commands::randomize::Args>),
 }

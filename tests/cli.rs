@@ -8,3 +8,5 @@ mod convert;
 mod info;
 #[path = "cli/log.rs"]
 mod log;
+#[path = "cli/randomize.rs"]
+mod randomize;

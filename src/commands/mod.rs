@@ -4,6 +4,7 @@ pub mod check;
 pub mod convert;
 pub mod info;
 pub mod log;
+pub mod randomize;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;
@@ -18,6 +19,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Convert(args) => convert::run(args),
         Command::Check(args) => check::run(args),
         Command::Log(args) => log::run(args),
+        Command::Randomize(args) => randomize::run(*args),
     }
 }
 

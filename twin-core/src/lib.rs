@@ -1,5 +1,6 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
-//! URDF/Gazebo → MJCF converter ([`convert`]) and the step-by-step model validation ([`check`]).
+//! URDF/Gazebo → MJCF converter ([`convert`]), the step-by-step model validation ([`check`]),
+//! controllers ([`control`]) and ROS 2 logs ([`log`]).
 //!
 //! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
 //! a small C shim and comes back as [`Error::MuJoCo`].
@@ -18,6 +19,7 @@
 //! ```
 
 pub mod check;
+pub mod control;
 pub mod convert;
 pub mod error;
 pub mod log;

@@ -169,6 +169,48 @@ impl Data {
         Ok(copy)
     }
 
+    /// Moves this state over to `model`, an edited copy of its current model (same sizes, as
+    /// [`Model::edit`] makes), and resets it there (`mj_resetData`). Saves allocating a new
+    /// `mjData` per randomized episode.
+    ///
+    /// # Errors
+    /// [`Error::Size`] if `model` does not have the current model's sizes; [`Error::MuJoCo`] as
+    /// [`Data::reset`].
+    pub fn set_model(&mut self, model: Arc<Model>) -> Result<()> {
+        let sizes = |m: &Model| {
+            [
+                ("nq of the model given to Data::set_model", m.nq()),
+                ("nv of the model given to Data::set_model", m.nv()),
+                ("nu of the model given to Data::set_model", m.nu()),
+                ("na of the model given to Data::set_model", m.raw().na as usize),
+                ("nbody of the model given to Data::set_model", m.nbody()),
+                ("njnt of the model given to Data::set_model", m.njnt()),
+                ("ngeom of the model given to Data::set_model", m.ngeom()),
+                ("nsite of the model given to Data::set_model", m.nsite()),
+                ("nsensordata of the model given to Data::set_model", m.nsensordata()),
+                ("nbuffer of the model given to Data::set_model", m.nbuffer()),
+                ("narena of the model given to Data::set_model", m.narena()),
+            ]
+        };
+        if let Some(((what, expected), (_, got))) =
+            sizes(&self.model).into_iter().zip(sizes(&model)).find(|((_, a), (_, b))| a != b)
+        {
+            return Err(Error::Size { what, expected, got });
+        }
+        self.model = model;
+        self.reset()
+    }
+
+    /// Geom ids of each active contact (`contact[i].geom`), after the last forward pass; -1
+    /// for flex contacts.
+    pub fn contact_geoms(&self) -> impl Iterator<Item = [i32; 2]> + '_ {
+        let d = self.raw();
+        // SAFETY: d.contact holds d.ncon initialised contacts after a forward pass; the borrow
+        // of self keeps them unmodified.
+        let contacts = unsafe { raw_slice(d.contact as *const sys::mjContact, self.ncon()) };
+        contacts.iter().map(|c| c.geom)
+    }
+
     /// The model this state belongs to.
     pub fn model(&self) -> &Arc<Model> {
         &self.model

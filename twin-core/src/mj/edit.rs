@@ -210,6 +210,31 @@ impl ModelEdit {
         self
     }
 
+    /// Sets actuator `actuator`'s transmission gear (entry 0 scales a joint motor's torque).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for non-finite values; [`Error::Size`] for a bad id.
+    pub fn set_actuator_gear(&mut self, actuator: usize, gear: [f64; 6]) -> Result<&mut Self> {
+        check("actuator id", actuator, self.model.nu())?;
+        finite("gear", &gear)?;
+        let n = self.model.nu();
+        let m = self.raw_mut();
+        // SAFETY: actuator_gear has nu rows of 6; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.actuator_gear.cast::<[f64; 6]>(), n) };
+        rows[actuator] = gear;
+        Ok(self)
+    }
+
+    /// Sets the gravity vector, world frame, m/s².
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for non-finite values.
+    pub fn set_gravity(&mut self, gravity: [f64; 3]) -> Result<&mut Self> {
+        finite("gravity", &gravity)?;
+        self.raw_mut().opt.gravity = gravity;
+        Ok(self)
+    }
+
     /// Recomputes derived quantities with `mj_setConst` and returns the edited model.
     ///
     /// # Errors

@@ -242,6 +242,13 @@ model_arrays! {
     dof_jntid: i32 = nv;
     /// Viscous damping per DOF, N·m·s/rad or N·s/m (len `nv`).
     dof_damping: f64 = nv;
+    /// Diagonal of the inverse inertia at `qpos0` per DOF (len `nv`; derived, set by
+    /// `mj_setConst`): 1 / effective inertia, 1/(kg·m²) or 1/kg.
+    dof_invweight0: f64 = nv;
+    /// Whether each joint's total actuator force is limited (len `njnt`).
+    jnt_actfrclimited: u8 = njnt;
+    /// Range of each joint's total actuator force, N·m or N (URDF `effort`) (len `njnt`).
+    jnt_actfrcrange: [f64; 2] = njnt;
     /// Dry friction loss per DOF, N·m or N (len `nv`).
     dof_frictionloss: f64 = nv;
     /// Armature (reflected rotor inertia) per DOF, kg·m² or kg (len `nv`).
@@ -250,6 +257,12 @@ model_arrays! {
     geom_bodyid: i32 = ngeom;
     /// Sliding, torsional and rolling friction of each geom (len `ngeom`).
     geom_friction: [f64; 3] = ngeom;
+    /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
+    geom_type: i32 = ngeom;
+    /// Type-specific size parameters of each geom, metres (len `ngeom`).
+    geom_size: [f64; 3] = ngeom;
+    /// Radius of each geom's bounding sphere, metres (len `ngeom`).
+    geom_rbound: f64 = ngeom;
     /// Transmission type of each actuator (`mjtTrn`) (len `nu`).
     actuator_trntype: i32 = nu;
     /// Transmission target ids of each actuator (len `nu`).
@@ -260,6 +273,10 @@ model_arrays! {
     actuator_ctrllimited: u8 = nu;
     /// Control range of each actuator (len `nu`).
     actuator_ctrlrange: [f64; 2] = nu;
+    /// Whether each actuator's force is clamped to its force range (len `nu`).
+    actuator_forcelimited: u8 = nu;
+    /// Force range of each actuator, N·m or N (len `nu`).
+    actuator_forcerange: [f64; 2] = nu;
     /// Gain parameters of each actuator (`kp` of position actuators is entry 0) (len `nu`).
     actuator_gainprm: [f64; 10] = nu;
     /// Bias parameters of each actuator (len `nu`).
@@ -276,12 +293,6 @@ model_arrays! {
     sensor_objid: i32 = nsensor;
     /// Noise standard deviation stored with each sensor (MuJoCo does not apply it) (len `nsensor`).
     sensor_noise: f64 = nsensor;
-    /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
-    geom_type: i32 = ngeom;
-    /// Whether each joint's actuator force is clamped (len `njnt`).
-    jnt_actfrclimited: u8 = njnt;
-    /// Range of the total actuator force on each joint, N·m or N (len `njnt`).
-    jnt_actfrcrange: [f64; 2] = njnt;
     /// Contact type bits of each geom (len `ngeom`).
     geom_contype: i32 = ngeom;
     /// Contact affinity bits of each geom (len `ngeom`).
@@ -292,9 +303,6 @@ model_arrays! {
     geom_matid: i32 = ngeom;
     /// Visibility group of each geom (len `ngeom`).
     geom_group: i32 = ngeom;
-    /// Type-specific sizes of each geom, metres (half sizes for boxes; radius, half length for
-    /// capsules and cylinders) (len `ngeom`).
-    geom_size: [f64; 3] = ngeom;
     /// Position of each geom in its body frame, metres (len `ngeom`).
     geom_pos: [f64; 3] = ngeom;
     /// Orientation of each geom in its body frame, quaternion w x y z (len `ngeom`).
@@ -321,10 +329,6 @@ model_arrays! {
     site_bodyid: i32 = nsite;
     /// Id of the body each body is welded to (itself when it has joints) (len `nbody`).
     body_weldid: i32 = nbody;
-    /// Whether each actuator's force is clamped (len `nu`).
-    actuator_forcelimited: u8 = nu;
-    /// Force range of each actuator (len `nu`).
-    actuator_forcerange: [f64; 2] = nu;
     /// Gain type of each actuator (`mjtGain`) (len `nu`).
     actuator_gaintype: i32 = nu;
     /// Bias type of each actuator (`mjtBias`) (len `nu`).
@@ -558,6 +562,7 @@ impl Model {
         let all = unsafe { raw_slice(self.raw().key_qpos as *const f64, self.nkey() * nq) };
         Some(&all[key * nq..(key + 1) * nq])
     }
+
     /// Simulation timestep in seconds.
     pub fn timestep_secs(&self) -> f64 {
         self.raw().opt.timestep
@@ -565,6 +570,16 @@ impl Model {
     /// Gravity in the world frame, m/s².
     pub fn gravity(&self) -> [f64; 3] {
         self.raw().opt.gravity
+    }
+
+    /// Number of bytes of the model's buffer (all its arrays): equal for a model and its edited
+    /// copies.
+    pub fn nbuffer(&self) -> usize {
+        self.raw().nbuffer as usize
+    }
+    /// Number of bytes of each `mjData` arena made for this model.
+    pub fn narena(&self) -> usize {
+        self.raw().narena as usize
     }
 
     /// Total mass of all bodies, kg (the world body has none).
@@ -580,6 +595,12 @@ impl Model {
             sys::mjtJoint_mjJNT_SLIDE => JointType::Slide,
             _ => JointType::Hinge,
         }
+    }
+
+    /// Whether sensor `id` is an inertial one of an IMU (gyro or accelerometer).
+    pub fn sensor_is_imu(&self, id: usize) -> bool {
+        let ty = self.sensor_type()[id] as u32;
+        ty == sys::mjtSensor_mjSENS_GYRO || ty == sys::mjtSensor_mjSENS_ACCELEROMETER
     }
 
     /// Id of the object of kind `obj` named `name`, if any.

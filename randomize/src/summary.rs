@@ -1,0 +1,405 @@
+//! Per-episode CSV rows and the batch summary computed from them.
+//!
+//! The summary is a pure function of the rows in episode order, so a single machine and the
+//! merge of its shards produce the same bytes. It keeps a handful of numbers per episode (for
+//! exact quantiles) and running sums per parameter, not the episodes themselves.
+
+use crate::episode::EpisodeResult;
+use crate::error::{Error, Result};
+use serde::{Deserialize, Serialize};
+use std::io::{Read, Write};
+use std::path::Path;
+
+/// The fixed leading CSV columns; the drawn parameters follow.
+pub const METRIC_COLUMNS: [&str; 13] = [
+    "episode",
+    "success",
+    "fell",
+    "fall_time_secs",
+    "unstable",
+    "unstable_reason",
+    "sim_secs",
+    "distance_m",
+    "avg_speed_mps",
+    "steps_taken",
+    "max_tilt_rad",
+    "saturation_secs",
+    "energy_j",
+];
+
+/// The CSV header for parameter columns `params`.
+pub fn csv_header(params: &[String]) -> Vec<String> {
+    METRIC_COLUMNS.iter().map(|s| s.to_string()).chain(params.iter().cloned()).collect()
+}
+
+/// One CSV record. Floats use Rust's shortest round-trip form, so parsing gives back the exact
+/// value.
+pub fn csv_record(r: &EpisodeResult) -> Vec<String> {
+    let mut out = vec![
+        r.index.to_string(),
+        u8::from(r.success()).to_string(),
+        u8::from(r.fell).to_string(),
+        r.fall_time_secs.map_or_else(String::new, |t| t.to_string()),
+        u8::from(r.unstable).to_string(),
+        r.unstable_reason.clone(),
+        r.sim_secs.to_string(),
+        r.distance_m.to_string(),
+        r.avg_speed_mps.to_string(),
+        r.steps_taken.to_string(),
+        r.max_tilt_rad.to_string(),
+        r.saturation_secs.to_string(),
+        r.energy_j.to_string(),
+    ];
+    out.extend(r.params.iter().map(f64::to_string));
+    out
+}
+
+/// Reads a per-episode CSV back: the parameter column names and the rows, in file order.
+///
+/// # Errors
+/// [`Error::Results`] naming the file and line for anything that is not such a CSV.
+pub fn read_csv(path: &Path) -> Result<(Vec<String>, Vec<EpisodeResult>)> {
+    let file = std::fs::File::open(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    read_csv_from(path, file)
+}
+
+fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<EpisodeResult>)> {
+    let err = |line: Option<u64>, message: String| Error::Results { path: path.to_path_buf(), line, message };
+    let mut rdr = csv::ReaderBuilder::new().has_headers(true).from_reader(reader);
+    let header = rdr.headers().map_err(|e| err(Some(1), e.to_string()))?.clone();
+    let names: Vec<&str> = header.iter().collect();
+    if names.len() < METRIC_COLUMNS.len() || names[..METRIC_COLUMNS.len()] != METRIC_COLUMNS {
+        return Err(err(
+            Some(1),
+            format!("not a `twin randomize` episodes file: the header must start with {}", METRIC_COLUMNS.join(",")),
+        ));
+    }
+    let params: Vec<String> = names[METRIC_COLUMNS.len()..].iter().map(|s| s.to_string()).collect();
+    let mut rows = Vec::new();
+    for (i, rec) in rdr.records().enumerate() {
+        let line = i as u64 + 2;
+        let rec = rec.map_err(|e| err(Some(line), e.to_string()))?;
+        let f = |k: usize| -> Result<f64> {
+            rec[k]
+                .parse::<f64>()
+                .map_err(|_| err(Some(line), format!("column {}: {:?} is not a number", names[k], &rec[k])))
+        };
+        let b = |k: usize| -> Result<bool> {
+            match &rec[k] {
+                "0" => Ok(false),
+                "1" => Ok(true),
+                v => Err(err(Some(line), format!("column {}: expected 0 or 1, got {v:?}", names[k]))),
+            }
+        };
+        let u = |k: usize| -> Result<u64> {
+            rec[k]
+                .parse::<u64>()
+                .map_err(|_| err(Some(line), format!("column {}: {:?} is not a count", names[k], &rec[k])))
+        };
+        let r = EpisodeResult {
+            index: u(0)?,
+            fell: b(2)?,
+            fall_time_secs: if rec[3].is_empty() { None } else { Some(f(3)?) },
+            unstable: b(4)?,
+            unstable_reason: rec[5].to_string(),
+            sim_secs: f(6)?,
+            distance_m: f(7)?,
+            avg_speed_mps: f(8)?,
+            steps_taken: u(9)?,
+            max_tilt_rad: f(10)?,
+            saturation_secs: f(11)?,
+            energy_j: f(12)?,
+            params: (METRIC_COLUMNS.len()..names.len()).map(f).collect::<Result<_>>()?,
+        };
+        if b(1)? != r.success() {
+            return Err(err(Some(line), "column success disagrees with fell/unstable".into()));
+        }
+        rows.push(r);
+    }
+    Ok((params, rows))
+}
+
+/// Writes rows as CSV (header first).
+///
+/// # Errors
+/// [`Error::Io`] naming `path`.
+pub fn write_csv<'a>(
+    path: &Path,
+    w: impl Write,
+    params: &[String],
+    rows: impl IntoIterator<Item = &'a EpisodeResult>,
+) -> Result<()> {
+    let io = |e: csv::Error| Error::Io { path: path.to_path_buf(), source: std::io::Error::other(e) };
+    let mut wtr = csv::Writer::from_writer(w);
+    wtr.write_record(csv_header(params)).map_err(io)?;
+    for r in rows {
+        wtr.write_record(csv_record(r)).map_err(io)?;
+    }
+    wtr.flush().map_err(|source| Error::Io { path: path.to_path_buf(), source })
+}
+
+/// Quantiles of one metric.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Quantiles {
+    /// Metric name and unit, e.g. `distance_m`.
+    pub metric: String,
+    /// Number of values (episodes, or falls for `fall_time_secs`).
+    pub count: u64,
+    /// Minimum.
+    pub min: f64,
+    /// 5th percentile.
+    pub p05: f64,
+    /// Median.
+    pub p50: f64,
+    /// 95th percentile.
+    pub p95: f64,
+    /// Maximum.
+    pub max: f64,
+}
+
+/// How one drawn parameter differs between failed and successful episodes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Separation {
+    /// Parameter column.
+    pub parameter: String,
+    /// Mean over failed episodes (fell or unstable).
+    pub mean_failed: f64,
+    /// Mean over successful episodes.
+    pub mean_succeeded: f64,
+    /// Standardized mean difference (mean_failed − mean_succeeded) / pooled standard deviation.
+    pub smd: f64,
+}
+
+/// The batch summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// Episodes in the summary.
+    pub episodes: u64,
+    /// Episodes that neither fell nor diverged.
+    pub succeeded: u64,
+    /// Episodes that fell.
+    pub fell: u64,
+    /// Episodes that diverged.
+    pub unstable: u64,
+    /// succeeded / episodes.
+    pub success_rate: f64,
+    /// 95 % Wilson score interval of the success rate.
+    pub success_rate_ci95: [f64; 2],
+    /// Quantiles of each metric.
+    pub quantiles: Vec<Quantiles>,
+    /// Parameters ranked by |SMD|, largest first (empty unless both groups have ≥ 2 episodes).
+    pub separation: Vec<Separation>,
+}
+
+/// Running per-group moments (Welford) of one parameter.
+#[derive(Debug, Clone, Default)]
+struct Moments {
+    n: f64,
+    mean: f64,
+    m2: f64,
+}
+
+impl Moments {
+    fn push(&mut self, x: f64) {
+        self.n += 1.0;
+        let d = x - self.mean;
+        self.mean += d / self.n;
+        self.m2 += d * (x - self.mean);
+    }
+}
+
+/// Builds a [`Summary`] from rows pushed in episode order.
+#[derive(Debug, Clone)]
+pub struct SummaryBuilder {
+    params: Vec<String>,
+    episodes: u64,
+    succeeded: u64,
+    fell: u64,
+    unstable: u64,
+    metrics: [Vec<f64>; 7],
+    groups: Vec<[Moments; 2]>,
+}
+
+const QUANTILE_METRICS: [&str; 7] =
+    ["distance_m", "avg_speed_mps", "steps_taken", "max_tilt_rad", "saturation_secs", "energy_j", "fall_time_secs"];
+
+impl SummaryBuilder {
+    /// An empty summary over parameter columns `params`.
+    pub fn new(params: &[String]) -> SummaryBuilder {
+        SummaryBuilder {
+            params: params.to_vec(),
+            episodes: 0,
+            succeeded: 0,
+            fell: 0,
+            unstable: 0,
+            metrics: Default::default(),
+            groups: vec![Default::default(); params.len()],
+        }
+    }
+
+    /// Adds one episode (in index order).
+    pub fn push(&mut self, r: &EpisodeResult) {
+        self.episodes += 1;
+        self.succeeded += u64::from(r.success());
+        self.fell += u64::from(r.fell);
+        self.unstable += u64::from(r.unstable);
+        // Diverged episodes carry no meaningful motion metrics.
+        if !r.unstable {
+            let values =
+                [r.distance_m, r.avg_speed_mps, r.steps_taken as f64, r.max_tilt_rad, r.saturation_secs, r.energy_j];
+            for (m, v) in self.metrics.iter_mut().zip(values) {
+                m.push(v);
+            }
+        }
+        if let Some(t) = r.fall_time_secs {
+            self.metrics[6].push(t);
+        }
+        let group = usize::from(r.success());
+        for (g, &x) in self.groups.iter_mut().zip(&r.params) {
+            g[group].push(x);
+        }
+    }
+
+    /// The summary so far.
+    pub fn finish(&self) -> Summary {
+        let n = self.episodes;
+        let rate = if n > 0 { self.succeeded as f64 / n as f64 } else { 0.0 };
+        let quantiles = QUANTILE_METRICS
+            .iter()
+            .zip(&self.metrics)
+            .filter(|(_, v)| !v.is_empty())
+            .map(|(name, v)| {
+                let mut s = v.clone();
+                s.sort_by(f64::total_cmp);
+                Quantiles {
+                    metric: name.to_string(),
+                    count: s.len() as u64,
+                    min: s[0],
+                    p05: quantile(&s, 0.05),
+                    p50: quantile(&s, 0.5),
+                    p95: quantile(&s, 0.95),
+                    max: s[s.len() - 1],
+                }
+            })
+            .collect();
+        let mut separation: Vec<Separation> = self
+            .params
+            .iter()
+            .zip(&self.groups)
+            .filter(|(_, [f, s])| f.n >= 2.0 && s.n >= 2.0)
+            .map(|(name, [f, s])| {
+                let pooled = ((f.m2 + s.m2) / (f.n + s.n - 2.0)).sqrt();
+                let diff = f.mean - s.mean;
+                let smd = if pooled > 0.0 { diff / pooled } else { 0.0 };
+                Separation { parameter: name.clone(), mean_failed: f.mean, mean_succeeded: s.mean, smd }
+            })
+            .collect();
+        separation.sort_by(|a, b| b.smd.abs().total_cmp(&a.smd.abs()));
+        Summary {
+            episodes: n,
+            succeeded: self.succeeded,
+            fell: self.fell,
+            unstable: self.unstable,
+            success_rate: rate,
+            success_rate_ci95: wilson(self.succeeded, n),
+            quantiles,
+            separation,
+        }
+    }
+}
+
+/// Linear-interpolation quantile of sorted values (the "type 7" definition).
+pub fn quantile(sorted: &[f64], p: f64) -> f64 {
+    let h = (sorted.len() - 1) as f64 * p;
+    let (lo, hi) = (h.floor() as usize, h.ceil() as usize);
+    sorted[lo] + (h - lo as f64) * (sorted[hi] - sorted[lo])
+}
+
+/// 95 % Wilson score interval for `k` successes in `n` trials.
+pub fn wilson(k: u64, n: u64) -> [f64; 2] {
+    if n == 0 {
+        return [0.0, 1.0];
+    }
+    let z = 1.959_963_984_540_054;
+    let (n, p) = (n as f64, k as f64 / n as f64);
+    let denom = 1.0 + z * z / n;
+    let centre = (p + z * z / (2.0 * n)) / denom;
+    let half = z * (p * (1.0 - p) / n + z * z / (4.0 * n * n)).sqrt() / denom;
+    [(centre - half).max(0.0), (centre + half).min(1.0)]
+}
+
+impl Summary {
+    /// The terminal report.
+    pub fn to_text(&self, requested: u64) -> String {
+        let mut s = String::new();
+        use std::fmt::Write as _;
+        let _ = writeln!(
+            s,
+            "episodes: {} of {requested}{}",
+            self.episodes,
+            if self.episodes < requested { " (interrupted: summary of the finished episodes)" } else { "" }
+        );
+        let _ = writeln!(
+            s,
+            "success: {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %); fell {}, unstable {}",
+            self.succeeded,
+            self.episodes,
+            100.0 * self.success_rate,
+            100.0 * self.success_rate_ci95[0],
+            100.0 * self.success_rate_ci95[1],
+            self.fell,
+            self.unstable
+        );
+        if !self.quantiles.is_empty() {
+            let _ = writeln!(
+                s,
+                "\n{:<18} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
+                "metric", "n", "min", "p5", "median", "p95", "max"
+            );
+            for q in &self.quantiles {
+                let _ = writeln!(
+                    s,
+                    "{:<18} {:>7} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.4}",
+                    q.metric, q.count, q.min, q.p05, q.p50, q.p95, q.max
+                );
+            }
+        }
+        if self.separation.is_empty() {
+            let _ = writeln!(s, "\nno parameter ranking: needs at least 2 failed and 2 successful episodes");
+        } else {
+            let _ = writeln!(s, "\nparameters separating failures from successes (standardized mean difference):");
+            let _ = writeln!(s, "{:<40} {:>12} {:>12} {:>8}", "parameter", "mean failed", "mean ok", "SMD");
+            for p in self.separation.iter().take(8) {
+                let _ = writeln!(
+                    s,
+                    "{:<40} {:>12.4} {:>12.4} {:>+8.2}",
+                    p.parameter, p.mean_failed, p.mean_succeeded, p.smd
+                );
+            }
+        }
+        s
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn wilson_interval_matches_reference_values() {
+        // Reference: Wilson (1927) interval for 8/10 successes, z = 1.96: 0.4902–0.9433.
+        let [lo, hi] = wilson(8, 10);
+        assert!((lo - 0.4902).abs() < 1e-4 && (hi - 0.9433).abs() < 1e-4, "{lo} {hi}");
+        let [lo, hi] = wilson(0, 20);
+        assert_eq!(lo, 0.0);
+        assert!((hi - 0.1611).abs() < 1e-4, "{hi}");
+    }
+
+    #[test]
+    fn quantiles_interpolate() {
+        let s = [1.0, 2.0, 3.0, 4.0, 5.0];
+        assert_eq!(quantile(&s, 0.5), 3.0);
+        assert_eq!(quantile(&s, 0.25), 2.0);
+        assert!((quantile(&s, 0.05) - 1.2).abs() < 1e-12);
+    }
+}

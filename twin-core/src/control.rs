@@ -1,0 +1,462 @@
+//! Controllers: what drives a twin during a rollout.
+//!
+//! A [`Controller`] reads an [`Observation`] (time, joint positions and velocities, sensor
+//! values: possibly noisy or delayed copies of the simulation's own) and writes a command. The
+//! command's meaning depends on the model, through [`Actuation`]:
+//!
+//! - a model with actuators (`nu > 0`, e.g. the converter's humanoid with one `motor` per joint)
+//!   gets `ctrl` (len `nu`);
+//! - a model without actuators (e.g. MuJoCo's own URDF import) gets generalised forces written
+//!   to `qfrc_applied` (len `nv`): N·m for hinges, N for slides, zero on the free joint.
+//!
+//! Controllers are written against [`Actuation`] so the same controller drives both kinds;
+//! [`Actuation::apply`] writes a command into [`Data`], clamped to the actuators' control range
+//! or the joints' effort limits.
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions};
+//! use twin_core::mj::{Data, Model};
+//!
+//! let model = Arc::new(Model::from_file("models/humanoid.xml")?);
+//! let mut data = Data::new(model.clone())?;
+//! twin_core::control::reset_to_home(&mut data)?;
+//! let actuation = Actuation::of(&model);
+//! let mut controller = PdHold::new(&model, PdHoldOptions::default());
+//! controller.reset(&model, &Observation::of(&data))?;
+//! let mut command = vec![0.0; actuation.len(&model)];
+//! for _ in 0..1000 {
+//!     controller.compute(&model, &Observation::of(&data), &mut command);
+//!     actuation.apply(&mut data, &command);
+//!     data.step()?;
+//! }
+//! # Ok::<(), twin_core::Error>(())
+//! ```
+
+use crate::error::{Error, Result};
+use crate::mj::{Data, JointType, Model, ObjType};
+
+/// What a controller reads each step. Slices have the model's lengths (`nq`, `nv`,
+/// `nsensordata`).
+#[derive(Debug, Clone, Copy)]
+pub struct Observation<'a> {
+    /// Simulation time, seconds.
+    pub time_secs: f64,
+    /// Joint positions (len `nq`).
+    pub qpos: &'a [f64],
+    /// Joint velocities (len `nv`).
+    pub qvel: &'a [f64],
+    /// Sensor values (len `nsensordata`).
+    pub sensordata: &'a [f64],
+}
+
+impl<'a> Observation<'a> {
+    /// The simulation's exact state, without noise or delay.
+    pub fn of(data: &'a Data) -> Observation<'a> {
+        Observation { time_secs: data.time_secs(), qpos: data.qpos(), qvel: data.qvel(), sensordata: data.sensordata() }
+    }
+}
+
+/// Where a command goes: `ctrl` when the model has actuators, else `qfrc_applied`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Actuation {
+    /// Command = `ctrl` (len `nu`), clamped to each actuator's `ctrlrange` when limited.
+    Ctrl,
+    /// Command = `qfrc_applied` (len `nv`), clamped to each joint's effort (`actuatorfrcrange`)
+    /// when limited; free and ball joints get none.
+    Qfrc,
+}
+
+impl Actuation {
+    /// [`Actuation::Ctrl`] for models with actuators, else [`Actuation::Qfrc`].
+    pub fn of(model: &Model) -> Actuation {
+        if model.nu() > 0 { Actuation::Ctrl } else { Actuation::Qfrc }
+    }
+
+    /// Length of a command: `nu` or `nv`.
+    pub fn len(self, model: &Model) -> usize {
+        match self {
+            Actuation::Ctrl => model.nu(),
+            Actuation::Qfrc => model.nv(),
+        }
+    }
+
+    /// Whether a command is empty (a model without actuators and DOFs).
+    pub fn is_empty(self, model: &Model) -> bool {
+        self.len(model) == 0
+    }
+
+    /// Limits of each command entry, `[low, high]` (infinite where unlimited; zero for the
+    /// DOFs of free and ball joints under [`Actuation::Qfrc`], which no motor drives).
+    pub fn limits(self, model: &Model) -> Vec<[f64; 2]> {
+        match self {
+            Actuation::Ctrl => (0..model.nu())
+                .map(|u| {
+                    if model.actuator_ctrllimited()[u] != 0 {
+                        model.actuator_ctrlrange()[u]
+                    } else {
+                        [f64::NEG_INFINITY, f64::INFINITY]
+                    }
+                })
+                .collect(),
+            Actuation::Qfrc => (0..model.nv())
+                .map(|dof| {
+                    let joint = model.dof_jntid()[dof] as usize;
+                    match model.joint_type(joint) {
+                        JointType::Free | JointType::Ball => [0.0, 0.0],
+                        _ if model.jnt_actfrclimited()[joint] != 0 => model.jnt_actfrcrange()[joint],
+                        _ => [f64::NEG_INFINITY, f64::INFINITY],
+                    }
+                })
+                .collect(),
+        }
+    }
+
+    /// Writes `command` into `data` (`ctrl` or `qfrc_applied`). MuJoCo clamps `ctrl` to limited
+    /// control ranges itself; controllers clamp `qfrc_applied` commands (see [`Actuation::limits`]).
+    ///
+    /// # Panics
+    /// If `command` does not have [`Actuation::len`] entries.
+    pub fn apply(self, data: &mut Data, command: &[f64]) {
+        match self {
+            Actuation::Ctrl => data.ctrl_mut().copy_from_slice(command),
+            Actuation::Qfrc => data.qfrc_applied_mut().copy_from_slice(command),
+        }
+    }
+}
+
+/// A closed-loop controller. One instance drives one simulation at a time; `reset` starts a new
+/// episode (it may use the model, which can differ per episode after randomization).
+pub trait Controller: Send {
+    /// Short name, as selected on the command line (e.g. `pd-hold`).
+    fn name(&self) -> &'static str;
+
+    /// Prepares for a new episode on `model`, starting from `observation`.
+    ///
+    /// # Errors
+    /// When the controller can't drive this model (e.g. a joint it needs is missing).
+    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()>;
+
+    /// Computes the command for the current step into `command` (len
+    /// `Actuation::of(model).len(model)`, see [`Actuation`]).
+    fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]);
+}
+
+/// Options of [`PdHold`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct PdHoldOptions {
+    /// Joint angle error (radians; metres for slides) at which a joint's PD torque reaches its
+    /// effort limit: `kp = effort / saturation_error`. Stiff enough for the shipped humanoid's
+    /// ankles to hold its whole weight. (default: 0.25)
+    pub saturation_error: f64,
+    /// Damping ratio of each joint on its own effective inertia (`1 / dof_invweight0`):
+    /// `kd = 2 · ratio · sqrt(kp · inertia)`. (default: 1.0)
+    pub damping_ratio: f64,
+    /// Effort (N·m or N) assumed for joints and actuators without a force limit.
+    /// (default: 100.0)
+    pub default_effort: f64,
+}
+
+impl Default for PdHoldOptions {
+    fn default() -> Self {
+        PdHoldOptions { saturation_error: 0.25, damping_ratio: 1.0, default_effort: 100.0 }
+    }
+}
+
+/// One PD loop: a command entry driving one 1-DOF joint.
+#[derive(Debug, Clone)]
+struct Loop {
+    command: usize,
+    qpos_adr: usize,
+    dof: usize,
+    kp: f64,
+    kd: f64,
+    target: f64,
+    limits: [f64; 2],
+}
+
+/// Holds the nominal pose ([`nominal_pose`]) with PD control on every actuated hinge/slide joint:
+/// `τ = kp·(q_target − q) − kd·q̇`, clamped to the actuator's range / the joint's effort.
+/// With actuators, each joint-transmission actuator drives its joint (torque / gear);
+/// without, every hinge and slide joint gets `qfrc_applied`.
+#[derive(Debug, Clone)]
+pub struct PdHold {
+    options: PdHoldOptions,
+    loops: Vec<Loop>,
+}
+
+impl PdHold {
+    /// A PD hold for `model`; the targets are set by [`Controller::reset`].
+    pub fn new(model: &Model, options: PdHoldOptions) -> PdHold {
+        let mut hold = PdHold { options, loops: Vec::new() };
+        hold.build(model);
+        hold
+    }
+
+    /// The gains `(kp, kd)` of each loop, in command order.
+    pub fn gains(&self) -> Vec<(f64, f64)> {
+        self.loops.iter().map(|l| (l.kp, l.kd)).collect()
+    }
+
+    fn build(&mut self, model: &Model) {
+        let actuation = Actuation::of(model);
+        let limits = actuation.limits(model);
+        let o = &self.options;
+        let gains = |effort: f64, dof: usize, gear: f64| {
+            let effort = if effort.is_finite() && effort > 0.0 { effort } else { o.default_effort };
+            let kp = effort / o.saturation_error;
+            let inertia = 1.0 / model.dof_invweight0()[dof].max(1e-12);
+            let kd = 2.0 * o.damping_ratio * (kp * inertia).sqrt();
+            // Joint-space gains, expressed in command units (torque = gear · ctrl).
+            (kp / gear, kd / gear)
+        };
+        self.loops.clear();
+        match actuation {
+            Actuation::Ctrl => {
+                for (u, &[lo, hi]) in limits.iter().enumerate() {
+                    // Only joint transmissions on 1-DOF joints are PD-able; others get 0.
+                    if model.actuator_trntype()[u] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
+                        continue;
+                    }
+                    let joint = model.actuator_trnid()[u][0] as usize;
+                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
+                        continue;
+                    }
+                    let gear = model.actuator_gear()[u][0];
+                    if gear == 0.0 {
+                        continue;
+                    }
+                    let dof = model.jnt_dofadr()[joint] as usize;
+                    let mut effort = (hi.abs().min(lo.abs())) * gear.abs();
+                    if model.actuator_forcelimited()[u] != 0 {
+                        let [flo, fhi] = model.actuator_forcerange()[u];
+                        effort = effort.min(flo.abs().min(fhi.abs()));
+                    }
+                    if model.jnt_actfrclimited()[joint] != 0 {
+                        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
+                        effort = effort.min(jlo.abs().min(jhi.abs()));
+                    }
+                    let (kp, kd) = gains(effort, dof, gear);
+                    self.loops.push(Loop {
+                        command: u,
+                        qpos_adr: model.jnt_qposadr()[joint] as usize,
+                        dof,
+                        kp,
+                        kd,
+                        target: 0.0,
+                        limits: [lo, hi],
+                    });
+                }
+            }
+            Actuation::Qfrc => {
+                for joint in 0..model.njnt() {
+                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
+                        continue;
+                    }
+                    let dof = model.jnt_dofadr()[joint] as usize;
+                    let [lo, hi] = limits[dof];
+                    let (kp, kd) = gains(hi.abs().min(lo.abs()), dof, 1.0);
+                    self.loops.push(Loop {
+                        command: dof,
+                        qpos_adr: model.jnt_qposadr()[joint] as usize,
+                        dof,
+                        kp,
+                        kd,
+                        target: 0.0,
+                        limits: [lo, hi],
+                    });
+                }
+            }
+        }
+    }
+}
+
+impl Controller for PdHold {
+    fn name(&self) -> &'static str {
+        "pd-hold"
+    }
+
+    fn reset(&mut self, model: &Model, _observation: &Observation<'_>) -> Result<()> {
+        // Gains follow the episode's model (effort limits, gear and inertia may be randomized).
+        self.build(model);
+        let nominal = nominal_pose(model);
+        for l in &mut self.loops {
+            l.target = nominal[l.qpos_adr];
+        }
+        Ok(())
+    }
+
+    fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        command.fill(0.0);
+        for l in &self.loops {
+            let error = l.target - observation.qpos[l.qpos_adr];
+            let u = l.kp * error - l.kd * observation.qvel[l.dof];
+            command[l.command] = u.clamp(l.limits[0], l.limits[1]);
+        }
+    }
+}
+
+/// Applies no command at all: the passive model (a baseline: how the robot does unpowered).
+#[derive(Debug, Clone, Default)]
+pub struct Passive;
+
+impl Controller for Passive {
+    fn name(&self) -> &'static str {
+        "passive"
+    }
+
+    fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
+        Ok(())
+    }
+
+    fn compute(&mut self, _model: &Model, _observation: &Observation<'_>, command: &mut [f64]) {
+        command.fill(0.0);
+    }
+}
+
+/// Names accepted by [`by_name`].
+pub const CONTROLLERS: &[&str] = &["pd-hold", "passive"];
+
+/// The controller called `name` (one of [`CONTROLLERS`]) with default options, for `model`.
+///
+/// # Errors
+/// [`Error::NotFound`] (kind `controller`) for an unknown name.
+pub fn by_name(name: &str, model: &Model) -> Result<Box<dyn Controller>> {
+    match name {
+        "pd-hold" => Ok(Box::new(PdHold::new(model, PdHoldOptions::default()))),
+        "passive" => Ok(Box::new(Passive)),
+        _ => Err(Error::NotFound { kind: "controller (available: pd-hold, passive)", name: name.to_string() }),
+    }
+}
+
+/// The pose a robot is meant to hold: keyframe `home` if the model has one, else `qpos0`
+/// (len `nq`).
+pub fn nominal_pose(model: &Model) -> Vec<f64> {
+    model.id(ObjType::Key, "home").and_then(|k| model.key_qpos(k)).unwrap_or_else(|| model.qpos0()).to_vec()
+}
+
+/// The body of the model's free joint (the floating base, e.g. `pelvis`), if it has one.
+pub fn base_body(model: &Model) -> Option<usize> {
+    (0..model.njnt()).find(|&j| model.joint_type(j) == JointType::Free).map(|j| model.jnt_bodyid()[j] as usize)
+}
+
+/// Puts `data` in the model's standing pose: keyframe `home` if the model has one; otherwise
+/// `qpos0` with the floating base raised or lowered so that the lowest robot geom touches
+/// z = 0. Runs `forward` so positions and sensors are current.
+///
+/// # Errors
+/// As [`Data::forward`].
+pub fn reset_to_home(data: &mut Data) -> Result<()> {
+    let model = data.model().clone();
+    if let Some(key) = model.id(ObjType::Key, "home") {
+        data.reset_to_keyframe(key)?;
+        return data.forward();
+    }
+    data.reset()?;
+    data.forward()?;
+    let Some(base) = base_body(&model) else {
+        return Ok(());
+    };
+    let lowest = lowest_robot_point_z(&model, data);
+    if lowest.is_finite() {
+        let joint = (0..model.njnt())
+            .find(|&j| model.joint_type(j) == JointType::Free && model.jnt_bodyid()[j] as usize == base)
+            .expect("base_body found a free joint");
+        let adr = model.jnt_qposadr()[joint] as usize;
+        data.qpos_mut()[adr + 2] -= lowest;
+        data.forward()?;
+    }
+    Ok(())
+}
+
+/// Lowest z (world frame, metres) of any geom not attached to the world body, from the geoms'
+/// current poses; +inf when there is none.
+pub fn lowest_robot_point_z(model: &Model, data: &Data) -> f64 {
+    let mut lowest = f64::INFINITY;
+    for g in 0..model.ngeom() {
+        if model.geom_bodyid()[g] == 0 {
+            continue;
+        }
+        let z = data.geom_xpos()[g][2];
+        let size = model.geom_size()[g];
+        let r = geom_xmat_row_z(data, g);
+        let extent = match model.geom_type()[g] as u32 {
+            mujoco_sys::mjtGeom_mjGEOM_SPHERE => size[0],
+            mujoco_sys::mjtGeom_mjGEOM_CAPSULE => size[0] + size[1] * r[2].abs(),
+            mujoco_sys::mjtGeom_mjGEOM_CYLINDER => size[0] * (1.0 - r[2] * r[2]).max(0.0).sqrt() + size[1] * r[2].abs(),
+            mujoco_sys::mjtGeom_mjGEOM_BOX => (0..3).map(|k| size[k] * r[k].abs()).sum(),
+            mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => (0..3).map(|k| (size[k] * r[k]).powi(2)).sum::<f64>().sqrt(),
+            mujoco_sys::mjtGeom_mjGEOM_PLANE => continue,
+            // Meshes and others: their bounding sphere (conservative: may leave a small gap).
+            _ => model.geom_rbound()[g],
+        };
+        lowest = lowest.min(z - extent);
+    }
+    lowest
+}
+
+/// Row z of geom `g`'s world rotation: the world z component of each of its local axes.
+fn geom_xmat_row_z(data: &Data, g: usize) -> [f64; 3] {
+    let m = data.geom_xmat()[g];
+    [m[6], m[7], m[8]]
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    const BOX: &str = r#"<mujoco><worldbody><geom type="plane" size="1 1 0.1"/>
+        <body name="base" pos="0 0 0.5"><freejoint/>
+          <geom type="box" size="0.1 0.2 0.05" euler="0 0.3 0"/>
+          <body name="leg" pos="0 0 -0.2"><joint name="hip" axis="0 1 0" range="-1 1"
+              actuatorfrcrange="-20 20"/><geom type="capsule" fromto="0 0 0 0 0 -0.3" size="0.04"/>
+          </body></body></worldbody></mujoco>"#;
+
+    #[test]
+    fn home_without_keyframe_puts_the_lowest_geom_on_the_floor() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        assert_eq!(base_body(&model), model.id(ObjType::Body, "base"));
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        // Capsule bottom: 0.2 + 0.3 + 0.04 below the base origin.
+        assert!((data.qpos()[2] - 0.54).abs() < 1e-9, "{}", data.qpos()[2]);
+        assert!(lowest_robot_point_z(&model, &data).abs() < 1e-9);
+    }
+
+    #[test]
+    fn pd_hold_without_actuators_clamps_to_joint_effort() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        let actuation = Actuation::of(&model);
+        assert_eq!(actuation, Actuation::Qfrc);
+        assert_eq!(actuation.limits(&model)[6], [-20.0, 20.0]);
+        let mut pd = PdHold::new(&model, PdHoldOptions::default());
+        pd.reset(&model, &Observation::of(&data)).unwrap();
+        // kp = effort / saturation error.
+        assert!((pd.gains()[0].0 - 20.0 / 0.25).abs() < 1e-12);
+        data.qpos_mut()[7] = 0.1;
+        let mut command = vec![0.0; actuation.len(&model)];
+        pd.compute(&model, &Observation::of(&data), &mut command);
+        assert!((command[6] + 8.0).abs() < 1e-9, "{command:?}");
+        assert!(command[..6].iter().all(|&c| c == 0.0), "no force on the free joint");
+        data.qpos_mut()[7] = 0.9;
+        pd.compute(&model, &Observation::of(&data), &mut command);
+        assert_eq!(command[6], -20.0);
+        assert!(by_name("dance", &model).is_err());
+    }
+
+    #[test]
+    fn set_model_refuses_another_model() {
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        let edited = Arc::new(model.edit().unwrap().finish().unwrap());
+        data.set_model(edited).unwrap();
+        let other = Arc::new(
+            Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size=\"1\"/></body></worldbody></mujoco>")
+                .unwrap(),
+        );
+        assert!(matches!(data.set_model(other), Err(Error::Size { .. })));
+    }
+}
