@@ -86,3 +86,27 @@ fn info_errors_name_the_file_and_element() {
         "{err}"
     );
 }
+
+/// Every ```console block of README.md is a real command: its `$ target/release/twin ...` line
+/// is run with this build's binary and the lines shown (up to a `...`) must be what it prints.
+#[test]
+fn readme_console_examples_print_what_they_show() {
+    let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
+    let mut blocks = 0;
+    let mut lines = readme.lines();
+    while let Some(line) = lines.next() {
+        if line.trim() != "```console" {
+            continue;
+        }
+        let block: Vec<&str> = lines.by_ref().take_while(|l| l.trim() != "```").collect();
+        let command = block[0].strip_prefix("$ target/release/twin ").expect("examples run target/release/twin");
+        let args: Vec<&str> = command.split_whitespace().collect();
+        let (ok, out, err) = run(&args);
+        assert!(ok, "README example `{command}` failed: {err}");
+        let expected: Vec<&str> = block[1..].iter().take_while(|l| l.trim() != "...").copied().collect();
+        let got: Vec<&str> = out.lines().take(expected.len()).collect();
+        assert_eq!(got, expected, "README example `{command}` prints something else");
+        blocks += 1;
+    }
+    assert!(blocks > 0, "README has no console example");
+}
