@@ -145,14 +145,6 @@ fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)
     Ok((edit.finish()?, servos))
 }
 
-fn home_qpos(model: &Model) -> Vec<f64> {
-    (0..model.nkey())
-        .find(|&k| model.name(ObjType::Key, k) == "home")
-        .and_then(|k| model.key_qpos(k))
-        .unwrap_or(model.qpos0())
-        .to_vec()
-}
-
 fn free_joint(model: &Model) -> Option<usize> {
     (0..model.njnt()).find(|&j| model.joint_type(j) == JointType::Free)
 }
@@ -201,7 +193,7 @@ pub fn check(floating: &Model, fixed: Option<&Model>, opts: &CheckOptions) -> Re
 
 fn physics_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<(StepReport, Data)> {
     let mut data = Data::new(model.clone())?;
-    let home = home_qpos(model);
+    let home = crate::control::nominal_pose(model);
     data.qpos_mut().copy_from_slice(&home);
     set_targets(&mut data, servos, &home);
     data.forward()?;
@@ -421,7 +413,7 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
 }
 
 fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<StepReport> {
-    let home = home_qpos(&model);
+    let home = crate::control::nominal_pose(&model);
     let free = free_joint(&model);
     let dt = model.timestep_secs();
     let mut data = Data::new(model.clone())?;
@@ -561,7 +553,7 @@ fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckO
 
 fn integration_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<StepReport> {
     let mut data = Data::new(model.clone())?;
-    let home = home_qpos(model);
+    let home = crate::control::nominal_pose(model);
     data.qpos_mut().copy_from_slice(&home);
     set_targets(&mut data, servos, &home);
     let n = (opts.timing_secs / model.timestep_secs()).round().max(1.0) as u64;
