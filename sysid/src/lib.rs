@@ -1,4 +1,12 @@
 //! System identification of link inertias and joint friction from robot logs (`twin sysid`).
-//!
-//! The identification pipeline arrives with its issue; this crate holds the workspace slot so
-//! the layout is stable for dependents.
+
+pub mod error;
+pub mod log;
+pub mod model;
+pub mod regressor;
+pub mod signal;
+pub mod writeback;
+
+pub use error::{Error, Result};
+pub use log::JointLog;
+pub use model::RobotModel;
