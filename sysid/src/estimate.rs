@@ -1,0 +1,579 @@
+//! Estimation: compressed least squares, base parameters (QR with column pivoting), per-joint
+//! noise weighting, statistics, and the physically consistent fit (log-Cholesky
+//! parameterisation, Levenberg–Marquardt).
+
+use crate::error::{Error, Result};
+use crate::model::{LINK_PARAMS, params_from_pseudo_inertia, pseudo_inertia};
+use faer::prelude::*;
+use faer::{Mat, Side};
+use nalgebra::Matrix4;
+
+/// Row-wise compression of each joint's regressor rows: `[W_j τ_j] = Q_j·R_j`, kept only on the
+/// columns the joint's rows can touch (the links it moves and its own friction terms), so the
+/// cost per sample is small and memory does not grow with the log.
+pub(crate) struct Accumulator {
+    ncols: usize,
+    blocks: Vec<JointBlock>,
+}
+
+struct JointBlock {
+    cols: Vec<usize>,
+    r: Mat<f64>,
+    pending: Vec<f64>,
+    pending_rows: usize,
+    rows: usize,
+}
+
+impl JointBlock {
+    fn width(&self) -> usize {
+        self.cols.len() + 1
+    }
+
+    fn flush(&mut self) {
+        if self.pending_rows == 0 {
+            return;
+        }
+        let w = self.width();
+        let rr = self.r.nrows();
+        let stacked = Mat::from_fn(rr + self.pending_rows, w, |i, j| {
+            if i < rr { self.r[(i, j)] } else { self.pending[(i - rr) * w + j] }
+        });
+        let qr = stacked.qr();
+        let r = qr.thin_R();
+        self.r = Mat::from_fn(r.nrows(), w, |i, j| if j >= i { r[(i, j)] } else { 0.0 });
+        self.pending.clear();
+        self.pending_rows = 0;
+    }
+}
+
+impl Accumulator {
+    /// `cols[j]`: the parameter columns joint `j`'s rows can be non-zero in.
+    pub(crate) fn new(ncols: usize, cols: Vec<Vec<usize>>) -> Accumulator {
+        Accumulator {
+            ncols,
+            blocks: cols
+                .into_iter()
+                .map(|cols| JointBlock {
+                    r: Mat::zeros(0, cols.len() + 1),
+                    cols,
+                    pending: Vec::new(),
+                    pending_rows: 0,
+                    rows: 0,
+                })
+                .collect(),
+        }
+    }
+
+    /// Adds the row `row` (all columns) with measured torque `tau` to joint `j`.
+    pub(crate) fn push(&mut self, j: usize, row: &[f64], tau: f64) {
+        let b = &mut self.blocks[j];
+        b.pending.extend(b.cols.iter().map(|&c| row[c]));
+        b.pending.push(tau);
+        b.pending_rows += 1;
+        b.rows += 1;
+        let w = b.width();
+        if b.pending_rows >= (4 * w).max(256) {
+            b.flush();
+        }
+    }
+
+    pub(crate) fn finish(&mut self) {
+        for b in &mut self.blocks {
+            b.flush();
+        }
+    }
+
+    /// Rows of joint `j`.
+    pub(crate) fn rows(&self, j: usize) -> usize {
+        self.blocks[j].rows
+    }
+
+    /// Total rows.
+    pub(crate) fn total_rows(&self) -> usize {
+        self.blocks.iter().map(|b| b.rows).sum()
+    }
+
+    /// `‖W_j·π − τ_j‖²` for joint `j`.
+    pub(crate) fn residual2(&self, j: usize, params: &[f64]) -> f64 {
+        self.quadratic(j, params, -1.0)
+    }
+
+    /// `‖W_j·π + tau_coef·τ_j‖²` for joint `j`.
+    pub(crate) fn quadratic(&self, j: usize, params: &[f64], tau_coef: f64) -> f64 {
+        let b = &self.blocks[j];
+        let w = b.width();
+        let mut x: Vec<f64> = b.cols.iter().map(|&c| params[c]).collect();
+        x.push(tau_coef);
+        (0..b.r.nrows())
+            .map(|i| {
+                let v: f64 = (i..w).map(|k| b.r[(i, k)] * x[k]).sum();
+                v * v
+            })
+            .sum()
+    }
+
+    /// `[R z; 0 ρ]` ((n+1) × (n+1), upper triangular) of all joints stacked, each joint's rows
+    /// scaled by `weights[j]`: `Σ_j w_j²‖W_j·π − τ_j‖² = ‖R·π − z‖² + ρ²`.
+    pub(crate) fn compressed(&self, weights: &[f64]) -> Mat<f64> {
+        let n = self.ncols;
+        let total: usize = self.blocks.iter().map(|b| b.r.nrows()).sum();
+        let mut stacked = Mat::<f64>::zeros(total.max(n + 1), n + 1);
+        let mut row = 0;
+        for (b, &w) in self.blocks.iter().zip(weights) {
+            for i in 0..b.r.nrows() {
+                for (k, &c) in b.cols.iter().enumerate() {
+                    stacked[(row, c)] = w * b.r[(i, k)];
+                }
+                stacked[(row, n)] = w * b.r[(i, b.cols.len())];
+                row += 1;
+            }
+        }
+        let qr = stacked.qr();
+        let r = qr.thin_R();
+        Mat::from_fn(n + 1, n + 1, |i, j| if j >= i { r[(i, j)] } else { 0.0 })
+    }
+}
+
+/// Identifiability of one standard parameter.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Identifiability {
+    /// Determined by the log on its own.
+    Identifiable,
+    /// Determined only in combination with other parameters (part of a base parameter); its
+    /// share comes from the CAD prior.
+    Combination,
+    /// Has no effect on the logged torques; stays at the CAD value.
+    NotIdentifiable,
+}
+
+/// One base parameter: `β = π_lead + Σ coef·π_other`.
+#[derive(Debug, Clone)]
+pub(crate) struct BaseParam {
+    pub lead: usize,
+    pub terms: Vec<(usize, f64)>,
+    pub value: f64,
+    pub std: f64,
+}
+
+/// Result of the base-parameter analysis of a compressed problem.
+pub(crate) struct BaseAnalysis {
+    pub rank: usize,
+    pub condition: f64,
+    /// Least-squares solution with the dependent parameters at 0 (all columns).
+    pub ols: Vec<f64>,
+    pub base: Vec<BaseParam>,
+    pub identifiability: Vec<Identifiability>,
+    /// Residual variance of the weighted least squares (≈ 1 with correct weights).
+    pub sigma2: f64,
+}
+
+/// Relative tolerance on `|R_ii|` of the column-pivoted QR (columns scaled to unit norm).
+const RANK_TOL: f64 = 1e-8;
+
+fn upper_solve(r: &Mat<f64>, n: usize, b: &mut [f64]) {
+    for i in (0..n).rev() {
+        let mut s = b[i];
+        for k in i + 1..n {
+            s -= r[(i, k)] * b[k];
+        }
+        b[i] = s / r[(i, i)];
+    }
+}
+
+pub(crate) fn base_analysis(rz: &Mat<f64>, rows: usize) -> Result<BaseAnalysis> {
+    let n = rz.ncols() - 1;
+    let norms: Vec<f64> = (0..n)
+        .map(|c| (0..n).map(|i| rz[(i, c)] * rz[(i, c)]).sum::<f64>().sqrt())
+        .collect();
+    let max_norm = norms.iter().copied().fold(0.0, f64::max);
+    if max_norm <= 0.0 || !max_norm.is_finite() {
+        return Err(Error::Numerical("the regressor is zero or not finite".into()));
+    }
+    let active: Vec<usize> = (0..n).filter(|&c| norms[c] > 1e-10 * max_norm).collect();
+    let na = active.len();
+    let scaled = Mat::from_fn(n, na, |i, k| rz[(i, active[k])] / norms[active[k]]);
+    let cp = scaled.col_piv_qr();
+    let r = cp.thin_R();
+    let perm: Vec<usize> = cp.P().arrays().0.to_vec();
+    let r00 = r[(0, 0)].abs();
+    let kmax = r.nrows().min(na);
+    let rank = (0..kmax).take_while(|&i| r[(i, i)].abs() > RANK_TOL * r00).count();
+    let q = cp.compute_thin_Q();
+    let y: Vec<f64> = (0..kmax)
+        .map(|i| (0..n).map(|k| q[(k, i)] * rz[(k, n)]).sum())
+        .collect();
+    let r11 = Mat::from_fn(rank, rank, |i, j| if j >= i { r[(i, j)] } else { 0.0 });
+    let mut beta: Vec<f64> = y[..rank].to_vec();
+    upper_solve(&r11, rank, &mut beta);
+    let mut ols = vec![0.0; n];
+    for k in 0..rank {
+        let c = active[perm[k]];
+        ols[c] = beta[k] / norms[c];
+    }
+    // K = R11⁻¹·R12, the dependent parameters' coefficients in each base parameter.
+    let nd = na - rank;
+    let mut kmat = vec![vec![0.0; nd]; rank];
+    for d in 0..nd {
+        let mut col: Vec<f64> = (0..rank).map(|i| r[(i, rank + d)]).collect();
+        upper_solve(&r11, rank, &mut col);
+        for i in 0..rank {
+            kmat[i][d] = col[i];
+        }
+    }
+    // Residual of the scaled problem: ‖z‖² + ρ² − ‖y_b‖².
+    let z2: f64 = (0..=n).map(|i| rz[(i, n)] * rz[(i, n)]).sum();
+    let y2: f64 = beta_norm2(&y[..rank]);
+    let resid2 = (z2 - y2).max(0.0);
+    let dof = rows.saturating_sub(rank).max(1);
+    let sigma2 = resid2 / dof as f64;
+    // Covariance of the scaled base parameters: σ²·R11⁻¹·R11⁻ᵀ.
+    let mut rinv = Mat::<f64>::zeros(rank, rank);
+    for c in 0..rank {
+        let mut e = vec![0.0; rank];
+        e[c] = 1.0;
+        upper_solve(&r11, rank, &mut e);
+        for i in 0..rank {
+            rinv[(i, c)] = e[i];
+        }
+    }
+    let base = (0..rank)
+        .map(|k| {
+            let lead = active[perm[k]];
+            let var: f64 = (0..rank).map(|c| rinv[(k, c)] * rinv[(k, c)]).sum::<f64>() * sigma2;
+            let terms = (0..nd)
+                .filter_map(|d| {
+                    let other = active[perm[rank + d]];
+                    let coef = kmat[k][d] * norms[other] / norms[lead];
+                    (coef.abs() > 1e-9).then_some((other, coef))
+                })
+                .collect();
+            BaseParam {
+                lead,
+                terms,
+                value: beta[k] / norms[lead],
+                std: var.sqrt() / norms[lead],
+            }
+        })
+        .collect();
+    let condition = if rank == 0 {
+        f64::INFINITY
+    } else {
+        let sv = r11
+            .singular_values()
+            .map_err(|e| Error::Numerical(format!("SVD failed: {e:?}")))?;
+        let (hi, lo) = sv
+            .iter()
+            .fold((0.0f64, f64::INFINITY), |(h, l), &s| (h.max(s), l.min(s)));
+        hi / lo
+    };
+    // Identifiable alone: the parameter's unit vector is orthogonal to the null space.
+    let mut identifiability = vec![Identifiability::NotIdentifiable; n];
+    for &c in &active {
+        identifiability[c] = Identifiability::Identifiable;
+    }
+    if nd > 0 {
+        let null = Mat::from_fn(na, nd, |i, d| {
+            // Row i of P·[−K; I] in the active (scaled) space.
+            let k = perm.iter().position(|&p| p == i).unwrap_or(0);
+            if k < rank {
+                -kmat[k][d]
+            } else if k - rank == d {
+                1.0
+            } else {
+                0.0
+            }
+        });
+        let qn = null.qr().compute_thin_Q();
+        for (i, &c) in active.iter().enumerate() {
+            let row2: f64 = (0..nd).map(|d| qn[(i, d)] * qn[(i, d)]).sum();
+            if row2.sqrt() > 1e-6 {
+                identifiability[c] = Identifiability::Combination;
+            }
+        }
+    }
+    Ok(BaseAnalysis {
+        rank,
+        condition,
+        ols,
+        base,
+        identifiability,
+        sigma2,
+    })
+}
+
+fn beta_norm2(v: &[f64]) -> f64 {
+    v.iter().map(|x| x * x).sum()
+}
+
+/// Kind of each parameter in the consistent fit.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub(crate) enum ParamKind {
+    /// Start of a link's 10 standard parameters (the fit works on its log-Cholesky factor).
+    Link,
+    /// Inside a link block.
+    LinkRest,
+    /// Constrained to ≥ 0 (viscous, Coulomb, armature).
+    NonNegative,
+    /// Free (offset).
+    Free,
+}
+
+/// Upper-triangular `U` with `J = U·Uᵀ`, diagonal `exp(θ_0..θ_3)`, off-diagonals `θ_4..θ_9`.
+fn u_of(theta: &[f64]) -> Matrix4<f64> {
+    let mut u = Matrix4::zeros();
+    for i in 0..4 {
+        u[(i, i)] = theta[i].exp();
+    }
+    let mut k = 4;
+    for i in 0..4 {
+        for j in i + 1..4 {
+            u[(i, j)] = theta[k];
+            k += 1;
+        }
+    }
+    u
+}
+
+/// Log-Cholesky coordinates of a positive-definite pseudo-inertia (nudged to PD if needed).
+fn theta_of(params: &[f64]) -> [f64; 10] {
+    let p: [f64; 10] = params.try_into().expect("10 link parameters");
+    let mut j = pseudo_inertia(&p);
+    let scale = j.trace().abs().max(1e-9);
+    let mut eps = 1e-9 * scale;
+    // Reverse-order Cholesky gives an upper-triangular factor: J = U·Uᵀ.
+    let rev = |m: &Matrix4<f64>| Matrix4::from_fn(|r, c| m[(3 - r, 3 - c)]);
+    let l = loop {
+        if let Some(ch) = rev(&j).cholesky() {
+            break ch.l();
+        }
+        j += Matrix4::identity() * eps;
+        eps *= 10.0;
+    };
+    let u = rev(&l);
+    let mut t = [0.0; 10];
+    for i in 0..4 {
+        t[i] = u[(i, i)].max(1e-300).ln();
+    }
+    let mut k = 4;
+    for i in 0..4 {
+        for jj in i + 1..4 {
+            t[k] = u[(i, jj)];
+            k += 1;
+        }
+    }
+    t
+}
+
+/// Standard parameters of `theta` and their 10×10 Jacobian `dπ/dθ` (column k = ∂π/∂θ_k).
+fn link_params_and_jacobian(theta: &[f64]) -> ([f64; 10], [[f64; 10]; 10]) {
+    let u = u_of(theta);
+    let p = params_from_pseudo_inertia(&(u * u.transpose()));
+    let mut jac = [[0.0; 10]; 10];
+    for k in 0..10 {
+        let mut du = Matrix4::zeros();
+        if k < 4 {
+            du[(k, k)] = u[(k, k)];
+        } else {
+            let mut idx = 4;
+            'outer: for i in 0..4 {
+                for j in i + 1..4 {
+                    if idx == k {
+                        du[(i, j)] = 1.0;
+                        break 'outer;
+                    }
+                    idx += 1;
+                }
+            }
+        }
+        let dj = du * u.transpose() + u * du.transpose();
+        let dp = params_from_pseudo_inertia(&dj);
+        for (i, v) in dp.iter().enumerate() {
+            jac[i][k] = *v;
+        }
+    }
+    (p, jac)
+}
+
+/// Minimises `πᵀ·H·π − 2·bᵀ·π` over physically consistent `π`: links through their
+/// log-Cholesky factor (always valid), non-negative terms projected onto ≥ 0.
+/// Returns the parameters and the number of iterations.
+pub(crate) fn consistent_fit(
+    h: &Mat<f64>,
+    b: &[f64],
+    start: &[f64],
+    kinds: &[ParamKind],
+    max_iterations: usize,
+) -> Result<(Vec<f64>, usize)> {
+    let n = b.len();
+    // Variables: θ for link blocks, the parameter itself otherwise.
+    let mut x = start.to_vec();
+    let link_starts: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::Link).collect();
+    for &s in &link_starts {
+        let t = theta_of(&start[s..s + LINK_PARAMS]);
+        x[s..s + LINK_PARAMS].copy_from_slice(&t);
+    }
+    for i in 0..n {
+        if kinds[i] == ParamKind::NonNegative {
+            x[i] = x[i].max(0.0);
+        }
+    }
+    let eval = |x: &[f64]| -> (Vec<f64>, Vec<[[f64; 10]; 10]>) {
+        let mut p = x.to_vec();
+        let mut jacs = Vec::with_capacity(link_starts.len());
+        for &s in &link_starts {
+            let (lp, jac) = link_params_and_jacobian(&x[s..s + LINK_PARAMS]);
+            p[s..s + LINK_PARAMS].copy_from_slice(&lp);
+            jacs.push(jac);
+        }
+        (p, jacs)
+    };
+    let hp = |p: &[f64]| -> Vec<f64> {
+        (0..n).map(|i| (0..n).map(|k| h[(i, k)] * p[k]).sum::<f64>()).collect()
+    };
+    let cost = |p: &[f64]| -> f64 {
+        let hp = hp(p);
+        p.iter().zip(&hp).map(|(a, c)| a * c).sum::<f64>() - 2.0 * p.iter().zip(b).map(|(a, c)| a * c).sum::<f64>()
+    };
+    let (mut p, mut jacs) = eval(&x);
+    let mut f = cost(&p);
+    let mut mu = 1e-3;
+    let mut iterations = 0;
+    let mut small_steps = 0;
+    // G = dπ/dx: identity except the link blocks.
+    while iterations < max_iterations {
+        iterations += 1;
+        let hpv = hp(&p);
+        let g: Vec<f64> = (0..n).map(|i| hpv[i] - b[i]).collect();
+        // HG = H·G, then A = Gᵀ·H·G and the gradient Gᵀ·g.
+        let mut hg = h.clone();
+        for (li, &s) in link_starts.iter().enumerate() {
+            let jac = &jacs[li];
+            for row in 0..n {
+                let mut out = [0.0; 10];
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = (0..10).map(|i| h[(row, s + i)] * jac[i][k]).sum();
+                }
+                for k in 0..10 {
+                    hg[(row, s + k)] = out[k];
+                }
+            }
+        }
+        let mut a = hg.clone();
+        let mut grad = g.clone();
+        for (li, &s) in link_starts.iter().enumerate() {
+            let jac = &jacs[li];
+            for col in 0..n {
+                let mut out = [0.0; 10];
+                for (k, o) in out.iter_mut().enumerate() {
+                    *o = (0..10).map(|i| jac[i][k] * hg[(s + i, col)]).sum();
+                }
+                for k in 0..10 {
+                    a[(s + k, col)] = out[k];
+                }
+            }
+            let mut out = [0.0; 10];
+            for (k, o) in out.iter_mut().enumerate() {
+                *o = (0..10).map(|i| jac[i][k] * g[s + i]).sum();
+            }
+            grad[s..s + 10].copy_from_slice(&out);
+        }
+        let mut accepted = false;
+        for _ in 0..30 {
+            let mut m = a.clone();
+            for i in 0..n {
+                m[(i, i)] += mu * a[(i, i)].abs().max(1e-12);
+            }
+            let Ok(llt) = m.llt(Side::Lower) else {
+                mu *= 10.0;
+                continue;
+            };
+            let rhs = Mat::from_fn(n, 1, |i, _| -grad[i]);
+            let step = llt.solve(&rhs);
+            let mut xn: Vec<f64> = (0..n).map(|i| x[i] + step[(i, 0)]).collect();
+            for i in 0..n {
+                if kinds[i] == ParamKind::NonNegative {
+                    xn[i] = xn[i].max(0.0);
+                }
+            }
+            let (pn, jn) = eval(&xn);
+            let fnew = cost(&pn);
+            if fnew.is_finite() && fnew <= f {
+                let decrease = f - fnew;
+                let scale = f.abs().max(1e-300);
+                x = xn;
+                p = pn;
+                jacs = jn;
+                f = fnew;
+                mu = (mu / 3.0).max(1e-12);
+                accepted = true;
+                if decrease <= 1e-13 * scale {
+                    small_steps += 1;
+                } else {
+                    small_steps = 0;
+                }
+                break;
+            }
+            mu *= 4.0;
+        }
+        if !accepted || small_steps >= 3 {
+            break;
+        }
+    }
+    if p.iter().any(|v| !v.is_finite()) {
+        return Err(Error::Numerical(
+            "the physically consistent fit did not converge to finite values".into(),
+        ));
+    }
+    Ok((p, iterations))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn log_cholesky_jacobian_matches_finite_differences() {
+        let theta = [0.1, -0.3, 0.2, 0.5, 0.05, -0.02, 0.3, 0.01, -0.04, 0.2];
+        let (p0, jac) = link_params_and_jacobian(&theta);
+        for k in 0..10 {
+            let mut t = theta;
+            t[k] += 1e-7;
+            let (p1, _) = link_params_and_jacobian(&t);
+            for i in 0..10 {
+                let fd = (p1[i] - p0[i]) / 1e-7;
+                assert!((fd - jac[i][k]).abs() < 1e-5 * (1.0 + fd.abs()), "d{i}/d{k}: {fd} vs {}", jac[i][k]);
+            }
+        }
+        // Round trip θ → π → θ.
+        let back = theta_of(&p0);
+        for (a, b) in theta.iter().zip(back) {
+            assert!((a - b).abs() < 1e-9);
+        }
+    }
+
+    #[test]
+    fn column_pivoted_qr_finds_the_rank_and_base_parameters() {
+        // τ = 2·x0 + 3·(x1 + x2): columns 1 and 2 equal, column 3 zero.
+        let rows = 50;
+        let mut acc = Accumulator::new(4, vec![vec![0, 1, 2, 3]]);
+        for i in 0..rows {
+            let a = (i as f64 * 0.37).sin();
+            let b = (i as f64 * 0.11).cos();
+            acc.push(0, &[a, b, b, 0.0], 2.0 * a + 3.0 * b);
+        }
+        acc.finish();
+        let rz = acc.compressed(&[1.0]);
+        let ba = base_analysis(&rz, rows).unwrap();
+        assert_eq!(ba.rank, 2);
+        assert_eq!(ba.identifiability[0], Identifiability::Identifiable);
+        assert_eq!(ba.identifiability[1], Identifiability::Combination);
+        assert_eq!(ba.identifiability[2], Identifiability::Combination);
+        assert_eq!(ba.identifiability[3], Identifiability::NotIdentifiable);
+        let combo = ba.base.iter().find(|b| b.lead == 1 || b.lead == 2).unwrap();
+        assert!((combo.value - 3.0).abs() < 1e-9, "{}", combo.value);
+        assert_eq!(combo.terms.len(), 1);
+        assert!((combo.terms[0].1 - 1.0).abs() < 1e-9);
+        assert!((ba.ols[0] - 2.0).abs() < 1e-9);
+    }
+}
