@@ -407,10 +407,32 @@ pub(crate) fn consistent_fit(
 ) -> Result<(Vec<f64>, usize)> {
     let n = b.len();
     // Variables: θ for link blocks, the parameter itself otherwise.
-    let mut x = start.to_vec();
     let link_starts: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::Link).collect();
+    // Start at the unconstrained minimiser H⁻¹·b projected onto the consistent set (each
+    // pseudo-inertia's eigenvalues clipped to a small positive floor, bounds clipped): when the
+    // least-squares answer is already physical this is the answer, otherwise it is close.
+    let mut x = match h.llt(Side::Lower) {
+        Ok(llt) => {
+            let rhs = Mat::from_fn(n, 1, |i, _| b[i]);
+            let sol = llt.solve(&rhs);
+            let mut p: Vec<f64> = (0..n).map(|i| sol[(i, 0)]).collect();
+            if p.iter().any(|v| !v.is_finite()) {
+                p = start.to_vec();
+            }
+            for &s in &link_starts {
+                let lp: [f64; 10] = p[s..s + LINK_PARAMS].try_into().expect("10");
+                let eig = pseudo_inertia(&lp).symmetric_eigen();
+                let top = eig.eigenvalues.max().max(1e-12);
+                let clipped = eig.eigenvalues.map(|l| l.max(1e-4 * top));
+                let j = eig.eigenvectors * Matrix4::from_diagonal(&clipped) * eig.eigenvectors.transpose();
+                p[s..s + LINK_PARAMS].copy_from_slice(&params_from_pseudo_inertia(&j));
+            }
+            p
+        }
+        Err(_) => start.to_vec(),
+    };
     for &s in &link_starts {
-        let t = theta_of(&start[s..s + LINK_PARAMS]);
+        let t = theta_of(&x[s..s + LINK_PARAMS]);
         x[s..s + LINK_PARAMS].copy_from_slice(&t);
     }
     for i in 0..n {
@@ -418,6 +440,7 @@ pub(crate) fn consistent_fit(
             x[i] = x[i].max(0.0);
         }
     }
+    let _ = start;
     let eval = |x: &[f64]| -> (Vec<f64>, Vec<[[f64; 10]; 10]>) {
         let mut p = x.to_vec();
         let mut jacs = Vec::with_capacity(link_starts.len());

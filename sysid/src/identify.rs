@@ -511,6 +511,9 @@ pub fn validate(
             }
             reg.compute(&q, &qd, &qdd, &mut rows)?;
             for j in 0..nj {
+                if qd[j].abs() < opts.velocity_deadzone {
+                    continue;
+                }
                 let t = seg.tau[j][k];
                 tau2[j] += t * t;
                 let row = &rows[j * ncols..(j + 1) * ncols];
@@ -525,4 +528,47 @@ pub fn validate(
         .iter()
         .map(|e| (0..nj).map(|j| (e[j] / tau2[j]).sqrt()).collect())
         .collect())
+}
+
+/// The URDF edits of an identification: the links and joints the log determined (at least one
+/// parameter identifiable alone or in combination).
+pub fn urdf_updates(
+    robot: &RobotModel,
+    ident: &Identification,
+) -> (Vec<crate::writeback::LinkUpdate>, Vec<crate::writeback::JointUpdate>) {
+    let layout = &ident.layout;
+    let seen = |c: usize, n: usize| {
+        ident.identifiability[c..c + n]
+            .iter()
+            .any(|i| *i != Identifiability::NotIdentifiable)
+    };
+    let links = robot
+        .links
+        .iter()
+        .enumerate()
+        .filter(|&(l, _)| seen(layout.link_col(l), LINK_PARAMS))
+        .filter_map(|(l, link)| {
+            MassProperties::from_params(&ident.link_params(l)).map(|mp| crate::writeback::LinkUpdate {
+                name: link.name.clone(),
+                mass_kg: mp.mass_kg,
+                com_link: mp.com_link,
+                inertia_com: mp.inertia_com,
+            })
+        })
+        .collect();
+    let joints = robot
+        .joints
+        .iter()
+        .enumerate()
+        .filter(|&(j, _)| seen(layout.joint_col(j), 2))
+        .map(|(j, joint)| {
+            let (viscous, coulomb, _) = ident.joint_friction(j);
+            crate::writeback::JointUpdate {
+                name: joint.name.clone(),
+                damping: viscous,
+                friction: coulomb,
+            }
+        })
+        .collect();
+    (links, joints)
 }

@@ -9,10 +9,11 @@ pub mod model;
 pub mod regressor;
 pub mod report;
 pub mod signal;
+pub mod synth;
 pub mod writeback;
 
 pub use error::{Error, Result};
-pub use identify::{Base, Identification, SysidOptions, identify, validate};
+pub use identify::{Base, Identification, SysidOptions, identify, urdf_updates, validate};
 pub use log::JointLog;
 pub use model::RobotModel;
 pub use report::Report;
