@@ -15,4 +15,6 @@ pub struct Cli {
 pub enum Command {
     /// Print a model's bodies, joints, actuators, sensors and total mass.
     Info(crate::commands::info::Args),
+    /// Identify link inertias and joint friction from a log and update the URDF.
+    Sysid(crate::commands::sysid::Args),
 }

@@ -1,6 +1,7 @@
 //! One module per subcommand, each with `run(args) -> anyhow::Result<()>`.
 
 pub mod info;
+pub mod sysid;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;
@@ -12,6 +13,7 @@ pub const VERSION_LINE: &str = concat!(env!("CARGO_PKG_VERSION"), " (MuJoCo 4.0.
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Info(args) => info::run(args),
+        Command::Sysid(args) => sysid::run(args),
     }
 }
 

@@ -43,7 +43,7 @@ pub struct SysidOptions {
     pub strict: bool,
     /// Base of the robot (default: [`Base::Fixed`]).
     pub base: Base,
-    /// Iteration limit of the physically consistent fit (default: 200).
+    /// Newton-step limit of the physically consistent fit (default: 200).
     pub max_iterations: usize,
 }
 
@@ -343,7 +343,10 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
             kinds[c + k] = ParamKind::NonNegative;
         }
     }
-    let (after, iterations) = consistent_fit(&h, &b, &before, &kinds, opts.max_iterations)?;
+    // Constant part of the cost: ‖z‖² + ρ² + Σ p·π_cad², so that f + offset is the χ²-like cost.
+    let offset = (0..=n).map(|i| rz[(i, n)] * rz[(i, n)]).sum::<f64>()
+        + (0..n).map(|i| prior[i] * before[i] * before[i]).sum::<f64>();
+    let (after, iterations) = consistent_fit(&h, &b, offset, &before, &kinds, &scales, opts.max_iterations)?;
     // Posterior covariance σ²·H⁻¹ (data and prior together).
     let h_inv = h
         .llt(Side::Lower)

@@ -5,6 +5,7 @@ pub mod error;
 pub mod estimate;
 pub mod identify;
 pub mod log;
+pub mod mjcf;
 pub mod model;
 pub mod regressor;
 pub mod report;

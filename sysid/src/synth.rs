@@ -94,6 +94,10 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
     let mut edit = base.edit()?;
     for dof in 0..base.nv() {
         edit.set_dof_armature(dof, opts.armature)?;
+        // MuJoCo's friction loss is a soft constraint; with its defaults the friction of a
+        // light joint ramps up over ~0.1 rad/s. A stiff constraint (time constant of two steps)
+        // makes it the Coulomb friction the URDF's `friction` stands for.
+        edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
     }
     let model = Arc::new(edit.finish()?);
     let robot = RobotModel::from_model(urdf, model.clone())?;

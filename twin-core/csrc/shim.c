@@ -174,3 +174,20 @@ int twin_jac_body_dot(const mjModel* m, mjData* d, int body, mjtNum* jacp, mjtNu
   TWIN_GUARD(mj_jacBody(m, d, jacp, jacr, body);
              mj_jacDot(m, d, jacp_dot, jacr_dot, d->xpos + 3 * body, body), reset_stack(d))
 }
+
+// Saves the model last loaded with mj_loadXML as MJCF, with the real-valued parameters of m
+// (same structure) copied back first.
+int twin_save_last_xml(const char* filename, const mjModel* m, char* err, int err_sz) {
+  int ok = 0;
+  jmp_buf env;
+  jmp_buf* prev = tls_jump;
+  if (setjmp(env)) {
+    tls_jump = prev;
+    copy_message(err, err_sz, tls_error);
+    return 1;
+  }
+  tls_jump = &env;
+  ok = mj_saveLastXML(filename, m, err, err_sz);
+  tls_jump = prev;
+  return ok ? 0 : 1;
+}

@@ -148,6 +148,12 @@ pub(crate) mod ffi {
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;
+        pub fn twin_save_last_xml(
+            filename: *const c_char,
+            m: *const mjModel,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
         pub fn twin_bench_c_step_loop(m: *const mjModel, d: *mut mjData, n: c_long);
     }
 }
@@ -224,6 +230,25 @@ pub fn thread_warnings() -> (u64, String) {
             .into_owned();
         (n, text)
     }
+}
+
+/// Saves the model most recently loaded from a file ([`Model::from_file`]) as MJCF at `path`
+/// (`mj_saveLastXML`), with the real-valued parameters (masses, inertias, damping, armature …)
+/// of `model`, which must be that model or an edit of it. MuJoCo keeps the "last loaded" model
+/// per process: call this right after loading, from one thread.
+///
+/// # Errors
+/// [`Error::MuJoCo`] with MuJoCo's message (e.g. no model loaded from a file, or a model of a
+/// different structure); [`Error::Io`] for a path with a NUL byte.
+pub fn save_last_xml(path: &std::path::Path, model: &Model) -> Result<()> {
+    let c_path = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Io {
+        path: path.to_path_buf(),
+        source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "path contains a NUL byte"),
+    })?;
+    guarded("mj_saveLastXML", |e, n| {
+        // SAFETY: NUL-terminated path; live model; the shim writes at most n bytes to e.
+        unsafe { ffi::twin_save_last_xml(c_path.as_ptr(), model.as_ptr(), e, n) }
+    })
 }
 
 /// Steps `data` `n` times with a plain C loop of `mj_step` and no error guard: the reference
