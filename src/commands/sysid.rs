@@ -107,7 +107,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .as_deref()
         .map(|p| read_log(p, args.topic.as_deref()))
         .transpose()?;
-    let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
+    let mut ident = sysid::identify(&robot, &log, &opts)
+        .context("identification failed; the URDF was not changed")?;
     if let (Some(path), Some(other)) = (&args.validate, &held_out) {
         let nrmse = sysid::validate(&robot, other, &opts, &[&ident.before, &ident.after])
             .with_context(|| format!("validating on {}", path.display()))?;
@@ -133,7 +134,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (links, joints) = sysid::urdf_updates(&robot, &ident);
     let outcome = sysid::writeback::update_urdf_file(&args.update, &links, &joints, args.dry_run)?;
     if args.dry_run {
-        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), outcome.diff);
+        println!(
+            "\n--dry-run: {} would change as follows:\n{}",
+            args.update.display(),
+            outcome.diff
+        );
     } else if let Some(backup) = &outcome.backup {
         eprintln!(
             "updated {} ({} links, {} joints); original kept as {}",
@@ -146,7 +151,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(out) = &args.mjcf {
         sysid::mjcf::write_mjcf(&args.update, &robot, &ident, &links, &joints, out)
             .with_context(|| format!("writing {}", out.display()))?;
-        eprintln!("MuJoCo model with the identified values (armature included) written to {}", out.display());
+        eprintln!(
+            "MuJoCo model with the identified values (armature included) written to {}",
+            out.display()
+        );
     }
     Ok(())
 }

@@ -135,7 +135,11 @@ pub(crate) fn quote_list(names: &[String]) -> String {
     if names.len() > MAX {
         s.push(format!("and {} more", names.len() - MAX));
     }
-    if s.is_empty() { "none".into() } else { s.join(", ") }
+    if s.is_empty() {
+        "none".into()
+    } else {
+        s.join(", ")
+    }
 }
 
 /// Conditions `log` for `robot`.
@@ -143,12 +147,18 @@ pub(crate) fn quote_list(names: &[String]) -> String {
 /// # Errors
 /// [`Error::BadLog`] for unmatched joints, missing effort, NaN/∞ in positions or efforts,
 /// timestamps going backwards, or too little data; [`Error::Option`] for a bad cut-off.
-pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) -> Result<Conditioned> {
+pub fn condition(
+    log: &JointLog,
+    robot: &RobotModel,
+    opts: &ConditionOptions,
+) -> Result<Conditioned> {
     log.check_shape()?;
     let (map, mut warnings) = match_joints(log, robot)?;
     let n = log.len();
     if n < 10 {
-        return Err(log.bad(format!("only {n} samples: a log of at least a few seconds is needed")));
+        return Err(log.bad(format!(
+            "only {n} samples: a log of at least a few seconds is needed"
+        )));
     }
     let no_effort: Vec<String> = robot
         .joints
@@ -187,7 +197,11 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
             (log.t_nanos[k - 1] - t0) as f64 * 1e-9
         )));
     }
-    let t: Vec<f64> = log.t_nanos.iter().map(|&x| (x - t0) as f64 * 1e-9).collect();
+    let t: Vec<f64> = log
+        .t_nanos
+        .iter()
+        .map(|&x| (x - t0) as f64 * 1e-9)
+        .collect();
     let dt = median_step(&t).ok_or_else(|| log.bad("all timestamps are equal".into()))?;
     let rate_hz = 1.0 / dt;
     let cutoff_hz = opts.cutoff_hz.unwrap_or((rate_hz / 25.0).min(20.0));
@@ -200,7 +214,10 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
         });
     }
     let order = opts.filter_order.clamp(1, 8);
-    let regressor_rate_hz = opts.regressor_rate_hz.unwrap_or(5.0 * cutoff_hz).min(rate_hz);
+    let regressor_rate_hz = opts
+        .regressor_rate_hz
+        .unwrap_or(5.0 * cutoff_hz)
+        .min(rate_hz);
     let decimate = ((rate_hz / regressor_rate_hz).floor() as usize).max(1);
     let filter = Butterworth::low_pass(order, cutoff_hz, rate_hz);
     // Edge transients of the forward-backward filter last a few cut-off periods.

@@ -36,7 +36,11 @@ impl JointBlock {
         let w = self.width();
         let rr = self.r.nrows();
         let stacked = Mat::from_fn(rr + self.pending_rows, w, |i, j| {
-            if i < rr { self.r[(i, j)] } else { self.pending[(i - rr) * w + j] }
+            if i < rr {
+                self.r[(i, j)]
+            } else {
+                self.pending[(i - rr) * w + j]
+            }
         });
         let qr = stacked.qr();
         let r = qr.thin_R();
@@ -188,7 +192,9 @@ pub(crate) fn base_analysis(rz: &Mat<f64>, rows: usize) -> Result<BaseAnalysis> 
         .collect();
     let max_norm = norms.iter().copied().fold(0.0, f64::max);
     if max_norm <= 0.0 || !max_norm.is_finite() {
-        return Err(Error::Numerical("the regressor is zero or not finite".into()));
+        return Err(Error::Numerical(
+            "the regressor is zero or not finite".into(),
+        ));
     }
     let active: Vec<usize> = (0..n).filter(|&c| norms[c] > 1e-10 * max_norm).collect();
     let na = active.len();
@@ -198,7 +204,9 @@ pub(crate) fn base_analysis(rz: &Mat<f64>, rows: usize) -> Result<BaseAnalysis> 
     let perm: Vec<usize> = cp.P().arrays().0.to_vec();
     let r00 = r[(0, 0)].abs();
     let kmax = r.nrows().min(na);
-    let rank = (0..kmax).take_while(|&i| r[(i, i)].abs() > RANK_TOL * r00).count();
+    let rank = (0..kmax)
+        .take_while(|&i| r[(i, i)].abs() > RANK_TOL * r00)
+        .count();
     let q = cp.compute_thin_Q();
     let y: Vec<f64> = (0..kmax)
         .map(|i| (0..n).map(|k| q[(k, i)] * rz[(k, n)]).sum())
@@ -339,7 +347,9 @@ fn interior_point(p: &[f64], kinds: &[ParamKind], scales: &[f64], floor: f64) ->
                 let eig = pseudo_inertia(&lp).symmetric_eigen();
                 let top = eig.eigenvalues.abs().max().max(1e-12);
                 let clipped = eig.eigenvalues.map(|l| l.max(floor * top));
-                let j = eig.eigenvectors * Matrix4::from_diagonal(&clipped) * eig.eigenvectors.transpose();
+                let j = eig.eigenvectors
+                    * Matrix4::from_diagonal(&clipped)
+                    * eig.eigenvectors.transpose();
                 p[i..i + LINK_PARAMS].copy_from_slice(&params_from_pseudo_inertia(&j));
             }
             ParamKind::NonNegative => p[i] = p[i].max(1e-3 * scales[i]),
@@ -368,7 +378,9 @@ pub(crate) fn consistent_fit(
     let n = b.len();
     let basis = pseudo_inertia_basis();
     let link_starts: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::Link).collect();
-    let bounded: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::NonNegative).collect();
+    let bounded: Vec<usize> = (0..n)
+        .filter(|&i| kinds[i] == ParamKind::NonNegative)
+        .collect();
     let barrier_terms = (4 * link_starts.len() + bounded.len()).max(1) as f64;
     let objective = |p: &[f64]| -> f64 {
         let mut f = 0.0;
@@ -409,7 +421,9 @@ pub(crate) fn consistent_fit(
         p = interior_point(start, kinds, scales, 1e-3);
     }
     if barrier(&p).is_none() {
-        return Err(Error::Numerical("no physically consistent starting point".into()));
+        return Err(Error::Numerical(
+            "no physically consistent starting point".into(),
+        ));
     }
     let chi2 = |p: &[f64]| (objective(p) + cost_offset).max(1.0);
     // Barrier weight: duality gap m/t starts near 10 % of the cost, ends below 1e-7 of it.
@@ -452,7 +466,11 @@ pub(crate) fn consistent_fit(
             }
             let step = match hess.llt(Side::Lower) {
                 Ok(llt) => llt.solve(&Mat::from_fn(n, 1, |i, _| -grad[i])),
-                Err(_) => return Err(Error::Numerical("barrier Hessian not positive definite".into())),
+                Err(_) => {
+                    return Err(Error::Numerical(
+                        "barrier Hessian not positive definite".into(),
+                    ));
+                }
             };
             let decrement: f64 = -(0..n).map(|i| grad[i] * step[(i, 0)]).sum::<f64>();
             if decrement / 2.0 < 1e-7 {
@@ -464,12 +482,12 @@ pub(crate) fn consistent_fit(
             let mut moved = false;
             for _ in 0..60 {
                 let trial: Vec<f64> = (0..n).map(|i| p[i] + alpha * step[(i, 0)]).collect();
-                if let Some(phi) = barrier(&trial) {
-                    if t * objective(&trial) + phi <= f0 - 0.25 * alpha * decrement {
-                        p = trial;
-                        moved = alpha > 1e-8;
-                        break;
-                    }
+                if let Some(phi) = barrier(&trial)
+                    && t * objective(&trial) + phi <= f0 - 0.25 * alpha * decrement
+                {
+                    p = trial;
+                    moved = alpha > 1e-8;
+                    break;
                 }
                 alpha *= 0.5;
             }

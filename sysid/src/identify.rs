@@ -84,7 +84,9 @@ impl Identification {
     /// Identified standard parameters of link `l` (index into [`RobotModel::links`]).
     pub fn link_params(&self, l: usize) -> [f64; LINK_PARAMS] {
         let c = self.layout.link_col(l);
-        self.after[c..c + LINK_PARAMS].try_into().expect("10 parameters")
+        self.after[c..c + LINK_PARAMS]
+            .try_into()
+            .expect("10 parameters")
     }
 
     /// Identified `(viscous, coulomb, armature)` of joint `j`.
@@ -185,7 +187,11 @@ fn prior_scales(robot: &RobotModel, layout: &Layout) -> Vec<f64> {
 fn nrmse_from(acc: &Accumulator, j: usize, params: &[f64]) -> f64 {
     let zero = vec![0.0; params.len()];
     let tau2 = acc.residual2(j, &zero);
-    if tau2 <= 0.0 { f64::NAN } else { (acc.residual2(j, params) / tau2).sqrt() }
+    if tau2 <= 0.0 {
+        f64::NAN
+    } else {
+        (acc.residual2(j, params) / tau2).sqrt()
+    }
 }
 
 /// Identifies `robot`'s link inertias and joint friction from `log`.
@@ -345,15 +351,27 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     }
     // Constant part of the cost: ‖z‖² + ρ² + Σ p·π_cad², so that f + offset is the χ²-like cost.
     let offset = (0..=n).map(|i| rz[(i, n)] * rz[(i, n)]).sum::<f64>()
-        + (0..n).map(|i| prior[i] * before[i] * before[i]).sum::<f64>();
-    let (after, iterations) = consistent_fit(&h, &b, offset, &before, &kinds, &scales, opts.max_iterations)?;
+        + (0..n)
+            .map(|i| prior[i] * before[i] * before[i])
+            .sum::<f64>();
+    let (after, iterations) = consistent_fit(
+        &h,
+        &b,
+        offset,
+        &before,
+        &kinds,
+        &scales,
+        opts.max_iterations,
+    )?;
     // Posterior covariance σ²·H⁻¹ (data and prior together).
     let h_inv = h
         .llt(Side::Lower)
         .map_err(|e| Error::Numerical(format!("normal matrix not positive definite: {e:?}")))?
         .inverse();
     let s2 = ba.sigma2.max(1e-300);
-    let std: Vec<f64> = (0..n).map(|i| (s2 * h_inv[(i, i)]).max(0.0).sqrt()).collect();
+    let std: Vec<f64> = (0..n)
+        .map(|i| (s2 * h_inv[(i, i)]).max(0.0).sqrt())
+        .collect();
 
     // Report.
     let param_report = |name: &str, i: usize| ParamReport {
@@ -371,17 +389,27 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
             let c = layout.link_col(l);
             let p: [f64; LINK_PARAMS] = after[c..c + LINK_PARAMS].try_into().expect("10");
             let mp = MassProperties::from_params(&p);
-            let (mass_kg, com_link, inertia_com) = mp.map_or((p[0], [f64::NAN; 3], [f64::NAN; 6]), |mp| {
-                let i = mp.inertia_com;
-                (
-                    mp.mass_kg,
-                    [mp.com_link.x, mp.com_link.y, mp.com_link.z],
-                    [i[(0, 0)], i[(0, 1)], i[(0, 2)], i[(1, 1)], i[(1, 2)], i[(2, 2)]],
-                )
-            });
+            let (mass_kg, com_link, inertia_com) =
+                mp.map_or((p[0], [f64::NAN; 3], [f64::NAN; 6]), |mp| {
+                    let i = mp.inertia_com;
+                    (
+                        mp.mass_kg,
+                        [mp.com_link.x, mp.com_link.y, mp.com_link.z],
+                        [
+                            i[(0, 0)],
+                            i[(0, 1)],
+                            i[(0, 2)],
+                            i[(1, 1)],
+                            i[(1, 2)],
+                            i[(2, 2)],
+                        ],
+                    )
+                });
             LinkReport {
                 name: link.name.clone(),
-                params: (0..LINK_PARAMS).map(|k| param_report(LINK_PARAM_NAMES[k], c + k)).collect(),
+                params: (0..LINK_PARAMS)
+                    .map(|k| param_report(LINK_PARAM_NAMES[k], c + k))
+                    .collect(),
                 mass_kg,
                 com_link,
                 inertia_com,
@@ -411,11 +439,19 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
         .collect();
     let label = |i: usize| -> String {
         if i < layout.links * LINK_PARAMS {
-            format!("{}[{}]", LINK_PARAM_NAMES[i % LINK_PARAMS], robot.links[i / LINK_PARAMS].name)
+            format!(
+                "{}[{}]",
+                LINK_PARAM_NAMES[i % LINK_PARAMS],
+                robot.links[i / LINK_PARAMS].name
+            )
         } else {
             let k = i - layout.links * LINK_PARAMS;
             let per = fm.columns_per_joint();
-            format!("{}[{}]", fm.column_names()[k % per], robot.joints[k / per].name)
+            format!(
+                "{}[{}]",
+                fm.column_names()[k % per],
+                robot.joints[k / per].name
+            )
         }
     };
     let base_parameters = ba
@@ -437,7 +473,11 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
                 expression,
                 value: bp.value,
                 std: bp.std,
-                rel_std_percent: if bp.value != 0.0 { 100.0 * bp.std / bp.value.abs() } else { f64::INFINITY },
+                rel_std_percent: if bp.value != 0.0 {
+                    100.0 * bp.std / bp.value.abs()
+                } else {
+                    f64::INFINITY
+                },
             }
         })
         .collect();
@@ -538,7 +578,10 @@ pub fn validate(
 pub fn urdf_updates(
     robot: &RobotModel,
     ident: &Identification,
-) -> (Vec<crate::writeback::LinkUpdate>, Vec<crate::writeback::JointUpdate>) {
+) -> (
+    Vec<crate::writeback::LinkUpdate>,
+    Vec<crate::writeback::JointUpdate>,
+) {
     let layout = &ident.layout;
     let seen = |c: usize, n: usize| {
         ident.identifiability[c..c + n]
@@ -551,11 +594,13 @@ pub fn urdf_updates(
         .enumerate()
         .filter(|&(l, _)| seen(layout.link_col(l), LINK_PARAMS))
         .filter_map(|(l, link)| {
-            MassProperties::from_params(&ident.link_params(l)).map(|mp| crate::writeback::LinkUpdate {
-                name: link.name.clone(),
-                mass_kg: mp.mass_kg,
-                com_link: mp.com_link,
-                inertia_com: mp.inertia_com,
+            MassProperties::from_params(&ident.link_params(l)).map(|mp| {
+                crate::writeback::LinkUpdate {
+                    name: link.name.clone(),
+                    mass_kg: mp.mass_kg,
+                    com_link: mp.com_link,
+                    inertia_com: mp.inertia_com,
+                }
             })
         })
         .collect();

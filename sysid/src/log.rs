@@ -137,9 +137,12 @@ impl JointLog {
             .enumerate()
             .map(|(i, l)| (i + 1, l.trim()))
             .filter(|(_, l)| !l.is_empty() && !l.starts_with('#'));
-        let (header_line, header) = lines
-            .next()
-            .ok_or_else(|| csv_err(1, "empty file: expected a header line starting with time_sec".into()))?;
+        let (header_line, header) = lines.next().ok_or_else(|| {
+            csv_err(
+                1,
+                "empty file: expected a header line starting with time_sec".into(),
+            )
+        })?;
         let columns: Vec<&str> = header.split(',').map(str::trim).collect();
         if columns.first() != Some(&"time_sec") {
             return Err(csv_err(
@@ -167,7 +170,9 @@ impl JointLog {
                 other => {
                     return Err(csv_err(
                         header_line,
-                        format!("column `{col}`: unknown field `{other}` (expected position, velocity or effort)"),
+                        format!(
+                            "column `{col}`: unknown field `{other}` (expected position, velocity or effort)"
+                        ),
                     ));
                 }
             };
@@ -179,7 +184,10 @@ impl JointLog {
                 }
             };
             if slots.contains(&(j, kind)) {
-                return Err(csv_err(header_line, format!("column `{col}` appears twice")));
+                return Err(csv_err(
+                    header_line,
+                    format!("column `{col}` appears twice"),
+                ));
             }
             slots.push((j, kind));
         }
@@ -198,8 +206,9 @@ impl JointLog {
                 if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
                     return Ok(f64::NAN);
                 }
-                cell.parse::<f64>()
-                    .map_err(|_| csv_err(line_no, format!("column `{col}`: `{cell}` is not a number")))
+                cell.parse::<f64>().map_err(|_| {
+                    csv_err(line_no, format!("column `{col}`: `{cell}` is not a number"))
+                })
             };
             let t = parse(cells[0], "time_sec")?;
             if !t.is_finite() {

@@ -29,7 +29,10 @@ pub fn write_mjcf(
     })?;
     let updated = rewrite_urdf(urdf, &text, links, joints)?;
     // Next to the URDF so that relative mesh paths resolve as for the original.
-    let dir = urdf.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = urdf
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let tmp = tempfile::Builder::new()
         .suffix(".urdf")
         .tempfile_in(dir)
@@ -49,7 +52,10 @@ pub fn write_mjcf(
     }
     let edited = edit.finish()?;
     // MuJoCo writes the file itself: into a temporary file beside OUT, renamed when complete.
-    let out_dir = out.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let out_dir = out
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let io = |source| Error::Io {
         path: out.to_path_buf(),
         source,

@@ -13,8 +13,9 @@ pub const LINK_PARAMS: usize = 10;
 
 /// Names of the standard parameters of a link, in Pinocchio's order: mass, first moment
 /// `h = m·c`, inertia about the link frame origin.
-pub const LINK_PARAM_NAMES: [&str; LINK_PARAMS] =
-    ["m", "hx", "hy", "hz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"];
+pub const LINK_PARAM_NAMES: [&str; LINK_PARAMS] = [
+    "m", "hx", "hy", "hz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz",
+];
 
 /// Standard parameters of one link: `[m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]` (kg, kg·m,
 /// kg·m²), the inertia `Ī` about the link frame's origin, in the link frame.
@@ -39,7 +40,18 @@ impl MassProperties {
         let c = self.com_link;
         let i = self.inertia_com + m * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
         let h = m * c;
-        [m, h.x, h.y, h.z, i[(0, 0)], i[(0, 1)], i[(1, 1)], i[(0, 2)], i[(1, 2)], i[(2, 2)]]
+        [
+            m,
+            h.x,
+            h.y,
+            h.z,
+            i[(0, 0)],
+            i[(0, 1)],
+            i[(1, 1)],
+            i[(0, 2)],
+            i[(1, 2)],
+            i[(2, 2)],
+        ]
     }
 
     /// From standard parameters; `None` for a non-positive mass.
@@ -173,7 +185,10 @@ pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
     }
     // Insert right after the <robot ...> start tag.
     let start = root.range().start;
-    let close = text[start..].find('>').map(|i| start + i + 1).unwrap_or(start);
+    let close = text[start..]
+        .find('>')
+        .map(|i| start + i + 1)
+        .unwrap_or(start);
     let dir = path
         .parent()
         .filter(|p| !p.as_os_str().is_empty())
@@ -256,7 +271,8 @@ impl RobotModel {
                 .to_rotation_matrix()
                 .into_inner();
             let d = model.body_inertia()[b];
-            let inertia_com = rot * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * rot.transpose();
+            let inertia_com =
+                rot * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * rot.transpose();
             let ipos = model.body_ipos()[b];
             let cad = MassProperties {
                 mass_kg: model.body_mass()[b],
@@ -294,13 +310,16 @@ mod tests {
         let mp = MassProperties {
             mass_kg: 2.5,
             com_link: Vector3::new(0.1, -0.02, 0.3),
-            inertia_com: Matrix3::new(0.02, 0.001, -0.002, 0.001, 0.03, 0.0005, -0.002, 0.0005, 0.015),
+            inertia_com: Matrix3::new(
+                0.02, 0.001, -0.002, 0.001, 0.03, 0.0005, -0.002, 0.0005, 0.015,
+            ),
         };
         let p = mp.to_params();
         // Pinocchio order: Ixy is entry 5, Iyy entry 6, Ixz entry 7.
         let ibar = inertia_matrix(&p);
         let c = mp.com_link;
-        let expected = mp.inertia_com + 2.5 * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+        let expected =
+            mp.inertia_com + 2.5 * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
         assert!((ibar - expected).norm() < 1e-15);
         assert_eq!(p[5], ibar[(0, 1)]);
         assert_eq!(p[7], ibar[(0, 2)]);

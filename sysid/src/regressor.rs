@@ -21,22 +21,13 @@ use crate::model::{LINK_PARAMS, RobotModel};
 use twin_core::mj::Data;
 
 /// Friction columns of each joint.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
 pub struct FrictionModel {
     /// Smooth the Coulomb term as `tanh(q̇/ε)` with this `ε` (rad/s or m/s); `None` uses
     /// `sign(q̇)` (default: `None`; samples inside the velocity dead zone are dropped instead).
     pub coulomb_smoothing: Option<f64>,
     /// Add a constant torque offset per joint (sensor bias) (default: `false`).
     pub offset: bool,
-}
-
-impl Default for FrictionModel {
-    fn default() -> Self {
-        FrictionModel {
-            coulomb_smoothing: None,
-            offset: false,
-        }
-    }
 }
 
 impl FrictionModel {
@@ -111,7 +102,11 @@ pub struct Regressor<'a> {
 }
 
 fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+    [
+        a[1] * b[2] - a[2] * b[1],
+        a[2] * b[0] - a[0] * b[2],
+        a[0] * b[1] - a[1] * b[0],
+    ]
 }
 
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
@@ -261,7 +256,13 @@ impl<'a> Regressor<'a> {
         rows.resize(nj * ncols, 0.0);
         self.compute(q, qd, qdd, rows)?;
         Ok((0..nj)
-            .map(|j| rows[j * ncols..(j + 1) * ncols].iter().zip(params).map(|(a, b)| a * b).sum())
+            .map(|j| {
+                rows[j * ncols..(j + 1) * ncols]
+                    .iter()
+                    .zip(params)
+                    .map(|(a, b)| a * b)
+                    .sum()
+            })
             .collect())
     }
 }

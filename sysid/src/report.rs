@@ -185,12 +185,26 @@ impl Report {
             }
         }
         let nrmse = |out: &mut String, title: &str, rows: &[NrmseReport]| {
-            let _ = writeln!(out, "\n{title}\n{:<40} {:>10} {:>10}", "joint", "before", "after");
+            let _ = writeln!(
+                out,
+                "\n{title}\n{:<40} {:>10} {:>10}",
+                "joint", "before", "after"
+            );
             for r in rows {
-                let _ = writeln!(out, "{:<40} {:>9.2}% {:>9.2}%", r.joint, 100.0 * r.before, 100.0 * r.after);
+                let _ = writeln!(
+                    out,
+                    "{:<40} {:>9.2}% {:>9.2}%",
+                    r.joint,
+                    100.0 * r.before,
+                    100.0 * r.after
+                );
             }
         };
-        nrmse(&mut out, "torque NRMSE on the identification log", &self.training_nrmse);
+        nrmse(
+            &mut out,
+            "torque NRMSE on the identification log",
+            &self.training_nrmse,
+        );
         if let Some(v) = &self.validation_nrmse {
             let title = format!(
                 "torque NRMSE on the held-out log {}",

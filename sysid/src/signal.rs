@@ -124,7 +124,11 @@ pub fn resample(t: &[f64], x: &[f64], grid: &[f64]) -> Vec<f64> {
             continue;
         }
         let (t0, t1) = (t[i], t[i + 1]);
-        let w = if t1 > t0 { ((g - t0) / (t1 - t0)).clamp(0.0, 1.0) } else { 0.0 };
+        let w = if t1 > t0 {
+            ((g - t0) / (t1 - t0)).clamp(0.0, 1.0)
+        } else {
+            0.0
+        };
         out.push(x[i] + w * (x[i + 1] - x[i]));
     }
     out
@@ -132,7 +136,11 @@ pub fn resample(t: &[f64], x: &[f64], grid: &[f64]) -> Vec<f64> {
 
 /// Median of positive differences of `t`.
 pub fn median_step(t: &[f64]) -> Option<f64> {
-    let mut d: Vec<f64> = t.windows(2).map(|w| w[1] - w[0]).filter(|&d| d > 0.0).collect();
+    let mut d: Vec<f64> = t
+        .windows(2)
+        .map(|w| w[1] - w[0])
+        .filter(|&d| d > 0.0)
+        .collect();
     if d.is_empty() {
         return None;
     }
@@ -156,13 +164,20 @@ mod tests {
                     .collect();
                 let mut y = x.clone();
                 f.forward(&mut y);
-                let rms = |v: &[f64]| (v.iter().map(|a| a * a).sum::<f64>() / v.len() as f64).sqrt();
+                let rms =
+                    |v: &[f64]| (v.iter().map(|a| a * a).sum::<f64>() / v.len() as f64).sqrt();
                 rms(&y[n / 2..]) / rms(&x[n / 2..])
             };
             assert!((gain(0.5) - 1.0).abs() < 1e-3, "order {order}");
-            assert!((gain(fc) - std::f64::consts::FRAC_1_SQRT_2).abs() < 5e-3, "order {order}");
+            assert!(
+                (gain(fc) - std::f64::consts::FRAC_1_SQRT_2).abs() < 5e-3,
+                "order {order}"
+            );
             // Butterworth: |H(10 fc)| ≈ 10^-order.
-            assert!(gain(10.0 * fc) < 1.5 * 10f64.powi(-(order as i32)), "order {order}");
+            assert!(
+                gain(10.0 * fc) < 1.5 * 10f64.powi(-(order as i32)),
+                "order {order}"
+            );
         }
     }
 
@@ -175,7 +190,12 @@ mod tests {
             .collect();
         let y = f.filtfilt(&x, 150);
         for i in 100..1900 {
-            assert!((y[i] - x[i]).abs() < 1e-3, "sample {i}: {} vs {}", y[i], x[i]);
+            assert!(
+                (y[i] - x[i]).abs() < 1e-3,
+                "sample {i}: {} vs {}",
+                y[i],
+                x[i]
+            );
         }
     }
 

@@ -213,7 +213,11 @@ pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
     let mut rng = Rng::new(seed);
     let factor = |rng: &mut Rng| {
         let size = 0.2 + 0.2 * rng.uniform();
-        if rng.uniform() < 0.5 { 1.0 - size } else { 1.0 + size }
+        if rng.uniform() < 0.5 {
+            1.0 - size
+        } else {
+            1.0 + size
+        }
     };
     let links: Vec<crate::writeback::LinkUpdate> = robot
         .links

@@ -51,9 +51,9 @@ pub fn format_number(x: f64) -> String {
 
 /// Whether `old` (file text) already holds `new` to the precision written.
 fn same_number(old: &str, new: f64) -> bool {
-    old.trim()
-        .parse::<f64>()
-        .is_ok_and(|o| (o - new).abs() <= 5e-7 * o.abs().max(new.abs()) || (o == 0.0 && new.abs() < 1e-300))
+    old.trim().parse::<f64>().is_ok_and(|o| {
+        (o - new).abs() <= 5e-7 * o.abs().max(new.abs()) || (o == 0.0 && new.abs() < 1e-300)
+    })
 }
 
 struct Editor<'a> {
@@ -82,7 +82,7 @@ impl<'a> Editor<'a> {
             None => {
                 let at = node
                     .attributes()
-                    .last()
+                    .next_back()
                     .map(|a| a.range().end)
                     .unwrap_or_else(|| node.range().start + 1 + node.tag_name().name().len());
                 self.edits.push((at..at, format!(" {name}=\"{text}\"")));
@@ -92,10 +92,10 @@ impl<'a> Editor<'a> {
 
     /// Whitespace before the first child element of `node` (its children's indentation).
     fn child_indent(&self, node: Node<'_, '_>) -> String {
-        if let Some(first) = node.children().find(|c| c.is_element()) {
-            if let Some(prev) = first.prev_sibling().filter(|p| p.is_text()) {
-                return self.text[prev.range()].to_string();
-            }
+        if let Some(first) = node.children().find(|c| c.is_element())
+            && let Some(prev) = first.prev_sibling().filter(|p| p.is_text())
+        {
+            return self.text[prev.range()].to_string();
         }
         // No child element: one level deeper than the node itself.
         let start = node.range().start;
@@ -118,7 +118,9 @@ impl<'a> Editor<'a> {
                 format!(">{indent}{xml}\n{own_indent}</{}>", node.tag_name().name()),
             ));
         } else {
-            let close = tag.find('>').ok_or_else(|| self.err(format!("<{}> has no end", node.tag_name().name())))?;
+            let close = tag
+                .find('>')
+                .ok_or_else(|| self.err(format!("<{}> has no end", node.tag_name().name())))?;
             let at = r.start + close + 1;
             self.edits.push((at..at, format!("{indent}{xml}")));
         }
@@ -126,7 +128,8 @@ impl<'a> Editor<'a> {
     }
 
     fn apply(mut self) -> String {
-        self.edits.sort_by_key(|(r, _)| std::cmp::Reverse((r.start, r.end)));
+        self.edits
+            .sort_by_key(|(r, _)| std::cmp::Reverse((r.start, r.end)));
         let mut out = self.text.to_string();
         for (r, s) in self.edits {
             out.replace_range(r, &s);
@@ -154,7 +157,12 @@ fn parse_triplet(s: Option<&str>) -> [f64; 3] {
 ///
 /// # Errors
 /// [`Error::Urdf`] for malformed XML or a link/joint the file does not have.
-pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[JointUpdate]) -> Result<String> {
+pub fn rewrite_urdf(
+    path: &Path,
+    text: &str,
+    links: &[LinkUpdate],
+    joints: &[JointUpdate],
+) -> Result<String> {
     let doc = Document::parse(text).map_err(|e| Error::Urdf {
         path: path.to_path_buf(),
         message: format!("not well-formed XML: {e}"),
@@ -196,7 +204,8 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
         let rpy = parse_triplet(origin.and_then(|o| o.attribute("rpy")));
         // URDF rpy: fixed-axis roll about x, pitch about y, yaw about z.
         let link_from_inertial = Rotation3::from_euler_angles(rpy[0], rpy[1], rpy[2]);
-        let mut inertia = link_from_inertial.inverse().matrix() * up.inertia_com * link_from_inertial.matrix();
+        let mut inertia =
+            link_from_inertial.inverse().matrix() * up.inertia_com * link_from_inertial.matrix();
         // Rounding noise of the rotation is not a product of inertia.
         let tiny = 1e-9 * inertia.abs().max();
         inertia.apply(|v| {
@@ -209,9 +218,17 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
                 let old = parse_triplet(o.attribute("xyz"));
                 let new = [c.x, c.y, c.z];
                 let unchanged = o.attribute("xyz").is_some()
-                    && old.iter().zip(new).all(|(a, b)| same_number(&a.to_string(), b));
+                    && old
+                        .iter()
+                        .zip(new)
+                        .all(|(a, b)| same_number(&a.to_string(), b));
                 if !unchanged {
-                    let v = format!("{} {} {}", format_number(c.x), format_number(c.y), format_number(c.z));
+                    let v = format!(
+                        "{} {} {}",
+                        format_number(c.x),
+                        format_number(c.y),
+                        format_number(c.z)
+                    );
                     match o.attribute_node("xyz") {
                         Some(a) => ed.edits.push((a.range_value(), v)),
                         None => {
@@ -222,7 +239,12 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
                 }
             }
             None => {
-                let v = format!("<origin xyz=\"{} {} {}\"/>", format_number(c.x), format_number(c.y), format_number(c.z));
+                let v = format!(
+                    "<origin xyz=\"{} {} {}\"/>",
+                    format_number(c.x),
+                    format_number(c.y),
+                    format_number(c.z)
+                );
                 ed.insert_child(inertial, &v)?;
             }
         }
@@ -277,7 +299,7 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
                 if tag.ends_with("/>") {
                     ed.insert_child(joint, &xml)?;
                 } else {
-                    let last = joint.children().filter(|c| c.is_element()).last();
+                    let last = joint.children().rfind(|c| c.is_element());
                     let at = last.map_or_else(
                         || r.start + tag.find('>').map_or(0, |i| i + 1),
                         |l| l.range().end,
@@ -314,7 +336,12 @@ pub struct UpdateOutcome {
 ///
 /// # Errors
 /// [`Error::Io`], [`Error::Urdf`].
-pub fn update_urdf_file(path: &Path, links: &[LinkUpdate], joints: &[JointUpdate], dry_run: bool) -> Result<UpdateOutcome> {
+pub fn update_urdf_file(
+    path: &Path,
+    links: &[LinkUpdate],
+    joints: &[JointUpdate],
+    dry_run: bool,
+) -> Result<UpdateOutcome> {
     let text = std::fs::read_to_string(path).map_err(|source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -340,7 +367,10 @@ pub fn update_urdf_file(path: &Path, links: &[LinkUpdate], joints: &[JointUpdate
 /// # Errors
 /// [`Error::Io`].
 pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .unwrap_or(Path::new("."));
     let io = |source| Error::Io {
         path: path.to_path_buf(),
         source,
@@ -391,12 +421,24 @@ mod tests {
         };
         let out = rewrite_urdf(path, URDF, &[up], &[j]).unwrap();
         // The inertia frame is rotated 90° about z: link-frame ixx 0.02 is the frame's iyy.
-        assert!(out.contains(r#"<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"/>"#), "{out}");
-        assert!(out.contains(r#"<origin xyz="0 0.01 0.1" rpy="0 0 1.5707963267948966"/>"#), "{out}");
+        assert!(
+            out.contains(r#"<inertia ixx="0.01" ixy="0" ixz="0" iyy="0.02" iyz="0" izz="0.03"/>"#),
+            "{out}"
+        );
+        assert!(
+            out.contains(r#"<origin xyz="0 0.01 0.1" rpy="0 0 1.5707963267948966"/>"#),
+            "{out}"
+        );
         assert!(out.contains(r#"<mass   value="1.25"/>"#), "{out}");
         assert!(out.contains("    <axis xyz=\"0 0 1\"/>\n    <dynamics damping=\"0.5\" friction=\"0.125\"/>\n  </joint>"), "{out}");
         let diff = unified_diff(path, URDF, &out);
-        assert_eq!(diff.lines().filter(|l| l.starts_with('+') && !l.starts_with("+++")).count(), 3, "{diff}");
+        assert_eq!(
+            diff.lines()
+                .filter(|l| l.starts_with('+') && !l.starts_with("+++"))
+                .count(),
+            3,
+            "{diff}"
+        );
         // Untouched values keep their text exactly, even when written differently.
         let same = rewrite_urdf(
             path,

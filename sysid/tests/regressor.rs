@@ -13,23 +13,31 @@ fn models_dir() -> &'static Path {
 
 /// Deterministic pseudo-random numbers in [-1, 1).
 fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+    *state = state
+        .wrapping_mul(6364136223846793005)
+        .wrapping_add(1442695040888963407);
     ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
 }
 
 fn check_against_inverse_dynamics(urdf: &Path) {
     // Damping and armature are part of MuJoCo's inverse dynamics; constraint forces (friction
     // loss, joint limits at random poses, self-contacts) are not part of the rigid-body model.
-    let base = load_urdf_in_mujoco(urdf, r#"<option><flag constraint="disable"/></option>"#).unwrap();
+    let base =
+        load_urdf_in_mujoco(urdf, r#"<option><flag constraint="disable"/></option>"#).unwrap();
     let mut edit = base.edit().unwrap();
     for dof in 0..base.nv() {
         edit.set_dof_frictionloss(dof, 0.0).unwrap();
-        edit.set_dof_armature(dof, 0.01 + 0.003 * dof as f64).unwrap();
+        edit.set_dof_armature(dof, 0.01 + 0.003 * dof as f64)
+            .unwrap();
         edit.set_dof_damping(dof, 0.5 + 0.1 * dof as f64).unwrap();
     }
     let model = Arc::new(edit.finish().unwrap());
     let robot = RobotModel::from_model(urdf, model.clone()).unwrap();
-    assert_eq!(robot.joints.len(), model.nv(), "fixed base: every DOF is a joint");
+    assert_eq!(
+        robot.joints.len(),
+        model.nv(),
+        "fixed base: every DOF is a joint"
+    );
     let fm = FrictionModel::default();
     let mut reg = Regressor::new(&robot, fm).unwrap();
     let layout = reg.layout();

@@ -16,7 +16,10 @@ fn mask_rewritable(text: &str) -> String {
     let doc = roxmltree::Document::parse(text).unwrap();
     let mut ranges = Vec::new();
     for node in doc.descendants().filter(|n| n.is_element()) {
-        let parent = node.parent_element().map(|p| p.tag_name().name()).unwrap_or("");
+        let parent = node
+            .parent_element()
+            .map(|p| p.tag_name().name())
+            .unwrap_or("");
         let names: &[&str] = match (parent, node.tag_name().name()) {
             ("inertial", "origin") => &["xyz"],
             ("inertial", "mass") => &["value"],
@@ -50,8 +53,24 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
     perturbed_urdf(&truth, &start, 3).unwrap();
     let original = std::fs::read_to_string(&start).unwrap();
 
-    let train = simulate(&truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
-    let held_out = simulate(&truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
+    let train = simulate(
+        &truth,
+        &SynthOptions {
+            duration_secs: train_secs,
+            seed: 1,
+            ..Default::default()
+        },
+    )
+    .unwrap();
+    let held_out = simulate(
+        &truth,
+        &SynthOptions {
+            duration_secs: 8.0,
+            seed: 2,
+            ..Default::default()
+        },
+    )
+    .unwrap();
 
     let robot = RobotModel::from_urdf(&start).unwrap();
     let true_robot = RobotModel::from_urdf(&truth).unwrap();
@@ -64,23 +83,45 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
     let mut worst_nrmse: f64 = 0.0;
     for (j, joint) in robot.joints.iter().enumerate() {
         let (before, after) = (nrmse[0][j], nrmse[1][j]);
-        assert!(after <= 0.02, "{}: held-out NRMSE {:.2} % > 2 % (before {:.2} %)", joint.name, 100.0 * after, 100.0 * before);
-        assert!(after < 0.5 * before, "{}: {after} not better than {before}", joint.name);
+        assert!(
+            after <= 0.02,
+            "{}: held-out NRMSE {:.2} % > 2 % (before {:.2} %)",
+            joint.name,
+            100.0 * after,
+            100.0 * before
+        );
+        assert!(
+            after < 0.5 * before,
+            "{}: {after} not better than {before}",
+            joint.name
+        );
         worst_nrmse = worst_nrmse.max(after);
     }
     // Viscous and Coulomb friction within 10 % of the truth.
     let mut worst_friction_error: f64 = 0.0;
     for (j, joint) in true_robot.joints.iter().enumerate() {
         let (viscous, coulomb, _) = ident.joint_friction(j);
-        for (what, got, want) in [("viscous", viscous, joint.damping), ("Coulomb", coulomb, joint.friction)] {
+        for (what, got, want) in [
+            ("viscous", viscous, joint.damping),
+            ("Coulomb", coulomb, joint.friction),
+        ] {
             let err = (got / want - 1.0).abs();
-            assert!(err <= 0.10, "{}: {what} {got} vs true {want} ({:.1} %)", joint.name, 100.0 * err);
+            assert!(
+                err <= 0.10,
+                "{}: {what} {got} vs true {want} ({:.1} %)",
+                joint.name,
+                100.0 * err
+            );
             worst_friction_error = worst_friction_error.max(err);
         }
     }
     // Every identified link physically valid.
     for (l, link) in robot.links.iter().enumerate() {
-        assert!(sysid::model::physically_valid(&ident.link_params(l)), "{} not physically valid", link.name);
+        assert!(
+            sysid::model::physically_valid(&ident.link_params(l)),
+            "{} not physically valid",
+            link.name
+        );
         assert!(ident.report.links[l].physically_valid);
     }
 
@@ -111,17 +152,28 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
     let new_text = std::fs::read_to_string(&start).unwrap();
     assert_ne!(new_text, original);
     assert_eq!(mask_rewritable(&new_text), mask_rewritable(&original));
-    Outcome { worst_nrmse, worst_friction_error }
+    Outcome {
+        worst_nrmse,
+        worst_friction_error,
+    }
 }
 
 #[test]
 fn arm_identification_meets_the_benchmark() {
     let o = run_benchmark("arm6.urdf", 20.0);
-    eprintln!("arm: worst held-out NRMSE {:.2} %, worst friction error {:.1} %", 100.0 * o.worst_nrmse, 100.0 * o.worst_friction_error);
+    eprintln!(
+        "arm: worst held-out NRMSE {:.2} %, worst friction error {:.1} %",
+        100.0 * o.worst_nrmse,
+        100.0 * o.worst_friction_error
+    );
 }
 
 #[test]
 fn humanoid_on_a_gantry_meets_the_benchmark() {
     let o = run_benchmark("humanoid.urdf", 20.0);
-    eprintln!("humanoid: worst held-out NRMSE {:.2} %, worst friction error {:.1} %", 100.0 * o.worst_nrmse, 100.0 * o.worst_friction_error);
+    eprintln!(
+        "humanoid: worst held-out NRMSE {:.2} %, worst friction error {:.1} %",
+        100.0 * o.worst_nrmse,
+        100.0 * o.worst_friction_error
+    );
 }

@@ -22,7 +22,14 @@ fn twin(dir: &Path, args: &[&str]) -> Output {
 fn setup(train_secs: f64) -> (tempfile::TempDir, JointLog) {
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(arm_urdf(), dir.path().join("arm6.urdf")).unwrap();
-    let log = simulate(&arm_urdf(), &SynthOptions { duration_secs: train_secs, ..Default::default() }).unwrap();
+    let log = simulate(
+        &arm_urdf(),
+        &SynthOptions {
+            duration_secs: train_secs,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     log.write_csv(dir.path().join("train.csv")).unwrap();
     (dir, log)
 }
@@ -37,30 +44,62 @@ fn sysid_updates_the_urdf_and_writes_report_and_mjcf() {
     let start = dir.path().join("arm6.urdf");
     sysid::synth::perturbed_urdf(&arm_urdf(), &start, 5).unwrap();
     let original = std::fs::read_to_string(&start).unwrap();
-    let val = simulate(&arm_urdf(), &SynthOptions { duration_secs: 6.0, seed: 9, ..Default::default() }).unwrap();
+    let val = simulate(
+        &arm_urdf(),
+        &SynthOptions {
+            duration_secs: 6.0,
+            seed: 9,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     val.write_csv(dir.path().join("val.csv")).unwrap();
     let out = twin(
         dir.path(),
-        &["sysid", "--log", "train.csv", "--update", "arm6.urdf", "--validate", "val.csv", "--report", "r.json", "--mjcf", "out.xml"],
+        &[
+            "sysid",
+            "--log",
+            "train.csv",
+            "--update",
+            "arm6.urdf",
+            "--validate",
+            "val.csv",
+            "--report",
+            "r.json",
+            "--mjcf",
+            "out.xml",
+        ],
     );
     assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("torque NRMSE on the held-out log"), "{stdout}");
+    assert!(
+        stdout.contains("torque NRMSE on the held-out log"),
+        "{stdout}"
+    );
     assert!(stdout.contains("fixed base"), "{stdout}");
-    assert_eq!(std::fs::read_to_string(dir.path().join("arm6.urdf.bak")).unwrap(), original);
+    assert_eq!(
+        std::fs::read_to_string(dir.path().join("arm6.urdf.bak")).unwrap(),
+        original
+    );
     assert_ne!(std::fs::read_to_string(&start).unwrap(), original);
 
-    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap()).unwrap();
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap()).unwrap();
     assert_eq!(report["base"], "fixed");
     let validation = report["validation_nrmse"].as_array().unwrap();
     assert_eq!(validation.len(), 6);
     for row in validation {
-        let (before, after) = (row["before"].as_f64().unwrap(), row["after"].as_f64().unwrap());
+        let (before, after) = (
+            row["before"].as_f64().unwrap(),
+            row["after"].as_f64().unwrap(),
+        );
         assert!(after < 0.02 && after < before / 5.0, "{row}");
     }
     // The MJCF carries what URDF can't: armature (true value 0.02 on every joint).
     let model = twin_core::mj::Model::from_file(dir.path().join("out.xml")).unwrap();
-    let elbow = model.require_id(twin_core::mj::ObjType::Joint, "elbow_joint").unwrap();
+    let elbow = model
+        .require_id(twin_core::mj::ObjType::Joint, "elbow_joint")
+        .unwrap();
     let armature = model.dof_armature()[model.jnt_dofadr()[elbow] as usize];
     assert!((armature - 0.02).abs() < 0.005, "elbow armature {armature}");
 }
@@ -71,10 +110,23 @@ fn sysid_dry_run_prints_a_diff_and_writes_nothing() {
     let start = dir.path().join("arm6.urdf");
     sysid::synth::perturbed_urdf(&arm_urdf(), &start, 6).unwrap();
     let original = std::fs::read(&start).unwrap();
-    let out = twin(dir.path(), &["sysid", "--log", "train.csv", "--update", "arm6.urdf", "--dry-run"]);
+    let out = twin(
+        dir.path(),
+        &[
+            "sysid",
+            "--log",
+            "train.csv",
+            "--update",
+            "arm6.urdf",
+            "--dry-run",
+        ],
+    );
     assert!(out.status.success(), "{}", stderr(&out));
     let stdout = String::from_utf8_lossy(&out.stdout);
-    assert!(stdout.contains("--- ") && stdout.contains("@@") && stdout.contains("+      <mass value="), "{stdout}");
+    assert!(
+        stdout.contains("--- ") && stdout.contains("@@") && stdout.contains("+      <mass value="),
+        "{stdout}"
+    );
     assert_eq!(std::fs::read(&start).unwrap(), original);
     assert!(!dir.path().join("arm6.urdf.bak").exists());
 }
@@ -109,7 +161,12 @@ fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
 
     let mut renamed = log.clone();
     renamed.joint_names[2] = "joint_3".into();
-    refuses(d, &renamed, &[], "the robot's joint(s) \"elbow_joint\" are not in the log");
+    refuses(
+        d,
+        &renamed,
+        &[],
+        "the robot's joint(s) \"elbow_joint\" are not in the log",
+    );
 
     let mut still = log.clone();
     for (j, q) in still.position.iter_mut().enumerate() {
@@ -119,9 +176,19 @@ fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
 
     let mut nan = log.clone();
     nan.position[1][1234] = f64::NAN;
-    refuses(d, &nan, &[], "position value(s) of joint \"shoulder_lift_joint\" are NaN");
+    refuses(
+        d,
+        &nan,
+        &[],
+        "position value(s) of joint \"shoulder_lift_joint\" are NaN",
+    );
 
-    refuses(d, &log, &["--base", "floating"], "floating-base identification needs");
+    refuses(
+        d,
+        &log,
+        &["--base", "floating"],
+        "floating-base identification needs",
+    );
 
     // Strict: a joint that barely moved is a refusal, not a warning.
     let mut lazy = log.clone();

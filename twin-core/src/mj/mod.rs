@@ -241,10 +241,14 @@ pub fn thread_warnings() -> (u64, String) {
 /// [`Error::MuJoCo`] with MuJoCo's message (e.g. no model loaded from a file, or a model of a
 /// different structure); [`Error::Io`] for a path with a NUL byte.
 pub fn save_last_xml(path: &std::path::Path, model: &Model) -> Result<()> {
-    let c_path = std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Io {
-        path: path.to_path_buf(),
-        source: std::io::Error::new(std::io::ErrorKind::InvalidInput, "path contains a NUL byte"),
-    })?;
+    let c_path =
+        std::ffi::CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Io {
+            path: path.to_path_buf(),
+            source: std::io::Error::new(
+                std::io::ErrorKind::InvalidInput,
+                "path contains a NUL byte",
+            ),
+        })?;
     guarded("mj_saveLastXML", |e, n| {
         // SAFETY: NUL-terminated path; live model; the shim writes at most n bytes to e.
         unsafe { ffi::twin_save_last_xml(c_path.as_ptr(), model.as_ptr(), e, n) }
