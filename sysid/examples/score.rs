@@ -7,7 +7,14 @@ use nalgebra::{Matrix3, Vector3};
 use sysid::model::MassProperties;
 use sysid::{JointLog, RobotModel, SysidOptions};
 
-fn score(label: &str, robot: &RobotModel, truth: &RobotModel, held: &JointLog, params: &[f64], secs: f64) {
+fn score(
+    label: &str,
+    robot: &RobotModel,
+    truth: &RobotModel,
+    held: &JointLog,
+    params: &[f64],
+    secs: f64,
+) {
     let opts = SysidOptions::default();
     let layout = sysid::regressor::Layout {
         links: robot.links.len(),
@@ -45,10 +52,13 @@ fn main() {
     score("start URDF", &robot, &truth, &held, &ident.before, 0.0);
     score("twin sysid", &robot, &truth, &held, &ident.after, secs);
     if let Some(path) = a.get(5) {
-        let v: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(path).expect("json")).expect("json");
+        let v: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(path).expect("json")).expect("json");
         let mut p = ident.before.clone();
         for (l, link) in robot.links.iter().enumerate() {
-            let Some(x) = v["links"].get(&link.name) else { continue };
+            let Some(x) = v["links"].get(&link.name) else {
+                continue;
+            };
             let f = |k: &str, i: usize| x[k][i].as_f64().unwrap();
             let i = &x["inertia_com"];
             let m = Matrix3::from_fn(|r, c| i[r][c].as_f64().unwrap());
@@ -67,6 +77,13 @@ fn main() {
             p[c + 1] = x["frictionloss"].as_f64().unwrap();
             p[c + 2] = x["armature"].as_f64().unwrap();
         }
-        score("mujoco.sysid", &robot, &truth, &held, &p, v["wall_secs"].as_f64().unwrap());
+        score(
+            "mujoco.sysid",
+            &robot,
+            &truth,
+            &held,
+            &p,
+            v["wall_secs"].as_f64().unwrap(),
+        );
     }
 }

@@ -269,3 +269,40 @@ impl JointLog {
         crate::writeback::write_atomic(path.as_ref(), self.to_csv().as_bytes())
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn csv_round_trips_and_reports_bad_lines() {
+        let dir = tempfile::tempdir().unwrap();
+        let mut log = JointLog::new(vec!["a".into(), "b/c".into()], "mem");
+        log.push(0, &[0.5, -1.25], &[f64::NAN, 2.0], &[3.0, 4.5]);
+        log.push(1_000_000, &[0.51, -1.2], &[0.1, 2.1], &[3.1, f64::NAN]);
+        let path = dir.path().join("log.csv");
+        log.write_csv(&path).unwrap();
+        let back = JointLog::read_csv(&path).unwrap();
+        assert_eq!(back.joint_names, log.joint_names);
+        assert_eq!(back.t_nanos, log.t_nanos);
+        assert_eq!(back.position, log.position);
+        assert!(back.velocity[0][0].is_nan() && back.velocity[1][1] == 2.1);
+        assert!(back.effort[1][1].is_nan());
+
+        std::fs::write(&path, "time_sec,a/position,a/effort\n0,1,2\n0.001,1,oops\n").unwrap();
+        let err = JointLog::read_csv(&path).unwrap_err().to_string();
+        assert!(
+            err.contains("log.csv:3: column `a/effort`: `oops` is not a number"),
+            "{err}"
+        );
+        std::fs::write(&path, "t,a/position\n").unwrap();
+        let err = JointLog::read_csv(&path).unwrap_err().to_string();
+        assert!(
+            err.contains(":1: the first column must be `time_sec`"),
+            "{err}"
+        );
+        std::fs::write(&path, "time_sec,a/torque\n").unwrap();
+        let err = JointLog::read_csv(&path).unwrap_err().to_string();
+        assert!(err.contains("unknown field `torque`"), "{err}");
+    }
+}

@@ -190,6 +190,18 @@ fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
         "floating-base identification needs",
     );
 
+    // Strict: an effort logged with the opposite sign convention is a refusal.
+    let mut flipped = log.clone();
+    for e in &mut flipped.effort[2] {
+        *e = -*e;
+    }
+    refuses(
+        d,
+        &flipped,
+        &["--strict"],
+        "\"elbow_joint\": the logged effort has the opposite sign",
+    );
+
     // Strict: a joint that barely moved is a refusal, not a warning.
     let mut lazy = log.clone();
     let q0 = lazy.position[5][0];
