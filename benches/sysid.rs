@@ -54,7 +54,7 @@ fn thirty_dof_urdf() -> String {
     s
 }
 
-fn bench_robot(label: &str, truth: &Path, secs: f64, dir: &Path) {
+fn bench_robot(label: &str, truth: &Path, secs: f64, dir: &Path, opts: &SysidOptions) {
     let start = dir.join(format!("start-{label}.urdf"));
     perturbed_urdf(truth, &start, 3).expect("perturbed URDF");
     let train = simulate(
@@ -75,12 +75,11 @@ fn bench_robot(label: &str, truth: &Path, secs: f64, dir: &Path) {
     )
     .expect("simulation");
     let robot = RobotModel::from_urdf(&start).expect("robot");
-    let opts = SysidOptions::default();
     let t = Instant::now();
-    let ident = identify(&robot, &train, &opts).expect("identification");
+    let ident = identify(&robot, &train, opts).expect("identification");
     let identify_secs = t.elapsed().as_secs_f64();
     let nrmse =
-        validate(&robot, &held_out, &opts, &[&ident.before, &ident.after]).expect("validation");
+        validate(&robot, &held_out, opts, &[&ident.before, &ident.after]).expect("validation");
     let truth_robot = RobotModel::from_urdf(truth).expect("truth");
     let worst = |v: &[f64]| v.iter().copied().fold(0.0, f64::max);
     let mut friction_err: f64 = 0.0;
@@ -116,14 +115,32 @@ fn main() {
     let dir = tempfile::tempdir().expect("temp dir");
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("models");
     if wanted("arm6") {
-        bench_robot("arm6", &models.join("arm6.urdf"), 20.0, dir.path());
+        bench_robot(
+            "arm6",
+            &models.join("arm6.urdf"),
+            20.0,
+            dir.path(),
+            &SysidOptions::default(),
+        );
     }
     if wanted("humanoid") {
-        bench_robot("humanoid", &models.join("humanoid.urdf"), 20.0, dir.path());
+        bench_robot(
+            "humanoid",
+            &models.join("humanoid.urdf"),
+            20.0,
+            dir.path(),
+            &SysidOptions::default(),
+        );
     }
+    let urdf = dir.path().join("thirty.urdf");
+    std::fs::write(&urdf, thirty_dof_urdf()).expect("write URDF");
     if wanted("30dof") {
-        let urdf = dir.path().join("thirty.urdf");
-        std::fs::write(&urdf, thirty_dof_urdf()).expect("write URDF");
-        bench_robot("30dof", &urdf, 100.0, dir.path());
+        bench_robot("30dof", &urdf, 100.0, dir.path(), &SysidOptions::default());
+    }
+    // Every one of the 10⁵ filtered samples in the regressor (no decimation): 3·10⁶ rows.
+    if filter.iter().any(|f| f == "30dof-all") {
+        let mut opts = SysidOptions::default();
+        opts.condition.regressor_rate_hz = Some(1000.0);
+        bench_robot("30dof-all", &urdf, 100.0, dir.path(), &opts);
     }
 }

@@ -202,6 +202,9 @@ fn nrmse_from(acc: &Accumulator, j: usize, params: &[f64]) -> f64 {
 /// problem), [`Error::Option`] for floating base or bad options, [`Error::Numerical`].
 pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Result<Identification> {
     let started = Instant::now();
+    // Results must not depend on the thread count: faer's parallel kernels may sum in a
+    // different order. The matrices here are small; sequential costs little.
+    faer::set_global_parallelism(faer::Par::Seq);
     if opts.base == Base::Floating {
         return Err(Error::Option {
             name: "base",
