@@ -53,6 +53,10 @@ pub struct Args {
     /// Identify a constant torque offset per joint as well (sensor bias).
     #[arg(long)]
     pub offset: bool,
+    /// Smooth Coulomb friction as tanh(velocity / EPS) instead of sign(velocity) with a dead
+    /// zone (EPS in rad/s or m/s).
+    #[arg(long, value_name = "EPS")]
+    pub coulomb_smoothing: Option<f64>,
 }
 
 fn read_log(path: &Path, topic: Option<&str>) -> anyhow::Result<JointLog> {
@@ -82,6 +86,11 @@ fn read_log(path: &Path, topic: Option<&str>) -> anyhow::Result<JointLog> {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(eps) = args.coulomb_smoothing
+        && !(eps > 0.0 && eps.is_finite())
+    {
+        bail!("--coulomb-smoothing must be a positive velocity, got {eps}");
+    }
     let opts = SysidOptions {
         condition: sysid::condition::ConditionOptions {
             cutoff_hz: args.cutoff_hz,
@@ -90,7 +99,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         friction: sysid::regressor::FrictionModel {
             offset: args.offset,
-            ..Default::default()
+            coulomb_smoothing: args.coulomb_smoothing,
         },
         strict: args.strict,
         base: match args.base {

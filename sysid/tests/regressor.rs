@@ -93,3 +93,57 @@ fn regressor_matches_mujoco_inverse_dynamics_on_the_arm() {
 fn regressor_matches_mujoco_inverse_dynamics_on_the_humanoid() {
     check_against_inverse_dynamics(&models_dir().join("humanoid.urdf"));
 }
+
+/// Models compiled with a free base (what the URDF converter produces by default) identify as a
+/// fixed base: the free joint stays at its default pose, at rest, and only the 1-DOF joints
+/// have rows.
+#[test]
+fn regressor_on_a_free_base_model_matches_inverse_dynamics_of_the_joints() {
+    let xml = r#"<mujoco><option><flag constraint="disable"/></option><worldbody>
+      <body name="base" pos="0 0 1"><freejoint/><inertial pos="0 0 0" mass="5" diaginertia="0.1 0.1 0.1"/>
+        <body name="a" pos="0.1 0 0"><joint name="ja" axis="0 1 0" damping="0.3" armature="0.01"/>
+          <inertial pos="0.1 0.02 0" mass="1.5" fullinertia="0.01 0.02 0.015 0.001 0 0.002"/>
+          <body name="b" pos="0.3 0 0"><joint name="jb" axis="1 0 1" damping="0.1"/>
+            <inertial pos="0.05 0 -0.03" quat="0.9 0.1 0.3 0" mass="0.7" diaginertia="0.004 0.003 0.002"/>
+          </body></body></body></worldbody></mujoco>"#;
+    let model = Arc::new(twin_core::mj::Model::from_xml_str(xml).unwrap());
+    let robot = RobotModel::from_model(Path::new("free.xml"), model.clone()).unwrap();
+    assert_eq!(robot.joints.len(), 2);
+    assert_eq!(
+        robot
+            .links
+            .iter()
+            .map(|l| l.name.as_str())
+            .collect::<Vec<_>>(),
+        ["a", "b"]
+    );
+    let mut reg = Regressor::new(&robot, FrictionModel::default()).unwrap();
+    let layout = reg.layout();
+    let mut params = vec![0.0; layout.ncols()];
+    for (l, link) in robot.links.iter().enumerate() {
+        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
+    }
+    for (j, joint) in robot.joints.iter().enumerate() {
+        params[layout.joint_col(j)] = joint.damping;
+        params[layout.joint_col(j) + 2] = joint.armature;
+    }
+    let mut data = Data::new(model.clone()).unwrap();
+    let (q, qd, qdd) = ([0.4, -1.1], [1.3, -0.7], [-2.0, 5.0]);
+    let mut rows = Vec::new();
+    let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
+    for (j, joint) in robot.joints.iter().enumerate() {
+        data.qpos_mut()[joint.qpos_adr] = q[j];
+        data.qvel_mut()[joint.dof] = qd[j];
+        data.qacc_mut()[joint.dof] = qdd[j];
+    }
+    data.inverse().unwrap();
+    for (j, joint) in robot.joints.iter().enumerate() {
+        let expected = data.qfrc_inverse()[joint.dof];
+        assert!(
+            (tau[j] - expected).abs() < 1e-9 * (1.0 + expected.abs()),
+            "{}: {} vs {expected}",
+            joint.name,
+            tau[j]
+        );
+    }
+}
