@@ -24,4 +24,6 @@ pub enum Command {
     Log(crate::commands::log::Args),
     /// Domain-randomized batch rollouts: how often and how the robot fails.
     Randomize(Box<crate::commands::randomize::Args>),
+    /// Identify link inertias and joint friction from a log and update the URDF.
+    Sysid(crate::commands::sysid::Args),
 }

@@ -161,3 +161,17 @@ void twin_bench_c_step_loop(const mjModel* m, mjData* d, long n) {
     mj_step(m, d);
   }
 }
+
+// Kinematics and velocity-dependent quantities only (positions, com frame, cvel, cdof_dot):
+// what Jacobians and their time derivatives need, without collision detection or dynamics.
+int twin_kinematics_vel(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_kinematics(m, d); mj_comPos(m, d); mj_comVel(m, d), reset_stack(d))
+}
+
+// Jacobian of a body frame's origin and its time derivative (each 3 x nv, row-major).
+int twin_jac_body_dot(const mjModel* m, mjData* d, int body, mjtNum* jacp, mjtNum* jacr,
+                      mjtNum* jacp_dot, mjtNum* jacr_dot, char* err, int err_sz) {
+  TWIN_GUARD(mj_jacBody(m, d, jacp, jacr, body);
+             mj_jacDot(m, d, jacp_dot, jacr_dot, d->xpos + 3 * body, body), reset_stack(d))
+}
+

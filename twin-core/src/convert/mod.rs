@@ -93,6 +93,10 @@ pub struct ConvertOptions {
     pub timestep_secs: f64,
     /// Armature (reflected rotor inertia) added to every joint, kg·m² or kg (default: 0).
     pub armature: f64,
+    /// Armature of individual joints by URDF joint name, kg·m² or kg, replacing
+    /// [`ConvertOptions::armature`] for those joints (e.g. identified by `twin sysid`; URDF has
+    /// no place for it) (default: empty).
+    pub joint_armature: std::collections::BTreeMap<String, f64>,
     /// Stiffness of `position` actuators per N·m of effort limit, 1/rad: kp = this × effort
     /// (default: 20, full effort at 0.05 rad error; 100 N·m/rad when no effort is given).
     pub position_kp_per_effort: f64,
@@ -124,6 +128,7 @@ impl Default for ConvertOptions {
             joint_sensors: true,
             timestep_secs: 0.002,
             armature: 0.0,
+            joint_armature: std::collections::BTreeMap::new(),
             position_kp_per_effort: 20.0,
             position_kv_per_kp: 0.05,
             velocity_kv_per_effort: 1.0,
@@ -1382,8 +1387,9 @@ impl<'a> Converter<'a> {
         if j.friction > 0.0 {
             let _ = write!(dyn_attrs, " frictionloss=\"{}\"", f(j.friction));
         }
-        if self.opts.armature > 0.0 {
-            let _ = write!(dyn_attrs, " armature=\"{}\"", f(self.opts.armature));
+        let armature = self.opts.joint_armature.get(&j.name).copied().unwrap_or(self.opts.armature);
+        if armature > 0.0 {
+            let _ = write!(dyn_attrs, " armature=\"{}\"", f(armature));
         }
         if let Some(l) = &j.limit
             && l.effort > 0.0

@@ -354,6 +354,51 @@ impl Data {
         Ok(out)
     }
 
+    /// Position and velocity kinematics only (`mj_kinematics`, `mj_comPos`, `mj_comVel`): body
+    /// poses, `cdof`, `cvel` and `cdof_dot`, as [`Data::body_jacobian_dot`] needs, without
+    /// collision detection or dynamics.
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn kinematics_with_velocity(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_kinematics", |e, n| unsafe { ffi::twin_kinematics_vel(m, d, e, n) })
+    }
+
+    /// Jacobian of body `body`'s frame origin and its time derivative (`mj_jacBody`,
+    /// `mj_jacDot`), world frame, each row-major 3 × nv: translational `jacp`, rotational
+    /// `jacr`, then their derivatives. Needs [`Data::kinematics_with_velocity`] (or a forward
+    /// pass) at the current `qpos`/`qvel`.
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a bad body id or output lengths other than `3 * nv`.
+    pub fn body_jacobian_dot(
+        &mut self,
+        body: usize,
+        jacp: &mut [f64],
+        jacr: &mut [f64],
+        jacp_dot: &mut [f64],
+        jacr_dot: &mut [f64],
+    ) -> Result<()> {
+        let nbody = self.model.nbody();
+        if body >= nbody {
+            return Err(Error::Size { what: "body id", expected: nbody, got: body });
+        }
+        let len = 3 * self.model.nv();
+        for out in [&*jacp, &*jacr, &*jacp_dot, &*jacr_dot] {
+            if out.len() != len {
+                return Err(Error::Size { what: "Jacobian buffer length (3 * nv)", expected: len, got: out.len() });
+            }
+        }
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        let (p, r) = (jacp.as_mut_ptr(), jacr.as_mut_ptr());
+        let (pd, rd) = (jacp_dot.as_mut_ptr(), jacr_dot.as_mut_ptr());
+        // SAFETY: body checked in range; each buffer has 3 * nv entries as both functions write;
+        // the pair is live and exclusive through &mut self.
+        guarded("mj_jacDot", |e, n| unsafe { ffi::twin_jac_body_dot(m, d, body as c_int, p, r, pd, rd, e, n) })
+    }
+
     /// Resets to the model's default state (`mj_resetData`), warnings included.
     ///
     /// # Errors

@@ -235,6 +235,34 @@ impl ModelEdit {
         Ok(self)
     }
 
+    /// Sets how stiff DOF `dof`'s friction-loss constraint is: `solref` (time constant in
+    /// seconds, damping ratio) and `solimp` (5 impedance numbers), as MJCF `solreffriction` /
+    /// `solimpfriction`. A stiffer constraint makes friction loss closer to ideal Coulomb
+    /// friction.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for non-finite values or impedances outside (0, 1).
+    pub fn set_dof_friction_solver(&mut self, dof: usize, solref: [f64; 2], solimp: [f64; 5]) -> Result<&mut Self> {
+        check("dof id", dof, self.model.nv())?;
+        finite("solref", &solref)?;
+        finite("solimp", &solimp)?;
+        if !(solimp[0] > 0.0 && solimp[0] < 1.0 && solimp[1] > 0.0 && solimp[1] < 1.0) {
+            return Err(Error::InvalidEdit(format!(
+                "dof {dof}: solimp {solimp:?} must have its first two entries in (0, 1)"
+            )));
+        }
+        let n = self.model.nv();
+        let m = self.raw_mut();
+        // SAFETY: dof_solref has nv rows of mjNREF (2) and dof_solimp nv rows of mjNIMP (5);
+        // exclusive access.
+        let (refs, imps) = unsafe {
+            (raw_slice_mut(m.dof_solref.cast::<[f64; 2]>(), n), raw_slice_mut(m.dof_solimp.cast::<[f64; 5]>(), n))
+        };
+        refs[dof] = solref;
+        imps[dof] = solimp;
+        Ok(self)
+    }
+
     /// Recomputes derived quantities with `mj_setConst` and returns the edited model.
     ///
     /// # Errors

@@ -71,6 +71,18 @@ pub(crate) mod ffi {
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;
+        pub fn twin_kinematics_vel(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_jac_body_dot(
+            m: *const mjModel,
+            d: *mut mjData,
+            body: c_int,
+            jacp: *mut mjtNum,
+            jacr: *mut mjtNum,
+            jacp_dot: *mut mjtNum,
+            jacr_dot: *mut mjtNum,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
         pub fn twin_bench_c_step_loop(m: *const mjModel, d: *mut mjData, n: c_long);
     }
 }

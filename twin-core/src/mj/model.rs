@@ -222,6 +222,14 @@ model_arrays! {
     body_subtreemass: f64 = nbody;
     /// First joint of each body, -1 if none (len `nbody`).
     body_jntadr: i32 = nbody;
+    /// Number of degrees of freedom of each body (len `nbody`).
+    body_dofnum: i32 = nbody;
+    /// Address of each body's first DOF, −1 when it has none (len `nbody`).
+    body_dofadr: i32 = nbody;
+    /// Parent DOF of each DOF, −1 at the root of a chain (len `nv`).
+    dof_parentid: i32 = nv;
+    /// Body each DOF moves (len `nv`).
+    dof_bodyid: i32 = nv;
     /// Number of joints of each body (len `nbody`).
     body_jntnum: i32 = nbody;
     /// Type of each joint (`mjtJoint`) (len `njnt`).

@@ -1,0 +1,150 @@
+//! `twin sysid --log LOG --update ROBOT.urdf`: identify link inertias and joint friction from a
+//! log and write them into the URDF (only those numbers change).
+
+use anyhow::{Context, bail};
+use std::path::{Path, PathBuf};
+use sysid::{Base, JointLog, RobotModel, SysidOptions};
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum BaseArg {
+    /// Robot bolted down or hung on a gantry.
+    Fixed,
+    /// Free-floating base (needs base state and contact wrenches in the log; not supported yet).
+    Floating,
+}
+
+#[derive(Debug, clap::Args)]
+pub struct Args {
+    /// The log: a CSV file with columns `time_sec`, then `<joint>/position`,
+    /// `<joint>/velocity` (optional), `<joint>/effort` per joint.
+    #[arg(long, value_name = "LOG")]
+    pub log: PathBuf,
+    /// The robot's URDF: the model identified and the file updated (original kept as
+    /// ROBOT.urdf.bak).
+    #[arg(long, value_name = "ROBOT.urdf")]
+    pub update: PathBuf,
+    /// Joint-state topic to read from an MCAP log (default: auto-detected).
+    #[arg(long, value_name = "T")]
+    pub topic: Option<String>,
+    /// Print the diff of the URDF instead of writing it.
+    #[arg(long)]
+    pub dry_run: bool,
+    /// Write the full report as JSON.
+    #[arg(long, value_name = "sysid.json")]
+    pub report: Option<PathBuf>,
+    /// A held-out log: print per-joint torque NRMSE before and after on it.
+    #[arg(long, value_name = "OTHER")]
+    pub validate: Option<PathBuf>,
+    /// Also write a MuJoCo model (MJCF) with the identified values, armature included.
+    #[arg(long, value_name = "OUT.xml")]
+    pub mjcf: Option<PathBuf>,
+    /// Refuse (exit with an error) when the log is under-exciting instead of warning.
+    #[arg(long)]
+    pub strict: bool,
+    /// How the robot's base was held while logging.
+    #[arg(long, value_enum, default_value_t = BaseArg::Fixed)]
+    pub base: BaseArg,
+    /// Low-pass cut-off in Hz (default: rate / 25, at most 20 Hz).
+    #[arg(long, value_name = "HZ")]
+    pub cutoff_hz: Option<f64>,
+    /// Butterworth filter order.
+    #[arg(long, default_value_t = 4, value_name = "N")]
+    pub filter_order: usize,
+    /// Identify a constant torque offset per joint as well (sensor bias).
+    #[arg(long)]
+    pub offset: bool,
+    /// Smooth Coulomb friction as tanh(velocity / EPS) instead of sign(velocity) with a dead
+    /// zone (EPS in rad/s or m/s).
+    #[arg(long, value_name = "EPS")]
+    pub coulomb_smoothing: Option<f64>,
+}
+
+fn read_log(path: &Path, topic: Option<&str>) -> anyhow::Result<JointLog> {
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
+    match ext.as_str() {
+        "csv" => {
+            if topic.is_some() {
+                eprintln!("warning: --topic is ignored for CSV logs");
+            }
+            Ok(JointLog::read_csv(path)?)
+        }
+        "mcap" => bail!(
+            "{}: reading ROS 2 MCAP logs is not available in this build yet; export the joint states as \
+             CSV (columns time_sec, <joint>/position, <joint>/velocity, <joint>/effort) and pass that",
+            path.display()
+        ),
+        _ => bail!(
+            "{}: unknown log format (expected .csv with columns time_sec, <joint>/position, \
+             <joint>/velocity, <joint>/effort)",
+            path.display()
+        ),
+    }
+}
+
+pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(eps) = args.coulomb_smoothing
+        && !(eps > 0.0 && eps.is_finite())
+    {
+        bail!("--coulomb-smoothing must be a positive velocity, got {eps}");
+    }
+    let opts = SysidOptions {
+        condition: sysid::condition::ConditionOptions {
+            cutoff_hz: args.cutoff_hz,
+            filter_order: args.filter_order,
+            ..Default::default()
+        },
+        friction: sysid::regressor::FrictionModel { offset: args.offset, coulomb_smoothing: args.coulomb_smoothing },
+        strict: args.strict,
+        base: match args.base {
+            BaseArg::Fixed => Base::Fixed,
+            BaseArg::Floating => Base::Floating,
+        },
+        ..Default::default()
+    };
+    let robot =
+        RobotModel::from_urdf(&args.update).with_context(|| format!("loading the robot {}", args.update.display()))?;
+    let log = read_log(&args.log, args.topic.as_deref())?;
+    let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref())).transpose()?;
+    let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
+    if let (Some(path), Some(other)) = (&args.validate, &held_out) {
+        let nrmse = sysid::validate(&robot, other, &opts, &[&ident.before, &ident.after])
+            .with_context(|| format!("validating on {}", path.display()))?;
+        ident.report.validation_nrmse = Some(
+            robot
+                .joints
+                .iter()
+                .enumerate()
+                .map(|(j, joint)| sysid::report::NrmseReport {
+                    joint: joint.name.clone(),
+                    before: nrmse[0][j],
+                    after: nrmse[1][j],
+                })
+                .collect(),
+        );
+        ident.report.validation_log = Some(path.display().to_string());
+    }
+    print!("{}", ident.report.table());
+    if let Some(path) = &args.report {
+        sysid::writeback::write_atomic(path, ident.report.to_json().as_bytes())?;
+        eprintln!("report written to {}", path.display());
+    }
+    let (links, joints) = sysid::urdf_updates(&robot, &ident);
+    let outcome = sysid::writeback::update_urdf_file(&args.update, &links, &joints, args.dry_run)?;
+    if args.dry_run {
+        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), outcome.diff);
+    } else if let Some(backup) = &outcome.backup {
+        eprintln!(
+            "updated {} ({} links, {} joints); original kept as {}",
+            args.update.display(),
+            links.len(),
+            joints.len(),
+            backup.display()
+        );
+    }
+    if let Some(out) = &args.mjcf {
+        sysid::mjcf::write_mjcf(&args.update, &robot, &ident, &links, &joints, out)
+            .with_context(|| format!("writing {}", out.display()))?;
+        eprintln!("MuJoCo model with the identified values (armature included) written to {}", out.display());
+    }
+    Ok(())
+}

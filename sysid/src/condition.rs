@@ -1,0 +1,289 @@
+//! From a raw [`JointLog`] to conditioned, uniformly sampled segments with filtered positions,
+//! velocities, accelerations and torques, ready for the regressor.
+
+use crate::error::{Error, Result};
+use crate::log::JointLog;
+use crate::model::RobotModel;
+use crate::signal::{Butterworth, derivative, median_step, resample};
+
+/// Signal-conditioning options.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ConditionOptions {
+    /// Low-pass cut-off, Hz (default: `None`: `min(rate / 25, 20 Hz)`, i.e. 20 Hz for 500 Hz
+    /// logs and faster, 4 Hz for a 100 Hz log).
+    pub cutoff_hz: Option<f64>,
+    /// Butterworth order, applied forward and backward (default: 4).
+    pub filter_order: usize,
+    /// Rate at which regressor samples are taken from the filtered signals, Hz (default:
+    /// `None`: 5 × the cut-off, at most the log's rate). After the low-pass the signals hold
+    /// nothing above the cut-off, so denser samples add computation, not information.
+    pub regressor_rate_hz: Option<f64>,
+    /// A time step larger than this many median steps splits the log into segments rather
+    /// than being bridged (default: 5).
+    pub gap_factor: f64,
+}
+
+impl Default for ConditionOptions {
+    fn default() -> Self {
+        ConditionOptions { cutoff_hz: None, filter_order: 4, regressor_rate_hz: None, gap_factor: 5.0 }
+    }
+}
+
+/// One contiguous, conditioned piece of the log. Series are `[joint][sample]`, joints in
+/// [`RobotModel::joints`] order.
+#[derive(Debug, Clone, Default)]
+pub struct Segment {
+    /// Sample times, seconds from the log's first sample.
+    pub t_secs: Vec<f64>,
+    /// Filtered positions.
+    pub q: Vec<Vec<f64>>,
+    /// Velocities (derivative of the filtered positions).
+    pub qd: Vec<Vec<f64>>,
+    /// Accelerations (second derivative of the filtered positions).
+    pub qdd: Vec<Vec<f64>>,
+    /// Filtered efforts.
+    pub tau: Vec<Vec<f64>>,
+}
+
+impl Segment {
+    /// Number of samples.
+    pub fn len(&self) -> usize {
+        self.t_secs.len()
+    }
+    /// Whether the segment is empty.
+    pub fn is_empty(&self) -> bool {
+        self.t_secs.is_empty()
+    }
+}
+
+/// The conditioned log.
+#[derive(Debug, Clone, Default)]
+pub struct Conditioned {
+    /// The log's sample rate (median), Hz.
+    pub rate_hz: f64,
+    /// Cut-off used, Hz.
+    pub cutoff_hz: f64,
+    /// Filter order used.
+    pub filter_order: usize,
+    /// Regressor sample rate, Hz.
+    pub regressor_rate_hz: f64,
+    /// Samples in the raw log.
+    pub raw_samples: usize,
+    /// Segments after gaps, trimming and decimation.
+    pub segments: Vec<Segment>,
+    /// Range of motion of each joint over the used data, rad or m.
+    pub joint_range: Vec<f64>,
+    /// RMS velocity of each joint, rad/s or m/s.
+    pub joint_rms_velocity: Vec<f64>,
+    /// Things the user should know (dropped segments, extra joints).
+    pub warnings: Vec<String>,
+}
+
+impl Conditioned {
+    /// Total number of conditioned samples.
+    pub fn samples(&self) -> usize {
+        self.segments.iter().map(Segment::len).sum()
+    }
+}
+
+/// Matches the log's joints to the model's: index into the log of each model joint.
+///
+/// # Errors
+/// [`Error::BadLog`] listing the model joints that the log lacks (and the log's joints).
+pub fn match_joints(log: &JointLog, robot: &RobotModel) -> Result<(Vec<usize>, Vec<String>)> {
+    let mut missing = Vec::new();
+    let mut map = Vec::new();
+    for joint in &robot.joints {
+        match log.joint_index(&joint.name) {
+            Some(i) => map.push(i),
+            None => missing.push(joint.name.clone()),
+        }
+    }
+    if !missing.is_empty() {
+        return Err(log.bad(format!(
+            "joint names do not match {}: the robot's joint(s) {} are not in the log, which has {}. \
+             Log joint names must be the URDF's <joint name> values",
+            robot.urdf_path.display(),
+            quote_list(&missing),
+            quote_list(&log.joint_names),
+        )));
+    }
+    let extra: Vec<String> = log.joint_names.iter().filter(|n| robot.joint_index(n).is_none()).cloned().collect();
+    let mut warnings = Vec::new();
+    if !extra.is_empty() {
+        warnings.push(format!("log joint(s) {} are not joints of the robot and were ignored", quote_list(&extra)));
+    }
+    Ok((map, warnings))
+}
+
+pub(crate) fn quote_list(names: &[String]) -> String {
+    const MAX: usize = 8;
+    let mut s: Vec<String> = names.iter().take(MAX).map(|n| format!("\"{n}\"")).collect();
+    if names.len() > MAX {
+        s.push(format!("and {} more", names.len() - MAX));
+    }
+    if s.is_empty() { "none".into() } else { s.join(", ") }
+}
+
+/// Conditions `log` for `robot`.
+///
+/// # Errors
+/// [`Error::BadLog`] for unmatched joints, missing effort, NaN/∞ in positions or efforts,
+/// timestamps going backwards, or too little data; [`Error::Option`] for a bad cut-off.
+pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) -> Result<Conditioned> {
+    log.check_shape()?;
+    let (map, mut warnings) = match_joints(log, robot)?;
+    let n = log.len();
+    if n < 10 {
+        return Err(log.bad(format!("only {n} samples: a log of at least a few seconds is needed")));
+    }
+    let no_effort: Vec<String> = robot
+        .joints
+        .iter()
+        .zip(&map)
+        .filter(|&(_, &i)| log.effort[i].iter().all(|x| x.is_nan()))
+        .map(|(j, _)| j.name.clone())
+        .collect();
+    if !no_effort.is_empty() {
+        return Err(log.bad(format!(
+            "no effort (torque) for joint(s) {}: identification needs measured joint torques \
+             (JointState.effort, or `<joint>/effort` CSV columns)",
+            quote_list(&no_effort)
+        )));
+    }
+    let t0 = log.t_nanos[0];
+    for (what, series) in [("position", &log.position), ("effort", &log.effort)] {
+        for (joint, &i) in robot.joints.iter().zip(&map) {
+            let bad: Vec<usize> = (0..n).filter(|&k| !series[i][k].is_finite()).collect();
+            if let Some(&k) = bad.first() {
+                return Err(log.bad(format!(
+                    "{} {what} value(s) of joint \"{}\" are NaN or infinite, the first at t = {:.6} s \
+                     (sample {k}); twin does not interpolate over missing data: remove those samples \
+                     (the log is then split at the gap)",
+                    bad.len(),
+                    joint.name,
+                    (log.t_nanos[k] - t0) as f64 * 1e-9
+                )));
+            }
+        }
+    }
+    if let Some(k) = (1..n).find(|&k| log.t_nanos[k] < log.t_nanos[k - 1]) {
+        return Err(log.bad(format!(
+            "timestamps go backwards at sample {k} (t = {:.6} s after {:.6} s); sort the log by time",
+            (log.t_nanos[k] - t0) as f64 * 1e-9,
+            (log.t_nanos[k - 1] - t0) as f64 * 1e-9
+        )));
+    }
+    let t: Vec<f64> = log.t_nanos.iter().map(|&x| (x - t0) as f64 * 1e-9).collect();
+    let dt = median_step(&t).ok_or_else(|| log.bad("all timestamps are equal".into()))?;
+    let rate_hz = 1.0 / dt;
+    let cutoff_hz = opts.cutoff_hz.unwrap_or((rate_hz / 25.0).min(20.0));
+    if !(cutoff_hz > 0.0 && cutoff_hz < 0.45 * rate_hz) {
+        return Err(Error::Option {
+            name: "cutoff_hz",
+            message: format!("{cutoff_hz} Hz must be positive and below 0.45 × the log's rate ({rate_hz:.1} Hz)"),
+        });
+    }
+    let order = opts.filter_order.clamp(1, 8);
+    let regressor_rate_hz = opts.regressor_rate_hz.unwrap_or(5.0 * cutoff_hz).min(rate_hz);
+    let decimate = ((rate_hz / regressor_rate_hz).floor() as usize).max(1);
+    let filter = Butterworth::low_pass(order, cutoff_hz, rate_hz);
+    // Edge transients of the forward-backward filter last a few cut-off periods.
+    let trim = (3.0 * rate_hz / cutoff_hz).ceil() as usize;
+    let pad = trim;
+
+    // Raw segments: split where the step is a gap; drop repeated timestamps.
+    let mut bounds = Vec::new();
+    let mut start = 0;
+    for k in 1..n {
+        if t[k] - t[k - 1] > opts.gap_factor * dt {
+            bounds.push((start, k));
+            start = k;
+        }
+    }
+    bounds.push((start, n));
+    if bounds.len() > 1 {
+        warnings.push(format!(
+            "the log has {} gap(s) longer than {:.0} ms; its {} pieces were conditioned separately",
+            bounds.len() - 1,
+            opts.gap_factor * dt * 1e3,
+            bounds.len()
+        ));
+    }
+    let nj = robot.joints.len();
+    let mut segments = Vec::new();
+    let mut dropped_secs = 0.0;
+    for &(a, b) in &bounds {
+        let span = t[b - 1] - t[a];
+        let m = (span / dt).floor() as usize + 1;
+        if m < 2 * trim + 20 {
+            dropped_secs += span;
+            continue;
+        }
+        let grid: Vec<f64> = (0..m).map(|i| t[a] + i as f64 * dt).collect();
+        // Strictly increasing times for interpolation.
+        let mut idx: Vec<usize> = Vec::with_capacity(b - a);
+        for k in a..b {
+            if idx.last().is_none_or(|&l| t[k] > t[l]) {
+                idx.push(k);
+            }
+        }
+        let ts: Vec<f64> = idx.iter().map(|&k| t[k]).collect();
+        let keep: Vec<usize> = (trim..m - trim).step_by(decimate).collect();
+        let mut seg = Segment { t_secs: keep.iter().map(|&i| grid[i]).collect(), ..Segment::default() };
+        for &i in &map {
+            let raw_q: Vec<f64> = idx.iter().map(|&k| log.position[i][k]).collect();
+            let raw_tau: Vec<f64> = idx.iter().map(|&k| log.effort[i][k]).collect();
+            let q = filter.filtfilt(&resample(&ts, &raw_q, &grid), pad);
+            let tau = filter.filtfilt(&resample(&ts, &raw_tau, &grid), pad);
+            let qd = derivative(&q, dt);
+            let qdd = derivative(&qd, dt);
+            seg.q.push(keep.iter().map(|&i| q[i]).collect());
+            seg.qd.push(keep.iter().map(|&i| qd[i]).collect());
+            seg.qdd.push(keep.iter().map(|&i| qdd[i]).collect());
+            seg.tau.push(keep.iter().map(|&i| tau[i]).collect());
+        }
+        segments.push(seg);
+    }
+    if dropped_secs > 0.0 {
+        warnings.push(format!(
+            "{dropped_secs:.2} s of the log in pieces shorter than {:.2} s were not used (the filter needs \
+             {:.2} s at each end)",
+            (2 * trim + 20) as f64 * dt,
+            trim as f64 * dt
+        ));
+    }
+    if segments.is_empty() {
+        return Err(log.bad(format!(
+            "no piece of the log is long enough: at {rate_hz:.1} Hz with a {cutoff_hz:.1} Hz cut-off, \
+             each piece needs at least {:.2} s without gaps",
+            (2 * trim + 20) as f64 * dt
+        )));
+    }
+    let mut joint_range = vec![0.0; nj];
+    let mut joint_rms_velocity = vec![0.0; nj];
+    let total: usize = segments.iter().map(Segment::len).sum();
+    for j in 0..nj {
+        let (mut lo, mut hi, mut ss) = (f64::INFINITY, f64::NEG_INFINITY, 0.0);
+        for s in &segments {
+            for k in 0..s.len() {
+                lo = lo.min(s.q[j][k]);
+                hi = hi.max(s.q[j][k]);
+                ss += s.qd[j][k] * s.qd[j][k];
+            }
+        }
+        joint_range[j] = hi - lo;
+        joint_rms_velocity[j] = (ss / total.max(1) as f64).sqrt();
+    }
+    Ok(Conditioned {
+        rate_hz,
+        cutoff_hz,
+        filter_order: order,
+        regressor_rate_hz: rate_hz / decimate as f64,
+        raw_samples: n,
+        segments,
+        joint_range,
+        joint_rms_velocity,
+        warnings,
+    })
+}

@@ -1,0 +1,77 @@
+//! The one error type of `sysid`.
+
+use std::path::PathBuf;
+
+/// Everything that can go wrong while identifying a robot. Variants carry what is needed to act
+/// on them: the file, the joint, the line or the time in the log.
+#[derive(Debug, thiserror::Error)]
+#[non_exhaustive]
+pub enum Error {
+    /// Reading or writing a file failed (the OS error is the source, printed by `{:#}`).
+    #[error("{}", path.display())]
+    Io {
+        /// The file.
+        path: PathBuf,
+        /// What the OS said.
+        source: std::io::Error,
+    },
+
+    /// A CSV log is malformed; `line` is 1-based.
+    #[error("{}:{line}: {message}", path.display())]
+    Csv {
+        /// The log file.
+        path: PathBuf,
+        /// Line of the problem (1-based).
+        line: usize,
+        /// What is wrong and what to do.
+        message: String,
+    },
+
+    /// The log can't be used as it is (no effort, NaNs, unmatched joints, too short ...).
+    #[error("{source_name}: {message}")]
+    BadLog {
+        /// The log (file or topic) the data came from.
+        source_name: String,
+        /// What is wrong and what to do.
+        message: String,
+    },
+
+    /// The log does not excite the robot enough to identify anything, or (with `strict`) the
+    /// diagnosis found problems.
+    #[error("{source_name}: the log is not exciting enough to identify the robot:\n{}", problems.iter().map(|p| format!("  - {p}")).collect::<Vec<_>>().join("\n"))]
+    NotExcited {
+        /// The log.
+        source_name: String,
+        /// One line per problem found.
+        problems: Vec<String>,
+    },
+
+    /// The URDF can't be used for identification or write-back.
+    #[error("{}: {message}", path.display())]
+    Urdf {
+        /// The URDF file.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
+
+    /// An option is out of its valid range.
+    #[error("invalid option {name}: {message}")]
+    Option {
+        /// Option name, e.g. `cutoff_hz`.
+        name: &'static str,
+        /// What is wrong.
+        message: String,
+    },
+
+    /// The estimation failed numerically.
+    #[error("estimation failed: {0}")]
+    Numerical(String),
+
+    /// A MuJoCo or URDF error from `twin-core`.
+    #[error(transparent)]
+    Core(#[from] twin_core::Error),
+}
+
+/// `Result` with [`Error`].
+pub type Result<T, E = Error> = std::result::Result<T, E>;

@@ -1,0 +1,299 @@
+//! The robot as the identification sees it: MuJoCo's compile of the URDF (the twin's own
+//! kinematics), the identified joints (1-DOF joints matched to the log by name), the moving
+//! links, and their CAD parameters in the standard (Pinocchio) order.
+
+use crate::error::{Error, Result};
+use nalgebra::{Matrix3, Quaternion, UnitQuaternion, Vector3};
+use std::path::{Path, PathBuf};
+use std::sync::Arc;
+use twin_core::mj::{JointType, Model, ObjType};
+
+/// Number of standard inertial parameters per link.
+pub const LINK_PARAMS: usize = 10;
+
+/// Names of the standard parameters of a link, in Pinocchio's order: mass, first moment
+/// `h = m·c`, inertia about the link frame origin.
+pub const LINK_PARAM_NAMES: [&str; LINK_PARAMS] = ["m", "hx", "hy", "hz", "Ixx", "Ixy", "Iyy", "Ixz", "Iyz", "Izz"];
+
+/// Standard parameters of one link: `[m, hx, hy, hz, Ixx, Ixy, Iyy, Ixz, Iyz, Izz]` (kg, kg·m,
+/// kg·m²), the inertia `Ī` about the link frame's origin, in the link frame.
+pub type LinkParams = [f64; LINK_PARAMS];
+
+/// Mass, centre of mass (link frame, m) and inertia about the centre of mass (link frame axes,
+/// kg·m²): the form URDF stores.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct MassProperties {
+    /// Mass, kg.
+    pub mass_kg: f64,
+    /// Centre of mass in the link frame, metres.
+    pub com_link: Vector3<f64>,
+    /// Inertia about the centre of mass, link frame axes, kg·m².
+    pub inertia_com: Matrix3<f64>,
+}
+
+impl MassProperties {
+    /// Standard parameters (parallel-axis theorem to the frame origin).
+    pub fn to_params(&self) -> LinkParams {
+        let m = self.mass_kg;
+        let c = self.com_link;
+        let i = self.inertia_com + m * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+        let h = m * c;
+        [m, h.x, h.y, h.z, i[(0, 0)], i[(0, 1)], i[(1, 1)], i[(0, 2)], i[(1, 2)], i[(2, 2)]]
+    }
+
+    /// From standard parameters; `None` for a non-positive mass.
+    pub fn from_params(p: &LinkParams) -> Option<MassProperties> {
+        let m = p[0];
+        if m.is_nan() || m <= 0.0 {
+            return None;
+        }
+        let c = Vector3::new(p[1], p[2], p[3]) / m;
+        let ibar = inertia_matrix(p);
+        let i = ibar - m * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+        Some(MassProperties { mass_kg: m, com_link: c, inertia_com: i })
+    }
+}
+
+/// The 3×3 inertia `Ī` of standard parameters.
+pub fn inertia_matrix(p: &LinkParams) -> Matrix3<f64> {
+    Matrix3::new(p[4], p[5], p[7], p[5], p[6], p[8], p[7], p[8], p[9])
+}
+
+/// Pseudo-inertia `J = [[Σ, h], [hᵀ, m]]`, `Σ = ½ tr(Ī)·1 − Ī`: positive definite exactly when
+/// the link is physically realisable (Wensing, Kim, Slotine 2017).
+pub fn pseudo_inertia(p: &LinkParams) -> nalgebra::Matrix4<f64> {
+    let ibar = inertia_matrix(p);
+    let sigma = 0.5 * ibar.trace() * Matrix3::identity() - ibar;
+    let mut j = nalgebra::Matrix4::zeros();
+    j.fixed_view_mut::<3, 3>(0, 0).copy_from(&sigma);
+    j[(0, 3)] = p[1];
+    j[(1, 3)] = p[2];
+    j[(2, 3)] = p[3];
+    j[(3, 0)] = p[1];
+    j[(3, 1)] = p[2];
+    j[(3, 2)] = p[3];
+    j[(3, 3)] = p[0];
+    j
+}
+
+/// Standard parameters of a pseudo-inertia.
+pub fn params_from_pseudo_inertia(j: &nalgebra::Matrix4<f64>) -> LinkParams {
+    let sigma = j.fixed_view::<3, 3>(0, 0).into_owned();
+    let ibar = sigma.trace() * Matrix3::identity() - sigma;
+    [
+        j[(3, 3)],
+        j[(0, 3)],
+        j[(1, 3)],
+        j[(2, 3)],
+        ibar[(0, 0)],
+        ibar[(0, 1)],
+        ibar[(1, 1)],
+        ibar[(0, 2)],
+        ibar[(1, 2)],
+        ibar[(2, 2)],
+    ]
+}
+
+/// Whether a link's parameters are physically valid (pseudo-inertia positive definite, i.e.
+/// mass > 0, inertia about the CoM positive definite, triangle inequalities hold).
+pub fn physically_valid(p: &LinkParams) -> bool {
+    pseudo_inertia(p).cholesky().is_some()
+}
+
+/// One identified joint: a 1-DOF joint of the model, matched to the log by name.
+#[derive(Debug, Clone)]
+pub struct JointInfo {
+    /// Joint name (URDF and log).
+    pub name: String,
+    /// MuJoCo DOF index.
+    pub dof: usize,
+    /// MuJoCo qpos address.
+    pub qpos_adr: usize,
+    /// URDF `<dynamics damping>` as compiled (N·m·s/rad).
+    pub damping: f64,
+    /// URDF `<dynamics friction>` as compiled (MuJoCo `frictionloss`, N·m).
+    pub friction: f64,
+    /// Armature of the model (URDF has none: 0).
+    pub armature: f64,
+}
+
+/// One moving link: a body moved by at least one identified joint.
+#[derive(Debug, Clone)]
+pub struct LinkInfo {
+    /// Link (body) name.
+    pub name: String,
+    /// MuJoCo body id.
+    pub body: usize,
+    /// Identified joints (indices into [`RobotModel::joints`]) that move this link.
+    pub ancestor_joints: Vec<usize>,
+    /// CAD parameters (from the URDF).
+    pub cad: LinkParams,
+}
+
+/// The robot model used for identification.
+#[derive(Debug, Clone)]
+pub struct RobotModel {
+    /// The URDF file.
+    pub urdf_path: PathBuf,
+    /// MuJoCo's compile of the URDF.
+    pub model: Arc<Model>,
+    /// 1-DOF joints, in MuJoCo DOF order.
+    pub joints: Vec<JointInfo>,
+    /// Moving links, in MuJoCo body order.
+    pub links: Vec<LinkInfo>,
+}
+
+/// Loads a URDF with MuJoCo's own importer and `extra_mujoco` (MJCF elements such as
+/// `<option>`) inside the URDF's `<mujoco>` extension. Links joined by fixed joints are kept as
+/// separate bodies (`fusestatic="false"`) so that each URDF link's inertia is its own.
+///
+/// # Errors
+/// [`Error::Io`], URDF checks of `twin-core`, MuJoCo's load error.
+pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    twin_core::urdf::validate(path, &text)?;
+    let doc = roxmltree::Document::parse(&text)
+        .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
+    let root = doc.root_element();
+    if root.children().any(|n| n.has_tag_name("mujoco")) {
+        return Err(Error::Urdf {
+            path: path.to_path_buf(),
+            message: "the URDF has its own <mujoco> block; remove it for `twin sysid` (it may fuse links and hide their inertias)".into(),
+        });
+    }
+    // Insert right after the <robot ...> start tag.
+    let start = root.range().start;
+    let close = text[start..].find('>').map(|i| start + i + 1).unwrap_or(start);
+    let dir = path
+        .parent()
+        .filter(|p| !p.as_os_str().is_empty())
+        .map(|p| p.canonicalize().unwrap_or_else(|_| p.to_path_buf()))
+        .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
+    let dir = dir.display().to_string().replace('"', "&quot;");
+    let injected = format!(
+        "{}<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" meshdir=\"{dir}/\"/>{extra_mujoco}</mujoco>{}",
+        &text[..close],
+        &text[close..]
+    );
+    let model = Model::from_xml_str(&injected).map_err(|e| match e {
+        twin_core::Error::Load { message, .. } => {
+            Error::Urdf { path: path.to_path_buf(), message: format!("MuJoCo could not load it: {message}") }
+        }
+        other => Error::Core(other),
+    })?;
+    Ok(model)
+}
+
+impl RobotModel {
+    /// Loads `urdf` for identification.
+    ///
+    /// # Errors
+    /// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] if the robot has no 1-DOF joint.
+    pub fn from_urdf(urdf: impl AsRef<Path>) -> Result<RobotModel> {
+        let path = urdf.as_ref();
+        let model = load_urdf_in_mujoco(path, "")?;
+        RobotModel::from_model(path, Arc::new(model))
+    }
+
+    /// Wraps an already compiled model of `urdf_path` (for callers that compile it themselves).
+    ///
+    /// # Errors
+    /// [`Error::Urdf`] if the robot has no 1-DOF joint.
+    pub fn from_model(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
+        let mut joints = Vec::new();
+        let mut joint_of_dof = vec![None; model.nv()];
+        for j in 0..model.njnt() {
+            if matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
+                let dof = model.jnt_dofadr()[j] as usize;
+                joint_of_dof[dof] = Some(joints.len());
+                joints.push(JointInfo {
+                    name: model.name(ObjType::Joint, j).to_string(),
+                    dof,
+                    qpos_adr: model.jnt_qposadr()[j] as usize,
+                    damping: model.dof_damping()[dof],
+                    friction: model.dof_frictionloss()[dof],
+                    armature: model.dof_armature()[dof],
+                });
+            }
+        }
+        if joints.is_empty() {
+            return Err(Error::Urdf {
+                path: urdf_path.to_path_buf(),
+                message: "the robot has no revolute or prismatic joint to identify".into(),
+            });
+        }
+        let mut links = Vec::new();
+        let parent = model.body_parentid();
+        for b in 1..model.nbody() {
+            let mut ancestor_joints = Vec::new();
+            let mut k = b;
+            while k != 0 {
+                let (adr, num) = (model.body_dofadr()[k], model.body_dofnum()[k]);
+                for d in 0..num.max(0) {
+                    if let Some(j) = joint_of_dof[(adr + d) as usize] {
+                        ancestor_joints.push(j);
+                    }
+                }
+                k = parent[k] as usize;
+            }
+            if ancestor_joints.is_empty() {
+                continue;
+            }
+            ancestor_joints.sort_unstable();
+            let q = model.body_iquat()[b];
+            let rot = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
+                .to_rotation_matrix()
+                .into_inner();
+            let d = model.body_inertia()[b];
+            let inertia_com = rot * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * rot.transpose();
+            let ipos = model.body_ipos()[b];
+            let cad = MassProperties {
+                mass_kg: model.body_mass()[b],
+                com_link: Vector3::new(ipos[0], ipos[1], ipos[2]),
+                inertia_com,
+            }
+            .to_params();
+            links.push(LinkInfo { name: model.name(ObjType::Body, b).to_string(), body: b, ancestor_joints, cad });
+        }
+        Ok(RobotModel { urdf_path: urdf_path.to_path_buf(), model, joints, links })
+    }
+
+    /// Index of joint `name` among [`RobotModel::joints`].
+    pub fn joint_index(&self, name: &str) -> Option<usize> {
+        self.joints.iter().position(|j| j.name == name)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn params_round_trip_through_mass_properties_and_pseudo_inertia() {
+        let mp = MassProperties {
+            mass_kg: 2.5,
+            com_link: Vector3::new(0.1, -0.02, 0.3),
+            inertia_com: Matrix3::new(0.02, 0.001, -0.002, 0.001, 0.03, 0.0005, -0.002, 0.0005, 0.015),
+        };
+        let p = mp.to_params();
+        // Pinocchio order: Ixy is entry 5, Iyy entry 6, Ixz entry 7.
+        let ibar = inertia_matrix(&p);
+        let c = mp.com_link;
+        let expected = mp.inertia_com + 2.5 * (c.norm_squared() * Matrix3::identity() - c * c.transpose());
+        assert!((ibar - expected).norm() < 1e-15);
+        assert_eq!(p[5], ibar[(0, 1)]);
+        assert_eq!(p[7], ibar[(0, 2)]);
+        let back = MassProperties::from_params(&p).unwrap();
+        assert!((back.com_link - mp.com_link).norm() < 1e-15);
+        assert!((back.inertia_com - mp.inertia_com).norm() < 1e-15);
+        let p2 = params_from_pseudo_inertia(&pseudo_inertia(&p));
+        for (a, b) in p.iter().zip(p2) {
+            assert!((a - b).abs() < 1e-15);
+        }
+        assert!(physically_valid(&p));
+        // A point mass far out with too little inertia about the origin is not realisable.
+        let mut bad = p;
+        bad[4] = 0.0;
+        assert!(!physically_valid(&bad));
+    }
+}

@@ -1,0 +1,248 @@
+//! The regressor: joint torques linear in the standard parameters, built from MuJoCo's
+//! kinematics of the twin.
+//!
+//! For each moving link `b`, MuJoCo gives the Jacobian `J_b` of the link frame's origin and its
+//! time derivative (`mj_jacBody`, `mj_jacDot`), hence the link's angular velocity `ω`, angular
+//! acceleration `α` and the classical acceleration `a` of its origin (gravity subtracted), all
+//! rotated into the link frame. The Newton–Euler wrench about the origin is linear in the
+//! link's standard parameters `π_b = [m, h, Ī]`:
+//!
+//! ```text
+//! f = m·a + α×h + ω×(ω×h)
+//! n = Ī·α + ω×(Ī·ω) + h×a
+//! ```
+//!
+//! and the joint torques are `τ = Σ_b J_bᵀ·[f; n] = Σ_b J_bᵀ·Y_b(ω, α, a)·π_b`, plus per joint
+//! viscous `q̇`, Coulomb `sign(q̇)` (or `tanh(q̇/ε)`), armature `q̈` and an optional constant
+//! offset.
+
+use crate::error::Result;
+use crate::model::{LINK_PARAMS, RobotModel};
+use twin_core::mj::Data;
+
+/// Friction columns of each joint.
+#[derive(Debug, Clone, Copy, PartialEq, Default)]
+pub struct FrictionModel {
+    /// Smooth the Coulomb term as `tanh(q̇/ε)` with this `ε` (rad/s or m/s); `None` uses
+    /// `sign(q̇)` (default: `None`; samples inside the velocity dead zone are dropped instead).
+    pub coulomb_smoothing: Option<f64>,
+    /// Add a constant torque offset per joint (sensor bias) (default: `false`).
+    pub offset: bool,
+}
+
+impl FrictionModel {
+    /// Columns per joint: viscous, Coulomb, armature (, offset).
+    pub fn columns_per_joint(&self) -> usize {
+        if self.offset { 4 } else { 3 }
+    }
+
+    /// Names of the per-joint columns.
+    pub fn column_names(&self) -> &'static [&'static str] {
+        if self.offset { &["viscous", "coulomb", "armature", "offset"] } else { &["viscous", "coulomb", "armature"] }
+    }
+
+    /// Coulomb regressor value at velocity `qd`.
+    pub fn coulomb(&self, qd: f64) -> f64 {
+        match self.coulomb_smoothing {
+            Some(eps) => (qd / eps).tanh(),
+            None => {
+                if qd > 0.0 {
+                    1.0
+                } else if qd < 0.0 {
+                    -1.0
+                } else {
+                    0.0
+                }
+            }
+        }
+    }
+}
+
+/// Column layout of the parameter vector: links first (10 each, Pinocchio order), then joints
+/// (viscous, Coulomb, armature, optional offset).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Layout {
+    /// Number of moving links.
+    pub links: usize,
+    /// Number of identified joints.
+    pub joints: usize,
+    /// Friction columns.
+    pub friction: FrictionModel,
+}
+
+impl Layout {
+    /// Total number of parameters.
+    pub fn ncols(&self) -> usize {
+        self.links * LINK_PARAMS + self.joints * self.friction.columns_per_joint()
+    }
+    /// First column of link `l`.
+    pub fn link_col(&self, l: usize) -> usize {
+        l * LINK_PARAMS
+    }
+    /// First column of joint `j`'s friction block.
+    pub fn joint_col(&self, j: usize) -> usize {
+        self.links * LINK_PARAMS + j * self.friction.columns_per_joint()
+    }
+}
+
+/// Computes regressor rows sample by sample.
+pub struct Regressor<'a> {
+    robot: &'a RobotModel,
+    data: Data,
+    layout: Layout,
+    jacp: Vec<f64>,
+    jacr: Vec<f64>,
+    jacp_dot: Vec<f64>,
+    jacr_dot: Vec<f64>,
+    qpos0: Vec<f64>,
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
+    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
+}
+
+/// `L(v)ᵀ·w` for the inertia columns `[Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`, where `Ī·v = L(v)·π_I`.
+fn inertia_cols(v: [f64; 3], w: [f64; 3]) -> [f64; 6] {
+    [
+        v[0] * w[0],
+        v[1] * w[0] + v[0] * w[1],
+        v[1] * w[1],
+        v[2] * w[0] + v[0] * w[2],
+        v[2] * w[1] + v[1] * w[2],
+        v[2] * w[2],
+    ]
+}
+
+impl<'a> Regressor<'a> {
+    /// A regressor for `robot` with the given friction columns.
+    ///
+    /// # Errors
+    /// [`crate::Error::Core`] if MuJoCo can't allocate its data.
+    pub fn new(robot: &'a RobotModel, friction: FrictionModel) -> Result<Regressor<'a>> {
+        let data = Data::new(robot.model.clone())?;
+        let nv = robot.model.nv();
+        Ok(Regressor {
+            robot,
+            data,
+            layout: Layout { links: robot.links.len(), joints: robot.joints.len(), friction },
+            jacp: vec![0.0; 3 * nv],
+            jacr: vec![0.0; 3 * nv],
+            jacp_dot: vec![0.0; 3 * nv],
+            jacr_dot: vec![0.0; 3 * nv],
+            qpos0: robot.model.qpos0().to_vec(),
+        })
+    }
+
+    /// The column layout.
+    pub fn layout(&self) -> Layout {
+        self.layout
+    }
+
+    /// Fills `rows` (row-major, one row per identified joint, [`Layout::ncols`] columns) for
+    /// joint positions `q`, velocities `qd`, accelerations `qdd` (one entry per identified
+    /// joint). Joints that are not identified (a free base) stay at their default pose, at rest.
+    ///
+    /// # Errors
+    /// [`crate::Error::Core`] if MuJoCo raises.
+    pub fn compute(&mut self, q: &[f64], qd: &[f64], qdd: &[f64], rows: &mut [f64]) -> Result<()> {
+        let robot = self.robot;
+        let nj = robot.joints.len();
+        let ncols = self.layout.ncols();
+        let nv = robot.model.nv();
+        debug_assert_eq!(rows.len(), nj * ncols);
+        rows.fill(0.0);
+        self.data.qpos_mut().copy_from_slice(&self.qpos0);
+        self.data.qvel_mut().fill(0.0);
+        for (j, joint) in robot.joints.iter().enumerate() {
+            self.data.qpos_mut()[joint.qpos_adr] = q[j];
+            self.data.qvel_mut()[joint.dof] = qd[j];
+        }
+        self.data.kinematics_with_velocity()?;
+        let g = robot.model.gravity();
+        for (l, link) in robot.links.iter().enumerate() {
+            self.data.body_jacobian_dot(
+                link.body,
+                &mut self.jacp,
+                &mut self.jacr,
+                &mut self.jacp_dot,
+                &mut self.jacr_dot,
+            )?;
+            let xmat = self.data.xmat()[link.body];
+            // world_from_link is row-major; link-frame coordinates are its transpose times world.
+            let to_link = |v: [f64; 3]| -> [f64; 3] {
+                [
+                    xmat[0] * v[0] + xmat[3] * v[1] + xmat[6] * v[2],
+                    xmat[1] * v[0] + xmat[4] * v[1] + xmat[7] * v[2],
+                    xmat[2] * v[0] + xmat[5] * v[1] + xmat[8] * v[2],
+                ]
+            };
+            let (mut w, mut al, mut acc) = ([0.0; 3], [0.0; 3], [-g[0], -g[1], -g[2]]);
+            for &j in &link.ancestor_joints {
+                let d = robot.joints[j].dof;
+                for r in 0..3 {
+                    let (jp, jr) = (self.jacp[r * nv + d], self.jacr[r * nv + d]);
+                    w[r] += jr * qd[j];
+                    al[r] += jr * qdd[j] + self.jacr_dot[r * nv + d] * qd[j];
+                    acc[r] += jp * qdd[j] + self.jacp_dot[r * nv + d] * qd[j];
+                }
+            }
+            let (w, al, acc) = (to_link(w), to_link(al), to_link(acc));
+            let w2 = dot(w, w);
+            let col = self.layout.link_col(l);
+            for &j in &link.ancestor_joints {
+                let d = robot.joints[j].dof;
+                let u = to_link([self.jacp[d], self.jacp[nv + d], self.jacp[2 * nv + d]]);
+                let v = to_link([self.jacr[d], self.jacr[nv + d], self.jacr[2 * nv + d]]);
+                let row = &mut rows[j * ncols + col..j * ncols + col + LINK_PARAMS];
+                row[0] += dot(u, acc);
+                // h columns: −α×u + ω(ω·u) − |ω|²u + a×v
+                let au = cross(al, u);
+                let av = cross(acc, v);
+                let wu = dot(w, u);
+                for k in 0..3 {
+                    row[1 + k] += -au[k] + w[k] * wu - w2 * u[k] + av[k];
+                }
+                // inertia columns: L(α)ᵀv − L(ω)ᵀ(ω×v)
+                let a_cols = inertia_cols(al, v);
+                let w_cols = inertia_cols(w, cross(w, v));
+                for k in 0..6 {
+                    row[4 + k] += a_cols[k] - w_cols[k];
+                }
+            }
+        }
+        let fm = self.layout.friction;
+        for j in 0..nj {
+            let c = j * ncols + self.layout.joint_col(j);
+            rows[c] = qd[j];
+            rows[c + 1] = fm.coulomb(qd[j]);
+            rows[c + 2] = qdd[j];
+            if fm.offset {
+                rows[c + 3] = 1.0;
+            }
+        }
+        Ok(())
+    }
+
+    /// Joint torques `Y·π` at one sample, for parameters `params` in [`Layout`] order.
+    ///
+    /// # Errors
+    /// As [`Regressor::compute`].
+    pub fn torques(
+        &mut self,
+        q: &[f64],
+        qd: &[f64],
+        qdd: &[f64],
+        params: &[f64],
+        rows: &mut Vec<f64>,
+    ) -> Result<Vec<f64>> {
+        let nj = self.robot.joints.len();
+        let ncols = self.layout.ncols();
+        rows.resize(nj * ncols, 0.0);
+        self.compute(q, qd, qdd, rows)?;
+        Ok((0..nj).map(|j| rows[j * ncols..(j + 1) * ncols].iter().zip(params).map(|(a, b)| a * b).sum()).collect())
+    }
+}

@@ -1,0 +1,141 @@
+//! The synthetic benchmark: the twin simulates a known robot (a 6-DOF arm; the shipped humanoid
+//! hung on a gantry) with MuJoCo, logs it with a 17-bit encoder, velocity noise and 1 % effort
+//! noise, and `sysid` starts from a URDF whose inertias and friction are off by 20–40 %.
+
+use std::path::{Path, PathBuf};
+use sysid::synth::{SynthOptions, perturbed_urdf, simulate};
+use sysid::{RobotModel, SysidOptions, identify, urdf_updates, validate};
+
+fn models_dir() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../models")
+}
+
+/// Replaces the values of the attributes write-back may change with `#`, so that two URDFs
+/// compare equal exactly when they differ only inside those attributes.
+fn mask_rewritable(text: &str) -> String {
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let mut ranges = Vec::new();
+    for node in doc.descendants().filter(|n| n.is_element()) {
+        let parent = node.parent_element().map(|p| p.tag_name().name()).unwrap_or("");
+        let names: &[&str] = match (parent, node.tag_name().name()) {
+            ("inertial", "origin") => &["xyz"],
+            ("inertial", "mass") => &["value"],
+            ("inertial", "inertia") => &["ixx", "ixy", "ixz", "iyy", "iyz", "izz"],
+            ("joint", "dynamics") => &["damping", "friction"],
+            _ => &[],
+        };
+        for name in names {
+            if let Some(a) = node.attribute_node(*name) {
+                ranges.push(a.range_value());
+            }
+        }
+    }
+    let mut out = text.to_string();
+    ranges.sort_by_key(|r| std::cmp::Reverse(r.start));
+    for r in ranges {
+        out.replace_range(r, "#");
+    }
+    out
+}
+
+struct Outcome {
+    worst_nrmse: f64,
+    worst_friction_error: f64,
+}
+
+fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
+    let truth = models_dir().join(truth_name);
+    let dir = tempfile::tempdir().unwrap();
+    let start = dir.path().join(truth_name);
+    perturbed_urdf(&truth, &start, 3).unwrap();
+    let original = std::fs::read_to_string(&start).unwrap();
+
+    let train = simulate(&truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
+    let held_out = simulate(&truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
+
+    let robot = RobotModel::from_urdf(&start).unwrap();
+    let true_robot = RobotModel::from_urdf(&truth).unwrap();
+    let opts = SysidOptions::default();
+    let ident = identify(&robot, &train, &opts).unwrap();
+    eprintln!("{}", ident.report.table());
+
+    // Held-out torque NRMSE ≤ 2 % on every joint, and much better than the starting URDF.
+    let nrmse = validate(&robot, &held_out, &opts, &[&ident.before, &ident.after]).unwrap();
+    let mut worst_nrmse: f64 = 0.0;
+    for (j, joint) in robot.joints.iter().enumerate() {
+        let (before, after) = (nrmse[0][j], nrmse[1][j]);
+        assert!(
+            after <= 0.02,
+            "{}: held-out NRMSE {:.2} % > 2 % (before {:.2} %)",
+            joint.name,
+            100.0 * after,
+            100.0 * before
+        );
+        assert!(after < 0.5 * before, "{}: {after} not better than {before}", joint.name);
+        worst_nrmse = worst_nrmse.max(after);
+    }
+    // Viscous and Coulomb friction within 10 % of the truth.
+    let mut worst_friction_error: f64 = 0.0;
+    for (j, joint) in true_robot.joints.iter().enumerate() {
+        let (viscous, coulomb, _) = ident.joint_friction(j);
+        for (what, got, want) in [("viscous", viscous, joint.damping), ("Coulomb", coulomb, joint.friction)] {
+            let err = (got / want - 1.0).abs();
+            assert!(err <= 0.10, "{}: {what} {got} vs true {want} ({:.1} %)", joint.name, 100.0 * err);
+            worst_friction_error = worst_friction_error.max(err);
+        }
+    }
+    // Every identified link physically valid.
+    for (l, link) in robot.links.iter().enumerate() {
+        assert!(sysid::model::physically_valid(&ident.link_params(l)), "{} not physically valid", link.name);
+        assert!(ident.report.links[l].physically_valid);
+    }
+
+    // Write-back: MuJoCo loads the updated URDF as it is (twin-core's URDF checks included), and
+    // it holds the identified values.
+    let (links, joints) = urdf_updates(&robot, &ident);
+    assert!(!links.is_empty() && joints.len() == robot.joints.len());
+    let outcome = sysid::writeback::update_urdf_file(&start, &links, &joints, false).unwrap();
+    let backup = outcome.backup.unwrap();
+    assert_eq!(std::fs::read_to_string(&backup).unwrap(), original);
+    twin_core::mj::Model::from_file(&start).unwrap();
+    let updated = RobotModel::from_urdf(&start).unwrap();
+    for (l, link) in updated.links.iter().enumerate() {
+        let written = link.cad;
+        let identified = ident.link_params(l);
+        for k in 0..10 {
+            let scale = identified[0].abs().max(1e-3) * if k == 0 { 1.0 } else { 1e-2 };
+            assert!(
+                (written[k] - identified[k]).abs() <= 1e-5 * scale.max(identified[k].abs()),
+                "{} parameter {k}: written {} vs identified {}",
+                link.name,
+                written[k],
+                identified[k]
+            );
+        }
+    }
+    // Only the rewritten attributes differ.
+    let new_text = std::fs::read_to_string(&start).unwrap();
+    assert_ne!(new_text, original);
+    assert_eq!(mask_rewritable(&new_text), mask_rewritable(&original));
+    Outcome { worst_nrmse, worst_friction_error }
+}
+
+#[test]
+fn arm_identification_meets_the_benchmark() {
+    let o = run_benchmark("arm6.urdf", 20.0);
+    eprintln!(
+        "arm: worst held-out NRMSE {:.2} %, worst friction error {:.1} %",
+        100.0 * o.worst_nrmse,
+        100.0 * o.worst_friction_error
+    );
+}
+
+#[test]
+fn humanoid_on_a_gantry_meets_the_benchmark() {
+    let o = run_benchmark("humanoid.urdf", 20.0);
+    eprintln!(
+        "humanoid: worst held-out NRMSE {:.2} %, worst friction error {:.1} %",
+        100.0 * o.worst_nrmse,
+        100.0 * o.worst_friction_error
+    );
+}

@@ -1,0 +1,147 @@
+//! `twin sysid`: identification from a CSV log, URDF write-back, reports, and refusals that
+//! leave the URDF untouched.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+use sysid::JointLog;
+use sysid::synth::{SynthOptions, simulate};
+
+fn arm_urdf() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("models/arm6.urdf")
+}
+
+fn twin(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twin")).current_dir(dir).args(args).output().expect("twin runs")
+}
+
+/// A temp dir with `arm6.urdf` (a copy of the true arm) and `train.csv` from its simulation.
+fn setup(train_secs: f64) -> (tempfile::TempDir, JointLog) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(arm_urdf(), dir.path().join("arm6.urdf")).unwrap();
+    let log = simulate(&arm_urdf(), &SynthOptions { duration_secs: train_secs, ..Default::default() }).unwrap();
+    log.write_csv(dir.path().join("train.csv")).unwrap();
+    (dir, log)
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+#[test]
+fn sysid_updates_the_urdf_and_writes_report_and_mjcf() {
+    let (dir, _) = setup(12.0);
+    let start = dir.path().join("arm6.urdf");
+    sysid::synth::perturbed_urdf(&arm_urdf(), &start, 5).unwrap();
+    let original = std::fs::read_to_string(&start).unwrap();
+    let val = simulate(&arm_urdf(), &SynthOptions { duration_secs: 6.0, seed: 9, ..Default::default() }).unwrap();
+    val.write_csv(dir.path().join("val.csv")).unwrap();
+    let out = twin(
+        dir.path(),
+        &[
+            "sysid",
+            "--log",
+            "train.csv",
+            "--update",
+            "arm6.urdf",
+            "--validate",
+            "val.csv",
+            "--report",
+            "r.json",
+            "--mjcf",
+            "out.xml",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("torque NRMSE on the held-out log"), "{stdout}");
+    assert!(stdout.contains("fixed base"), "{stdout}");
+    assert_eq!(std::fs::read_to_string(dir.path().join("arm6.urdf.bak")).unwrap(), original);
+    assert_ne!(std::fs::read_to_string(&start).unwrap(), original);
+
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap()).unwrap();
+    assert_eq!(report["base"], "fixed");
+    let validation = report["validation_nrmse"].as_array().unwrap();
+    assert_eq!(validation.len(), 6);
+    for row in validation {
+        let (before, after) = (row["before"].as_f64().unwrap(), row["after"].as_f64().unwrap());
+        assert!(after < 0.02 && after < before / 5.0, "{row}");
+    }
+    // The MJCF carries what URDF can't: armature (true value 0.02 on every joint).
+    let model = twin_core::mj::Model::from_file(dir.path().join("out.xml")).unwrap();
+    let elbow = model.require_id(twin_core::mj::ObjType::Joint, "elbow_joint").unwrap();
+    let armature = model.dof_armature()[model.jnt_dofadr()[elbow] as usize];
+    assert!((armature - 0.02).abs() < 0.005, "elbow armature {armature}");
+}
+
+#[test]
+fn sysid_dry_run_prints_a_diff_and_writes_nothing() {
+    let (dir, _) = setup(8.0);
+    let start = dir.path().join("arm6.urdf");
+    sysid::synth::perturbed_urdf(&arm_urdf(), &start, 6).unwrap();
+    let original = std::fs::read(&start).unwrap();
+    let out = twin(dir.path(), &["sysid", "--log", "train.csv", "--update", "arm6.urdf", "--dry-run"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("--- ") && stdout.contains("@@") && stdout.contains("+      <mass value="), "{stdout}");
+    assert_eq!(std::fs::read(&start).unwrap(), original);
+    assert!(!dir.path().join("arm6.urdf.bak").exists());
+}
+
+/// Runs `twin sysid` on a bad `log`: it must fail with `expected` in the message and leave the
+/// URDF byte-identical, with no backup.
+fn refuses(dir: &Path, log: &JointLog, extra: &[&str], expected: &str) {
+    log.write_csv(dir.join("bad.csv")).unwrap();
+    let urdf = dir.join("arm6.urdf");
+    let before = std::fs::read(&urdf).unwrap();
+    let mut args = vec!["sysid", "--log", "bad.csv", "--update", "arm6.urdf"];
+    args.extend_from_slice(extra);
+    let out = twin(dir, &args);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "accepted a bad log: {err}");
+    assert!(err.contains(expected), "expected `{expected}` in: {err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(std::fs::read(&urdf).unwrap(), before, "URDF changed");
+    assert!(!dir.join("arm6.urdf.bak").exists());
+}
+
+#[test]
+fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
+    let (dir, log) = setup(6.0);
+    let d = dir.path();
+
+    let mut no_effort = log.clone();
+    for e in &mut no_effort.effort {
+        e.fill(f64::NAN);
+    }
+    refuses(d, &no_effort, &[], "no effort (torque) for joint(s)");
+
+    let mut renamed = log.clone();
+    renamed.joint_names[2] = "joint_3".into();
+    refuses(d, &renamed, &[], "the robot's joint(s) \"elbow_joint\" are not in the log");
+
+    let mut still = log.clone();
+    for (j, q) in still.position.iter_mut().enumerate() {
+        q.fill(0.1 * j as f64);
+    }
+    refuses(d, &still, &[], "the robot stood still");
+
+    let mut nan = log.clone();
+    nan.position[1][1234] = f64::NAN;
+    refuses(d, &nan, &[], "position value(s) of joint \"shoulder_lift_joint\" are NaN");
+
+    refuses(d, &log, &["--base", "floating"], "floating-base identification needs");
+
+    // Strict: an effort logged with the opposite sign convention is a refusal.
+    let mut flipped = log.clone();
+    for e in &mut flipped.effort[2] {
+        *e = -*e;
+    }
+    refuses(d, &flipped, &["--strict"], "\"elbow_joint\": the logged effort has the opposite sign");
+
+    // Strict: a joint that barely moved is a refusal, not a warning.
+    let mut lazy = log.clone();
+    let q0 = lazy.position[5][0];
+    lazy.position[5].fill(q0);
+    refuses(d, &lazy, &["--strict"], "\"wrist_3_joint\" barely moved");
+}
