@@ -15,8 +15,9 @@ pub enum BaseArg {
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
-    /// The log: a CSV file with columns `time_sec`, then `<joint>/position`,
-    /// `<joint>/velocity` (optional), `<joint>/effort` per joint.
+    /// The log: a ROS 2 bag (rosbag2 folder or `.mcap`) with `sensor_msgs/msg/JointState`
+    /// (position, velocity, effort), or a CSV file with columns `time_sec`, then
+    /// `<joint>/position`, `<joint>/velocity` (optional), `<joint>/effort` per joint.
     #[arg(long, value_name = "LOG")]
     pub log: PathBuf,
     /// The robot's URDF: the model identified and the file updated (original kept as
@@ -68,13 +69,16 @@ fn read_log(path: &Path, topic: Option<&str>) -> anyhow::Result<JointLog> {
             }
             Ok(JointLog::read_csv(path)?)
         }
-        "mcap" => bail!(
-            "{}: reading ROS 2 MCAP logs is not available in this build yet; export the joint states as \
-             CSV (columns time_sec, <joint>/position, <joint>/velocity, <joint>/effort) and pass that",
-            path.display()
-        ),
+        _ if ext == "mcap" || path.is_dir() => {
+            let (log, warnings) = JointLog::read_mcap(path, topic)?;
+            for w in warnings {
+                eprintln!("warning: {w}");
+            }
+            Ok(log)
+        }
         _ => bail!(
-            "{}: unknown log format (expected .csv with columns time_sec, <joint>/position, \
+            "{}: unknown log format (expected a ROS 2 bag: a rosbag2 folder or a .mcap file with \
+             sensor_msgs/msg/JointState, or a .csv with columns time_sec, <joint>/position, \
              <joint>/velocity, <joint>/effort)",
             path.display()
         ),

@@ -270,3 +270,173 @@ mod tests {
         assert!(err.contains("unknown field `torque`"), "{err}");
     }
 }
+
+impl JointLog {
+    /// Reads `sensor_msgs/msg/JointState` from a ROS 2 bag (a rosbag2 folder or a bare `.mcap`).
+    /// `topic` picks the topic; without it the only JointState topic is used (`/joint_states`
+    /// when there are several). Publishers of one topic are merged by joint name; joints
+    /// published at different instants are put on the union of their times by linear
+    /// interpolation (conditioning resamples to a uniform grid afterwards anyway). Damage the
+    /// reader recovered from comes back as warnings.
+    ///
+    /// # Errors
+    /// [`Error::Core`] for unreadable or damaged (strict) files and a missing topic;
+    /// [`Error::BadLog`] when there is no JointState topic or several and none chosen.
+    pub fn read_mcap(path: impl AsRef<Path>, topic: Option<&str>) -> Result<(JointLog, Vec<String>)> {
+        use twin_core::log::{Log, ReadOptions};
+        let path = path.as_ref();
+        let log = Log::open(path, ReadOptions::default())?;
+        let source_name = path.display().to_string();
+        let topic = match topic {
+            Some(t) => t.to_string(),
+            None => {
+                let info = log.info()?;
+                let candidates: Vec<&str> = info
+                    .topics
+                    .iter()
+                    .filter(|t| t.type_name.ends_with("JointState"))
+                    .map(|t| t.topic.as_str())
+                    .collect();
+                match candidates.as_slice() {
+                    [one] => one.to_string(),
+                    [] => {
+                        return Err(Error::BadLog {
+                            source_name,
+                            message: "no sensor_msgs/msg/JointState topic in the log; record /joint_states".into(),
+                        });
+                    }
+                    many if many.contains(&"/joint_states") => "/joint_states".to_string(),
+                    many => {
+                        return Err(Error::BadLog {
+                            source_name,
+                            message: format!(
+                                "several JointState topics ({}): choose one with --topic",
+                                many.join(", ")
+                            ),
+                        });
+                    }
+                }
+            }
+        };
+        let series = log.joint_states(&topic)?;
+        // The series report includes the read report (damage recovered from).
+        let warnings = series.report.warnings();
+        let source = format!("{} topic {topic}", path.display());
+        Ok((JointLog::from_series(&series.joints, source), warnings))
+    }
+
+    /// Builds a log from per-joint series (each with its own sorted times).
+    pub fn from_series(joints: &[twin_core::log::JointSeries], source: impl Into<String>) -> JointLog {
+        let mut log = JointLog::new(joints.iter().map(|j| j.name.clone()).collect(), source);
+        let shared = joints.windows(2).all(|w| w[0].time_nanos == w[1].time_nanos);
+        if shared {
+            // One publisher (the usual case): copy as is.
+            log.t_nanos = joints.first().map(|j| j.time_nanos.clone()).unwrap_or_default();
+            for (k, j) in joints.iter().enumerate() {
+                log.position[k] = j.position.clone();
+                log.velocity[k] = j.velocity.clone();
+                log.effort[k] = j.effort.clone();
+            }
+            return log;
+        }
+        let mut times: Vec<i64> = joints.iter().flat_map(|j| j.time_nanos.iter().copied()).collect();
+        times.sort_unstable();
+        times.dedup();
+        for (k, j) in joints.iter().enumerate() {
+            log.position[k] = times.iter().map(|&t| interpolate(&j.time_nanos, &j.position, t)).collect();
+            log.velocity[k] = times.iter().map(|&t| interpolate(&j.time_nanos, &j.velocity, t)).collect();
+            log.effort[k] = times.iter().map(|&t| interpolate(&j.time_nanos, &j.effort, t)).collect();
+        }
+        log.t_nanos = times;
+        log
+    }
+}
+
+/// Linear interpolation of `values` (sampled at sorted `times`) at `t`; NaN outside the samples.
+fn interpolate(times: &[i64], values: &[f64], t: i64) -> f64 {
+    let i = times.partition_point(|&x| x < t);
+    match (times.get(i), i.checked_sub(1).and_then(|p| times.get(p).map(|&tp| (p, tp)))) {
+        (Some(&ti), _) if ti == t => values[i],
+        (Some(&ti), Some((p, tp))) => {
+            let a = (t - tp) as f64 / (ti - tp) as f64;
+            values[p] + a * (values[i] - values[p])
+        }
+        _ => f64::NAN,
+    }
+}
+
+impl JointLog {
+    /// Writes the log as a ROS 2 bag (`.mcap`, profile `ros2`): one `sensor_msgs/msg/JointState`
+    /// per sample on `topic`, header stamp = log time = the sample time. NaN velocities/efforts
+    /// of a joint that has none are written as empty arrays, as drivers that don't report them do.
+    ///
+    /// # Errors
+    /// [`Error::Core`] if the file can't be written.
+    pub fn write_mcap(&self, path: impl AsRef<Path>, topic: &str) -> Result<()> {
+        use twin_core::log::{Header, JointState, LogWriter, WriterOptions};
+        let mut writer = LogWriter::create(path.as_ref(), &WriterOptions::default())?;
+        let channel = writer.add_topic::<JointState>(topic)?;
+        let all_nan = |v: &[Vec<f64>]| v.iter().all(|j| j.iter().all(|x| x.is_nan()));
+        let (has_velocity, has_effort) = (!all_nan(&self.velocity), !all_nan(&self.effort));
+        let mut msg = JointState { name: self.joint_names.clone(), ..Default::default() };
+        for (k, &t) in self.t_nanos.iter().enumerate() {
+            msg.header = Header { stamp_nanos: t, frame_id: String::new() };
+            msg.position = self.position.iter().map(|j| j[k]).collect();
+            msg.velocity = if has_velocity { self.velocity.iter().map(|j| j[k]).collect() } else { Vec::new() };
+            msg.effort = if has_effort { self.effort.iter().map(|j| j[k]).collect() } else { Vec::new() };
+            writer.write(channel, t.max(0) as u64, &msg)?;
+        }
+        writer.finish()?;
+        Ok(())
+    }
+}
+
+#[cfg(test)]
+mod mcap_tests {
+    use super::*;
+
+    #[test]
+    fn ros2_bag_round_trip_keeps_every_value() {
+        let mut log = JointLog::new(vec!["a".into(), "b".into()], "test");
+        for k in 0..50 {
+            let t = k as f64 * 0.002;
+            log.push(1_000_000_000 + k * 2_000_000, &[t.sin(), -t], &[t.cos(), -1.0], &[0.5 * t, 2.0]);
+        }
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("js.mcap");
+        log.write_mcap(&path, "/joint_states").unwrap();
+        let (back, warnings) = JointLog::read_mcap(&path, None).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        assert_eq!(back.joint_names, log.joint_names);
+        assert_eq!(back.t_nanos, log.t_nanos);
+        assert_eq!(back.position, log.position);
+        assert_eq!(back.velocity, log.velocity);
+        assert_eq!(back.effort, log.effort);
+        assert!(back.source.contains("/joint_states"));
+    }
+
+    #[test]
+    fn publishers_at_different_instants_are_interpolated_onto_one_timeline() {
+        use twin_core::log::JointSeries;
+        let arm = JointSeries {
+            name: "arm".into(),
+            time_nanos: vec![0, 10, 20],
+            position: vec![0.0, 1.0, 2.0],
+            velocity: vec![f64::NAN; 3],
+            effort: vec![0.0, 10.0, 20.0],
+        };
+        let grip = JointSeries {
+            name: "grip".into(),
+            time_nanos: vec![5, 15],
+            position: vec![5.0, 15.0],
+            velocity: vec![f64::NAN; 2],
+            effort: vec![1.0, 3.0],
+        };
+        let log = JointLog::from_series(&[arm, grip], "t");
+        assert_eq!(log.t_nanos, vec![0, 5, 10, 15, 20]);
+        assert_eq!(log.position[0], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
+        assert!(log.position[1][0].is_nan() && log.position[1][4].is_nan());
+        assert_eq!(&log.position[1][1..4], &[5.0, 10.0, 15.0]);
+        assert_eq!(&log.effort[1][1..4], &[1.0, 2.0, 3.0]);
+    }
+}

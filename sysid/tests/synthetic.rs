@@ -3,6 +3,7 @@
 //! noise, and `sysid` starts from a URDF whose inertias and friction are off by 20–40 %.
 
 use std::path::{Path, PathBuf};
+use sysid::JointLog;
 use sysid::synth::{SynthOptions, perturbed_urdf, simulate};
 use sysid::{RobotModel, SysidOptions, identify, urdf_updates, validate};
 
@@ -52,6 +53,19 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
 
     let train = simulate(&truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
     let held_out = simulate(&truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
+    // The logs go through ROS 2 bags (/joint_states), as a real robot's would.
+    let bags = tempfile::tempdir().unwrap();
+    let through_bag = |mut log: JointLog, name: &str| {
+        // Stamped in wall-clock time as a robot would (a zero stamp means "unset" in ROS).
+        log.t_nanos.iter_mut().for_each(|t| *t += 1_700_000_000_000_000_000);
+        let path = bags.path().join(name);
+        log.write_mcap(&path, "/joint_states").unwrap();
+        let (back, warnings) = JointLog::read_mcap(&path, None).unwrap();
+        assert!(warnings.is_empty(), "{warnings:?}");
+        back
+    };
+    let train = through_bag(train, "train.mcap");
+    let held_out = through_bag(held_out, "held_out.mcap");
 
     let robot = RobotModel::from_urdf(&start).unwrap();
     let true_robot = RobotModel::from_urdf(&truth).unwrap();

@@ -1,5 +1,5 @@
-//! `twin sysid`: identification from a CSV log, URDF write-back, reports, and refusals that
-//! leave the URDF untouched.
+//! `twin sysid`: identification from a ROS 2 bag or a CSV log, URDF write-back, reports, and
+//! refusals that leave the URDF untouched.
 
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
@@ -14,12 +14,14 @@ fn twin(dir: &Path, args: &[&str]) -> Output {
     Command::new(env!("CARGO_BIN_EXE_twin")).current_dir(dir).args(args).output().expect("twin runs")
 }
 
-/// A temp dir with `arm6.urdf` (a copy of the true arm) and `train.csv` from its simulation.
+/// A temp dir with `arm6.urdf` (a copy of the true arm) and its simulation as `train.csv` and
+/// as a ROS 2 bag `train.mcap` (`/joint_states`).
 fn setup(train_secs: f64) -> (tempfile::TempDir, JointLog) {
     let dir = tempfile::tempdir().unwrap();
     std::fs::copy(arm_urdf(), dir.path().join("arm6.urdf")).unwrap();
     let log = simulate(&arm_urdf(), &SynthOptions { duration_secs: train_secs, ..Default::default() }).unwrap();
     log.write_csv(dir.path().join("train.csv")).unwrap();
+    log.write_mcap(dir.path().join("train.mcap"), "/joint_states").unwrap();
     (dir, log)
 }
 
@@ -34,17 +36,17 @@ fn sysid_updates_the_urdf_and_writes_report_and_mjcf() {
     sysid::synth::perturbed_urdf(&arm_urdf(), &start, 5).unwrap();
     let original = std::fs::read_to_string(&start).unwrap();
     let val = simulate(&arm_urdf(), &SynthOptions { duration_secs: 6.0, seed: 9, ..Default::default() }).unwrap();
-    val.write_csv(dir.path().join("val.csv")).unwrap();
+    val.write_mcap(dir.path().join("val.mcap"), "/joint_states").unwrap();
     let out = twin(
         dir.path(),
         &[
             "sysid",
             "--log",
-            "train.csv",
+            "train.mcap",
             "--update",
             "arm6.urdf",
             "--validate",
-            "val.csv",
+            "val.mcap",
             "--report",
             "r.json",
             "--mjcf",
