@@ -128,7 +128,28 @@ pub struct LinkInfo {
     pub ancestor_joints: Vec<usize>,
     /// CAD parameters (from the URDF).
     pub cad: LinkParams,
+    /// Moved by the floating base (in the free joint's subtree): its wrench shows in the base
+    /// rows. Always `false` for a fixed base.
+    pub floating: bool,
 }
+
+/// The free joint of a floating-base robot (MuJoCo's convention: `qpos` = position (m, world)
+/// then orientation quaternion `w x y z` (world_from_base); `qvel` = linear velocity of the base
+/// origin (world frame, m/s) then angular velocity (base frame, rad/s)).
+#[derive(Debug, Clone)]
+pub struct FloatingBase {
+    /// The base link (root link of the URDF).
+    pub name: String,
+    /// MuJoCo body id of the base link.
+    pub body: usize,
+    /// First of the free joint's 6 DOFs.
+    pub dof: usize,
+    /// First of the free joint's 7 qpos entries.
+    pub qpos_adr: usize,
+}
+
+/// Name of the free joint twin adds to the root link for floating-base identification.
+pub const FLOATING_JOINT: &str = "twin_floating_base";
 
 /// The robot model used for identification.
 #[derive(Debug, Clone)]
@@ -141,6 +162,66 @@ pub struct RobotModel {
     pub joints: Vec<JointInfo>,
     /// Moving links, in MuJoCo body order.
     pub links: Vec<LinkInfo>,
+    /// The free joint when the base is floating (`None`: fixed base).
+    pub floating: Option<FloatingBase>,
+}
+
+/// The root link of a URDF: the one link that is no joint's child.
+fn root_link(path: &Path, text: &str) -> Result<String> {
+    let doc = roxmltree::Document::parse(text).map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
+    let root = doc.root_element();
+    let children: Vec<&str> = root
+        .children()
+        .filter(|n| n.has_tag_name("joint"))
+        .filter_map(|j| j.children().find(|c| c.has_tag_name("child")).and_then(|c| c.attribute("link")))
+        .collect();
+    let roots: Vec<&str> = root
+        .children()
+        .filter(|n| n.has_tag_name("link"))
+        .filter_map(|l| l.attribute("name"))
+        .filter(|name| !children.contains(name))
+        .collect();
+    match roots.as_slice() {
+        [one] if *one == "world" => Err(Error::Urdf {
+            path: path.to_path_buf(),
+            message: "the URDF attaches its root to a link named \"world\": the base is fixed there, so \
+                      --base floating does not apply; identify it with --base fixed"
+                .into(),
+        }),
+        [one] => Ok(one.to_string()),
+        _ => Err(Error::Urdf {
+            path: path.to_path_buf(),
+            message: format!("expected exactly one root link (a link that is no joint's child), found {}", roots.len()),
+        }),
+    }
+}
+
+/// Standard parameters of body `b` as the model holds them.
+fn cad_params_of_body(model: &Model, b: usize) -> LinkParams {
+    let q = model.body_iquat()[b];
+    let rot =
+        UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3])).to_rotation_matrix().into_inner();
+    let d = model.body_inertia()[b];
+    let inertia_com = rot * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * rot.transpose();
+    let ipos = model.body_ipos()[b];
+    MassProperties { mass_kg: model.body_mass()[b], com_link: Vector3::new(ipos[0], ipos[1], ipos[2]), inertia_com }
+        .to_params()
+}
+
+/// As [`load_urdf_in_mujoco`], with a free joint ([`FLOATING_JOINT`]) between the world and the
+/// URDF's root link (a `world` link and a `floating` joint are added to the text MuJoCo reads;
+/// the file is not changed).
+///
+/// # Errors
+/// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] when the root link is `world`.
+pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<Model> {
+    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let root = root_link(path, &text)?;
+    let urdf_elements = format!(
+        "<link name=\"world\"/><joint name=\"{FLOATING_JOINT}\" type=\"floating\">\
+         <parent link=\"world\"/><child link=\"{root}\"/></joint>"
+    );
+    load_urdf_text(path, &text, extra_mujoco, &urdf_elements)
 }
 
 /// Loads a URDF with MuJoCo's own importer and `extra_mujoco` (MJCF elements such as
@@ -151,8 +232,14 @@ pub struct RobotModel {
 /// [`Error::Io`], URDF checks of `twin-core`, MuJoCo's load error.
 pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
     let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
-    twin_core::urdf::validate(path, &text)?;
-    let doc = roxmltree::Document::parse(&text)
+    load_urdf_text(path, &text, extra_mujoco, "")
+}
+
+/// Loads URDF `text` (of `path`) with `extra_mujoco` inside the injected `<mujoco>` block and
+/// `urdf_elements` right after it.
+fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, urdf_elements: &str) -> Result<Model> {
+    twin_core::urdf::validate(path, text)?;
+    let doc = roxmltree::Document::parse(text)
         .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
     let root = doc.root_element();
     if root.children().any(|n| n.has_tag_name("mujoco")) {
@@ -171,7 +258,7 @@ pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
         .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
     let dir = dir.display().to_string().replace('"', "&quot;");
     let injected = format!(
-        "{}<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" meshdir=\"{dir}/\"/>{extra_mujoco}</mujoco>{}",
+        "{}<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" meshdir=\"{dir}/\"/>{extra_mujoco}</mujoco>{urdf_elements}{}",
         &text[..close],
         &text[close..]
     );
@@ -193,6 +280,69 @@ impl RobotModel {
         let path = urdf.as_ref();
         let model = load_urdf_in_mujoco(path, "")?;
         RobotModel::from_model(path, Arc::new(model))
+    }
+
+    /// Loads `urdf` with a floating base: a free joint ([`FLOATING_JOINT`]) between the world
+    /// and the URDF's root link, which then moves with the logged base motion and whose inertia
+    /// is identified too.
+    ///
+    /// # Errors
+    /// As [`RobotModel::from_urdf`]; [`Error::Urdf`] when the root link is `world` (fixed).
+    pub fn from_urdf_floating(urdf: impl AsRef<Path>) -> Result<RobotModel> {
+        let path = urdf.as_ref();
+        let model = load_urdf_in_mujoco_floating(path, "")?;
+        RobotModel::from_model_floating(path, Arc::new(model))
+    }
+
+    /// Wraps a compiled model whose base link hangs from the world by a free joint: the free
+    /// joint's subtree is identified as a floating base.
+    ///
+    /// # Errors
+    /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
+    pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
+        let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
+        let free = (0..model.njnt()).find(|&j| matches!(model.joint_type(j), JointType::Free)).ok_or_else(|| {
+            Error::Urdf { path: urdf_path.to_path_buf(), message: "the model has no free joint for a floating base".into() }
+        })?;
+        let body = model.jnt_bodyid()[free] as usize;
+        let parent = model.body_parentid();
+        let in_subtree = |mut b: usize| {
+            while b != 0 {
+                if b == body {
+                    return true;
+                }
+                b = parent[b] as usize;
+            }
+            false
+        };
+        let mut links = Vec::new();
+        let mut existing = std::mem::take(&mut robot.links).into_iter().peekable();
+        for b in 1..model.nbody() {
+            let known = existing.next_if(|l| l.body == b);
+            let floating = in_subtree(b);
+            match known {
+                Some(mut l) => {
+                    l.floating = floating;
+                    links.push(l);
+                }
+                None if floating => links.push(LinkInfo {
+                    name: model.name(ObjType::Body, b).to_string(),
+                    body: b,
+                    ancestor_joints: Vec::new(),
+                    cad: cad_params_of_body(&model, b),
+                    floating: true,
+                }),
+                None => {}
+            }
+        }
+        robot.links = links;
+        robot.floating = Some(FloatingBase {
+            name: model.name(ObjType::Body, body).to_string(),
+            body,
+            dof: model.jnt_dofadr()[free] as usize,
+            qpos_adr: model.jnt_qposadr()[free] as usize,
+        });
+        Ok(robot)
     }
 
     /// Wraps an already compiled model of `urdf_path` (for callers that compile it themselves).
@@ -240,22 +390,16 @@ impl RobotModel {
                 continue;
             }
             ancestor_joints.sort_unstable();
-            let q = model.body_iquat()[b];
-            let rot = UnitQuaternion::from_quaternion(Quaternion::new(q[0], q[1], q[2], q[3]))
-                .to_rotation_matrix()
-                .into_inner();
-            let d = model.body_inertia()[b];
-            let inertia_com = rot * Matrix3::from_diagonal(&Vector3::new(d[0], d[1], d[2])) * rot.transpose();
-            let ipos = model.body_ipos()[b];
-            let cad = MassProperties {
-                mass_kg: model.body_mass()[b],
-                com_link: Vector3::new(ipos[0], ipos[1], ipos[2]),
-                inertia_com,
-            }
-            .to_params();
-            links.push(LinkInfo { name: model.name(ObjType::Body, b).to_string(), body: b, ancestor_joints, cad });
+            let cad = cad_params_of_body(&model, b);
+            links.push(LinkInfo {
+                name: model.name(ObjType::Body, b).to_string(),
+                body: b,
+                ancestor_joints,
+                cad,
+                floating: false,
+            });
         }
-        Ok(RobotModel { urdf_path: urdf_path.to_path_buf(), model, joints, links })
+        Ok(RobotModel { urdf_path: urdf_path.to_path_buf(), model, joints, links, floating: None })
     }
 
     /// Index of joint `name` among [`RobotModel::joints`].

@@ -85,6 +85,18 @@ impl Layout {
     }
 }
 
+/// State of a floating base at one sample, in MuJoCo's free-joint convention.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct BaseSample {
+    /// Position of the base origin (world, m), then orientation `w x y z` (world_from_base).
+    pub qpos: [f64; 7],
+    /// Linear velocity of the base origin (world frame, m/s), then angular velocity (base
+    /// frame, rad/s).
+    pub qvel: [f64; 6],
+    /// Time derivative of `qvel` (m/s², rad/s²).
+    pub qacc: [f64; 6],
+}
+
 /// Computes regressor rows sample by sample.
 pub struct Regressor<'a> {
     robot: &'a RobotModel,
@@ -142,18 +154,52 @@ impl<'a> Regressor<'a> {
         self.layout
     }
 
-    /// Fills `rows` (row-major, one row per identified joint, [`Layout::ncols`] columns) for
+    /// Rows per sample: one per identified joint, then 6 for a floating base (the free
+    /// joint's DOFs: force along the world axes, then torque about the base origin in base axes).
+    pub fn nrows(&self) -> usize {
+        self.robot.joints.len() + if self.robot.floating.is_some() { 6 } else { 0 }
+    }
+
+    /// Fills `rows` (row-major, [`Regressor::nrows`] rows, [`Layout::ncols`] columns) for
     /// joint positions `q`, velocities `qd`, accelerations `qdd` (one entry per identified
-    /// joint). Joints that are not identified (a free base) stay at their default pose, at rest.
+    /// joint). The base is at its default pose, at rest (a fixed base; a floating robot's free
+    /// joint too: use [`Regressor::compute_floating`] for it).
     ///
     /// # Errors
     /// [`crate::Error::Core`] if MuJoCo raises.
     pub fn compute(&mut self, q: &[f64], qd: &[f64], qdd: &[f64], rows: &mut [f64]) -> Result<()> {
+        self.compute_with(None, q, qd, qdd, rows)
+    }
+
+    /// As [`Regressor::compute`], the floating base in state `base`; the last 6 rows are the
+    /// free joint's.
+    ///
+    /// # Errors
+    /// As [`Regressor::compute`].
+    pub fn compute_floating(
+        &mut self,
+        base: &BaseSample,
+        q: &[f64],
+        qd: &[f64],
+        qdd: &[f64],
+        rows: &mut [f64],
+    ) -> Result<()> {
+        self.compute_with(Some(base), q, qd, qdd, rows)
+    }
+
+    fn compute_with(
+        &mut self,
+        base: Option<&BaseSample>,
+        q: &[f64],
+        qd: &[f64],
+        qdd: &[f64],
+        rows: &mut [f64],
+    ) -> Result<()> {
         let robot = self.robot;
         let nj = robot.joints.len();
         let ncols = self.layout.ncols();
         let nv = robot.model.nv();
-        debug_assert_eq!(rows.len(), nj * ncols);
+        debug_assert_eq!(rows.len(), self.nrows() * ncols);
         rows.fill(0.0);
         self.data.qpos_mut().copy_from_slice(&self.qpos0);
         self.data.qvel_mut().fill(0.0);
@@ -161,9 +207,25 @@ impl<'a> Regressor<'a> {
             self.data.qpos_mut()[joint.qpos_adr] = q[j];
             self.data.qvel_mut()[joint.dof] = qd[j];
         }
+        if let (Some(fb), Some(b)) = (&robot.floating, base) {
+            self.data.qpos_mut()[fb.qpos_adr..fb.qpos_adr + 7].copy_from_slice(&b.qpos);
+            self.data.qvel_mut()[fb.dof..fb.dof + 6].copy_from_slice(&b.qvel);
+        }
         self.data.kinematics_with_velocity()?;
         let g = robot.model.gravity();
+        // (dof, row, velocity, acceleration) of each DOF that moves the current link.
+        let mut dofs: Vec<(usize, usize, f64, f64)> = Vec::with_capacity(nj + 6);
         for (l, link) in robot.links.iter().enumerate() {
+            dofs.clear();
+            for &j in &link.ancestor_joints {
+                dofs.push((robot.joints[j].dof, j, qd[j], qdd[j]));
+            }
+            if let (true, Some(fb)) = (link.floating, &robot.floating) {
+                let (v, a) = base.map_or(([0.0; 6], [0.0; 6]), |b| (b.qvel, b.qacc));
+                for k in 0..6 {
+                    dofs.push((fb.dof + k, nj + k, v[k], a[k]));
+                }
+            }
             self.data.body_jacobian_dot(
                 link.body,
                 &mut self.jacp,
@@ -181,23 +243,21 @@ impl<'a> Regressor<'a> {
                 ]
             };
             let (mut w, mut al, mut acc) = ([0.0; 3], [0.0; 3], [-g[0], -g[1], -g[2]]);
-            for &j in &link.ancestor_joints {
-                let d = robot.joints[j].dof;
+            for &(d, _, v, a) in &dofs {
                 for r in 0..3 {
                     let (jp, jr) = (self.jacp[r * nv + d], self.jacr[r * nv + d]);
-                    w[r] += jr * qd[j];
-                    al[r] += jr * qdd[j] + self.jacr_dot[r * nv + d] * qd[j];
-                    acc[r] += jp * qdd[j] + self.jacp_dot[r * nv + d] * qd[j];
+                    w[r] += jr * v;
+                    al[r] += jr * a + self.jacr_dot[r * nv + d] * v;
+                    acc[r] += jp * a + self.jacp_dot[r * nv + d] * v;
                 }
             }
             let (w, al, acc) = (to_link(w), to_link(al), to_link(acc));
             let w2 = dot(w, w);
             let col = self.layout.link_col(l);
-            for &j in &link.ancestor_joints {
-                let d = robot.joints[j].dof;
+            for &(d, row_idx, _, _) in &dofs {
                 let u = to_link([self.jacp[d], self.jacp[nv + d], self.jacp[2 * nv + d]]);
                 let v = to_link([self.jacr[d], self.jacr[nv + d], self.jacr[2 * nv + d]]);
-                let row = &mut rows[j * ncols + col..j * ncols + col + LINK_PARAMS];
+                let row = &mut rows[row_idx * ncols + col..row_idx * ncols + col + LINK_PARAMS];
                 row[0] += dot(u, acc);
                 // h columns: −α×u + ω(ω·u) − |ω|²u + a×v
                 let au = cross(al, u);
@@ -227,6 +287,65 @@ impl<'a> Regressor<'a> {
         Ok(())
     }
 
+    /// Generalized forces `Jᵀ·w` (one per row, as [`Regressor::nrows`]) of external wrenches
+    /// at the pose of the last [`Regressor::compute`]/[`Regressor::compute_floating`] call.
+    /// Each wrench is `(body, [fx, fy, fz, nx, ny, nz])`, force (N) and torque (N·m) expressed
+    /// in the body's frame, the torque about the body frame's origin.
+    ///
+    /// # Errors
+    /// [`crate::Error::Core`] for a bad body id.
+    pub fn external_forces(&mut self, wrenches: &[(usize, [f64; 6])], out: &mut [f64]) -> Result<()> {
+        let robot = self.robot;
+        let nv = robot.model.nv();
+        out.fill(0.0);
+        for &(body, w) in wrenches {
+            self.data.body_jacobian_dot(body, &mut self.jacp, &mut self.jacr, &mut self.jacp_dot, &mut self.jacr_dot)?;
+            let x = self.data.xmat()[body];
+            let to_world = |v: [f64; 3]| -> [f64; 3] {
+                [
+                    x[0] * v[0] + x[1] * v[1] + x[2] * v[2],
+                    x[3] * v[0] + x[4] * v[1] + x[5] * v[2],
+                    x[6] * v[0] + x[7] * v[1] + x[8] * v[2],
+                ]
+            };
+            let f = to_world([w[0], w[1], w[2]]);
+            let n = to_world([w[3], w[4], w[5]]);
+            let mut add = |d: usize, row: usize| {
+                out[row] += (0..3).map(|r| self.jacp[r * nv + d] * f[r] + self.jacr[r * nv + d] * n[r]).sum::<f64>();
+            };
+            for (j, joint) in robot.joints.iter().enumerate() {
+                add(joint.dof, j);
+            }
+            if let Some(fb) = &robot.floating {
+                for k in 0..6 {
+                    add(fb.dof + k, robot.joints.len() + k);
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Generalized forces `Y·π` at one sample (one per row, as [`Regressor::nrows`]), for
+    /// parameters `params` in [`Layout`] order; `base` for a floating base.
+    ///
+    /// # Errors
+    /// As [`Regressor::compute`].
+    pub fn torques_with(
+        &mut self,
+        base: Option<&BaseSample>,
+        q: &[f64],
+        qd: &[f64],
+        qdd: &[f64],
+        params: &[f64],
+        rows: &mut Vec<f64>,
+    ) -> Result<Vec<f64>> {
+        let nr = self.nrows();
+        let ncols = self.layout.ncols();
+        rows.resize(nr * ncols, 0.0);
+        self.compute_with(base, q, qd, qdd, rows)?;
+        Ok((0..nr).map(|j| rows[j * ncols..(j + 1) * ncols].iter().zip(params).map(|(a, b)| a * b).sum()).collect())
+    }
+
     /// Joint torques `Y·π` at one sample, for parameters `params` in [`Layout`] order.
     ///
     /// # Errors
@@ -240,9 +359,8 @@ impl<'a> Regressor<'a> {
         rows: &mut Vec<f64>,
     ) -> Result<Vec<f64>> {
         let nj = self.robot.joints.len();
-        let ncols = self.layout.ncols();
-        rows.resize(nj * ncols, 0.0);
-        self.compute(q, qd, qdd, rows)?;
-        Ok((0..nj).map(|j| rows[j * ncols..(j + 1) * ncols].iter().zip(params).map(|(a, b)| a * b).sum()).collect())
+        let mut t = self.torques_with(None, q, qd, qdd, params, rows)?;
+        t.truncate(nj);
+        Ok(t)
     }
 }

@@ -241,3 +241,42 @@ pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
     let new = crate::writeback::rewrite_urdf(src, &text, &links, &joints)?;
     crate::writeback::write_atomic(dst, new.as_bytes())
 }
+
+/// MuJoCo's `xfrc_applied` entry (world frame, force then torque about the body's centre of
+/// mass) of a wrench `[f; n]` expressed in the body frame, torque about the body origin.
+/// `world_from_body` is the body's row-major `xmat`, `origin` its `xpos`, `com` its `xipos`.
+pub fn xfrc_from_body_wrench(wrench_body: [f64; 6], world_from_body: [f64; 9], origin: [f64; 3], com: [f64; 3]) -> [f64; 6] {
+    let r = world_from_body;
+    let rot = |v: [f64; 3]| {
+        [
+            r[0] * v[0] + r[1] * v[1] + r[2] * v[2],
+            r[3] * v[0] + r[4] * v[1] + r[5] * v[2],
+            r[6] * v[0] + r[7] * v[1] + r[8] * v[2],
+        ]
+    };
+    let f = rot([wrench_body[0], wrench_body[1], wrench_body[2]]);
+    let n = rot([wrench_body[3], wrench_body[4], wrench_body[5]]);
+    // Torque about the CoM = torque about the origin + (origin − com) × f.
+    let d = [origin[0] - com[0], origin[1] - com[1], origin[2] - com[2]];
+    let c = [d[1] * f[2] - d[2] * f[1], d[2] * f[0] - d[0] * f[2], d[0] * f[1] - d[1] * f[0]];
+    [f[0], f[1], f[2], n[0] + c[0], n[1] + c[1], n[2] + c[2]]
+}
+
+/// The body-frame wrench (torque about the body origin) of an `xfrc_applied`-style world
+/// wrench at the centre of mass: the inverse of [`xfrc_from_body_wrench`].
+pub fn body_wrench_from_xfrc(xfrc: [f64; 6], world_from_body: [f64; 9], origin: [f64; 3], com: [f64; 3]) -> [f64; 6] {
+    let r = world_from_body;
+    let f = [xfrc[0], xfrc[1], xfrc[2]];
+    let d = [com[0] - origin[0], com[1] - origin[1], com[2] - origin[2]];
+    let c = [d[1] * f[2] - d[2] * f[1], d[2] * f[0] - d[0] * f[2], d[0] * f[1] - d[1] * f[0]];
+    let n = [xfrc[3] + c[0], xfrc[4] + c[1], xfrc[5] + c[2]];
+    let rot_t = |v: [f64; 3]| {
+        [
+            r[0] * v[0] + r[3] * v[1] + r[6] * v[2],
+            r[1] * v[0] + r[4] * v[1] + r[7] * v[2],
+            r[2] * v[0] + r[5] * v[1] + r[8] * v[2],
+        ]
+    };
+    let (fb, nb) = (rot_t(f), rot_t(n));
+    [fb[0], fb[1], fb[2], nb[0], nb[1], nb[2]]
+}

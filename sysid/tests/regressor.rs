@@ -127,3 +127,104 @@ fn regressor_on_a_free_base_model_matches_inverse_dynamics_of_the_joints() {
         assert!((tau[j] - expected).abs() < 1e-9 * (1.0 + expected.abs()), "{}: {} vs {expected}", joint.name, tau[j]);
     }
 }
+
+/// Floating base: with MuJoCo's free joint moving (random pose, twist and acceleration) and
+/// known external wrenches applied through `xfrc_applied`, the regressor's rows (6 base rows
+/// included) equal MuJoCo's inverse dynamics, and `Y·π − Jᵀ·w` equals the applied joint torques
+/// and zero on the base: the equation `twin sysid --base floating` fits.
+#[test]
+fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
+    use sysid::regressor::BaseSample;
+    use sysid::synth::xfrc_from_body_wrench;
+    let urdf = models_dir().join("humanoid.urdf");
+    let base =
+        sysid::model::load_urdf_in_mujoco_floating(&urdf, r#"<option><flag constraint="disable"/></option>"#).unwrap();
+    let mut edit = base.edit().unwrap();
+    for dof in 0..base.nv() {
+        edit.set_dof_frictionloss(dof, 0.0).unwrap();
+        edit.set_dof_armature(dof, if dof < 6 { 0.0 } else { 0.01 + 0.003 * dof as f64 }).unwrap();
+        edit.set_dof_damping(dof, if dof < 6 { 0.0 } else { 0.5 + 0.1 * dof as f64 }).unwrap();
+    }
+    let model = Arc::new(edit.finish().unwrap());
+    let robot = RobotModel::from_model_floating(&urdf, model.clone()).unwrap();
+    let fb = robot.floating.clone().unwrap();
+    assert_eq!(fb.name, "pelvis");
+    assert_eq!(robot.joints.len() + 6, model.nv());
+    assert!(robot.links.iter().any(|l| l.name == "pelvis" && l.floating && l.ancestor_joints.is_empty()));
+    let mut reg = Regressor::new(&robot, FrictionModel::default()).unwrap();
+    assert_eq!(reg.nrows(), model.nv());
+    let layout = reg.layout();
+    let mut params = vec![0.0; layout.ncols()];
+    for (l, link) in robot.links.iter().enumerate() {
+        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
+    }
+    for (j, joint) in robot.joints.iter().enumerate() {
+        let c = layout.joint_col(j);
+        params[c] = joint.damping;
+        params[c + 2] = joint.armature;
+    }
+    let wrench_bodies: Vec<usize> = ["left_foot_link", "right_foot_link", "left_forearm_link", "pelvis"]
+        .iter()
+        .filter_map(|n| model.id(twin_core::mj::ObjType::Body, n))
+        .collect();
+    assert!(wrench_bodies.len() >= 2, "humanoid bodies renamed?");
+    let mut data = Data::new(model.clone()).unwrap();
+    let nj = robot.joints.len();
+    let mut rng = 11u64;
+    let (mut rows, mut ext) = (Vec::new(), vec![0.0; reg.nrows()]);
+    let mut worst = 0.0f64;
+    for _ in 0..10 {
+        let q: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 1.2).collect();
+        let qd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 3.0).collect();
+        let tau_joint: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 20.0).collect();
+        let mut quat = [1.0 + lcg(&mut rng), lcg(&mut rng), lcg(&mut rng), lcg(&mut rng)];
+        let norm = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
+        quat.iter_mut().for_each(|x| *x /= norm);
+        let mut base_qpos = [lcg(&mut rng), lcg(&mut rng), 1.0 + lcg(&mut rng), 0.0, 0.0, 0.0, 0.0];
+        base_qpos[3..].copy_from_slice(&quat);
+        let base_qvel: [f64; 6] = std::array::from_fn(|_| lcg(&mut rng) * 2.0);
+        data.qpos_mut()[fb.qpos_adr..fb.qpos_adr + 7].copy_from_slice(&base_qpos);
+        data.qvel_mut()[fb.dof..fb.dof + 6].copy_from_slice(&base_qvel);
+        data.qfrc_applied_mut().fill(0.0);
+        for (j, joint) in robot.joints.iter().enumerate() {
+            data.qpos_mut()[joint.qpos_adr] = q[j];
+            data.qvel_mut()[joint.dof] = qd[j];
+            data.qfrc_applied_mut()[joint.dof] = tau_joint[j];
+        }
+        // Wrenches in body frames (torque about the body origin), applied as MuJoCo's
+        // xfrc_applied (world frame, at the CoM) at this pose.
+        data.kinematics_with_velocity().unwrap();
+        let wrenches: Vec<(usize, [f64; 6])> =
+            wrench_bodies.iter().map(|&b| (b, std::array::from_fn(|k| lcg(&mut rng) * if k < 3 { 50.0 } else { 5.0 }))).collect();
+        data.xfrc_applied_mut().iter_mut().for_each(|x| *x = [0.0; 6]);
+        for &(b, w) in &wrenches {
+            let x = xfrc_from_body_wrench(w, data.xmat()[b], data.xpos()[b], data.xipos()[b]);
+            data.xfrc_applied_mut()[b] = x;
+        }
+        data.forward().unwrap();
+        let qacc = data.qacc().to_vec();
+        let qdd: Vec<f64> = robot.joints.iter().map(|j| qacc[j.dof]).collect();
+        let sample = BaseSample {
+            qpos: base_qpos,
+            qvel: base_qvel,
+            qacc: std::array::from_fn(|k| qacc[fb.dof + k]),
+        };
+        let tau = reg.torques_with(Some(&sample), &q, &qd, &qdd, &params, &mut rows).unwrap();
+        reg.external_forces(&wrenches, &mut ext).unwrap();
+        data.inverse().unwrap();
+        let dof_of_row = |r: usize| if r < nj { robot.joints[r].dof } else { fb.dof + r - nj };
+        for r in 0..reg.nrows() {
+            let d = dof_of_row(r);
+            let inverse = data.qfrc_inverse()[d];
+            let applied = if r < nj { tau_joint[r] } else { 0.0 };
+            let e1 = (tau[r] - inverse).abs() / (1.0 + inverse.abs());
+            let e2 = (tau[r] - ext[r] - applied).abs() / (1.0 + tau[r].abs());
+            worst = worst.max(e1).max(e2);
+            assert!(e1 < 1e-9, "row {r} (dof {d}): Y·π = {} but qfrc_inverse = {inverse}", tau[r]);
+            assert!(e2 < 1e-9, "row {r} (dof {d}): Y·π − Jᵀw = {} but applied {applied}", tau[r] - ext[r]);
+        }
+        // The wrench term matters: without it the base rows would not balance.
+        assert!((nj..reg.nrows()).any(|r| ext[r].abs() > 1.0));
+    }
+    eprintln!("floating humanoid: worst relative error {worst:e}");
+}
