@@ -4,7 +4,94 @@
 use crate::error::{Error, Result};
 use crate::log::JointLog;
 use crate::model::RobotModel;
+use crate::regressor::BaseSample;
 use crate::signal::{Butterworth, derivative, median_step, resample};
+
+/// `a ⊗ b` of quaternions `w x y z`.
+fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+/// Base samples on `grid` (seconds from the joint log's first sample, `t0_nanos`): the pose
+/// resampled (quaternion signs made continuous), filtered, the quaternion normalised; the
+/// linear velocity (world) and its derivative from the position, the angular velocity in the
+/// base frame `ω = 2·vec(q* ⊗ q̇)` and its derivative.
+fn condition_base(
+    base: &crate::log::BaseTrajectory,
+    t0_nanos: i64,
+    grid: &[f64],
+    filter: &Butterworth,
+    pad: usize,
+    dt: f64,
+) -> Vec<BaseSample> {
+    let tb: Vec<f64> = base.t_nanos.iter().map(|&x| (x - t0_nanos) as f64 * 1e-9).collect();
+    let mut quats = base.orientation_wxyz.clone();
+    for k in 1..quats.len() {
+        let d: f64 = (0..4).map(|i| quats[k][i] * quats[k - 1][i]).sum();
+        if d < 0.0 {
+            quats[k].iter_mut().for_each(|x| *x = -*x);
+        }
+    }
+    let pos: Vec<Vec<f64>> = (0..3)
+        .map(|i| filter.filtfilt(&resample(&tb, &base.position.iter().map(|p| p[i]).collect::<Vec<_>>(), grid), pad))
+        .collect();
+    let quat: Vec<Vec<f64>> = (0..4)
+        .map(|i| filter.filtfilt(&resample(&tb, &quats.iter().map(|q| q[i]).collect::<Vec<_>>(), grid), pad))
+        .collect();
+    let m = grid.len();
+    let q: Vec<[f64; 4]> = (0..m)
+        .map(|k| {
+            let v = [quat[0][k], quat[1][k], quat[2][k], quat[3][k]];
+            let n = v.iter().map(|x| x * x).sum::<f64>().sqrt();
+            v.map(|x| x / n)
+        })
+        .collect();
+    let qdot: Vec<Vec<f64>> = (0..4).map(|i| derivative(&q.iter().map(|x| x[i]).collect::<Vec<_>>(), dt)).collect();
+    let omega: Vec<[f64; 3]> = (0..m)
+        .map(|k| {
+            let conj = [q[k][0], -q[k][1], -q[k][2], -q[k][3]];
+            let p = quat_mul(conj, [qdot[0][k], qdot[1][k], qdot[2][k], qdot[3][k]]);
+            [2.0 * p[1], 2.0 * p[2], 2.0 * p[3]]
+        })
+        .collect();
+    let vel: Vec<Vec<f64>> = pos.iter().map(|p| derivative(p, dt)).collect();
+    let acc: Vec<Vec<f64>> = vel.iter().map(|v| derivative(v, dt)).collect();
+    let alpha: Vec<Vec<f64>> = (0..3).map(|i| derivative(&omega.iter().map(|w| w[i]).collect::<Vec<_>>(), dt)).collect();
+    (0..m)
+        .map(|k| BaseSample {
+            qpos: [pos[0][k], pos[1][k], pos[2][k], q[k][0], q[k][1], q[k][2], q[k][3]],
+            qvel: [vel[0][k], vel[1][k], vel[2][k], omega[k][0], omega[k][1], omega[k][2]],
+            qacc: [acc[0][k], acc[1][k], acc[2][k], alpha[0][k], alpha[1][k], alpha[2][k]],
+        })
+        .collect()
+}
+
+/// A wrench series on `grid`: linear interpolation inside the topic's span, zero outside (no
+/// contact), then the effort filter.
+fn condition_wrench(
+    w: &crate::log::WrenchSeries,
+    t0_nanos: i64,
+    grid: &[f64],
+    filter: &Butterworth,
+    pad: usize,
+) -> Vec<[f64; 6]> {
+    let tw: Vec<f64> = w.t_nanos.iter().map(|&x| (x - t0_nanos) as f64 * 1e-9).collect();
+    let (first, last) = (tw[0], tw[tw.len() - 1]);
+    let comps: Vec<Vec<f64>> = (0..6)
+        .map(|i| {
+            let raw = resample(&tw, &w.wrench.iter().map(|x| x[i]).collect::<Vec<_>>(), grid);
+            let raw: Vec<f64> =
+                raw.iter().zip(grid).map(|(&v, &g)| if g < first || g > last { 0.0 } else { v }).collect();
+            filter.filtfilt(&raw, pad)
+        })
+        .collect();
+    (0..grid.len()).map(|k| std::array::from_fn(|i| comps[i][k])).collect()
+}
 
 /// Signal-conditioning options.
 #[derive(Debug, Clone, PartialEq)]
@@ -43,6 +130,12 @@ pub struct Segment {
     pub qdd: Vec<Vec<f64>>,
     /// Filtered efforts.
     pub tau: Vec<Vec<f64>>,
+    /// Floating base state per sample (empty for a fixed base): pose filtered like the joint
+    /// positions, velocity and acceleration differentiated from it, in MuJoCo's free-joint form.
+    pub base: Vec<BaseSample>,
+    /// External wrenches `[wrench][sample]`, filtered like the efforts (body frame, torque about
+    /// the body origin), one series per [`JointLog::wrenches`] entry.
+    pub wrench: Vec<Vec<[f64; 6]>>,
 }
 
 impl Segment {
@@ -193,15 +286,43 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
     let pad = trim;
 
     // Raw segments: split where the step is a gap; drop repeated timestamps.
+    // A joint sample inside a gap of the base odometry is a gap too (never bridged).
+    let in_base_gap: Vec<bool> = match &log.base {
+        Some(base) => {
+            let tb: Vec<f64> = base.t_nanos.iter().map(|&x| (x - t0) as f64 * 1e-9).collect();
+            let step = median_step(&tb).unwrap_or(dt);
+            t.iter()
+                .map(|&x| {
+                    let i = tb.partition_point(|&b| b < x);
+                    i == 0 && tb[0] > x
+                        || i >= tb.len()
+                        || (i > 0 && tb[i] - tb[i - 1] > opts.gap_factor * step)
+                })
+                .collect()
+        }
+        None => vec![false; n],
+    };
     let mut bounds = Vec::new();
-    let mut start = 0;
-    for k in 1..n {
-        if t[k] - t[k - 1] > opts.gap_factor * dt {
-            bounds.push((start, k));
-            start = k;
+    let mut start = None;
+    for k in 0..n {
+        if in_base_gap[k] {
+            if let Some(s0) = start.take() {
+                bounds.push((s0, k));
+            }
+            continue;
+        }
+        match start {
+            None => start = Some(k),
+            Some(s0) if k > 0 && t[k] - t[k - 1] > opts.gap_factor * dt => {
+                bounds.push((s0, k));
+                start = Some(k);
+            }
+            Some(_) => {}
         }
     }
-    bounds.push((start, n));
+    if let Some(s0) = start {
+        bounds.push((s0, n));
+    }
     if bounds.len() > 1 {
         warnings.push(format!(
             "the log has {} gap(s) longer than {:.0} ms; its {} pieces were conditioned separately",
@@ -242,6 +363,14 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
             seg.qd.push(keep.iter().map(|&i| qd[i]).collect());
             seg.qdd.push(keep.iter().map(|&i| qdd[i]).collect());
             seg.tau.push(keep.iter().map(|&i| tau[i]).collect());
+        }
+        if let Some(base) = &log.base {
+            let all = condition_base(base, t0, &grid, &filter, pad, dt);
+            seg.base = keep.iter().map(|&i| all[i]).collect();
+        }
+        for w in &log.wrenches {
+            let all = condition_wrench(w, t0, &grid, &filter, pad);
+            seg.wrench.push(keep.iter().map(|&i| all[i]).collect());
         }
         segments.push(seg);
     }

@@ -7,7 +7,7 @@ use crate::estimate::{Accumulator, Identifiability, ParamKind, base_analysis, co
 use crate::log::JointLog;
 use crate::model::{LINK_PARAM_NAMES, LINK_PARAMS, MassProperties, RobotModel, physically_valid};
 use crate::regressor::{FrictionModel, Layout, Regressor};
-use crate::report::{BaseParamReport, JointReport, LinkReport, NrmseReport, ParamReport, Report};
+use crate::report::{BaseParamReport, BaseRowReport, JointReport, LinkReport, NrmseReport, ParamReport, Report};
 use faer::linalg::solvers::DenseSolveCore;
 use faer::{Mat, Side};
 use std::time::Instant;
@@ -18,7 +18,10 @@ pub enum Base {
     /// Bolted down or hung on a gantry: the base does not move (default).
     #[default]
     Fixed,
-    /// Free-floating base: needs base state and contact wrenches in the log (not supported yet).
+    /// Free-floating base: the log carries the base motion ([`JointLog::base`]) and, when the
+    /// robot touches anything, the contact wrenches ([`JointLog::wrenches`]); the robot is
+    /// loaded with [`RobotModel::from_urdf_floating`]. The free joint's 6 rows join the joint
+    /// rows: `0 = Y_base·π − J_baseᵀ·w_ext`.
     Floating,
 }
 
@@ -109,6 +112,21 @@ pub fn cad_params(robot: &RobotModel, layout: &Layout) -> Vec<f64> {
     p
 }
 
+/// Columns a floating base's rows can be non-zero in: every link the free joint moves.
+fn base_columns(robot: &RobotModel, layout: &Layout) -> Vec<usize> {
+    let mut cols = Vec::new();
+    for (l, link) in robot.links.iter().enumerate() {
+        if link.floating {
+            cols.extend(layout.link_col(l)..layout.link_col(l) + LINK_PARAMS);
+        }
+    }
+    cols
+}
+
+/// Names of a floating base's 6 rows (the free joint's DOFs).
+pub const BASE_ROW_NAMES: [&str; 6] =
+    ["base force x (N)", "base force y (N)", "base force z (N)", "base torque x (N·m)", "base torque y (N·m)", "base torque z (N·m)"];
+
 /// Columns joint `j`'s rows can be non-zero in.
 fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Vec<usize> {
     let mut cols = Vec::new();
@@ -122,18 +140,43 @@ fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Vec<usize> {
     cols
 }
 
-/// Feeds every conditioned sample into `acc` (rows inside the dead zone left out when
-/// `deadzone > 0`).
-fn accumulate(
+/// Body ids of the log's wrench series: `(series index, body)` for the series whose frame is a
+/// body of the robot; warnings for the others.
+fn wrench_bodies(robot: &RobotModel, log: &JointLog) -> (Vec<(usize, usize)>, Vec<String>) {
+    let mut found = Vec::new();
+    let mut warnings = Vec::new();
+    for (i, w) in log.wrenches.iter().enumerate() {
+        match robot.model.id(twin_core::mj::ObjType::Body, &w.body) {
+            Some(b) if b > 0 => found.push((i, b)),
+            _ => warnings.push(format!(
+                "wrench topic {} is expressed in frame \"{}\", which is not a link of {}: ignored \
+                 (contact wrenches must name the link they act on in header.frame_id)",
+                w.topic,
+                w.body,
+                robot.urdf_path.display()
+            )),
+        }
+    }
+    (found, warnings)
+}
+
+/// Calls `f(rows, target, ext, qd)` for every conditioned sample: the regressor rows
+/// ([`Regressor::nrows`] × ncols), the measured side `τ + Jᵀ·w_ext` (joints) and `Jᵀ·w_ext`
+/// (base rows), the external part `Jᵀ·w_ext` alone, and the joint velocities.
+fn for_each_sample(
     robot: &RobotModel,
     reg: &mut Regressor<'_>,
     data: &Conditioned,
-    deadzone: f64,
-    acc: &mut Accumulator,
+    wrenches: &[(usize, usize)],
+    mut f: impl FnMut(&[f64], &[f64], &[f64], &[f64]),
 ) -> Result<()> {
     let nj = robot.joints.len();
+    let nr = reg.nrows();
     let ncols = reg.layout().ncols();
-    let mut rows = vec![0.0; nj * ncols];
+    let mut rows = vec![0.0; nr * ncols];
+    let mut ext = vec![0.0; nr];
+    let mut target = vec![0.0; nr];
+    let mut w = Vec::with_capacity(wrenches.len());
     let (mut q, mut qd, mut qdd) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
     for seg in &data.segments {
         for k in 0..seg.len() {
@@ -142,14 +185,46 @@ fn accumulate(
                 qd[j] = seg.qd[j][k];
                 qdd[j] = seg.qdd[j][k];
             }
-            reg.compute(&q, &qd, &qdd, &mut rows)?;
-            for j in 0..nj {
-                if qd[j].abs() >= deadzone {
-                    acc.push(j, &rows[j * ncols..(j + 1) * ncols], seg.tau[j][k]);
-                }
+            match (robot.floating.is_some(), seg.base.get(k)) {
+                (true, Some(b)) => reg.compute_floating(b, &q, &qd, &qdd, &mut rows)?,
+                _ => reg.compute(&q, &qd, &qdd, &mut rows)?,
             }
+            w.clear();
+            w.extend(wrenches.iter().map(|&(i, body)| (body, seg.wrench[i][k])));
+            if w.is_empty() {
+                ext.fill(0.0);
+            } else {
+                reg.external_forces(&w, &mut ext)?;
+            }
+            for r in 0..nr {
+                target[r] = if r < nj { seg.tau[r][k] } else { 0.0 } + ext[r];
+            }
+            f(&rows, &target, &ext, &qd);
         }
     }
+    Ok(())
+}
+
+/// Feeds every conditioned sample into `acc` (joint rows inside the dead zone left out when
+/// `deadzone > 0`; base rows always in).
+fn accumulate(
+    robot: &RobotModel,
+    reg: &mut Regressor<'_>,
+    data: &Conditioned,
+    wrenches: &[(usize, usize)],
+    deadzone: f64,
+    acc: &mut Accumulator,
+) -> Result<()> {
+    let nj = robot.joints.len();
+    let nr = reg.nrows();
+    let ncols = reg.layout().ncols();
+    for_each_sample(robot, reg, data, wrenches, |rows, target, _, qd| {
+        for r in 0..nr {
+            if r >= nj || qd[r].abs() >= deadzone {
+                acc.push(r, &rows[r * ncols..(r + 1) * ncols], target[r]);
+            }
+        }
+    })?;
     acc.finish();
     Ok(())
 }
@@ -199,13 +274,30 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     // Results must not depend on the thread count: faer's parallel kernels may sum in a
     // different order. The matrices here are small; sequential costs little.
     faer::set_global_parallelism(faer::Par::Seq);
-    if opts.base == Base::Floating {
-        return Err(Error::Option {
-            name: "base",
-            message: "floating-base identification needs base pose/twist and contact wrenches in the log, \
-                      which twin does not read yet; hang the robot on a gantry (fixed base) and log that"
-                .into(),
-        });
+    match (opts.base, &robot.floating, &log.base) {
+        (Base::Fixed, None, _) | (Base::Floating, Some(_), Some(_)) => {}
+        (Base::Fixed, Some(_), _) => {
+            return Err(Error::Option {
+                name: "base",
+                message: "the robot was loaded with a floating base; use Base::Floating, or RobotModel::from_urdf \
+                          for a fixed base"
+                    .into(),
+            });
+        }
+        (Base::Floating, None, _) => {
+            return Err(Error::Option {
+                name: "base",
+                message: "Base::Floating needs the robot loaded with RobotModel::from_urdf_floating".into(),
+            });
+        }
+        (Base::Floating, Some(_), None) => {
+            return Err(Error::BadLog {
+                source_name: log.source.clone(),
+                message: "--base floating needs the base motion in the log (nav_msgs/msg/Odometry of the base \
+                          link); record it, or hang the robot on a gantry and use --base fixed"
+                    .into(),
+            });
+        }
     }
     if !(opts.prior_rel_std > 0.0 && opts.prior_rel_std.is_finite()) {
         return Err(Error::Option {
@@ -216,6 +308,21 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     let data = condition(log, robot, &opts.condition)?;
     let mut warnings = data.warnings.clone();
     let nj = robot.joints.len();
+    let (wrenches, wrench_warnings) = wrench_bodies(robot, log);
+    warnings.extend(wrench_warnings);
+    let base_description = match (&robot.floating, &log.base) {
+        (Some(_), Some(b)) => {
+            if wrenches.is_empty() {
+                warnings.push(format!(
+                    "no contact wrench topic (geometry_msgs/msg/WrenchStamped with a link's name as \
+                     header.frame_id) in the log: the base rows assume the robot touched nothing (free flight, \
+                     momentum conserved); if it stood or walked, record the contact wrenches"
+                ));
+            }
+            format!("floating base (base motion from {}, {} contact wrench topics)", b.topic, wrenches.len())
+        }
+        _ => "fixed base".to_string(),
+    };
 
     // Diagnosis of excitation, before any fitting.
     let still: Vec<String> =
@@ -244,9 +351,13 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     let mut reg = Regressor::new(robot, fm)?;
     let layout = reg.layout();
     let n = layout.ncols();
-    let cols: Vec<Vec<usize>> = (0..nj).map(|j| joint_columns(robot, &layout, j)).collect();
+    let nr = reg.nrows();
+    let mut cols: Vec<Vec<usize>> = (0..nj).map(|j| joint_columns(robot, &layout, j)).collect();
+    for _ in nj..nr {
+        cols.push(base_columns(robot, &layout));
+    }
     let mut acc = Accumulator::new(n, cols);
-    accumulate(robot, &mut reg, &data, opts.velocity_deadzone, &mut acc)?;
+    accumulate(robot, &mut reg, &data, &wrenches, opts.velocity_deadzone, &mut acc)?;
     let total_rows = acc.total_rows();
     let few: Vec<String> = (0..nj).filter(|&j| acc.rows(j) < 50).map(|j| robot.joints[j].name.clone()).collect();
     if !few.is_empty() {
@@ -282,10 +393,13 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     }
 
     // Pass 1: unweighted least squares for the per-joint noise levels.
-    let rz1 = acc.compressed(&vec![1.0; nj]);
+    // Row groups (each joint; each base row) get their own noise level: a base row carries
+    // force or torque on the whole robot, with its own scale and noise (odometry differentiated
+    // twice, wrench sensors), so one weight for all would let one kind of row dominate.
+    let rz1 = acc.compressed(&vec![1.0; nr]);
     let ba1 = base_analysis(&rz1, total_rows)?;
     let rank1 = ba1.rank.max(1);
-    let sigma: Vec<f64> = (0..nj)
+    let sigma: Vec<f64> = (0..nr)
         .map(|j| {
             let rows = acc.rows(j) as f64;
             let dof = (rows * (1.0 - rank1 as f64 / total_rows as f64)).max(1.0);
@@ -438,11 +552,25 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
             after: nrmse_from(&acc, j, &after),
         })
         .collect();
+    let base_rows = (nj..nr)
+        .map(|r| {
+            let rows = acc.rows(r).max(1) as f64;
+            let rms = |p: &[f64]| (acc.residual2(r, p) / rows).sqrt();
+            BaseRowReport {
+                row: BASE_ROW_NAMES[r - nj].to_string(),
+                rms_external: rms(&vec![0.0; n]),
+                before_rms: rms(&before),
+                after_rms: rms(&after),
+                noise_std: sigma[r],
+            }
+        })
+        .collect();
     let report = Report {
         generator: concat!("twin/", env!("CARGO_PKG_VERSION")).to_string(),
         robot: robot.urdf_path.display().to_string(),
         log: log.source.clone(),
-        base: "fixed".into(),
+        base: if robot.floating.is_some() { "floating" } else { "fixed" }.into(),
+        base_description,
         log_samples: data.raw_samples,
         rate_hz: data.rate_hz,
         cutoff_hz: data.cutoff_hz,
@@ -460,6 +588,7 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
         joints,
         base_parameters,
         training_nrmse,
+        base_rows,
         validation_nrmse: None,
         validation_log: None,
     };
@@ -472,36 +601,34 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
 /// # Errors
 /// As [`identify`]'s conditioning.
 pub fn validate(robot: &RobotModel, log: &JointLog, opts: &SysidOptions, params: &[&[f64]]) -> Result<Vec<Vec<f64>>> {
+    if robot.floating.is_some() && log.base.is_none() {
+        return Err(Error::BadLog {
+            source_name: log.source.clone(),
+            message: "the held-out log has no base motion (nav_msgs/msg/Odometry) for the floating base".into(),
+        });
+    }
     let data = condition(log, robot, &opts.condition)?;
+    let (wrenches, _) = wrench_bodies(robot, log);
     let nj = robot.joints.len();
     let mut reg = Regressor::new(robot, opts.friction)?;
     let ncols = reg.layout().ncols();
-    let mut rows = vec![0.0; nj * ncols];
     let mut err2 = vec![vec![0.0; nj]; params.len()];
     let mut tau2 = vec![0.0; nj];
-    let (mut q, mut qd, mut qdd) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
-    for seg in &data.segments {
-        for k in 0..seg.len() {
-            for j in 0..nj {
-                q[j] = seg.q[j][k];
-                qd[j] = seg.qd[j][k];
-                qdd[j] = seg.qdd[j][k];
+    for_each_sample(robot, &mut reg, &data, &wrenches, |rows, target, ext, qd| {
+        for j in 0..nj {
+            if qd[j].abs() < opts.velocity_deadzone {
+                continue;
             }
-            reg.compute(&q, &qd, &qdd, &mut rows)?;
-            for j in 0..nj {
-                if qd[j].abs() < opts.velocity_deadzone {
-                    continue;
-                }
-                let t = seg.tau[j][k];
-                tau2[j] += t * t;
-                let row = &rows[j * ncols..(j + 1) * ncols];
-                for (p, e) in params.iter().zip(err2.iter_mut()) {
-                    let pred: f64 = row.iter().zip(p.iter()).map(|(a, b)| a * b).sum();
-                    e[j] += (pred - t) * (pred - t);
-                }
+            // Normalised by the measured torque; the prediction is Y·π − Jᵀ·w_ext.
+            let t = target[j];
+            tau2[j] += (t - ext[j]) * (t - ext[j]);
+            let row = &rows[j * ncols..(j + 1) * ncols];
+            for (p, e) in params.iter().zip(err2.iter_mut()) {
+                let pred: f64 = row.iter().zip(p.iter()).map(|(a, b)| a * b).sum();
+                e[j] += (pred - t) * (pred - t);
             }
         }
-    }
+    })?;
     Ok(err2.iter().map(|e| (0..nj).map(|j| (e[j] / tau2[j]).sqrt()).collect()).collect())
 }
 

@@ -37,6 +37,40 @@ pub struct JointLog {
     pub effort: Vec<Vec<f64>>,
     /// Where the data came from (file, topic), for messages.
     pub source: String,
+    /// Motion of a floating base (`None`: none logged).
+    pub base: Option<BaseTrajectory>,
+    /// External (contact) wrenches on bodies of the robot.
+    pub wrenches: Vec<WrenchSeries>,
+}
+
+/// Pose of a floating base over time, from `nav_msgs/msg/Odometry` (REP-105: pose of the child
+/// frame, the base link, in the odometry/world frame).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct BaseTrajectory {
+    /// Where it came from (topic).
+    pub topic: String,
+    /// Sample times, nanoseconds, same clock as [`JointLog::t_nanos`].
+    pub t_nanos: Vec<i64>,
+    /// Position of the base link's origin in the world (odom) frame, m.
+    pub position: Vec<[f64; 3]>,
+    /// Orientation world_from_base, quaternion `w x y z`.
+    pub orientation_wxyz: Vec<[f64; 4]>,
+}
+
+/// An external wrench on one body over time, from `geometry_msgs/msg/WrenchStamped`: force (N)
+/// and torque (N·m) expressed in the frame of body `body` (the message's `header.frame_id`),
+/// the torque about that frame's origin: the convention of `twin sim`'s contact wrench topics
+/// (`/contacts/<link>`). Outside the topic's time span the wrench is zero (no contact).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct WrenchSeries {
+    /// The topic.
+    pub topic: String,
+    /// The body (URDF link) the wrench acts on and is expressed in.
+    pub body: String,
+    /// Sample times, nanoseconds.
+    pub t_nanos: Vec<i64>,
+    /// `[fx, fy, fz, nx, ny, nz]` per sample.
+    pub wrench: Vec<[f64; 6]>,
 }
 
 impl JointLog {
@@ -50,6 +84,8 @@ impl JointLog {
             velocity: vec![Vec::new(); n],
             effort: vec![Vec::new(); n],
             source: source.into(),
+            base: None,
+            wrenches: Vec::new(),
         }
     }
 
@@ -386,8 +422,197 @@ impl JointLog {
             msg.effort = if has_effort { self.effort.iter().map(|j| j[k]).collect() } else { Vec::new() };
             writer.write(channel, t.max(0) as u64, &msg)?;
         }
+        if let Some(base) = &self.base {
+            use twin_core::log::Odometry;
+            let odom = writer.add_topic::<Odometry>(&base.topic)?;
+            for (k, &t) in base.t_nanos.iter().enumerate() {
+                let [w, x, y, z] = base.orientation_wxyz[k];
+                // REP-105 twist: in the child (base) frame, from the neighbouring poses.
+                let (a, b) = (k.saturating_sub(1), (k + 1).min(base.t_nanos.len() - 1));
+                let (linear_velocity, angular_velocity) = if b > a {
+                    let dt = (base.t_nanos[b] - base.t_nanos[a]) as f64 * 1e-9;
+                    twist_in_base(base.position[a], base.orientation_wxyz[a], base.position[b], base.orientation_wxyz[b], dt)
+                } else {
+                    ([0.0; 3], [0.0; 3])
+                };
+                let msg = Odometry {
+                    header: Header { stamp_nanos: t, frame_id: "odom".into() },
+                    child_frame_id: "base_link".into(),
+                    position: base.position[k],
+                    orientation_xyzw: [x, y, z, w],
+                    linear_velocity,
+                    angular_velocity,
+                    ..Default::default()
+                };
+                writer.write(odom, t.max(0) as u64, &msg)?;
+            }
+        }
+        for series in &self.wrenches {
+            use twin_core::log::WrenchStamped;
+            let topic = writer.add_topic::<WrenchStamped>(&series.topic)?;
+            for (k, &t) in series.t_nanos.iter().enumerate() {
+                let w = series.wrench[k];
+                let msg = WrenchStamped {
+                    header: Header { stamp_nanos: t, frame_id: series.body.clone() },
+                    force: [w[0], w[1], w[2]],
+                    torque: [w[3], w[4], w[5]],
+                };
+                writer.write(topic, t.max(0) as u64, &msg)?;
+            }
+        }
         writer.finish()?;
         Ok(())
+    }
+}
+
+/// Twist of the base frame between two poses `dt` apart, in the base frame (REP-105):
+/// `(linear, angular)`, m/s and rad/s.
+fn twist_in_base(p0: [f64; 3], q0: [f64; 4], p1: [f64; 3], q1: [f64; 4], dt: f64) -> ([f64; 3], [f64; 3]) {
+    use nalgebra::{Quaternion, UnitQuaternion, Vector3};
+    let r0 = UnitQuaternion::from_quaternion(Quaternion::new(q0[0], q0[1], q0[2], q0[3]));
+    let r1 = UnitQuaternion::from_quaternion(Quaternion::new(q1[0], q1[1], q1[2], q1[3]));
+    let v_world = (Vector3::from(p1) - Vector3::from(p0)) / dt;
+    let v = r0.inverse() * v_world;
+    let w = (r0.inverse() * r1).scaled_axis() / dt;
+    ([v.x, v.y, v.z], [w.x, w.y, w.z])
+}
+
+impl JointLog {
+    /// Reads a floating robot's log from a ROS 2 bag: joint states as [`JointLog::read_mcap`],
+    /// base motion from the `nav_msgs/msg/Odometry` topic `odom_topic`, and every
+    /// `geometry_msgs/msg/WrenchStamped` topic as an external wrench on the body its
+    /// `header.frame_id` names (see [`WrenchSeries`]). Joint samples outside the odometry's
+    /// time span are dropped (with a warning).
+    ///
+    /// # Errors
+    /// As [`JointLog::read_mcap`]; [`Error::BadLog`] when `odom_topic` is not in the bag (the
+    /// message names the topics that are), is not Odometry, or has fewer than 2 messages.
+    pub fn read_mcap_floating(
+        path: impl AsRef<Path>,
+        topic: Option<&str>,
+        odom_topic: &str,
+    ) -> Result<(JointLog, Vec<String>)> {
+        use twin_core::log::{Log, Odometry, ReadOptions, WrenchStamped};
+        let path = path.as_ref();
+        let (mut log, mut warnings) = JointLog::read_mcap(path, topic)?;
+        let bag = Log::open(path, ReadOptions::default())?;
+        let info = bag.info()?;
+        let source_name = path.display().to_string();
+        let listing = info.topics.iter().map(|t| format!("{} ({})", t.topic, t.type_name)).collect::<Vec<_>>().join(", ");
+        match info.topics.iter().find(|t| t.topic == odom_topic) {
+            None => {
+                let odoms: Vec<&str> =
+                    info.topics.iter().filter(|t| t.type_name.ends_with("Odometry")).map(|t| t.topic.as_str()).collect();
+                let hint = if odoms.is_empty() {
+                    "record the base pose and twist as nav_msgs/msg/Odometry (from motion capture or the state                      estimator), or hang the robot on a gantry and use --base fixed"
+                        .to_string()
+                } else {
+                    format!("choose the odometry topic with --odom-topic ({})", odoms.join(", "))
+                };
+                return Err(Error::BadLog {
+                    source_name,
+                    message: format!(
+                        "--base floating needs the base motion, but the bag has no topic {odom_topic}; its topics are:                          {listing}; {hint}"
+                    ),
+                });
+            }
+            Some(t) if !t.type_name.ends_with("Odometry") => {
+                return Err(Error::BadLog {
+                    source_name,
+                    message: format!(
+                        "topic {odom_topic} has type {}, expected nav_msgs/msg/Odometry (choose another with --odom-topic)",
+                        t.type_name
+                    ),
+                });
+            }
+            Some(_) => {}
+        }
+        let (odom, report) = bag.read_typed::<Odometry>(odom_topic)?;
+        warnings.extend(report.warnings());
+        let mut base = BaseTrajectory { topic: odom_topic.to_string(), ..Default::default() };
+        let mut frames: Vec<String> = Vec::new();
+        for (log_time, msg) in &odom {
+            let t = if msg.header.stamp_nanos != 0 { msg.header.stamp_nanos } else { *log_time as i64 };
+            let [x, y, z, w] = msg.orientation_xyzw;
+            let norm = (w * w + x * x + y * y + z * z).sqrt();
+            if !(norm > 0.5 && norm < 1.5) || msg.position.iter().any(|v| !v.is_finite()) {
+                return Err(Error::BadLog {
+                    source_name,
+                    message: format!(
+                        "{odom_topic}: pose at t = {:.6} s is not finite or its quaternion is not unit (norm {norm:.3})",
+                        t as f64 * 1e-9
+                    ),
+                });
+            }
+            if base.t_nanos.last().is_some_and(|&l| t <= l) {
+                continue;
+            }
+            if !frames.contains(&msg.child_frame_id) {
+                frames.push(msg.child_frame_id.clone());
+            }
+            base.t_nanos.push(t);
+            base.position.push(msg.position);
+            base.orientation_wxyz.push([w / norm, x / norm, y / norm, z / norm]);
+        }
+        if base.t_nanos.len() < 2 {
+            return Err(Error::BadLog {
+                source_name,
+                message: format!("{odom_topic} has {} usable message(s); the base motion needs a stream", base.t_nanos.len()),
+            });
+        }
+        let (first, last) = (base.t_nanos[0], *base.t_nanos.last().expect("2"));
+        let keep: Vec<usize> = (0..log.len()).filter(|&k| (first..=last).contains(&log.t_nanos[k])).collect();
+        if keep.len() < log.len() {
+            warnings.push(format!(
+                "{} of {} joint-state samples lie outside the span of {odom_topic} and were not used",
+                log.len() - keep.len(),
+                log.len()
+            ));
+            log.t_nanos = keep.iter().map(|&k| log.t_nanos[k]).collect();
+            for series in [&mut log.position, &mut log.velocity, &mut log.effort] {
+                for j in series.iter_mut() {
+                    *j = keep.iter().map(|&k| j[k]).collect();
+                }
+            }
+        }
+        log.base = Some(base);
+        for t in info.topics.iter().filter(|t| t.type_name.ends_with("WrenchStamped")) {
+            let (msgs, report) = bag.read_typed::<WrenchStamped>(&t.topic)?;
+            warnings.extend(report.warnings());
+            let mut series = WrenchSeries { topic: t.topic.clone(), ..Default::default() };
+            for (log_time, msg) in &msgs {
+                let time = if msg.header.stamp_nanos != 0 { msg.header.stamp_nanos } else { *log_time as i64 };
+                if series.body.is_empty() {
+                    series.body = msg.header.frame_id.clone();
+                } else if series.body != msg.header.frame_id {
+                    return Err(Error::BadLog {
+                        source_name,
+                        message: format!(
+                            "{}: header.frame_id changes from \"{}\" to \"{}\"; a contact wrench topic must \
+                             keep one body frame",
+                            t.topic, series.body, msg.header.frame_id
+                        ),
+                    });
+                }
+                if series.t_nanos.last().is_some_and(|&l| time <= l) {
+                    continue;
+                }
+                let w = [msg.force[0], msg.force[1], msg.force[2], msg.torque[0], msg.torque[1], msg.torque[2]];
+                if w.iter().any(|v| !v.is_finite()) {
+                    return Err(Error::BadLog {
+                        source_name,
+                        message: format!("{}: wrench at t = {:.6} s is not finite", t.topic, time as f64 * 1e-9),
+                    });
+                }
+                series.t_nanos.push(time);
+                series.wrench.push(w);
+            }
+            if !series.t_nanos.is_empty() {
+                log.wrenches.push(series);
+            }
+        }
+        log.source = format!("{} (base motion from {odom_topic}, {} wrench topic(s))", log.source, log.wrenches.len());
+        Ok((log, warnings))
     }
 }
 

@@ -77,6 +77,22 @@ pub struct NrmseReport {
     pub after: f64,
 }
 
+/// Fit of one floating-base row (the free joint's force or torque balance `0 = Y_base·π −
+/// Jᵀ·w_ext`), as RMS residuals in N or N·m.
+#[derive(Debug, Clone, Serialize)]
+pub struct BaseRowReport {
+    /// E.g. `base force z (N)`.
+    pub row: String,
+    /// RMS of the measured side `Jᵀ·w_ext` (0 in free flight).
+    pub rms_external: f64,
+    /// RMS residual with the URDF's parameters.
+    pub before_rms: f64,
+    /// RMS residual with the identified parameters.
+    pub after_rms: f64,
+    /// Estimated noise (residual standard deviation): the weighting of the row.
+    pub noise_std: f64,
+}
+
 /// Everything `twin sysid` found.
 #[derive(Debug, Clone, Serialize)]
 pub struct Report {
@@ -88,6 +104,8 @@ pub struct Report {
     pub log: String,
     /// `fixed` (robot bolted down or on a gantry) or `floating`.
     pub base: String,
+    /// In words, e.g. `floating base (base motion from /odom, 2 contact wrench topics)`.
+    pub base_description: String,
     /// Samples in the log.
     pub log_samples: usize,
     /// Log rate, Hz.
@@ -122,6 +140,8 @@ pub struct Report {
     pub base_parameters: Vec<BaseParamReport>,
     /// Fit on the identification log.
     pub training_nrmse: Vec<NrmseReport>,
+    /// Floating base: fit of the 6 base rows on the identification log (empty when fixed).
+    pub base_rows: Vec<BaseRowReport>,
     /// Fit on a held-out log (`--validate`).
     pub validation_nrmse: Option<Vec<NrmseReport>>,
     /// The held-out log.
@@ -142,9 +162,9 @@ impl Report {
         let mut out = String::new();
         let _ = writeln!(
             out,
-            "robot {} ({} base), log {}: {} samples at {:.1} Hz, low-pass {:.1} Hz (order {}), {} rows in {} segment(s)",
+            "robot {} ({}), log {}: {} samples at {:.1} Hz, low-pass {:.1} Hz (order {}), {} rows in {} segment(s)",
             self.robot,
-            self.base,
+            self.base_description,
             self.log,
             self.log_samples,
             self.rate_hz,
@@ -187,6 +207,17 @@ impl Report {
             }
         };
         nrmse(&mut out, "torque NRMSE on the identification log", &self.training_nrmse);
+        if !self.base_rows.is_empty() {
+            let _ = writeln!(
+                out,
+                "\nfloating-base rows on the identification log (RMS)\n{:<40} {:>10} {:>10} {:>10}",
+                "row", "external", "before", "after"
+            );
+            for r in &self.base_rows {
+                let _ =
+                    writeln!(out, "{:<40} {:>10.3} {:>10.3} {:>10.3}", r.row, r.rms_external, r.before_rms, r.after_rms);
+            }
+        }
         if let Some(v) = &self.validation_nrmse {
             let title = format!("torque NRMSE on the held-out log {}", self.validation_log.as_deref().unwrap_or(""));
             nrmse(&mut out, &title, v);
