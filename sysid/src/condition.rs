@@ -59,9 +59,28 @@ fn condition_base(
             [2.0 * p[1], 2.0 * p[2], 2.0 * p[3]]
         })
         .collect();
-    let vel: Vec<Vec<f64>> = pos.iter().map(|p| derivative(p, dt)).collect();
+    let mut vel: Vec<Vec<f64>> = pos.iter().map(|p| derivative(p, dt)).collect();
+    let mut omega = omega;
+    if !base.twist.is_empty() {
+        // The logged twist (base frame) is filtered like the pose: a state estimator's twist
+        // is far less noisy than the derivative of its pose. Linear velocity to the world frame.
+        let tw: Vec<Vec<f64>> = (0..6)
+            .map(|i| filter.filtfilt(&resample(&tb, &base.twist.iter().map(|t| t[i]).collect::<Vec<_>>(), grid), pad))
+            .collect();
+        for k in 0..m {
+            let r = nalgebra::UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
+                q[k][0], q[k][1], q[k][2], q[k][3],
+            ));
+            let v = r * nalgebra::Vector3::new(tw[0][k], tw[1][k], tw[2][k]);
+            for i in 0..3 {
+                vel[i][k] = v[i];
+            }
+            omega[k] = [tw[3][k], tw[4][k], tw[5][k]];
+        }
+    }
     let acc: Vec<Vec<f64>> = vel.iter().map(|v| derivative(v, dt)).collect();
-    let alpha: Vec<Vec<f64>> = (0..3).map(|i| derivative(&omega.iter().map(|w| w[i]).collect::<Vec<_>>(), dt)).collect();
+    let alpha: Vec<Vec<f64>> =
+        (0..3).map(|i| derivative(&omega.iter().map(|w| w[i]).collect::<Vec<_>>(), dt)).collect();
     (0..m)
         .map(|k| BaseSample {
             qpos: [pos[0][k], pos[1][k], pos[2][k], q[k][0], q[k][1], q[k][2], q[k][3]],
@@ -294,9 +313,7 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
             t.iter()
                 .map(|&x| {
                     let i = tb.partition_point(|&b| b < x);
-                    i == 0 && tb[0] > x
-                        || i >= tb.len()
-                        || (i > 0 && tb[i] - tb[i - 1] > opts.gap_factor * step)
+                    i == 0 && tb[0] > x || i >= tb.len() || (i > 0 && tb[i] - tb[i - 1] > opts.gap_factor * step)
                 })
                 .collect()
         }

@@ -124,8 +124,14 @@ fn base_columns(robot: &RobotModel, layout: &Layout) -> Vec<usize> {
 }
 
 /// Names of a floating base's 6 rows (the free joint's DOFs).
-pub const BASE_ROW_NAMES: [&str; 6] =
-    ["base force x (N)", "base force y (N)", "base force z (N)", "base torque x (N·m)", "base torque y (N·m)", "base torque z (N·m)"];
+pub const BASE_ROW_NAMES: [&str; 6] = [
+    "base force x (N)",
+    "base force y (N)",
+    "base force z (N)",
+    "base torque x (N·m)",
+    "base torque y (N·m)",
+    "base torque z (N·m)",
+];
 
 /// Columns joint `j`'s rows can be non-zero in.
 fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Vec<usize> {
@@ -647,11 +653,18 @@ pub fn urdf_updates(
         .enumerate()
         .filter(|&(l, _)| seen(layout.link_col(l), LINK_PARAMS))
         .filter_map(|(l, link)| {
-            MassProperties::from_params(&ident.link_params(l)).map(|mp| crate::writeback::LinkUpdate {
-                name: link.name.clone(),
-                mass_kg: mp.mass_kg,
-                com_link: mp.com_link,
-                inertia_com: mp.inertia_com,
+            MassProperties::from_params(&ident.link_params(l)).map(|mp| {
+                // A link identified on the boundary of physical validity (a triangle inequality
+                // holding with equality) could cross it when the URDF's 7 significant digits
+                // round it: 1e-5 of the trace added isotropically keeps a margin (far below σ).
+                let inertia_com =
+                    mp.inertia_com + nalgebra::Matrix3::identity() * (1e-5 * mp.inertia_com.trace().max(0.0));
+                crate::writeback::LinkUpdate {
+                    name: link.name.clone(),
+                    mass_kg: mp.mass_kg,
+                    com_link: mp.com_link,
+                    inertia_com,
+                }
             })
         })
         .collect();

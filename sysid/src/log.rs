@@ -55,6 +55,10 @@ pub struct BaseTrajectory {
     pub position: Vec<[f64; 3]>,
     /// Orientation world_from_base, quaternion `w x y z`.
     pub orientation_wxyz: Vec<[f64; 4]>,
+    /// Twist of the base in the base frame (REP-105), `[vx, vy, vz, wx, wy, wz]` (m/s, rad/s),
+    /// one per sample, or empty when the odometry carries none (all zero): the base velocity
+    /// then comes from differentiating the pose, which is noisier.
+    pub twist: Vec<[f64; 6]>,
 }
 
 /// An external wrench on one body over time, from `geometry_msgs/msg/WrenchStamped`: force (N)
@@ -429,9 +433,17 @@ impl JointLog {
                 let [w, x, y, z] = base.orientation_wxyz[k];
                 // REP-105 twist: in the child (base) frame, from the neighbouring poses.
                 let (a, b) = (k.saturating_sub(1), (k + 1).min(base.t_nanos.len() - 1));
-                let (linear_velocity, angular_velocity) = if b > a {
+                let (linear_velocity, angular_velocity) = if let Some(t) = base.twist.get(k) {
+                    ([t[0], t[1], t[2]], [t[3], t[4], t[5]])
+                } else if b > a {
                     let dt = (base.t_nanos[b] - base.t_nanos[a]) as f64 * 1e-9;
-                    twist_in_base(base.position[a], base.orientation_wxyz[a], base.position[b], base.orientation_wxyz[b], dt)
+                    twist_in_base(
+                        base.position[a],
+                        base.orientation_wxyz[a],
+                        base.position[b],
+                        base.orientation_wxyz[b],
+                        dt,
+                    )
                 } else {
                     ([0.0; 3], [0.0; 3])
                 };
@@ -498,11 +510,16 @@ impl JointLog {
         let bag = Log::open(path, ReadOptions::default())?;
         let info = bag.info()?;
         let source_name = path.display().to_string();
-        let listing = info.topics.iter().map(|t| format!("{} ({})", t.topic, t.type_name)).collect::<Vec<_>>().join(", ");
+        let listing =
+            info.topics.iter().map(|t| format!("{} ({})", t.topic, t.type_name)).collect::<Vec<_>>().join(", ");
         match info.topics.iter().find(|t| t.topic == odom_topic) {
             None => {
-                let odoms: Vec<&str> =
-                    info.topics.iter().filter(|t| t.type_name.ends_with("Odometry")).map(|t| t.topic.as_str()).collect();
+                let odoms: Vec<&str> = info
+                    .topics
+                    .iter()
+                    .filter(|t| t.type_name.ends_with("Odometry"))
+                    .map(|t| t.topic.as_str())
+                    .collect();
                 let hint = if odoms.is_empty() {
                     "record the base pose and twist as nav_msgs/msg/Odometry (from motion capture or the state                      estimator), or hang the robot on a gantry and use --base fixed"
                         .to_string()
@@ -530,7 +547,6 @@ impl JointLog {
         let (odom, report) = bag.read_typed::<Odometry>(odom_topic)?;
         warnings.extend(report.warnings());
         let mut base = BaseTrajectory { topic: odom_topic.to_string(), ..Default::default() };
-        let mut frames: Vec<String> = Vec::new();
         for (log_time, msg) in &odom {
             let t = if msg.header.stamp_nanos != 0 { msg.header.stamp_nanos } else { *log_time as i64 };
             let [x, y, z, w] = msg.orientation_xyzw;
@@ -547,17 +563,27 @@ impl JointLog {
             if base.t_nanos.last().is_some_and(|&l| t <= l) {
                 continue;
             }
-            if !frames.contains(&msg.child_frame_id) {
-                frames.push(msg.child_frame_id.clone());
-            }
             base.t_nanos.push(t);
             base.position.push(msg.position);
             base.orientation_wxyz.push([w / norm, x / norm, y / norm, z / norm]);
+            let (v, om) = (msg.linear_velocity, msg.angular_velocity);
+            base.twist.push([v[0], v[1], v[2], om[0], om[1], om[2]]);
+        }
+        if base.twist.iter().all(|t| t.iter().all(|&x| x == 0.0)) || base.twist.iter().flatten().any(|x| !x.is_finite())
+        {
+            base.twist.clear();
+            warnings.push(format!(
+                "{odom_topic} carries no usable twist: the base velocity is differentiated from the pose, which \
+                 amplifies its noise"
+            ));
         }
         if base.t_nanos.len() < 2 {
             return Err(Error::BadLog {
                 source_name,
-                message: format!("{odom_topic} has {} usable message(s); the base motion needs a stream", base.t_nanos.len()),
+                message: format!(
+                    "{odom_topic} has {} usable message(s); the base motion needs a stream",
+                    base.t_nanos.len()
+                ),
             });
         }
         let (first, last) = (base.t_nanos[0], *base.t_nanos.last().expect("2"));

@@ -168,7 +168,8 @@ pub struct RobotModel {
 
 /// The root link of a URDF: the one link that is no joint's child.
 fn root_link(path: &Path, text: &str) -> Result<String> {
-    let doc = roxmltree::Document::parse(text).map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
+    let doc = roxmltree::Document::parse(text)
+        .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
     let root = doc.root_element();
     let children: Vec<&str> = root
         .children()
@@ -301,9 +302,11 @@ impl RobotModel {
     /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
     pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
         let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
-        let free = (0..model.njnt()).find(|&j| matches!(model.joint_type(j), JointType::Free)).ok_or_else(|| {
-            Error::Urdf { path: urdf_path.to_path_buf(), message: "the model has no free joint for a floating base".into() }
-        })?;
+        let free =
+            (0..model.njnt()).find(|&j| matches!(model.joint_type(j), JointType::Free)).ok_or_else(|| Error::Urdf {
+                path: urdf_path.to_path_buf(),
+                message: "the model has no free joint for a floating base".into(),
+            })?;
         let body = model.jnt_bodyid()[free] as usize;
         let parent = model.body_parentid();
         let in_subtree = |mut b: usize| {

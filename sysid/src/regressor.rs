@@ -299,7 +299,13 @@ impl<'a> Regressor<'a> {
         let nv = robot.model.nv();
         out.fill(0.0);
         for &(body, w) in wrenches {
-            self.data.body_jacobian_dot(body, &mut self.jacp, &mut self.jacr, &mut self.jacp_dot, &mut self.jacr_dot)?;
+            self.data.body_jacobian_dot(
+                body,
+                &mut self.jacp,
+                &mut self.jacr,
+                &mut self.jacp_dot,
+                &mut self.jacr_dot,
+            )?;
             let x = self.data.xmat()[body];
             let to_world = |v: [f64; 3]| -> [f64; 3] {
                 [

@@ -214,8 +214,11 @@ impl Report {
                 "row", "external", "before", "after"
             );
             for r in &self.base_rows {
-                let _ =
-                    writeln!(out, "{:<40} {:>10.3} {:>10.3} {:>10.3}", r.row, r.rms_external, r.before_rms, r.after_rms);
+                let _ = writeln!(
+                    out,
+                    "{:<40} {:>10.3} {:>10.3} {:>10.3}",
+                    r.row, r.rms_external, r.before_rms, r.after_rms
+                );
             }
         }
         if let Some(v) = &self.validation_nrmse {

@@ -82,17 +82,82 @@ impl Rng {
     }
 }
 
+/// A floating-base synthetic log: the robot's root link hangs from nothing (a free joint), and
+/// the log carries the base motion (`nav_msgs/msg/Odometry`) and the known external wrenches.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FloatingSynthOptions {
+    /// Gravity on (default: `true`: the robot is in free fall, which for its joints and base
+    /// rows is the same as floating in zero gravity: momentum conservation makes the base move
+    /// as the joints do. `false` simulates zero gravity, which the identification must then be
+    /// told about: its model has the URDF's gravity).
+    pub gravity: bool,
+    /// Links that receive a known external wrench (a stand-in for measured contact wrenches),
+    /// logged as `WrenchStamped` on `/contacts/<link>` with `header.frame_id = <link>`
+    /// (default: none).
+    pub wrench_links: Vec<String>,
+    /// Amplitude of each force component, N (default: 20).
+    pub wrench_force_n: f64,
+    /// Amplitude of each torque component (about the link origin), N·m (default: 2).
+    pub wrench_torque_nm: f64,
+    /// Wrench noise standard deviation as a fraction of its amplitude (default: 0.01).
+    pub wrench_noise_rel: f64,
+    /// Standard deviation of the odometry position noise, m (default: 1e-4).
+    pub position_noise_m: f64,
+    /// Standard deviation of the odometry orientation noise, rad (default: 1e-4).
+    pub orientation_noise_rad: f64,
+    /// Standard deviation of the odometry twist noise, m/s and rad/s (default: 0.002; a state
+    /// estimator fusing an IMU).
+    pub twist_noise: f64,
+    /// Odometry topic name (default: `/odom`).
+    pub odom_topic: String,
+}
+
+impl Default for FloatingSynthOptions {
+    fn default() -> Self {
+        FloatingSynthOptions {
+            gravity: true,
+            wrench_links: Vec::new(),
+            wrench_force_n: 20.0,
+            wrench_torque_nm: 2.0,
+            wrench_noise_rel: 0.01,
+            position_noise_m: 1e-4,
+            orientation_noise_rad: 1e-4,
+            twist_noise: 0.002,
+            odom_topic: "/odom".into(),
+        }
+    }
+}
+
 /// Simulates the robot of `urdf` (contacts off: a robot bolted down or on a gantry, moving in
 /// free space) and returns its log.
 ///
 /// # Errors
 /// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
 pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
+    simulate_impl(urdf, opts, None)
+}
+
+/// Simulates the robot of `urdf` with a floating base (contacts off) and returns its log with
+/// [`JointLog::base`] and [`JointLog::wrenches`] filled ([`JointLog::write_mcap`] writes them
+/// as `/odom` and `/contacts/<link>`).
+///
+/// # Errors
+/// As [`simulate`]; [`crate::Error::Urdf`] for a wrench link the robot lacks.
+pub fn simulate_floating(urdf: &Path, opts: &SynthOptions, floating: &FloatingSynthOptions) -> Result<JointLog> {
+    simulate_impl(urdf, opts, Some(floating))
+}
+
+fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSynthOptions>) -> Result<JointLog> {
     let dt = 1.0 / opts.rate_hz;
-    let extra = format!(r#"<option timestep="{dt}"><flag contact="disable"/></option>"#);
-    let base = load_urdf_in_mujoco(urdf, &extra)?;
+    let gravity = if floating.is_some_and(|f| !f.gravity) { r#" gravity="0 0 0""# } else { "" };
+    let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable"/></option>"#);
+    let base = match floating {
+        Some(_) => crate::model::load_urdf_in_mujoco_floating(urdf, &extra)?,
+        None => load_urdf_in_mujoco(urdf, &extra)?,
+    };
+    let free_dofs = if floating.is_some() { 6 } else { 0 };
     let mut edit = base.edit()?;
-    for dof in 0..base.nv() {
+    for dof in free_dofs..base.nv() {
         edit.set_dof_armature(dof, opts.armature)?;
         // MuJoCo's friction loss is a soft constraint; with its defaults the friction of a
         // light joint ramps up over ~0.1 rad/s. A stiff constraint (time constant of two steps)
@@ -100,9 +165,49 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
         edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
     }
     let model = Arc::new(edit.finish()?);
-    let robot = RobotModel::from_model(urdf, model.clone())?;
+    let robot = match floating {
+        Some(_) => RobotModel::from_model_floating(urdf, model.clone())?,
+        None => RobotModel::from_model(urdf, model.clone())?,
+    };
     let nj = robot.joints.len();
     let mut rng = Rng::new(opts.seed);
+    // Known external wrenches: per link and component, 3 sines between 0.2 and 1.5 Hz.
+    let wrench_links: Vec<(String, usize)> = match floating {
+        Some(f) => f
+            .wrench_links
+            .iter()
+            .map(|name| {
+                model.id(twin_core::mj::ObjType::Body, name).map(|b| (name.clone(), b)).ok_or_else(|| {
+                    crate::Error::Urdf { path: urdf.to_path_buf(), message: format!("no link \"{name}\" for a wrench") }
+                })
+            })
+            .collect::<Result<_>>()?,
+        None => Vec::new(),
+    };
+    let wrench_waves: Vec<[[(f64, f64, f64); 3]; 6]> = wrench_links
+        .iter()
+        .map(|_| {
+            std::array::from_fn(|k| {
+                let amp = floating.map_or(0.0, |f| if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm });
+                std::array::from_fn(|_| (amp / 3.0, 0.2 + 1.3 * rng.uniform(), 2.0 * PI * rng.uniform()))
+            })
+        })
+        .collect();
+    let wrench_at = |i: usize, t: f64| -> [f64; 6] {
+        std::array::from_fn(|k| wrench_waves[i][k].iter().map(|&(a, f, p)| a * (2.0 * PI * f * t + p).sin()).sum())
+    };
+    let mut base_log = crate::log::BaseTrajectory {
+        topic: floating.map_or(String::new(), |f| f.odom_topic.clone()),
+        ..Default::default()
+    };
+    let mut wrench_log: Vec<crate::log::WrenchSeries> = wrench_links
+        .iter()
+        .map(|(name, _)| crate::log::WrenchSeries {
+            topic: format!("/contacts/{name}"),
+            body: name.clone(),
+            ..Default::default()
+        })
+        .collect();
 
     // Trajectory: per joint centre, 5 harmonics with random phases, amplitudes within range.
     const HARMONICS: [f64; 5] = [1.0, 2.0, 3.0, 5.0, 7.0];
@@ -168,15 +273,62 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
     let mut log = JointLog::new(names, format!("synthetic log of {}", urdf.display()));
     let resolution = 2.0 * PI / (1u64 << opts.encoder_bits) as f64;
     let (mut p, mut v, mut e) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
+    let nv = model.nv();
+    let mut qfrc_ext = vec![0.0; nv];
+    let (mut jacp, mut jacr, mut jacp_dot, mut jacr_dot) =
+        (vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
     for step in 0..steps {
         let t = step as f64 * dt;
         data.step1()?;
+        let t_nanos = (t * 1e9).round() as i64;
+        // The controller cancels the known wrenches' joint torques (feedforward `−Jᵀ·w`), so
+        // that a light joint such as an ankle is not pushed into its limits (joint-limit forces
+        // are not in the identified model).
+        qfrc_ext.fill(0.0);
+        for (i, &(_, body)) in wrench_links.iter().enumerate() {
+            let w = wrench_at(i, t);
+            let x = data.xmat()[body];
+            data.xfrc_applied_mut()[body] = xfrc_from_body_wrench(w, x, data.xpos()[body], data.xipos()[body]);
+            data.body_jacobian_dot(body, &mut jacp, &mut jacr, &mut jacp_dot, &mut jacr_dot)?;
+            let rot = |v: [f64; 3]| [0, 1, 2].map(|r| x[3 * r] * v[0] + x[3 * r + 1] * v[1] + x[3 * r + 2] * v[2]);
+            let (f, n) = (rot([w[0], w[1], w[2]]), rot([w[3], w[4], w[5]]));
+            for (d, q) in qfrc_ext.iter_mut().enumerate() {
+                *q += (0..3).map(|r| jacp[r * nv + d] * f[r] + jacr[r * nv + d] * n[r]).sum::<f64>();
+            }
+            wrench_log[i].t_nanos.push(t_nanos);
+            wrench_log[i].wrench.push(w);
+        }
+        if let (Some(f), Some(fb)) = (floating, &robot.floating) {
+            let qpos = &data.qpos()[fb.qpos_adr..fb.qpos_adr + 7];
+            let p = [qpos[0], qpos[1], qpos[2]].map(|x| x + f.position_noise_m * rng.normal());
+            // Orientation noise: a small random rotation (half-angles in the vector part).
+            let e: [f64; 3] = std::array::from_fn(|_| 0.5 * f.orientation_noise_rad * rng.normal());
+            let mut q = [qpos[3], qpos[4], qpos[5], qpos[6]];
+            let dq = [1.0, e[0], e[1], e[2]];
+            q = [
+                q[0] * dq[0] - q[1] * dq[1] - q[2] * dq[2] - q[3] * dq[3],
+                q[0] * dq[1] + q[1] * dq[0] + q[2] * dq[3] - q[3] * dq[2],
+                q[0] * dq[2] - q[1] * dq[3] + q[2] * dq[0] + q[3] * dq[1],
+                q[0] * dq[3] + q[1] * dq[2] - q[2] * dq[1] + q[3] * dq[0],
+            ];
+            let n = q.iter().map(|x| x * x).sum::<f64>().sqrt();
+            // REP-105 twist: linear velocity in the base frame (MuJoCo's is in the world frame).
+            let qvel = &data.qvel()[fb.dof..fb.dof + 6];
+            let r = data.xmat()[fb.body];
+            let v_base = [0, 1, 2].map(|i| r[i] * qvel[0] + r[3 + i] * qvel[1] + r[6 + i] * qvel[2]);
+            let twist =
+                [v_base[0], v_base[1], v_base[2], qvel[3], qvel[4], qvel[5]].map(|x| x + f.twist_noise * rng.normal());
+            base_log.twist.push(twist);
+            base_log.t_nanos.push(t_nanos);
+            base_log.position.push(p);
+            base_log.orientation_wxyz.push(q.map(|x| x / n));
+        }
         let bias = data.qfrc_bias().to_vec();
         for (j, joint) in robot.joints.iter().enumerate() {
             let (qr, qdr, qddr) = reference(j, t);
             let (q, qd) = (data.qpos()[joint.qpos_adr], data.qvel()[joint.dof]);
             let m = kp[j] / (wn * wn);
-            let tau = bias[joint.dof] + m * qddr + kp[j] * (qr - q) + kd[j] * (qdr - qd);
+            let tau = bias[joint.dof] - qfrc_ext[joint.dof] + m * qddr + kp[j] * (qr - q) + kd[j] * (qdr - qd);
             data.qfrc_applied_mut()[joint.dof] = tau;
             p[j] = (q / resolution).round() * resolution;
             v[j] = qd + opts.velocity_noise * rng.normal();
@@ -190,6 +342,17 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
                 urdf.display()
             )));
         }
+    }
+    if let Some(f) = floating {
+        for series in &mut wrench_log {
+            for w in &mut series.wrench {
+                for (k, x) in w.iter_mut().enumerate() {
+                    *x += f.wrench_noise_rel * if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm } * rng.normal();
+                }
+            }
+        }
+        log.base = Some(base_log);
+        log.wrenches = wrench_log;
     }
     // Effort noise relative to each joint's RMS torque.
     for j in 0..nj {
@@ -245,7 +408,12 @@ pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
 /// MuJoCo's `xfrc_applied` entry (world frame, force then torque about the body's centre of
 /// mass) of a wrench `[f; n]` expressed in the body frame, torque about the body origin.
 /// `world_from_body` is the body's row-major `xmat`, `origin` its `xpos`, `com` its `xipos`.
-pub fn xfrc_from_body_wrench(wrench_body: [f64; 6], world_from_body: [f64; 9], origin: [f64; 3], com: [f64; 3]) -> [f64; 6] {
+pub fn xfrc_from_body_wrench(
+    wrench_body: [f64; 6],
+    world_from_body: [f64; 9],
+    origin: [f64; 3],
+    com: [f64; 3],
+) -> [f64; 6] {
     let r = world_from_body;
     let rot = |v: [f64; 3]| {
         [

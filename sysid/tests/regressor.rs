@@ -194,8 +194,10 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
         // Wrenches in body frames (torque about the body origin), applied as MuJoCo's
         // xfrc_applied (world frame, at the CoM) at this pose.
         data.kinematics_with_velocity().unwrap();
-        let wrenches: Vec<(usize, [f64; 6])> =
-            wrench_bodies.iter().map(|&b| (b, std::array::from_fn(|k| lcg(&mut rng) * if k < 3 { 50.0 } else { 5.0 }))).collect();
+        let wrenches: Vec<(usize, [f64; 6])> = wrench_bodies
+            .iter()
+            .map(|&b| (b, std::array::from_fn(|k| lcg(&mut rng) * if k < 3 { 50.0 } else { 5.0 })))
+            .collect();
         data.xfrc_applied_mut().iter_mut().for_each(|x| *x = [0.0; 6]);
         for &(b, w) in &wrenches {
             let x = xfrc_from_body_wrench(w, data.xmat()[b], data.xpos()[b], data.xipos()[b]);
@@ -204,11 +206,7 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
         data.forward().unwrap();
         let qacc = data.qacc().to_vec();
         let qdd: Vec<f64> = robot.joints.iter().map(|j| qacc[j.dof]).collect();
-        let sample = BaseSample {
-            qpos: base_qpos,
-            qvel: base_qvel,
-            qacc: std::array::from_fn(|k| qacc[fb.dof + k]),
-        };
+        let sample = BaseSample { qpos: base_qpos, qvel: base_qvel, qacc: std::array::from_fn(|k| qacc[fb.dof + k]) };
         let tau = reg.torques_with(Some(&sample), &q, &qd, &qdd, &params, &mut rows).unwrap();
         reg.external_forces(&wrenches, &mut ext).unwrap();
         data.inverse().unwrap();
