@@ -656,9 +656,15 @@ pub fn urdf_updates(
             MassProperties::from_params(&ident.link_params(l)).map(|mp| {
                 // A link identified on the boundary of physical validity (a triangle inequality
                 // holding with equality) could cross it when the URDF's 7 significant digits
-                // round it: 1e-5 of the trace added isotropically keeps a margin (far below σ).
-                let inertia_com =
-                    mp.inertia_com + nalgebra::Matrix3::identity() * (1e-5 * mp.inertia_com.trace().max(0.0));
+                // round it: 2e-6 of the trace added isotropically keeps a margin (far below σ).
+                let e = mp.inertia_com.symmetric_eigenvalues();
+                let trace = mp.inertia_com.trace().max(0.0);
+                let margin = (e[0] + e[1] - e[2]).min(e[1] + e[2] - e[0]).min(e[0] + e[2] - e[1]).min(e.min());
+                let inertia_com = if margin < 1e-5 * trace {
+                    mp.inertia_com + nalgebra::Matrix3::identity() * (2e-6 * trace)
+                } else {
+                    mp.inertia_com
+                };
                 crate::writeback::LinkUpdate {
                     name: link.name.clone(),
                     mass_kg: mp.mass_kg,
