@@ -9,7 +9,9 @@ use sysid::{Base, JointLog, RobotModel, SysidOptions};
 pub enum BaseArg {
     /// Robot bolted down or hung on a gantry.
     Fixed,
-    /// Free-floating base (needs base state and contact wrenches in the log; not supported yet).
+    /// Free-floating base: base motion from nav_msgs/msg/Odometry (--odom-topic), contact
+    /// wrenches from every geometry_msgs/msg/WrenchStamped topic whose header.frame_id is a link
+    /// (force/torque in that link's frame, torque about its origin).
     Floating,
 }
 
@@ -45,6 +47,10 @@ pub struct Args {
     /// How the robot's base was held while logging.
     #[arg(long, value_enum, default_value_t = BaseArg::Fixed)]
     pub base: BaseArg,
+    /// Odometry topic of the base motion for --base floating (pose in the world frame, twist
+    /// in the base frame, REP-105).
+    #[arg(long, value_name = "T", default_value = "/odom")]
+    pub odom_topic: String,
     /// Low-pass cut-off in Hz (default: rate / 25, at most 20 Hz).
     #[arg(long, value_name = "HZ")]
     pub cutoff_hz: Option<f64>,
@@ -60,9 +66,21 @@ pub struct Args {
     pub coulomb_smoothing: Option<f64>,
 }
 
-fn read_log(path: &Path, topic: Option<&str>) -> anyhow::Result<JointLog> {
+fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyhow::Result<JointLog> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
+        "csv" if odom_topic.is_some() => bail!(
+            "{}: --base floating needs the base motion (nav_msgs/msg/Odometry) and contact wrenches, which a \
+             CSV log cannot carry; record a ROS 2 bag",
+            path.display()
+        ),
+        _ if (ext == "mcap" || path.is_dir()) && odom_topic.is_some() => {
+            let (log, warnings) = JointLog::read_mcap_floating(path, topic, odom_topic.unwrap_or("/odom"))?;
+            for w in warnings {
+                eprintln!("warning: {w}");
+            }
+            Ok(log)
+        }
         "csv" => {
             if topic.is_some() {
                 eprintln!("warning: --topic is ignored for CSV logs");
@@ -105,10 +123,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
-    let robot =
-        RobotModel::from_urdf(&args.update).with_context(|| format!("loading the robot {}", args.update.display()))?;
-    let log = read_log(&args.log, args.topic.as_deref())?;
-    let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref())).transpose()?;
+    let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
+    let robot = match opts.base {
+        Base::Fixed => RobotModel::from_urdf(&args.update),
+        Base::Floating => RobotModel::from_urdf_floating(&args.update),
+    }
+    .with_context(|| format!("loading the robot {}", args.update.display()))?;
+    let log = read_log(&args.log, args.topic.as_deref(), odom)?;
+    let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref(), odom)).transpose()?;
     let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
     if let (Some(path), Some(other)) = (&args.validate, &held_out) {
         let nrmse = sysid::validate(&robot, other, &opts, &[&ident.before, &ident.after])

@@ -319,11 +319,12 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     let base_description = match (&robot.floating, &log.base) {
         (Some(_), Some(b)) => {
             if wrenches.is_empty() {
-                warnings.push(format!(
+                warnings.push(
                     "no contact wrench topic (geometry_msgs/msg/WrenchStamped with a link's name as \
                      header.frame_id) in the log: the base rows assume the robot touched nothing (free flight, \
                      momentum conserved); if it stood or walked, record the contact wrenches"
-                ));
+                        .to_string(),
+                );
             }
             format!("floating base (base motion from {}, {} contact wrench topics)", b.topic, wrenches.len())
         }

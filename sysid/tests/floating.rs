@@ -95,9 +95,9 @@ fn run(wrench_links: &[&str], train_secs: f64) -> Outcome {
         );
     }
     let (mut worst_nrmse, mut worst_before) = (0.0f64, 0.0f64);
-    for j in 0..robot.joints.len() {
-        worst_nrmse = worst_nrmse.max(nrmse[1][j]);
-        worst_before = worst_before.max(nrmse[0][j]);
+    for (before, after) in nrmse[0].iter().zip(&nrmse[1]) {
+        worst_nrmse = worst_nrmse.max(*after);
+        worst_before = worst_before.max(*before);
     }
     let (sb, sa): (f64, f64) =
         ident.report.base_rows.iter().fold((0.0, 0.0), |(b, a), r| (b + r.before_rms.powi(2), a + r.after_rms.powi(2)));

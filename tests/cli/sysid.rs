@@ -132,7 +132,7 @@ fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
     nan.position[1][1234] = f64::NAN;
     refuses(d, &nan, &[], "position value(s) of joint \"shoulder_lift_joint\" are NaN");
 
-    refuses(d, &log, &["--base", "floating"], "floating-base identification needs");
+    refuses(d, &log, &["--base", "floating"], "--base floating needs the base motion");
 
     // Strict: an effort logged with the opposite sign convention is a refusal.
     let mut flipped = log.clone();
@@ -146,4 +146,55 @@ fn sysid_refuses_bad_logs_and_leaves_the_urdf_untouched() {
     let q0 = lazy.position[5][0];
     lazy.position[5].fill(q0);
     refuses(d, &lazy, &["--strict"], "\"wrist_3_joint\" barely moved");
+}
+
+/// `--base floating` on a bag with `/joint_states`, `/odom` and contact wrench topics updates
+/// the URDF (pelvis included) and says so; the same joints without `/odom` are refused, the
+/// topics that are there named, and the URDF untouched.
+#[test]
+fn sysid_floating_base_from_a_bag_and_refusal_without_odometry() {
+    use sysid::synth::{FloatingSynthOptions, simulate_floating};
+    let truth = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/humanoid.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let start = dir.path().join("humanoid.urdf");
+    sysid::synth::perturbed_urdf(&truth, &start, 4).unwrap();
+    let fopts = FloatingSynthOptions {
+        wrench_links: vec!["left_foot_link".into(), "right_foot_link".into()],
+        ..Default::default()
+    };
+    let log = simulate_floating(&truth, &SynthOptions { duration_secs: 10.0, ..Default::default() }, &fopts).unwrap();
+    log.write_mcap(dir.path().join("float.mcap"), "/joint_states").unwrap();
+    let mut joints_only = log.clone();
+    joints_only.base = None;
+    joints_only.wrenches.clear();
+    joints_only.write_mcap(dir.path().join("joints.mcap"), "/joint_states").unwrap();
+
+    let original = std::fs::read(&start).unwrap();
+    let out = twin(dir.path(), &["sysid", "--log", "joints.mcap", "--update", "humanoid.urdf", "--base", "floating"]);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("the bag has no topic /odom") && err.contains("/joint_states"), "{err}");
+    assert_eq!(std::fs::read(&start).unwrap(), original);
+    assert!(!dir.path().join("humanoid.urdf.bak").exists());
+
+    let out = twin(
+        dir.path(),
+        &["sysid", "--log", "float.mcap", "--update", "humanoid.urdf", "--base", "floating", "--report", "r.json"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("floating base (base motion from /odom, 2 contact wrench topics)"), "{stdout}");
+    assert!(stdout.contains("base force z (N)"), "{stdout}");
+    let updated = std::fs::read_to_string(&start).unwrap();
+    assert_ne!(updated.as_bytes(), original.as_slice());
+    assert_eq!(std::fs::read(dir.path().join("humanoid.urdf.bak")).unwrap(), original);
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap()).unwrap();
+    assert_eq!(report["base"], "floating");
+    assert!(report["links"].as_array().unwrap().iter().any(|l| l["name"] == "pelvis" && l["physically_valid"] == true));
+    for row in report["training_nrmse"].as_array().unwrap() {
+        let (before, after) = (row["before"].as_f64().unwrap(), row["after"].as_f64().unwrap());
+        assert!(after < before && after < 0.1, "{row}");
+    }
+    twin_core::mj::Model::from_file(&start).unwrap();
 }
