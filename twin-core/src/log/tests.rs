@@ -371,9 +371,15 @@ fn humanoid_fixture_reads_with_the_generating_formula() {
 fn partial_chunk_messages_are_salvaged() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("raw.mcap");
-    let mut w =
-        LogWriter::create(&path, &WriterOptions { chunk_size_bytes: 16 * 1024, compress: false, ..Default::default() })
-            .unwrap();
+    let mut w = LogWriter::create(
+        &path,
+        &WriterOptions {
+            chunk_size_bytes: 16 * 1024,
+            compression: super::writer::Compression::None,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let js = w.add_topic::<JointState>("/joint_states").unwrap();
     for i in 0..300 {
         w.write(js, i as u64, &joint_state(i, i as i64 + 1)).unwrap();
