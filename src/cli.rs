@@ -24,4 +24,7 @@ pub enum Command {
     Log(crate::commands::log::Args),
     /// Domain-randomized batch rollouts: how often and how the robot fails.
     Randomize(Box<crate::commands::randomize::Args>),
+    /// Run the twin under a built-in controller and record ROS 2 topics (MCAP) and a rerun
+    /// recording, stamped in simulation time.
+    Sim(Box<crate::commands::sim::Args>),
 }

@@ -5,6 +5,7 @@ pub mod convert;
 pub mod info;
 pub mod log;
 pub mod randomize;
+pub mod sim;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;
@@ -20,6 +21,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Check(args) => check::run(args),
         Command::Log(args) => log::run(args),
         Command::Randomize(args) => randomize::run(*args),
+        Command::Sim(args) => sim::run(*args),
     }
 }
 

@@ -24,6 +24,7 @@ pub mod convert;
 pub mod error;
 pub mod log;
 pub mod mj;
+pub mod sim;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;

@@ -199,7 +199,16 @@ impl Recorder {
     /// # Errors
     /// [`Error::Rerun`] if writing fails.
     pub fn log_poses(&self, data: &Data) -> Result<()> {
-        self.set_time_secs(data.time_secs());
+        self.log_poses_at(data.time_secs(), data)
+    }
+
+    /// Logs every body's world pose from `data` stamped `t_secs` (for a `data` whose poses
+    /// belong to another time than `data.time`, e.g. between `mj_step1` and the end of a step).
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn log_poses_at(&self, t_secs: f64, data: &Data) -> Result<()> {
+        self.set_time_secs(t_secs);
         let (xpos, xquat) = (data.xpos(), data.xquat());
         for (b, path) in self.body_paths.iter().enumerate() {
             if let Some(path) = path {
@@ -216,6 +225,11 @@ impl Recorder {
     /// [`Error::Rerun`] if writing fails.
     pub fn scalar(&self, name: &str, value: f64) -> Result<()> {
         self.rec.log(format!("series/{name}"), &rerun::Scalars::single(value)).map_err(|e| self.err(e))
+    }
+
+    /// The `.rrd` file, when recording to one.
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
     }
 
     /// Flushes everything to the file or viewer.
