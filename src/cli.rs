@@ -27,4 +27,7 @@ pub enum Command {
     /// Run the twin under a built-in controller and record ROS 2 topics (MCAP) and a rerun
     /// recording, stamped in simulation time.
     Sim(Box<crate::commands::sim::Args>),
+    /// Turn a robot's ROS 2 log into a rerun recording: the robot animated from its joint
+    /// states, joint and IMU time series.
+    View(crate::commands::view::Args),
 }

@@ -366,6 +366,8 @@ impl TrajectoryJoint {
 pub struct JointTrajectory {
     /// Where it came from (for messages).
     pub source: std::path::PathBuf,
+    /// Absolute time of the trajectory's time 0, ns (the earliest log stamp; 0 for CSV).
+    pub start_nanos: i64,
     /// The joints, in file order.
     pub joints: Vec<TrajectoryJoint>,
 }
@@ -415,7 +417,7 @@ impl JointTrajectory {
                 name: j.name,
             })
             .collect();
-        Ok(JointTrajectory { source: path.to_path_buf(), joints })
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })
     }
 
     /// From a CSV file: a header `time_sec,<joint>,<joint>,…` (a column `<joint>_vel` next to a
@@ -477,7 +479,7 @@ impl JointTrajectory {
                 velocity,
             });
         }
-        Ok(JointTrajectory { source: path.to_path_buf(), joints })
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: 0, joints })
     }
 }
 

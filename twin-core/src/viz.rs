@@ -240,3 +240,143 @@ impl Recorder {
         self.rec.flush_blocking().map_err(|e| self.err(e))
     }
 }
+
+/// Options of [`record_log`].
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    /// JointState topic that animates the robot (default: `/joint_states`).
+    pub joint_states_topic: String,
+    /// Odometry topic that moves the floating base, used when the log has it (default: `/odom`).
+    pub odom_topic: String,
+    /// Rate of the posed frames, Hz; joint and IMU scalars keep every sample (default: 50).
+    pub pose_rate_hz: f64,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        ViewOptions { joint_states_topic: "/joint_states".into(), odom_topic: "/odom".into(), pose_rate_hz: 50.0 }
+    }
+}
+
+/// What [`record_log`] did.
+#[derive(Debug, Clone, Default)]
+pub struct ViewSummary {
+    /// Posed frames logged.
+    pub frames: u64,
+    /// Log joints that animate a model joint.
+    pub joints_matched: Vec<String>,
+    /// Log joints the model lacks (logged as scalars only).
+    pub joints_unknown: Vec<String>,
+    /// Odometry messages that moved the base (0: base kept at its home pose).
+    pub odom_messages: u64,
+    /// IMU topics logged as scalars.
+    pub imu_topics: Vec<String>,
+    /// Scalars logged.
+    pub scalars: u64,
+    /// Log time span shown, seconds.
+    pub duration_secs: f64,
+    /// Warnings about the log (damage, odd stamps).
+    pub warnings: Vec<String>,
+}
+
+/// Turns a robot's ROS 2 log into a recording: the model posed from the log's joint states
+/// (positions set by joint name, interpolated to [`ViewOptions::pose_rate_hz`] frames, then
+/// `mj_forward`), the floating base from odometry when the log has it, and joint positions /
+/// IMU readings as scalars (`series/joints/<joint>`, `series/imu/<topic>/{gyro,accel}_{x,y,z}`).
+/// Time 0 is the first joint-state stamp.
+///
+/// # Errors
+/// Log errors ([`Error::LogTopic`] when the joint-state topic is missing); [`Error::Rerun`].
+pub fn record_log(
+    robot: &crate::sim::Robot,
+    log: &crate::log::Log,
+    options: &ViewOptions,
+    recorder: &Recorder,
+) -> Result<ViewSummary> {
+    use crate::control::JointTrajectory;
+    use crate::log::{Imu, Odometry};
+    let model = &robot.model;
+    let mut summary = ViewSummary::default();
+    let series = log.joint_states(&options.joint_states_topic)?;
+    summary.warnings = series.report.warnings();
+    let trajectory = JointTrajectory::from_log(log.path(), &options.joint_states_topic)?;
+    let t0 = trajectory.start_nanos;
+    let rel = |stamp_nanos: i64, log_nanos: u64| {
+        let t = if stamp_nanos != 0 { stamp_nanos } else { log_nanos as i64 };
+        (t - t0) as f64 * 1e-9
+    };
+    let mut animated = Vec::new();
+    for j in &trajectory.joints {
+        match model.id(ObjType::Joint, &j.name) {
+            Some(id) if model.jnt_type()[id] as u32 != sys::mjtJoint_mjJNT_FREE => {
+                summary.joints_matched.push(j.name.clone());
+                animated.push((model.jnt_qposadr()[id] as usize, j));
+            }
+            _ => summary.joints_unknown.push(j.name.clone()),
+        }
+        for (t, q) in j.time_secs.iter().zip(&j.position) {
+            recorder.set_time_secs(*t);
+            recorder.scalar(&format!("joints/{}", entity_name(&j.name, "joint", 0)), *q)?;
+            summary.scalars += 1;
+        }
+    }
+    summary.duration_secs = trajectory.duration_secs();
+
+    let topics = log.info()?.topics;
+    let free_adr = robot.base_body.and_then(|b| {
+        (0..model.njnt())
+            .find(|&j| model.jnt_bodyid()[j] as usize == b && model.jnt_type()[j] as u32 == sys::mjtJoint_mjJNT_FREE)
+            .map(|j| model.jnt_qposadr()[j] as usize)
+    });
+    let mut odom: Vec<(f64, [f64; 3], [f64; 4])> = Vec::new();
+    if free_adr.is_some() && topics.iter().any(|t| t.topic == options.odom_topic) {
+        let (msgs, _) = log.read_typed::<Odometry>(&options.odom_topic)?;
+        odom = msgs
+            .iter()
+            .map(|(log_nanos, m)| {
+                let q = m.orientation_xyzw;
+                (rel(m.header.stamp_nanos, *log_nanos), m.position, [q[3], q[0], q[1], q[2]])
+            })
+            .collect();
+        odom.sort_by(|a, b| a.0.total_cmp(&b.0));
+        summary.odom_messages = odom.len() as u64;
+    }
+    for t in topics.iter().filter(|t| t.type_name == "sensor_msgs/msg/Imu") {
+        let (msgs, _) = log.read_typed::<Imu>(&t.topic)?;
+        let name = entity_name(t.topic.trim_start_matches('/'), "imu", 0);
+        for (log_nanos, m) in &msgs {
+            recorder.set_time_secs(rel(m.header.stamp_nanos, *log_nanos));
+            let v = [m.angular_velocity, m.linear_acceleration].concat();
+            for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate() {
+                recorder.scalar(&format!("imu/{name}/{axis}"), v[i])?;
+                summary.scalars += 1;
+            }
+        }
+        summary.imu_topics.push(t.topic.clone());
+    }
+
+    let mut data = Data::new(model.clone())?;
+    crate::control::reset_to_home(&mut data)?;
+    let frames = ((summary.duration_secs * options.pose_rate_hz.max(1e-3)).floor() as u64) + 1;
+    let mut next_odom = 0usize;
+    for k in 0..frames {
+        let t = k as f64 / options.pose_rate_hz;
+        for (adr, j) in &animated {
+            data.qpos_mut()[*adr] = j.sample(t).0;
+        }
+        if let Some(adr) = free_adr {
+            while next_odom + 1 < odom.len() && odom[next_odom + 1].0 <= t {
+                next_odom += 1;
+            }
+            if let Some((_, p, q)) = odom.get(next_odom) {
+                let qpos = data.qpos_mut();
+                qpos[adr..adr + 3].copy_from_slice(p);
+                qpos[adr + 3..adr + 7].copy_from_slice(q);
+            }
+        }
+        data.forward()?;
+        recorder.log_poses_at(t, &data)?;
+        summary.frames += 1;
+    }
+    Ok(summary)
+}
