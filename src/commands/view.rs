@@ -60,8 +60,13 @@ fn run_view(args: Args) -> anyhow::Result<()> {
         (Some(path), None) => Recorder::to_file(&robot.model, "twin", path)?,
         (None, None) => unreachable!("checked in run"),
     };
-    let options = ViewOptions { joint_states_topic: args.topic.clone(), odom_topic: args.odom_topic.clone(), pose_rate_hz: args.fps };
-    let summary = record_log(&robot, &log, &options, &recorder).with_context(|| format!("reading {}", args.log.display()))?;
+    let options = ViewOptions {
+        joint_states_topic: args.topic.clone(),
+        odom_topic: args.odom_topic.clone(),
+        pose_rate_hz: args.fps,
+    };
+    let summary =
+        record_log(&robot, &log, &options, &recorder).with_context(|| format!("reading {}", args.log.display()))?;
     recorder.finish()?;
     for w in &summary.warnings {
         eprintln!("warning: {w}");
@@ -87,7 +92,11 @@ fn run_view(args: Args) -> anyhow::Result<()> {
         summary.duration_secs,
         summary.frames,
         summary.joints_matched.len(),
-        if summary.odom_messages > 0 { format!("from {} ({} messages)", args.odom_topic, summary.odom_messages) } else { "at its home pose".into() },
+        if summary.odom_messages > 0 {
+            format!("from {} ({} messages)", args.odom_topic, summary.odom_messages)
+        } else {
+            "at its home pose".into()
+        },
         summary.imu_topics.len(),
         summary.scalars
     );
