@@ -10,3 +10,5 @@ mod info;
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
+#[path = "cli/sim.rs"]
+mod sim;

@@ -2,7 +2,7 @@
 //! controller and records ROS 2 topics (MCAP) and a rerun recording, stamped in simulation time.
 
 use anyhow::{Context, bail};
-use std::io::IsTerminal;
+use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use twin_core::control::{Controller, JointTrajectory, PdHold, PdHoldOptions, Replay, ReplayOptions};
 use twin_core::log::{Compression, WriterOptions};
@@ -147,8 +147,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(r) => Some(r.finish()?),
         None => None,
     };
+    let mut out = std::io::stdout().lock();
 
-    println!(
+    writeln!(
+        out,
         "simulated {:.3} s of {} ({} steps of {} ms) with controller {} in {:.3} s wall: real-time factor {:.1}",
         report.sim_secs,
         path.display(),
@@ -157,25 +159,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         controller.name(),
         report.wall_secs,
         report.real_time_factor()
-    );
+    )?;
     if let Some(s) = summary {
         if recording_wanted {
-            println!(
+            writeln!(
+                out,
                 "recording: {:.3} s inside the loop ({:.1} % of the loop, {:.2} µs per step)",
                 report.record_secs,
                 100.0 * report.record_secs / report.wall_secs.max(1e-12),
                 report.record_secs * 1e6 / report.steps as f64
-            );
+            )?;
         }
         if let Some((file, w)) = &s.mcap {
-            println!("{}: {} messages, {} chunks, {} bytes", file.display(), w.messages, w.chunks, w.bytes);
+            writeln!(out, "{}: {} messages, {} chunks, {} bytes", file.display(), w.messages, w.chunks, w.bytes)?;
             let width = s.topics.iter().map(|(t, _)| t.len()).max().unwrap_or(0);
             for (topic, n) in &s.topics {
-                println!("  {topic:<width$}  {n}");
+                writeln!(out, "  {topic:<width$}  {n}")?;
             }
         }
         if let Some((file, bytes)) = &s.rrd {
-            println!("{}: {bytes} bytes", file.display());
+            writeln!(out, "{}: {bytes} bytes", file.display())?;
         }
     }
     Ok(())

@@ -49,6 +49,7 @@ fn run_view(_args: Args) -> anyhow::Result<()> {
 
 #[cfg(feature = "rerun")]
 fn run_view(args: Args) -> anyhow::Result<()> {
+    use std::io::Write;
     use twin_core::log::{Log, ReadOptions};
     use twin_core::viz::{Recorder, ViewOptions, record_log};
 
@@ -65,6 +66,7 @@ fn run_view(args: Args) -> anyhow::Result<()> {
         odom_topic: args.odom_topic.clone(),
         pose_rate_hz: args.fps,
     };
+    let mut out = std::io::stdout().lock();
     let summary =
         record_log(&robot, &log, &options, &recorder).with_context(|| format!("reading {}", args.log.display()))?;
     recorder.finish()?;
@@ -86,7 +88,8 @@ fn run_view(args: Args) -> anyhow::Result<()> {
             summary.joints_unknown.join(", ")
         );
     }
-    println!(
+    writeln!(
+        out,
         "{}: {:.3} s of log, {} frames, {} joints animated, base {}, {} IMU topics, {} scalars",
         args.log.display(),
         summary.duration_secs,
@@ -99,12 +102,12 @@ fn run_view(args: Args) -> anyhow::Result<()> {
         },
         summary.imu_topics.len(),
         summary.scalars
-    );
+    )?;
     match (&args.output, &args.connect) {
-        (_, Some(url)) => println!("streamed to {url}"),
+        (_, Some(url)) => writeln!(out, "streamed to {url}")?,
         (Some(path), None) => {
             let bytes = std::fs::metadata(path).map(|m| m.len()).unwrap_or(0);
-            println!("{}: {bytes} bytes", path.display());
+            writeln!(out, "{}: {bytes} bytes", path.display())?;
         }
         (None, None) => {}
     }
