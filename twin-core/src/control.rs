@@ -717,6 +717,44 @@ mod tests {
     }
 
     #[test]
+    fn trajectory_interpolates_and_csv_errors_name_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.csv");
+        std::fs::write(&path, "time_sec,hip,hip_vel\n1.0,0.0,0.5\n1.5,0.5,1.5\n").unwrap();
+        let t = JointTrajectory::from_csv(&path).unwrap();
+        assert_eq!(t.joints.len(), 1, "the _vel column is the hip's velocity");
+        let hip = &t.joints[0];
+        assert_eq!(hip.time_secs, [0.0, 0.5]);
+        assert_eq!(hip.sample(0.25), (0.25, 1.0));
+        assert_eq!(hip.sample(-1.0), (0.0, 0.5));
+        assert_eq!(hip.sample(9.0), (0.5, 1.5));
+        std::fs::write(&path, "time_sec,hip\n0,0\n0,1\n").unwrap();
+        let e = JointTrajectory::from_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("t.csv:3") && e.contains("does not increase"), "{e}");
+        std::fs::write(&path, "when,hip\n0,0\n").unwrap();
+        let e = JointTrajectory::from_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("t.csv:1") && e.contains("time_sec"), "{e}");
+
+        // Replay drives the named joint toward the interpolated target with feed-forward.
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        std::fs::write(&path, "time_sec,hip\n0,0.0\n1,0.5\n").unwrap();
+        let mut replay =
+            Replay::new(&model, JointTrajectory::from_csv(&path).unwrap(), ReplayOptions::default()).unwrap();
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        replay.reset(&model, &Observation::of(&data)).unwrap();
+        data.set_time_secs(0.5);
+        data.qpos_mut()[7] = 0.24;
+        let mut command = vec![0.0; model.nv()];
+        replay.compute(&model, &Observation::of(&data), &mut command);
+        let (kp, kd) = replay.hold.gains()[0];
+        assert!((command[6] - (kp * 0.01 + kd * 0.5)).abs() < 1e-9, "{command:?}");
+        std::fs::write(&path, "time_sec,knee\n0,0\n").unwrap();
+        let e = Replay::new(&model, JointTrajectory::from_csv(&path).unwrap(), ReplayOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("\"knee\" is not a joint of the model; actuated joints: hip"), "{e}");
+    }
+
+    #[test]
     fn set_model_refuses_another_model() {
         let model = Arc::new(Model::from_xml_str(BOX).unwrap());
         let mut data = Data::new(model.clone()).unwrap();
