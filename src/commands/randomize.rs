@@ -206,8 +206,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("wrote {}", out.display());
         if !report.worst.is_empty() {
             eprintln!(
-                "worst episodes {:?}: trajectories (.csv, .mcap, .rrd) in {}",
+                "worst episodes {:?}: trajectories ({}) in {}",
                 report.worst,
+                if cfg!(feature = "rerun") { ".csv, .mcap, .rrd" } else { ".csv, .mcap" },
                 out.join("worst").display()
             );
         }

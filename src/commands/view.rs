@@ -2,7 +2,7 @@
 //! a rerun recording, the robot animated from `/joint_states` (and `/odom` when present), joint
 //! and IMU time series as scalars: RViz and PlotJuggler in one file.
 
-use anyhow::{Context, bail};
+use anyhow::bail;
 use std::path::PathBuf;
 
 #[derive(Debug, clap::Args)]
@@ -49,6 +49,7 @@ fn run_view(_args: Args) -> anyhow::Result<()> {
 
 #[cfg(feature = "rerun")]
 fn run_view(args: Args) -> anyhow::Result<()> {
+    use anyhow::Context;
     use std::io::Write;
     use twin_core::log::{Log, ReadOptions};
     use twin_core::viz::{Recorder, ViewOptions, record_log};
