@@ -68,6 +68,9 @@ pub struct Args {
     /// Compress and write the MCAP on the simulation thread instead of a writer thread.
     #[arg(long)]
     pub inline_writer: bool,
+    /// Record only these topics (comma-separated; `/contacts/*` for every contact topic).
+    #[arg(long, value_delimiter = ',', value_name = "TOPIC,...")]
+    pub topics: Option<Vec<String>>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -113,6 +116,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             background: !args.inline_writer,
             ..WriterOptions::default()
         },
+        topics: args.topics.clone(),
         ..RecordOptions::default()
     };
     let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
@@ -143,10 +147,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    let finishing = std::time::Instant::now();
     let summary = match recording {
         Some(r) => Some(r.finish()?),
         None => None,
     };
+    let finish_secs = finishing.elapsed().as_secs_f64();
     let mut out = std::io::stdout().lock();
 
     writeln!(
@@ -160,14 +166,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.wall_secs,
         report.real_time_factor()
     )?;
+    if let Some(cpu) = report.loop_cpu_secs {
+        writeln!(out, "simulation thread CPU: {cpu:.3} s ({:.2} µs per step)", cpu * 1e6 / report.steps as f64)?;
+    }
     if let Some(s) = summary {
         if recording_wanted {
             writeln!(
                 out,
-                "recording: {:.3} s inside the loop ({:.1} % of the loop, {:.2} µs per step)",
+                "recording: {:.3} s inside the loop ({:.1} % of the loop, {:.2} µs per step), {:.3} s to close",
                 report.record_secs,
                 100.0 * report.record_secs / report.wall_secs.max(1e-12),
-                report.record_secs * 1e6 / report.steps as f64
+                report.record_secs * 1e6 / report.steps as f64,
+                finish_secs
             )?;
         }
         if let Some((file, w)) = &s.mcap {

@@ -75,11 +75,6 @@ impl<T> Clone for Topic<T> {
 impl<T> Copy for Topic<T> {}
 
 impl<T> Topic<T> {
-    /// A handle that names no channel yet (to be replaced by [`LogWriter::add_topic`]'s).
-    pub(crate) fn placeholder() -> Topic<T> {
-        Topic { channel_id: u16::MAX, _type: PhantomData }
-    }
-
     /// The MCAP channel id.
     pub fn channel_id(self) -> u16 {
         self.channel_id

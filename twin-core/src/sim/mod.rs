@@ -164,6 +164,17 @@ pub struct SimReport {
     pub wall_secs: f64,
     /// Wall time spent inside [`Recording::record`], seconds.
     pub record_secs: f64,
+    /// CPU time of the simulating thread during the loop, seconds (Linux; `None` elsewhere):
+    /// unlike wall time, not inflated by waiting for a core on a busy machine, and without the
+    /// MCAP writer thread's work.
+    pub loop_cpu_secs: Option<f64>,
+}
+
+/// CPU time of the calling thread, seconds, from `/proc/thread-self/schedstat` (Linux).
+fn thread_cpu_secs() -> Option<f64> {
+    let text = std::fs::read_to_string("/proc/thread-self/schedstat").ok()?;
+    let nanos: u64 = text.split_whitespace().next()?.parse().ok()?;
+    Some(nanos as f64 * 1e-9)
 }
 
 impl SimReport {
@@ -209,6 +220,7 @@ pub fn simulate(
     let steps = steps_for(&model, options.duration_secs);
     let report_every = (steps / 100).max(1);
     let mut record_secs = 0.0;
+    let cpu_started = thread_cpu_secs();
     let started = std::time::Instant::now();
     for step in 0..steps {
         data.step1()?;
@@ -237,6 +249,7 @@ pub fn simulate(
         }
     }
     let wall_secs = started.elapsed().as_secs_f64();
+    let loop_cpu_secs = cpu_started.zip(thread_cpu_secs()).map(|(a, b)| b - a);
     progress(1.0);
-    Ok(SimReport { steps, sim_secs: steps as f64 * model.timestep_secs(), wall_secs, record_secs })
+    Ok(SimReport { steps, sim_secs: steps as f64 * model.timestep_secs(), wall_secs, record_secs, loop_cpu_secs })
 }

@@ -52,6 +52,9 @@ pub struct RecordOptions {
     pub seed: u64,
     /// MCAP writer options (default: [`WriterOptions::default`]).
     pub writer: WriterOptions,
+    /// Only these MCAP topics, by exact name (`/contacts/*` stands for every contact topic)
+    /// (default: none given = all).
+    pub topics: Option<Vec<String>>,
 }
 
 impl Default for RecordOptions {
@@ -65,6 +68,7 @@ impl Default for RecordOptions {
             rerun_rate_hz: 50.0,
             seed: 0,
             writer: WriterOptions::default(),
+            topics: None,
         }
     }
 }
@@ -137,17 +141,19 @@ struct TfLink {
 }
 
 struct ImuStream {
-    topic: Topic<Imu>,
+    topic: Option<Topic<Imu>>,
     schedule: Schedule,
 }
 
 /// The MCAP side.
 struct McapOut {
     writer: LogWriter,
-    joint_states: Topic<JointState>,
-    commands: Topic<Float64MultiArray>,
+    /// `None`: all topics; else the topics asked for.
+    wanted: Option<Vec<String>>,
+    joint_states: Option<Topic<JointState>>,
+    commands: Option<Topic<Float64MultiArray>>,
     odom: Option<Topic<Odometry>>,
-    tf: Topic<TfMessage>,
+    tf: Option<Topic<TfMessage>>,
     imus: Vec<ImuStream>,
     /// Per body: its `/contacts/<body>` topic once it has touched something.
     contacts: Vec<Option<Topic<WrenchStamped>>>,
@@ -160,6 +166,17 @@ impl McapOut {
         if let Some(c) = self.counts.get_mut(usize::from(channel)) {
             c.1 += 1;
         }
+    }
+
+    fn wants(&self, topic: &str) -> bool {
+        self.wanted
+            .as_ref()
+            .is_none_or(|w| w.iter().any(|t| t == topic || (t == "/contacts/*" && topic.starts_with("/contacts/"))))
+    }
+
+    /// Adds `topic` if it is wanted.
+    fn add_wanted<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Option<Topic<T>>> {
+        if self.wants(topic) { self.add(topic).map(Some) } else { Ok(None) }
     }
 
     fn add<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Topic<T>> {
@@ -202,6 +219,8 @@ pub struct Recording {
     touching: Vec<bool>,
     /// IMU values this tick (for rerun): gyro and accel, with noise.
     imu_values: Vec<[f64; 6]>,
+    /// Which IMU topics are due this tick.
+    imu_due: Vec<bool>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
@@ -263,36 +282,37 @@ impl Recording {
             wrench: vec![[0.0; 6]; model.nbody()],
             touching: vec![false; model.nbody()],
             imu_values: vec![[0.0; 6]; robot.imus.len()],
+            imu_due: Vec::new(),
         };
 
         if let Some(path) = &options.mcap {
             let writer = LogWriter::create(path, &options.writer)?;
-            // Placeholder handles, replaced right below (Topic has no public constructor).
             let mut out = McapOut {
-                joint_states: Topic::placeholder(),
-                commands: Topic::placeholder(),
+                wanted: options.topics.clone(),
+                joint_states: None,
+                commands: None,
                 odom: None,
-                tf: Topic::placeholder(),
+                tf: None,
                 imus: Vec::new(),
                 contacts: vec![None; model.nbody()],
                 counts: Vec::new(),
                 writer,
             };
-            out.joint_states = out.add("/joint_states")?;
+            out.joint_states = out.add_wanted("/joint_states")?;
             for imu in &robot.imus {
                 let rate = imu.update_rate_hz.unwrap_or(options.state_rate_hz);
-                let topic = out.add(&imu.topic)?;
+                let topic = out.add_wanted(&imu.topic)?;
                 out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
             }
             if base.is_some() {
-                out.odom = Some(out.add("/odom")?);
+                out.odom = out.add_wanted("/odom")?;
             }
-            out.tf = out.add("/tf")?;
-            out.commands = out.add(&format!("/{}/joint_commands", robot.name))?;
+            out.tf = out.add_wanted("/tf")?;
+            out.commands = out.add_wanted(&format!("/{}/joint_commands", robot.name))?;
             // IMU frames that are no body: a static transform from their body.
             let statics: Vec<&super::ImuInfo> =
                 robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.frame_id)).collect();
-            if !statics.is_empty() {
+            if !statics.is_empty() && out.wants("/tf_static") {
                 let topic: Topic<TfMessage> = out.add("/tf_static")?;
                 let body_frames = &rec.body_frames;
                 out.writer.write_with(topic, 0, |w| {
@@ -348,7 +368,10 @@ impl Recording {
         if state_due || rerun_due {
             self.accumulate_contacts(data);
         }
-        let mut imu_due = vec![false; self.imus.len()];
+        // Reused buffer: nothing is allocated per step.
+        let mut imu_due = std::mem::take(&mut self.imu_due);
+        imu_due.clear();
+        imu_due.resize(self.imus.len(), false);
         if let Some(out) = self.mcap.as_mut() {
             for (k, s) in out.imus.iter_mut().enumerate() {
                 imu_due[k] = s.schedule.due(t_nanos);
@@ -371,18 +394,20 @@ impl Recording {
                 let (joints, names) = (&self.joints, &self.joint_names);
                 let (qpos, qvel) = (sample.qpos, sample.qvel);
                 let (actuator, applied) = (data.qfrc_actuator(), data.qfrc_applied());
-                out.writer.write_with(out.joint_states, t_nanos, |w| {
-                    w.header(stamp, "");
-                    w.seq_len(names.len());
-                    for n in names {
-                        w.string(n);
-                    }
-                    let n = joints.len();
-                    w.f64_seq_iter(n, joints.iter().map(|&(adr, _)| qpos[adr]));
-                    w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| qvel[dof]));
-                    w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
-                })?;
-                out.count(out.joint_states.channel_id());
+                if let Some(topic) = out.joint_states {
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.header(stamp, "");
+                        w.seq_len(names.len());
+                        for n in names {
+                            w.string(n);
+                        }
+                        let n = joints.len();
+                        w.f64_seq_iter(n, joints.iter().map(|&(adr, _)| qpos[adr]));
+                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| qvel[dof]));
+                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
+                    })?;
+                    out.count(topic.channel_id());
+                }
 
                 if let (Some(topic), Some((body, dof))) = (out.odom, self.base) {
                     let child = &self.body_frames[body];
@@ -405,7 +430,7 @@ impl Recording {
                 }
 
                 for b in 1..self.touching.len() {
-                    if self.touching[b] && out.contacts[b].is_none() {
+                    if self.touching[b] && out.contacts[b].is_none() && out.wants("/contacts/*") {
                         let name: String = self.body_frames[b]
                             .chars()
                             .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
@@ -427,12 +452,14 @@ impl Recording {
                 }
 
                 let command = sample.command;
-                out.writer.write_with(out.commands, t_nanos, |w| {
-                    w.seq_len(0);
-                    w.u32(0);
-                    w.f64_seq(command);
-                })?;
-                out.count(out.commands.channel_id());
+                if let Some(topic) = out.commands {
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.seq_len(0);
+                        w.u32(0);
+                        w.f64_seq(command);
+                    })?;
+                    out.count(topic.channel_id());
+                }
             }
 
             for (k, imu) in self.imus.iter().enumerate() {
@@ -446,7 +473,7 @@ impl Recording {
                 };
                 let v = self.imu_values[k];
                 let (g2, a2) = (imu.gyro_noise_std.powi(2), imu.accel_noise_std.powi(2));
-                let topic = out.imus[k].topic;
+                let Some(topic) = out.imus[k].topic else { continue };
                 out.writer.write_with(topic, t_nanos, |w| {
                     w.header(stamp, &imu.frame_id);
                     w.f64_fixed(&xyzw(q));
@@ -459,10 +486,10 @@ impl Recording {
                 out.count(topic.channel_id());
             }
 
-            if tf_due {
+            if let (true, Some(tf)) = (tf_due, out.tf) {
                 let (xpos, xquat) = (data.xpos(), data.xquat());
                 let links = &self.tf_links;
-                out.writer.write_with(out.tf, t_nanos, |w| {
+                out.writer.write_with(tf, t_nanos, |w| {
                     w.seq_len(links.len());
                     for l in links {
                         let (p, q) = match l.parent {
@@ -475,9 +502,11 @@ impl Recording {
                         w.f64_fixed(&xyzw(q));
                     }
                 })?;
-                out.count(out.tf.channel_id());
+                out.count(tf.channel_id());
             }
         }
+
+        self.imu_due = imu_due;
 
         #[cfg(feature = "rerun")]
         if rerun_due && let Some(r) = self.rerun.as_ref() {
