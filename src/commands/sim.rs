@@ -182,6 +182,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if let Some((file, w)) = &s.mcap {
             writeln!(out, "{}: {} messages, {} chunks, {} bytes", file.display(), w.messages, w.chunks, w.bytes)?;
+            if w.queue_full_waits > 0 {
+                writeln!(
+                    out,
+                    "  the simulation waited {} times for the MCAP writer thread (no free core, or slow disk)",
+                    w.queue_full_waits
+                )?;
+            }
             let width = s.topics.iter().map(|(t, _)| t.len()).max().unwrap_or(0);
             for (topic, n) in &s.topics {
                 writeln!(out, "  {topic:<width$}  {n}")?;

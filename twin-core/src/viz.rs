@@ -14,6 +14,9 @@ use crate::mj::{Data, Model, ObjType};
 use mujoco_sys as sys;
 use std::path::{Path, PathBuf};
 
+/// How long [`Recorder::finish`] waits for a viewer to take the recording.
+const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// Name of the timeline everything is logged on.
 pub const TIMELINE: &str = "sim_time";
 
@@ -23,6 +26,8 @@ pub struct Recorder {
     /// Entity path of each body (index = body id; the world body has none).
     body_paths: Vec<Option<String>>,
     path: Option<PathBuf>,
+    /// The viewer's address when streaming.
+    url: Option<String>,
 }
 
 fn rerun_err(path: Option<&Path>, e: impl std::fmt::Display) -> Error {
@@ -67,13 +72,15 @@ impl Recorder {
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             .connect_grpc_opts(url.to_string())
             .map_err(|e| rerun_err(None, e))?;
-        Self::start(rec, model, None)
+        let mut recorder = Self::start(rec, model, None)?;
+        recorder.url = Some(url.to_string());
+        Ok(recorder)
     }
 
     fn start(rec: rerun::RecordingStream, model: &Model, path: Option<PathBuf>) -> Result<Recorder> {
         // Wall-clock log time would make files differ run to run; simulation time is what matters.
         rec.set_log_time_enabled(false);
-        let mut recorder = Recorder { rec, body_paths: Vec::new(), path };
+        let mut recorder = Recorder { rec, body_paths: Vec::new(), path, url: None };
         recorder.log_geometry(model)?;
         Ok(recorder)
     }
@@ -237,7 +244,24 @@ impl Recorder {
     /// # Errors
     /// [`Error::Rerun`] if the sink can't be flushed.
     pub fn finish(self) -> Result<()> {
-        self.rec.flush_blocking().map_err(|e| self.err(e))
+        match &self.url {
+            // A viewer that is not running would make a blocking flush wait forever.
+            Some(url) => match self.rec.flush_with_timeout(VIEWER_TIMEOUT) {
+                Ok(()) => Ok(()),
+                Err(e) => {
+                    let err = self.err(format!(
+                        "{e}: could not hand the recording to the rerun viewer at {url} within {} s; \
+                         is a viewer running there (start one with `rerun`)?",
+                        VIEWER_TIMEOUT.as_secs()
+                    ));
+                    // Dropping the stream would join its sender thread, which waits for the
+                    // viewer forever: leave it to the end of the process instead.
+                    std::mem::forget(self.rec);
+                    Err(err)
+                }
+            },
+            None => self.rec.flush_blocking().map_err(|e| self.err(e)),
+        }
     }
 }
 

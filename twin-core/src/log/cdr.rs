@@ -250,6 +250,7 @@ impl CdrWriter {
             return;
         }
         self.align(8);
+        self.buf.reserve(n * 8);
         let mut written = 0;
         for x in values.into_iter().take(n) {
             self.buf.extend_from_slice(&x.to_le_bytes());
@@ -263,6 +264,7 @@ impl CdrWriter {
             return;
         }
         self.align(8);
+        self.buf.reserve(v.len() * 8);
         for x in v {
             self.buf.extend_from_slice(&x.to_le_bytes());
         }

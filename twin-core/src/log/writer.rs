@@ -90,6 +90,9 @@ pub struct WriteSummary {
     pub chunks: usize,
     /// File size, bytes.
     pub bytes: u64,
+    /// Times the caller waited because the writer thread's queue was full (it could not keep
+    /// up: compression and I/O slower than the messages came, or no free core).
+    pub queue_full_waits: u64,
 }
 
 /// Encoded messages handed over together: one queue operation (and at most one wake-up of the
@@ -174,7 +177,7 @@ impl Sink {
         let io = |source| Error::Io { path: path.clone(), source };
         file.sync_all().map_err(io)?;
         let bytes = file.metadata().map_err(io)?.len();
-        Ok(WriteSummary { messages: self.messages, chunks: summary.chunk_indexes.len(), bytes })
+        Ok(WriteSummary { messages: self.messages, chunks: summary.chunk_indexes.len(), bytes, queue_full_waits: 0 })
     }
 }
 
@@ -220,6 +223,7 @@ pub struct LogWriter {
     cdr: CdrWriter,
     sequences: Vec<u32>,
     messages: u64,
+    queue_full_waits: u64,
 }
 
 /// Batches that may wait for the writer thread (each about [`BATCH_BYTES`]).
@@ -284,7 +288,15 @@ impl LogWriter {
         } else {
             Backend::Inline(Some(Box::new(sink)))
         };
-        Ok(Self { path, backend, batch: Batch::default(), cdr: CdrWriter::new(), sequences: Vec::new(), messages: 0 })
+        Ok(Self {
+            path,
+            backend,
+            batch: Batch::default(),
+            cdr: CdrWriter::new(),
+            sequences: Vec::new(),
+            messages: 0,
+            queue_full_waits: 0,
+        })
     }
 
     /// The file being written.
@@ -309,11 +321,16 @@ impl LogWriter {
 
     fn send(&mut self, job: Job) -> Result<()> {
         match &mut self.backend {
-            Backend::Thread { tx: Some(tx), .. } => {
-                if tx.send(job).is_ok() {
-                    return Ok(());
+            Backend::Thread { tx: Some(tx), .. } => match tx.try_send(job) {
+                Ok(()) => return Ok(()),
+                Err(mpsc::TrySendError::Full(job)) => {
+                    self.queue_full_waits += 1;
+                    if tx.send(job).is_ok() {
+                        return Ok(());
+                    }
                 }
-            }
+                Err(mpsc::TrySendError::Disconnected(_)) => {}
+            },
             Backend::Thread { tx: None, .. } => {}
             Backend::Inline(sink) => {
                 let Some(s) = sink.as_mut() else {
@@ -462,7 +479,8 @@ impl LogWriter {
     /// [`Error::McapWrite`] / [`Error::Io`] when the file cannot be written.
     pub fn finish(mut self) -> Result<WriteSummary> {
         self.send_batch()?;
-        self.close()
+        let waits = self.queue_full_waits;
+        self.close().map(|s| WriteSummary { queue_full_waits: waits, ..s })
     }
 
     fn close(&mut self) -> Result<WriteSummary> {
