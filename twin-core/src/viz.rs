@@ -50,12 +50,19 @@ fn vec3(v: [f64; 3]) -> [f32; 3] {
 }
 
 impl Recorder {
-    /// Records to a `.rrd` file at `path` under application id `app_id`.
+    /// Records to a `.rrd` file at `path` under application id `app_id`; an existing file there is
+    /// kept as `<name>.bak`.
     ///
     /// # Errors
     /// [`Error::Rerun`] if the file can't be created.
     pub fn to_file(model: &Model, app_id: &'static str, path: impl AsRef<Path>) -> Result<Recorder> {
         let path = path.as_ref();
+        if path.exists() {
+            // Keep what was there, like the MCAP writer does.
+            let mut backup = path.as_os_str().to_owned();
+            backup.push(".bak");
+            std::fs::rename(path, &backup).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        }
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             // A fixed id keeps re-recordings of the same run comparable.
             .recording_id(format!("{app_id}-recording"))

@@ -112,7 +112,7 @@ impl Batch {
 }
 
 /// Bytes after which a batch is handed to the writer.
-const BATCH_BYTES: usize = 64 * 1024;
+pub const BATCH_BYTES: usize = 64 * 1024;
 
 /// Work for the writer.
 enum Job {
