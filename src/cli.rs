@@ -26,4 +26,10 @@ pub enum Command {
     Randomize(Box<crate::commands::randomize::Args>),
     /// Identify link inertias and joint friction from a log and update the URDF.
     Sysid(crate::commands::sysid::Args),
+    /// Run the twin under a built-in controller and record ROS 2 topics (MCAP) and a rerun
+    /// recording, stamped in simulation time.
+    Sim(Box<crate::commands::sim::Args>),
+    /// Turn a robot's ROS 2 log into a rerun recording: the robot animated from its joint
+    /// states, joint and IMU time series.
+    View(crate::commands::view::Args),
 }

@@ -10,5 +10,7 @@ mod info;
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
+#[path = "cli/sim.rs"]
+mod sim;
 #[path = "cli/sysid.rs"]
 mod sysid;

@@ -200,9 +200,26 @@ impl Worker {
     /// [`Error::Apply`] if the drawn parameters can't be applied, [`Error::Core`] if MuJoCo
     /// fails outside the rollout (copying, resetting).
     pub fn run(&mut self, batch: &Batch, index: u64, trajectory: Option<&mut Trajectory>) -> Result<EpisodeResult> {
+        self.run_recorded(batch, index, trajectory, None)
+    }
+
+    /// [`Worker::run`], also recording every step into `recording` (MCAP topics / rerun, see
+    /// `twin_core::sim::record`). The recording reads the simulation after each step: joint
+    /// states stamped with the new time, body poses, sensors and contact forces from that
+    /// step's forward pass (one step, `dt`, earlier). Recording does not change the episode.
+    ///
+    /// # Errors
+    /// As [`Worker::run`]; write errors of the recording.
+    pub fn run_recorded(
+        &mut self,
+        batch: &Batch,
+        index: u64,
+        trajectory: Option<&mut Trajectory>,
+        recording: Option<&mut twin_core::sim::Recording>,
+    ) -> Result<EpisodeResult> {
         let mut param_rng = episode_rng(batch.seed, index, 0);
         let draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
-        self.rollout(batch, index, draw, trajectory)
+        self.rollout(batch, index, draw, trajectory, recording)
     }
 
     fn rollout(
@@ -211,6 +228,7 @@ impl Worker {
         index: u64,
         draw: Draw,
         mut trajectory: Option<&mut Trajectory>,
+        mut recording: Option<&mut twin_core::sim::Recording>,
     ) -> Result<EpisodeResult> {
         let Draw {
             values,
@@ -425,6 +443,15 @@ impl Worker {
                     result.fell = true;
                     result.fall_time_secs = Some(result.sim_secs);
                 }
+            }
+            if let Some(rec) = recording.as_deref_mut() {
+                let sample = twin_core::sim::StepSample {
+                    time_secs: data.time_secs(),
+                    qpos: data.qpos(),
+                    qvel: data.qvel(),
+                    command: &self.command,
+                };
+                rec.record(&sample, data)?;
             }
             if let Some(t) = trajectory.as_deref_mut() {
                 let p = batch.base.map_or([0.0; 3], |b| data.xpos()[b]);

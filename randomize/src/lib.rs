@@ -35,7 +35,6 @@
 //! ## Limitations
 //! - Friction is randomized per geom (sliding coefficient); explicit `<pair>` contacts keep
 //!   their own friction.
-//! - `--record-worst` writes trajectories as CSV; MCAP/rrd output comes with twin's log writers.
 //! - Pushes change the floating base's velocity; fixed-base models can't be pushed.
 
 pub mod draw;

@@ -269,7 +269,7 @@ pub fn run_batch(
             f.write_all(run.spec.as_bytes()).map_err(|source| Error::Io { path: spec_path.clone(), source })
         })?;
         if !worst.is_empty() {
-            record_worst(batch, &worst, &dir.join("worst"))?;
+            record_worst(batch, &worst, &dir.join("worst"), &run.model)?;
         }
     }
     Ok(Report {
@@ -298,18 +298,52 @@ pub fn write_summary(dir: &Path, run: &RunInfo, summary: &Summary) -> Result<()>
     write_atomic(&path, |f| f.write_all(text.as_bytes()).map_err(|source| Error::Io { path: path.clone(), source }))
 }
 
+/// The robot as recordings see it: IMU topics, rates and noise from the model file when
+/// twin's converter gives them (URDF), else found in the compiled model; always the batch's
+/// nominal model.
+fn recording_robot(batch: &Batch, model_path: &str) -> twin_core::sim::Robot {
+    let path = Path::new(model_path);
+    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
+    let fallback = || twin_core::sim::Robot::from_model(batch.nominal.clone(), stem, path);
+    match twin_core::sim::load_robot(path) {
+        Ok(robot)
+            if robot.model.nq() == batch.nominal.nq()
+                && robot.model.nsensordata() == batch.nominal.nsensordata()
+                && robot.model.nbody() == batch.nominal.nbody() =>
+        {
+            twin_core::sim::Robot { model: batch.nominal.clone(), ..robot }
+        }
+        _ => fallback(),
+    }
+}
+
 /// Re-simulates `worst` episodes with recording, checks that each reproduces its batch
-/// metrics bit for bit, and writes `episode_<index>.csv` trajectories into `dir`.
+/// metrics bit for bit, and writes into `dir`, per episode: `episode_<index>.csv` (a row per
+/// step), `worst_<index>.mcap` (the topics of `twin sim`, see `twin_core::sim::record`) and,
+/// with the `rerun` feature, `worst_<index>.rrd`. `model_path` is the model file of the batch
+/// (for the IMUs' topics and the robot name).
 ///
 /// # Errors
-/// [`Error::NotReproducible`] if a re-run differs; [`Error::Io`].
-pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path) -> Result<Vec<PathBuf>> {
+/// [`Error::NotReproducible`] if a re-run differs; [`Error::Io`]; recording errors.
+pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path, model_path: &str) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
     let mut worker = Worker::new(batch)?;
+    let robot = recording_robot(batch, model_path);
     let mut written = Vec::new();
     for original in worst {
         let mut trajectory = Trajectory::default();
-        let again = worker.run(batch, original.index, Some(&mut trajectory))?;
+        let mcap = dir.join(format!("worst_{:06}.mcap", original.index));
+        let rrd = dir.join(format!("worst_{:06}.rrd", original.index));
+        let options = twin_core::sim::RecordOptions {
+            mcap: Some(mcap.clone()),
+            rrd: cfg!(feature = "rerun").then(|| rrd.clone()),
+            // The episode's own sensor-noise stream is separate; this seeds the IMU messages.
+            seed: batch.seed ^ original.index,
+            ..Default::default()
+        };
+        let mut recording = twin_core::sim::Recording::new(&robot, &options)?;
+        let again = worker.run_recorded(batch, original.index, Some(&mut trajectory), Some(&mut recording))?;
+        recording.finish()?;
         if &again != original {
             return Err(Error::NotReproducible { episode: original.index, what: format!("{again:?} vs {original:?}") });
         }
@@ -323,6 +357,10 @@ pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path) -> Resul
             w.flush().map_err(|source| Error::Io { path: path.clone(), source })
         })?;
         written.push(path);
+        written.push(mcap);
+        if cfg!(feature = "rerun") {
+            written.push(rrd);
+        }
     }
     Ok(written)
 }

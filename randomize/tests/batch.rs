@@ -212,6 +212,24 @@ fn worst_episodes_are_resimulated_identically() {
         let rows = text.lines().count() - 1;
         // One row per simulated step, up to the fall or the end.
         assert!(rows > 10 && rows <= 1000, "{rows}");
+        // The MCAP of the same re-run: a JointState per step (500 Hz = every 2 ms step), whose
+        // positions are the CSV's qpos columns of the same step, and the base from /odom.
+        let mcap = dir.path().join(format!("worst/worst_{i:06}.mcap"));
+        let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions { strict: true }).unwrap();
+        let (js, _) = log.read_typed::<twin_core::log::JointState>("/joint_states").unwrap();
+        assert_eq!(js.len(), rows);
+        let header: Vec<&str> = text.lines().next().unwrap().split(',').collect();
+        let last: Vec<f64> = text.lines().last().unwrap().split(',').map(|x| x.parse().unwrap()).collect();
+        let (t_last, m) = js.last().unwrap();
+        assert!((*t_last as f64 * 1e-9 - last[0]).abs() < 1e-9, "stamped with the row's time");
+        let knee = m.name.iter().position(|n| n == "left_knee_joint").unwrap();
+        let col = |name: &str| header.iter().position(|h| *h == name).unwrap();
+        let model = &b.nominal;
+        let adr = model.jnt_qposadr()[model.id(twin_core::mj::ObjType::Joint, "left_knee_joint").unwrap()];
+        assert_eq!(m.position[knee], last[col(&format!("qpos[{adr}]"))]);
+        let (odom, _) = log.read_typed::<twin_core::log::Odometry>("/odom").unwrap();
+        assert_eq!(odom.last().unwrap().1.position[2], last[col("base_z_m")]);
+        assert!(log.info().unwrap().topics.iter().any(|t| t.topic == "/humanoid/imu"), "IMU found in the MJCF");
     }
 }
 

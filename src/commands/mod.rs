@@ -5,7 +5,9 @@ pub mod convert;
 pub mod info;
 pub mod log;
 pub mod randomize;
+pub mod sim;
 pub mod sysid;
+pub mod view;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;
@@ -22,6 +24,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Log(args) => log::run(args),
         Command::Randomize(args) => randomize::run(*args),
         Command::Sysid(args) => sysid::run(args),
+        Command::Sim(args) => sim::run(*args),
+        Command::View(args) => view::run(args),
     }
 }
 

@@ -52,7 +52,8 @@ pub struct Args {
     #[arg(long)]
     pub shard: Option<String>,
 
-    /// Re-simulate the K worst episodes and write their trajectories (CSV) to OUT/worst/.
+    /// Re-simulate the K worst episodes and write their trajectories to OUT/worst/: CSV, MCAP
+    /// (the topics of `twin sim`) and, with the rerun feature, .rrd.
     #[arg(long, default_value_t = 0)]
     pub record_worst: usize,
 
@@ -204,7 +205,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
         eprintln!("wrote {}", out.display());
         if !report.worst.is_empty() {
-            eprintln!("worst episodes {:?}: trajectories in {}", report.worst, out.join("worst").display());
+            eprintln!(
+                "worst episodes {:?}: trajectories ({}) in {}",
+                report.worst,
+                if cfg!(feature = "rerun") { ".csv, .mcap, .rrd" } else { ".csv, .mcap" },
+                out.join("worst").display()
+            );
         }
     }
     if report.interrupted {

@@ -1,6 +1,6 @@
 //! `twin info` and the top-level flags.
 
-use crate::common::{repo_root, run, write};
+use crate::common::{output_of, repo_root, run, twin, write};
 
 #[test]
 fn version_names_mujoco() {
@@ -87,26 +87,37 @@ fn info_errors_name_the_file_and_element() {
     );
 }
 
-/// Every ```console block of README.md is a real command: its `$ target/release/twin ...` line
-/// is run with this build's binary and the lines shown (up to a `...`) must be what it prints.
+/// Every ```console block of README.md is real: each `$ target/release/twin ...` line is run
+/// with this build's binary (in a scratch folder that sees the repository's `models/` and
+/// `data/`), and the lines shown under it (up to a `...`) must be what it prints.
 #[test]
 fn readme_console_examples_print_what_they_show() {
     let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
-    let mut blocks = 0;
+    let scratch = tempfile::tempdir().unwrap();
+    for folder in ["models", "data"] {
+        std::os::unix::fs::symlink(repo_root().join(folder), scratch.path().join(folder)).unwrap();
+    }
+    let mut commands = 0;
     let mut lines = readme.lines();
     while let Some(line) = lines.next() {
         if line.trim() != "```console" {
             continue;
         }
         let block: Vec<&str> = lines.by_ref().take_while(|l| l.trim() != "```").collect();
-        let command = block[0].strip_prefix("$ target/release/twin ").expect("examples run target/release/twin");
-        let args: Vec<&str> = command.split_whitespace().collect();
-        let (ok, out, err) = run(&args);
-        assert!(ok, "README example `{command}` failed: {err}");
-        let expected: Vec<&str> = block[1..].iter().take_while(|l| l.trim() != "...").copied().collect();
-        let got: Vec<&str> = out.lines().take(expected.len()).collect();
-        assert_eq!(got, expected, "README example `{command}` prints something else");
-        blocks += 1;
+        let mut k = 0;
+        while k < block.len() {
+            let command = block[k].strip_prefix("$ target/release/twin ").expect("examples run target/release/twin");
+            let expected: Vec<&str> = block[k + 1..].iter().take_while(|l| !l.starts_with("$ ")).copied().collect();
+            k += 1 + expected.len();
+            let shown: Vec<&str> = expected.iter().take_while(|l| l.trim() != "...").copied().collect();
+            let args: Vec<&str> = command.split_whitespace().collect();
+            let out = twin().current_dir(scratch.path()).args(&args).output().expect("twin runs");
+            let (ok, out, err) = output_of(out);
+            assert!(ok, "README example `{command}` failed: {err}");
+            let got: Vec<&str> = out.lines().take(shown.len()).collect();
+            assert_eq!(got, shown, "README example `{command}` prints something else");
+            commands += 1;
+        }
     }
-    assert!(blocks > 0, "README has no console example");
+    assert!(commands > 0, "README has no console example");
 }

@@ -140,6 +140,10 @@ pub trait Controller: Send {
     /// Computes the command for the current step into `command` (len
     /// `Actuation::of(model).len(model)`, see [`Actuation`]).
     fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]);
+
+    /// Adjusts the initial joint positions `qpos` (len `nq`, the home pose) before an episode,
+    /// e.g. to start a replay where its trajectory starts. Default: leaves them.
+    fn initial_qpos(&self, _model: &Model, _qpos: &mut [f64]) {}
 }
 
 /// Options of [`PdHold`].
@@ -314,6 +318,271 @@ impl Controller for Passive {
     }
 }
 
+/// One joint of a [`JointTrajectory`]: samples sorted by time.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TrajectoryJoint {
+    /// Joint name (matched to the model's joints by name).
+    pub name: String,
+    /// Sample times, seconds from the trajectory's start (sorted).
+    pub time_secs: Vec<f64>,
+    /// Positions, rad (or m).
+    pub position: Vec<f64>,
+    /// Velocities, rad/s (or m/s), when every sample has one: the feed-forward of [`Replay`].
+    pub velocity: Option<Vec<f64>>,
+}
+
+impl TrajectoryJoint {
+    /// Position and velocity at `t_secs`, linearly interpolated (held at the ends). The
+    /// velocity is the logged one when present, else the slope of the segment.
+    pub fn sample(&self, t_secs: f64) -> (f64, f64) {
+        let t = &self.time_secs;
+        let n = t.len();
+        if n == 0 {
+            return (0.0, 0.0);
+        }
+        if n == 1 || t_secs <= t[0] {
+            return (self.position[0], self.velocity.as_ref().map_or(0.0, |v| v[0]));
+        }
+        if t_secs >= t[n - 1] {
+            return (self.position[n - 1], self.velocity.as_ref().map_or(0.0, |v| v[n - 1]));
+        }
+        // First sample after t_secs (t[0] < t_secs < t[n-1], so 1 <= i <= n-1).
+        let i = t.partition_point(|&x| x <= t_secs).clamp(1, n - 1);
+        let (t0, t1) = (t[i - 1], t[i]);
+        let span = t1 - t0;
+        let a = if span > 0.0 { (t_secs - t0) / span } else { 1.0 };
+        let (p0, p1) = (self.position[i - 1], self.position[i]);
+        let velocity = match &self.velocity {
+            Some(v) => v[i - 1] + a * (v[i] - v[i - 1]),
+            None if span > 0.0 => (p1 - p0) / span,
+            None => 0.0,
+        };
+        (p0 + a * (p1 - p0), velocity)
+    }
+}
+
+/// A joint-space trajectory to replay, from a ROS 2 log's `JointState` topic or a CSV file.
+#[derive(Debug, Clone, PartialEq)]
+pub struct JointTrajectory {
+    /// Where it came from (for messages).
+    pub source: std::path::PathBuf,
+    /// Absolute time of the trajectory's time 0, ns (the earliest log stamp; 0 for CSV).
+    pub start_nanos: i64,
+    /// The joints, in file order.
+    pub joints: Vec<TrajectoryJoint>,
+}
+
+impl JointTrajectory {
+    /// Duration, seconds (last sample of any joint).
+    pub fn duration_secs(&self) -> f64 {
+        self.joints.iter().filter_map(|j| j.time_secs.last().copied()).fold(0.0, f64::max)
+    }
+
+    /// Reads a trajectory: a `.csv` file (see [`JointTrajectory::from_csv`]) or else a ROS 2 log
+    /// (`.mcap` or rosbag2 folder) whose `topic` is read with [`crate::log::Log::joint_states`].
+    ///
+    /// # Errors
+    /// [`Error::Trajectory`] for a malformed file; log errors as [`crate::log::Log`].
+    pub fn load(path: &std::path::Path, topic: &str) -> Result<JointTrajectory> {
+        if path.extension().is_some_and(|e| e.eq_ignore_ascii_case("csv")) {
+            JointTrajectory::from_csv(path)
+        } else {
+            JointTrajectory::from_log(path, topic)
+        }
+    }
+
+    /// From a `sensor_msgs/msg/JointState` topic: every joint logged, times from the header
+    /// stamps (log time where zero) relative to the earliest sample; velocities kept when each
+    /// of a joint's samples has one.
+    ///
+    /// # Errors
+    /// As [`crate::log::Log::joint_states`]; [`Error::Trajectory`] when the topic has no samples.
+    pub fn from_log(path: &std::path::Path, topic: &str) -> Result<JointTrajectory> {
+        let log = crate::log::Log::open(path, crate::log::ReadOptions::default())?;
+        let series = log.joint_states(topic)?;
+        let t0 = series.joints.iter().filter_map(|j| j.time_nanos.first().copied()).min().ok_or_else(|| {
+            Error::Trajectory {
+                path: path.to_path_buf(),
+                line: None,
+                message: format!("topic {topic} has no joint samples"),
+            }
+        })?;
+        let joints = series
+            .joints
+            .into_iter()
+            .map(|j| TrajectoryJoint {
+                time_secs: j.time_nanos.iter().map(|&t| (t - t0) as f64 * 1e-9).collect(),
+                velocity: (!j.velocity.is_empty() && j.velocity.iter().all(|v| v.is_finite())).then_some(j.velocity),
+                position: j.position,
+                name: j.name,
+            })
+            .collect();
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })
+    }
+
+    /// From a CSV file: a header `time_sec,<joint>,<joint>,…` (a column `<joint>_vel` next to a
+    /// column `<joint>` gives its velocity), then one row per sample, times in seconds,
+    /// increasing.
+    ///
+    /// # Errors
+    /// [`Error::Io`]; [`Error::Trajectory`] naming the line for a bad header, a non-number, a
+    /// short row or a time that does not increase.
+    pub fn from_csv(path: &std::path::Path) -> Result<JointTrajectory> {
+        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let bad =
+            |line: usize, message: String| Error::Trajectory { path: path.to_path_buf(), line: Some(line), message };
+        let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
+        let Some((_, header)) = lines.next() else {
+            return Err(bad(1, "empty file; expected a header `time_sec,<joint>,…`".into()));
+        };
+        let columns: Vec<&str> = header.split(',').map(str::trim).collect();
+        if columns.first().is_none_or(|c| !matches!(*c, "time_sec" | "time_secs" | "time" | "t")) || columns.len() < 2 {
+            return Err(bad(1, format!("header must be `time_sec,<joint>,…` (got `{header}`)")));
+        }
+        let mut rows: Vec<Vec<f64>> = vec![Vec::new(); columns.len()];
+        for (i, line) in lines {
+            let cells: Vec<&str> = line.split(',').map(str::trim).collect();
+            if cells.len() != columns.len() {
+                return Err(bad(i + 1, format!("{} values, the header has {} columns", cells.len(), columns.len())));
+            }
+            for (k, cell) in cells.iter().enumerate() {
+                let v: f64 = cell
+                    .parse()
+                    .ok()
+                    .filter(|v: &f64| v.is_finite())
+                    .ok_or_else(|| bad(i + 1, format!("column {}: `{cell}` is not a finite number", columns[k])))?;
+                rows[k].push(v);
+            }
+            let t = &rows[0];
+            if t.len() > 1 && t[t.len() - 1] <= t[t.len() - 2] {
+                return Err(bad(i + 1, format!("time {} does not increase", t[t.len() - 1])));
+            }
+        }
+        let time = &rows[0];
+        if time.is_empty() {
+            return Err(bad(2, "no samples after the header".into()));
+        }
+        let t0 = time[0];
+        let time_secs: Vec<f64> = time.iter().map(|t| t - t0).collect();
+        let mut joints = Vec::new();
+        for (k, name) in columns.iter().enumerate().skip(1) {
+            if let Some(base) = name.strip_suffix("_vel")
+                && columns.contains(&base)
+            {
+                continue;
+            }
+            let velocity = columns.iter().position(|c| c.strip_suffix("_vel") == Some(name)).map(|kv| rows[kv].clone());
+            joints.push(TrajectoryJoint {
+                name: name.to_string(),
+                time_secs: time_secs.clone(),
+                position: rows[k].clone(),
+                velocity,
+            });
+        }
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: 0, joints })
+    }
+}
+
+/// Options of [`Replay`].
+#[derive(Debug, Clone, PartialEq, Default)]
+pub struct ReplayOptions {
+    /// Gains, as for [`PdHold`] (default: [`PdHoldOptions::default`]; stiffer gains did not
+    /// track the shipped humanoid's legs better: with both feet planted their error comes from
+    /// the closed chain, not the gains).
+    pub gains: PdHoldOptions,
+}
+
+/// Tracks a [`JointTrajectory`]: `τ = kp·(q_ref(t) − q) + kd·(q̇_ref(t) − q̇)` on every joint the
+/// trajectory names (position interpolated in time, velocity feed-forward from the log or the
+/// interpolation slope); the model's other actuated joints hold the nominal pose. Time 0 of the
+/// trajectory is the time of [`Controller::reset`].
+#[derive(Debug, Clone)]
+pub struct Replay {
+    trajectory: JointTrajectory,
+    hold: PdHold,
+    /// Trajectory joint index per PD loop (None: hold nominal).
+    tracks: Vec<Option<usize>>,
+    start_secs: f64,
+}
+
+impl Replay {
+    /// A replay of `trajectory` on `model`.
+    ///
+    /// # Errors
+    /// [`Error::Trajectory`] when the trajectory names a joint the model lacks or that no
+    /// actuator drives, listing the model's actuated joints.
+    pub fn new(model: &Model, trajectory: JointTrajectory, options: ReplayOptions) -> Result<Replay> {
+        let hold = PdHold::new(model, options.gains);
+        let mut replay = Replay { trajectory, hold, tracks: Vec::new(), start_secs: 0.0 };
+        replay.bind(model)?;
+        Ok(replay)
+    }
+
+    /// The trajectory replayed.
+    pub fn trajectory(&self) -> &JointTrajectory {
+        &self.trajectory
+    }
+
+    fn bind(&mut self, model: &Model) -> Result<()> {
+        let loop_joint: Vec<usize> = self.hold.loops.iter().map(|l| model.dof_jntid()[l.dof] as usize).collect();
+        let driven: Vec<&str> = loop_joint.iter().map(|&j| model.name(ObjType::Joint, j)).collect();
+        for tj in &self.trajectory.joints {
+            if !driven.contains(&tj.name.as_str()) {
+                let what = if model.id(ObjType::Joint, &tj.name).is_some() {
+                    "is a joint of the model but no actuator drives it"
+                } else {
+                    "is not a joint of the model"
+                };
+                return Err(Error::Trajectory {
+                    path: self.trajectory.source.clone(),
+                    line: None,
+                    message: format!("trajectory joint \"{}\" {what}; actuated joints: {}", tj.name, driven.join(", ")),
+                });
+            }
+        }
+        self.tracks = driven.iter().map(|name| self.trajectory.joints.iter().position(|t| t.name == *name)).collect();
+        Ok(())
+    }
+
+    /// The reference `(position, velocity)` of every trajectory joint at controller time
+    /// `t_secs` (seconds since reset), in trajectory order.
+    pub fn reference(&self, t_secs: f64) -> Vec<(f64, f64)> {
+        self.trajectory.joints.iter().map(|j| j.sample(t_secs)).collect()
+    }
+}
+
+impl Controller for Replay {
+    fn name(&self) -> &'static str {
+        "replay"
+    }
+
+    fn initial_qpos(&self, model: &Model, qpos: &mut [f64]) {
+        for tj in &self.trajectory.joints {
+            if let Some(j) = model.id(ObjType::Joint, &tj.name) {
+                qpos[model.jnt_qposadr()[j] as usize] = tj.sample(0.0).0;
+            }
+        }
+    }
+
+    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
+        self.hold.reset(model, observation)?;
+        self.bind(model)?;
+        self.start_secs = observation.time_secs;
+        Ok(())
+    }
+
+    fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        self.hold.compute(model, observation, command);
+        let t = observation.time_secs - self.start_secs;
+        for (l, track) in self.hold.loops.iter().zip(&self.tracks) {
+            let Some(k) = *track else { continue };
+            let (q_ref, v_ref) = self.trajectory.joints[k].sample(t);
+            let u = l.kp * (q_ref - observation.qpos[l.qpos_adr]) + l.kd * (v_ref - observation.qvel[l.dof]);
+            command[l.command] = u.clamp(l.limits[0], l.limits[1]);
+        }
+    }
+}
+
 /// Names accepted by [`by_name`].
 pub const CONTROLLERS: &[&str] = &["pd-hold", "passive"];
 
@@ -445,6 +714,44 @@ mod tests {
         pd.compute(&model, &Observation::of(&data), &mut command);
         assert_eq!(command[6], -20.0);
         assert!(by_name("dance", &model).is_err());
+    }
+
+    #[test]
+    fn trajectory_interpolates_and_csv_errors_name_the_line() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("t.csv");
+        std::fs::write(&path, "time_sec,hip,hip_vel\n1.0,0.0,0.5\n1.5,0.5,1.5\n").unwrap();
+        let t = JointTrajectory::from_csv(&path).unwrap();
+        assert_eq!(t.joints.len(), 1, "the _vel column is the hip's velocity");
+        let hip = &t.joints[0];
+        assert_eq!(hip.time_secs, [0.0, 0.5]);
+        assert_eq!(hip.sample(0.25), (0.25, 1.0));
+        assert_eq!(hip.sample(-1.0), (0.0, 0.5));
+        assert_eq!(hip.sample(9.0), (0.5, 1.5));
+        std::fs::write(&path, "time_sec,hip\n0,0\n0,1\n").unwrap();
+        let e = JointTrajectory::from_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("t.csv:3") && e.contains("does not increase"), "{e}");
+        std::fs::write(&path, "when,hip\n0,0\n").unwrap();
+        let e = JointTrajectory::from_csv(&path).unwrap_err().to_string();
+        assert!(e.contains("t.csv:1") && e.contains("time_sec"), "{e}");
+
+        // Replay drives the named joint toward the interpolated target with feed-forward.
+        let model = Arc::new(Model::from_xml_str(BOX).unwrap());
+        std::fs::write(&path, "time_sec,hip\n0,0.0\n1,0.5\n").unwrap();
+        let mut replay =
+            Replay::new(&model, JointTrajectory::from_csv(&path).unwrap(), ReplayOptions::default()).unwrap();
+        let mut data = Data::new(model.clone()).unwrap();
+        reset_to_home(&mut data).unwrap();
+        replay.reset(&model, &Observation::of(&data)).unwrap();
+        data.set_time_secs(0.5);
+        data.qpos_mut()[7] = 0.24;
+        let mut command = vec![0.0; model.nv()];
+        replay.compute(&model, &Observation::of(&data), &mut command);
+        let (kp, kd) = replay.hold.gains()[0];
+        assert!((command[6] - (kp * 0.01 + kd * 0.5)).abs() < 1e-9, "{command:?}");
+        std::fs::write(&path, "time_sec,knee\n0,0\n").unwrap();
+        let e = Replay::new(&model, JointTrajectory::from_csv(&path).unwrap(), ReplayOptions::default()).unwrap_err();
+        assert!(e.to_string().contains("\"knee\" is not a joint of the model; actuated joints: hip"), "{e}");
     }
 
     #[test]

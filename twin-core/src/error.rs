@@ -96,6 +96,18 @@ pub enum Error {
         got: usize,
     },
 
+    /// Something needs a cargo feature this build lacks.
+    #[error(
+        "{what} needs the `{feature}` cargo feature, which this build of twin lacks: rebuild with \
+         it (`cargo build --release --features {feature}`; it is on by default)"
+    )]
+    FeatureMissing {
+        /// The cargo feature.
+        feature: &'static str,
+        /// What was asked for.
+        what: String,
+    },
+
     /// Writing a rerun recording failed.
     #[cfg(feature = "rerun")]
     #[error("{}: rerun recording failed: {message}", path.as_deref().map_or_else(|| "<viewer>".into(), |p| p.display().to_string()))]
@@ -166,6 +178,17 @@ pub enum Error {
     },
 
     /// A model edit would make the model physically invalid (e.g. negative mass).
+    /// A joint trajectory (CSV or log) that can't be replayed.
+    #[error("{}{}: {message}", path.display(), line.map_or_else(String::new, |l| format!(":{l}")))]
+    Trajectory {
+        /// The trajectory file.
+        path: std::path::PathBuf,
+        /// 1-based line, for CSV.
+        line: Option<usize>,
+        /// What is wrong and what to do.
+        message: String,
+    },
+
     #[error("invalid model edit: {0}")]
     InvalidEdit(String),
 }

@@ -1,6 +1,7 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
 //! URDF/Gazebo → MJCF converter ([`convert`]), the step-by-step model validation ([`check`]),
-//! controllers ([`control`]) and ROS 2 logs ([`log`]).
+//! controllers ([`control`]), ROS 2 logs ([`log`]), simulation runs with recording ([`sim`])
+//! and, with the cargo feature `rerun`, rerun recordings (`viz`).
 //!
 //! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
 //! a small C shim and comes back as [`Error::MuJoCo`].
@@ -24,6 +25,7 @@ pub mod convert;
 pub mod error;
 pub mod log;
 pub mod mj;
+pub mod sim;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;

@@ -14,6 +14,9 @@ use crate::mj::{Data, Model, ObjType};
 use mujoco_sys as sys;
 use std::path::{Path, PathBuf};
 
+/// How long [`Recorder::finish`] waits for a viewer to take the recording.
+const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
+
 /// Name of the timeline everything is logged on.
 pub const TIMELINE: &str = "sim_time";
 
@@ -23,6 +26,8 @@ pub struct Recorder {
     /// Entity path of each body (index = body id; the world body has none).
     body_paths: Vec<Option<String>>,
     path: Option<PathBuf>,
+    /// The viewer's address when streaming.
+    url: Option<String>,
 }
 
 fn rerun_err(path: Option<&Path>, e: impl std::fmt::Display) -> Error {
@@ -45,12 +50,19 @@ fn vec3(v: [f64; 3]) -> [f32; 3] {
 }
 
 impl Recorder {
-    /// Records to a `.rrd` file at `path` under application id `app_id`.
+    /// Records to a `.rrd` file at `path` under application id `app_id`; an existing file there is
+    /// kept as `<name>.bak`.
     ///
     /// # Errors
     /// [`Error::Rerun`] if the file can't be created.
     pub fn to_file(model: &Model, app_id: &'static str, path: impl AsRef<Path>) -> Result<Recorder> {
         let path = path.as_ref();
+        if path.exists() {
+            // Keep what was there, like the MCAP writer does.
+            let mut backup = path.as_os_str().to_owned();
+            backup.push(".bak");
+            std::fs::rename(path, &backup).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        }
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             // A fixed id keeps re-recordings of the same run comparable.
             .recording_id(format!("{app_id}-recording"))
@@ -67,13 +79,15 @@ impl Recorder {
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             .connect_grpc_opts(url.to_string())
             .map_err(|e| rerun_err(None, e))?;
-        Self::start(rec, model, None)
+        let mut recorder = Self::start(rec, model, None)?;
+        recorder.url = Some(url.to_string());
+        Ok(recorder)
     }
 
     fn start(rec: rerun::RecordingStream, model: &Model, path: Option<PathBuf>) -> Result<Recorder> {
         // Wall-clock log time would make files differ run to run; simulation time is what matters.
         rec.set_log_time_enabled(false);
-        let mut recorder = Recorder { rec, body_paths: Vec::new(), path };
+        let mut recorder = Recorder { rec, body_paths: Vec::new(), path, url: None };
         recorder.log_geometry(model)?;
         Ok(recorder)
     }
@@ -199,7 +213,16 @@ impl Recorder {
     /// # Errors
     /// [`Error::Rerun`] if writing fails.
     pub fn log_poses(&self, data: &Data) -> Result<()> {
-        self.set_time_secs(data.time_secs());
+        self.log_poses_at(data.time_secs(), data)
+    }
+
+    /// Logs every body's world pose from `data` stamped `t_secs` (for a `data` whose poses
+    /// belong to another time than `data.time`, e.g. between `mj_step1` and the end of a step).
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn log_poses_at(&self, t_secs: f64, data: &Data) -> Result<()> {
+        self.set_time_secs(t_secs);
         let (xpos, xquat) = (data.xpos(), data.xquat());
         for (b, path) in self.body_paths.iter().enumerate() {
             if let Some(path) = path {
@@ -218,11 +241,173 @@ impl Recorder {
         self.rec.log(format!("series/{name}"), &rerun::Scalars::single(value)).map_err(|e| self.err(e))
     }
 
+    /// The `.rrd` file, when recording to one.
+    pub fn path(&self) -> Option<&Path> {
+        self.path.as_deref()
+    }
+
     /// Flushes everything to the file or viewer.
     ///
     /// # Errors
     /// [`Error::Rerun`] if the sink can't be flushed.
     pub fn finish(self) -> Result<()> {
-        self.rec.flush_blocking().map_err(|e| self.err(e))
+        match &self.url {
+            // A viewer that is not running would make a blocking flush wait forever.
+            Some(url) => match self.rec.flush_with_timeout(VIEWER_TIMEOUT) {
+                Ok(()) => Ok(()),
+                Err(e) => {
+                    let err = self.err(format!(
+                        "{e}: could not hand the recording to the rerun viewer at {url} within {} s; \
+                         is a viewer running there (start one with `rerun`)?",
+                        VIEWER_TIMEOUT.as_secs()
+                    ));
+                    // Dropping the stream would join its sender thread, which waits for the
+                    // viewer forever: leave it to the end of the process instead.
+                    std::mem::forget(self.rec);
+                    Err(err)
+                }
+            },
+            None => self.rec.flush_blocking().map_err(|e| self.err(e)),
+        }
     }
+}
+
+/// Options of [`record_log`].
+#[derive(Debug, Clone)]
+pub struct ViewOptions {
+    /// JointState topic that animates the robot (default: `/joint_states`).
+    pub joint_states_topic: String,
+    /// Odometry topic that moves the floating base, used when the log has it (default: `/odom`).
+    pub odom_topic: String,
+    /// Rate of the posed frames, Hz; joint and IMU scalars keep every sample (default: 50).
+    pub pose_rate_hz: f64,
+}
+
+impl Default for ViewOptions {
+    fn default() -> Self {
+        ViewOptions { joint_states_topic: "/joint_states".into(), odom_topic: "/odom".into(), pose_rate_hz: 50.0 }
+    }
+}
+
+/// What [`record_log`] did.
+#[derive(Debug, Clone, Default)]
+pub struct ViewSummary {
+    /// Posed frames logged.
+    pub frames: u64,
+    /// Log joints that animate a model joint.
+    pub joints_matched: Vec<String>,
+    /// Log joints the model lacks (logged as scalars only).
+    pub joints_unknown: Vec<String>,
+    /// Odometry messages that moved the base (0: base kept at its home pose).
+    pub odom_messages: u64,
+    /// IMU topics logged as scalars.
+    pub imu_topics: Vec<String>,
+    /// Scalars logged.
+    pub scalars: u64,
+    /// Log time span shown, seconds.
+    pub duration_secs: f64,
+    /// Warnings about the log (damage, odd stamps).
+    pub warnings: Vec<String>,
+}
+
+/// Turns a robot's ROS 2 log into a recording: the model posed from the log's joint states
+/// (positions set by joint name, interpolated to [`ViewOptions::pose_rate_hz`] frames, then
+/// `mj_forward`), the floating base from odometry when the log has it, and joint positions /
+/// IMU readings as scalars (`series/joints/<joint>`, `series/imu/<topic>/{gyro,accel}_{x,y,z}`).
+/// Time 0 is the first joint-state stamp.
+///
+/// # Errors
+/// Log errors ([`Error::LogTopic`] when the joint-state topic is missing); [`Error::Rerun`].
+pub fn record_log(
+    robot: &crate::sim::Robot,
+    log: &crate::log::Log,
+    options: &ViewOptions,
+    recorder: &Recorder,
+) -> Result<ViewSummary> {
+    use crate::control::JointTrajectory;
+    use crate::log::{Imu, Odometry};
+    let model = &robot.model;
+    let mut summary = ViewSummary::default();
+    let series = log.joint_states(&options.joint_states_topic)?;
+    summary.warnings = series.report.warnings();
+    let trajectory = JointTrajectory::from_log(log.path(), &options.joint_states_topic)?;
+    let t0 = trajectory.start_nanos;
+    let rel = |stamp_nanos: i64, log_nanos: u64| {
+        let t = if stamp_nanos != 0 { stamp_nanos } else { log_nanos as i64 };
+        (t - t0) as f64 * 1e-9
+    };
+    let mut animated = Vec::new();
+    for j in &trajectory.joints {
+        match model.id(ObjType::Joint, &j.name) {
+            Some(id) if model.jnt_type()[id] as u32 != sys::mjtJoint_mjJNT_FREE => {
+                summary.joints_matched.push(j.name.clone());
+                animated.push((model.jnt_qposadr()[id] as usize, j));
+            }
+            _ => summary.joints_unknown.push(j.name.clone()),
+        }
+        for (t, q) in j.time_secs.iter().zip(&j.position) {
+            recorder.set_time_secs(*t);
+            recorder.scalar(&format!("joints/{}", entity_name(&j.name, "joint", 0)), *q)?;
+            summary.scalars += 1;
+        }
+    }
+    summary.duration_secs = trajectory.duration_secs();
+
+    let topics = log.info()?.topics;
+    let free_adr = robot.base_body.and_then(|b| {
+        (0..model.njnt())
+            .find(|&j| model.jnt_bodyid()[j] as usize == b && model.jnt_type()[j] as u32 == sys::mjtJoint_mjJNT_FREE)
+            .map(|j| model.jnt_qposadr()[j] as usize)
+    });
+    let mut odom: Vec<(f64, [f64; 3], [f64; 4])> = Vec::new();
+    if free_adr.is_some() && topics.iter().any(|t| t.topic == options.odom_topic) {
+        let (msgs, _) = log.read_typed::<Odometry>(&options.odom_topic)?;
+        odom = msgs
+            .iter()
+            .map(|(log_nanos, m)| {
+                let q = m.orientation_xyzw;
+                (rel(m.header.stamp_nanos, *log_nanos), m.position, [q[3], q[0], q[1], q[2]])
+            })
+            .collect();
+        odom.sort_by(|a, b| a.0.total_cmp(&b.0));
+        summary.odom_messages = odom.len() as u64;
+    }
+    for t in topics.iter().filter(|t| t.type_name == "sensor_msgs/msg/Imu") {
+        let (msgs, _) = log.read_typed::<Imu>(&t.topic)?;
+        let name = entity_name(t.topic.trim_start_matches('/'), "imu", 0);
+        for (log_nanos, m) in &msgs {
+            recorder.set_time_secs(rel(m.header.stamp_nanos, *log_nanos));
+            let v = [m.angular_velocity, m.linear_acceleration].concat();
+            for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate() {
+                recorder.scalar(&format!("imu/{name}/{axis}"), v[i])?;
+                summary.scalars += 1;
+            }
+        }
+        summary.imu_topics.push(t.topic.clone());
+    }
+
+    let mut data = Data::new(model.clone())?;
+    crate::control::reset_to_home(&mut data)?;
+    let frames = ((summary.duration_secs * options.pose_rate_hz.max(1e-3)).floor() as u64) + 1;
+    let mut next_odom = 0usize;
+    for k in 0..frames {
+        let t = k as f64 / options.pose_rate_hz;
+        for (adr, j) in &animated {
+            data.qpos_mut()[*adr] = j.sample(t).0;
+        }
+        if let Some(adr) = free_adr {
+            while next_odom + 1 < odom.len() && odom[next_odom + 1].0 <= t {
+                next_odom += 1;
+            }
+            if let Some((_, p, q)) = odom.get(next_odom) {
+                let qpos = data.qpos_mut();
+                qpos[adr..adr + 3].copy_from_slice(p);
+                qpos[adr + 3..adr + 7].copy_from_slice(q);
+            }
+        }
+        data.forward()?;
+        recorder.log_poses_at(t, &data)?;
+        summary.frames += 1;
+    }
+    Ok(summary)
 }

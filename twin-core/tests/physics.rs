@@ -230,3 +230,49 @@ fn model_is_send_sync_and_data_is_send() {
     send_sync::<Model>();
     send::<Data>();
 }
+
+/// A 2 kg box resting on the floor, and a 1 kg box stacked on it: `contact_wrench_world`
+/// gives the force on each contact's second geom, so summing per body (+ on geom2's body, − on
+/// geom1's) gives the support forces m·g whatever order MuJoCo lists the geoms in.
+#[test]
+fn contact_wrenches_carry_the_weight_of_resting_boxes() {
+    let mut data = data_for(&format!(
+        r#"<mujoco>
+          <option timestep="0.002" gravity="0 0 -{G}"/>
+          <worldbody>
+            <geom name="floor" type="plane" size="2 2 0.1"/>
+            <body name="low" pos="0 0 0.1"><freejoint/>
+              <geom type="box" size="0.2 0.2 0.1" mass="2"/></body>
+            <body name="high" pos="0.05 0 0.25"><freejoint/>
+              <geom type="box" size="0.1 0.1 0.05" mass="1"/></body>
+          </worldbody>
+        </mujoco>"#
+    ));
+    for _ in 0..1000 {
+        data.step().unwrap();
+    }
+    data.forward().unwrap();
+    let model = data.model().clone();
+    let (low, high) = (model.id(ObjType::Body, "low").unwrap(), model.id(ObjType::Body, "high").unwrap());
+    let mut force_z = vec![0.0; model.nbody()];
+    let mut torque_about_origin_y = vec![0.0; model.nbody()];
+    for i in 0..data.ncon() {
+        let c = data.contact_wrench_world(i).unwrap();
+        for (k, sign) in [(0, -1.0), (1, 1.0)] {
+            let body = model.geom_bodyid()[c.geoms[k] as usize] as usize;
+            force_z[body] += sign * c.force_n[2];
+            // Moment about the body origin of a vertical force at the contact point: −x · F_z.
+            let r_x = c.position[0] - data.xpos()[body][0];
+            torque_about_origin_y[body] += -r_x * sign * c.force_n[2] + sign * c.torque_nm[1];
+        }
+    }
+    // The floor pushes the lower box up with the weight of both; the upper box pushes it down
+    // with its own; the upper box is held up by its weight.
+    assert!((force_z[high] - 1.0 * G).abs() < 1e-3 * G, "{}", force_z[high]);
+    assert!((force_z[low] - 2.0 * G).abs() < 1e-3 * G, "net on the low box: {}", force_z[low]);
+    assert!((force_z[0] + 3.0 * G).abs() < 1e-3 * G, "the floor gets the reaction: {}", force_z[0]);
+    // The upper box rests 5 cm off the lower's centre: its weight's moment about the lower
+    // box's origin is balanced by the floor's contact forces (net moment ≈ 0).
+    assert!(torque_about_origin_y[low].abs() < 1e-2, "{}", torque_about_origin_y[low]);
+    assert!(data.contact_wrench_world(data.ncon()).is_none());
+}

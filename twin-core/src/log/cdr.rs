@@ -243,12 +243,28 @@ impl CdrWriter {
         self.seq_len(v.len());
         self.f64_fixed(v);
     }
+    /// A `float64[]` of `n` values from an iterator (no intermediate vector).
+    pub fn f64_seq_iter(&mut self, n: usize, values: impl IntoIterator<Item = f64>) {
+        self.seq_len(n);
+        if n == 0 {
+            return;
+        }
+        self.align(8);
+        self.buf.reserve(n * 8);
+        let mut written = 0;
+        for x in values.into_iter().take(n) {
+            self.buf.extend_from_slice(&x.to_le_bytes());
+            written += 1;
+        }
+        assert_eq!(written, n, "f64_seq_iter: the iterator gave fewer values than announced");
+    }
     /// A fixed `float64[N]` (no count).
     pub fn f64_fixed(&mut self, v: &[f64]) {
         if v.is_empty() {
             return;
         }
         self.align(8);
+        self.buf.reserve(v.len() * 8);
         for x in v {
             self.buf.extend_from_slice(&x.to_le_bytes());
         }

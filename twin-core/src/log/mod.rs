@@ -38,7 +38,7 @@ pub use typed::{
     Float64MultiArray, Header, Imu, JointState, MultiArrayDimension, Odometry, RosMessage, TfMessage, TransformStamped,
     WrenchStamped,
 };
-pub use writer::{LogWriter, WriterOptions};
+pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 
 use crate::{Error, Result};
 use msgdef::MsgDefs;

@@ -183,7 +183,8 @@ pub(crate) fn read_joint_states(log: &Log, topic: &str) -> Result<JointStateSeri
         rep.empty_velocity += u64::from(js.velocity.is_empty());
         rep.empty_effort += u64::from(js.effort.is_empty());
         let time_nanos = if js.header.stamp_nanos == 0 {
-            rep.zero_stamps += 1;
+            // A zero stamp logged at time 0 (a simulation's first instant) is no substitution.
+            rep.zero_stamps += u64::from(m.log_time_nanos != 0);
             m.log_time_nanos as i64
         } else {
             js.header.stamp_nanos

@@ -371,9 +371,15 @@ fn humanoid_fixture_reads_with_the_generating_formula() {
 fn partial_chunk_messages_are_salvaged() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("raw.mcap");
-    let mut w =
-        LogWriter::create(&path, &WriterOptions { chunk_size_bytes: 16 * 1024, compress: false, ..Default::default() })
-            .unwrap();
+    let mut w = LogWriter::create(
+        &path,
+        &WriterOptions {
+            chunk_size_bytes: 16 * 1024,
+            compression: super::writer::Compression::None,
+            ..Default::default()
+        },
+    )
+    .unwrap();
     let js = w.add_topic::<JointState>("/joint_states").unwrap();
     for i in 0..300 {
         w.write(js, i as u64, &joint_state(i, i as i64 + 1)).unwrap();
@@ -420,4 +426,37 @@ fn partial_chunk_messages_are_salvaged() {
     let (n, report) = count_all(&cut_path, false).unwrap();
     eprintln!("zstd salvage: {n} of {in_chunk}: {:?}", report.warnings());
     assert!(n < in_chunk);
+}
+
+#[test]
+fn inline_and_background_writers_write_the_same_bytes_and_lz4_reads_back() {
+    let dir = tempfile::tempdir().unwrap();
+    let write = |name: &str, options: WriterOptions| {
+        let path = dir.path().join(name);
+        let mut w = LogWriter::create(&path, &WriterOptions { chunk_size_bytes: 64 * 1024, ..options }).unwrap();
+        let js = w.add_topic::<JointState>("/joint_states").unwrap();
+        for i in 0..3000 {
+            let t = i as i64 * 2_000_000;
+            w.write(js, t as u64, &joint_state(i, t)).unwrap();
+            if i == 1500 {
+                // A topic added mid-run lands after the messages batched before it.
+                let late = w.add_topic::<WrenchStamped>("/late").unwrap();
+                w.write(late, t as u64, &WrenchStamped { force: [1.0, 2.0, 3.0], ..Default::default() }).unwrap();
+            }
+        }
+        assert_eq!(w.finish().unwrap().messages, 3001);
+        path
+    };
+    let background = write("bg.mcap", WriterOptions::default());
+    let inline = write("inline.mcap", WriterOptions { background: false, ..Default::default() });
+    assert_eq!(std::fs::read(&background).unwrap(), std::fs::read(&inline).unwrap());
+    let lz4 = write("lz4.mcap", WriterOptions { compression: writer::Compression::Lz4, ..Default::default() });
+    for path in [&background, &lz4] {
+        let log = Log::open(path, ReadOptions { strict: true }).unwrap();
+        let (msgs, _) = log.read_typed::<JointState>("/joint_states").unwrap();
+        assert_eq!(msgs.len(), 3000);
+        assert_eq!(msgs[2999].1, joint_state(2999, 2999 * 2_000_000));
+        let (late, _) = log.read_typed::<WrenchStamped>("/late").unwrap();
+        assert_eq!((late.len(), late[0].0), (1, 1500 * 2_000_000));
+    }
 }

@@ -57,6 +57,20 @@ pub enum Warning {
     BadCtrl = sys::mjtWarning_mjWARN_BADCTRL,
 }
 
+/// One contact's wrench from [`Data::contact_wrench_world`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ContactWrench {
+    /// The two geoms (-1 for flex contacts).
+    pub geoms: [i32; 2],
+    /// Contact point, world frame, metres.
+    pub position: [f64; 3],
+    /// Force on the second geom, world frame, N (the first geom gets the opposite).
+    pub force_n: [f64; 3],
+    /// Torque on the second geom about `position`, world frame, N·m (zero without
+    /// torsional/rolling friction).
+    pub torque_nm: [f64; 3],
+}
+
 /// Which parts of the state [`Data::state`] copies (`mjtState` bits).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub struct StateSig(pub u32);
@@ -259,6 +273,38 @@ impl Data {
         // SAFETY: d->contact holds at least ncon initialised contacts after a forward pass.
         let c = unsafe { raw_slice(self.raw().contact as *const sys::mjContact, n) };
         c.iter().map(|c| c.pos).collect()
+    }
+
+    /// Force and torque of active contact `i` (`mj_contactForce`), in the world frame, acting on
+    /// the contact's second geom (its first geom gets the opposite), with the contact position
+    /// (world, metres) the torque is taken about: `(geoms, position, force_n, torque_nm)`.
+    /// `None` when `i >= ncon`.
+    pub fn contact_wrench_world(&self, i: usize) -> Option<ContactWrench> {
+        if i >= self.ncon() {
+            return None;
+        }
+        let mut local = [0.0f64; 6];
+        // SAFETY: i < ncon, so the id is valid (mj_contactForce never raises for valid ids);
+        // `local` has the 6 entries it writes; model and data are a live pair, only read.
+        unsafe { sys::mj_contactForce(self.model.as_ptr(), self.ptr.as_ptr(), i as c_int, local.as_mut_ptr()) };
+        // SAFETY: as in contacts(): d->contact holds ncon initialised contacts.
+        let c = unsafe { &raw_slice(self.raw().contact as *const sys::mjContact, self.ncon())[i] };
+        // The contact frame's rows are its axes in world coordinates (normal first, from geom1 to
+        // geom2): world = frameᵀ · local.
+        let to_world = |v: &[f64]| {
+            let f = &c.frame;
+            [
+                f[0] * v[0] + f[3] * v[1] + f[6] * v[2],
+                f[1] * v[0] + f[4] * v[1] + f[7] * v[2],
+                f[2] * v[0] + f[5] * v[1] + f[8] * v[2],
+            ]
+        };
+        Some(ContactWrench {
+            geoms: c.geom,
+            position: c.pos,
+            force_n: to_world(&local[..3]),
+            torque_nm: to_world(&local[3..]),
+        })
     }
 
     /// Potential and kinetic energy, joules (when the model enables the energy flag).

@@ -9,7 +9,7 @@ mod data;
 mod edit;
 mod model;
 
-pub use data::{Data, StateSig, Warning};
+pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use model::{JointType, Model, ObjType};
 

@@ -335,6 +335,10 @@ model_arrays! {
     geom_priority: i32 = ngeom;
     /// Body each site belongs to (len `nsite`).
     site_bodyid: i32 = nsite;
+    /// Position of each site in its body frame, metres (len `nsite`).
+    site_pos: [f64; 3] = nsite;
+    /// Orientation of each site in its body frame, quaternion w x y z (len `nsite`).
+    site_quat: [f64; 4] = nsite;
     /// Id of the body each body is welded to (itself when it has joints) (len `nbody`).
     body_weldid: i32 = nbody;
     /// Gain type of each actuator (`mjtGain`) (len `nu`).

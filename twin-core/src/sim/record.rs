@@ -1,0 +1,664 @@
+//! Recording a run: ROS 2 topics into an MCAP file and a rerun recording, all stamped in
+//! simulation time (log time = publish time = header stamp).
+//!
+//! Topics (`<robot>` = [`Robot::name`]):
+//! - `/joint_states` (`sensor_msgs/msg/JointState`): every hinge/slide joint; effort = the
+//!   actuator torque (force) on the joint, N·m (N); at [`RecordOptions::state_rate_hz`].
+//! - each IMU on its topic (`sensor_msgs/msg/Imu`) at its update rate: orientation from the
+//!   framequat sensor, angular velocity from the gyro, linear acceleration (specific force) from
+//!   the accelerometer, plus the IMU's configured Gaussian noise (seeded), covariances = σ².
+//! - `/odom` (`nav_msgs/msg/Odometry`, floating bases): pose of the base in `odom` (= the
+//!   simulation's world frame); twist in the child (base) frame, as REP-105 defines it.
+//! - `/tf` (`tf2_msgs/msg/TFMessage`): `odom` → base and every body relative to its parent, at
+//!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU frames that are not bodies.
+//! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`): the net contact force and torque on
+//!   each body that has touched something, in the body frame about its origin (zero while it
+//!   touches nothing); from its first contact on, at the state rate.
+//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent (actuator
+//!   controls, or joint forces for models without actuators), at the state rate.
+//!
+//! The rerun recording gets the posed geometry at [`RecordOptions::rerun_rate_hz`] and scalars:
+//! `series/joints/<joint>`, `series/imu/<imu>/{gyro,accel}_{x,y,z}`,
+//! `series/contacts/<body>/force_{x,y,z}`.
+
+use super::Robot;
+use crate::error::{Error, Result};
+use crate::log::{
+    Float64MultiArray, Imu, JointState, LogWriter, Odometry, TfMessage, Topic, WrenchStamped, WriteSummary,
+    WriterOptions,
+};
+use crate::mj::{Data, JointType, ObjType};
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+use std::path::PathBuf;
+
+/// What to record and how often.
+#[derive(Debug, Clone)]
+pub struct RecordOptions {
+    /// MCAP file to write (default: none).
+    pub mcap: Option<PathBuf>,
+    /// rerun `.rrd` file to write (default: none; needs the `rerun` feature).
+    pub rrd: Option<PathBuf>,
+    /// rerun viewer to stream to, e.g. `rerun+http://127.0.0.1:9876/proxy` (default: none).
+    pub connect: Option<String>,
+    /// Rate of `/joint_states`, `/odom`, contacts and commands, Hz; every step when the
+    /// timestep is longer than its period (default: 500).
+    pub state_rate_hz: f64,
+    /// Rate of `/tf`, Hz (default: 100: enough for RViz, a fifth of the bytes of 500 Hz).
+    pub tf_rate_hz: f64,
+    /// Rate of the rerun poses and scalars, Hz (default: 50).
+    pub rerun_rate_hz: f64,
+    /// Seed of the IMU noise (default: 0).
+    pub seed: u64,
+    /// MCAP writer options (default: [`WriterOptions::default`]).
+    pub writer: WriterOptions,
+    /// Only these MCAP topics, by exact name (`/contacts/*` stands for every contact topic)
+    /// (default: none given = all).
+    pub topics: Option<Vec<String>>,
+}
+
+impl Default for RecordOptions {
+    fn default() -> Self {
+        RecordOptions {
+            mcap: None,
+            rrd: None,
+            connect: None,
+            state_rate_hz: 500.0,
+            tf_rate_hz: 100.0,
+            rerun_rate_hz: 50.0,
+            seed: 0,
+            writer: WriterOptions::default(),
+            topics: None,
+        }
+    }
+}
+
+/// The state of one instant, handed to [`Recording::record`] together with a `Data` whose
+/// derived quantities (body poses, sensors, contacts, actuator forces) belong to the same
+/// instant.
+#[derive(Debug, Clone, Copy)]
+pub struct StepSample<'a> {
+    /// Simulation time, seconds.
+    pub time_secs: f64,
+    /// Joint positions (len `nq`).
+    pub qpos: &'a [f64],
+    /// Joint velocities (len `nv`).
+    pub qvel: &'a [f64],
+    /// The command sent at this instant.
+    pub command: &'a [f64],
+}
+
+/// What was recorded.
+#[derive(Debug, Clone, Default)]
+pub struct RecordSummary {
+    /// Messages per topic, in the order the topics were added.
+    pub topics: Vec<(String, u64)>,
+    /// The MCAP file and what was written into it.
+    pub mcap: Option<(PathBuf, WriteSummary)>,
+    /// The `.rrd` file and its size, bytes.
+    pub rrd: Option<(PathBuf, u64)>,
+}
+
+impl RecordSummary {
+    /// Messages written, all topics.
+    pub fn messages(&self) -> u64 {
+        self.topics.iter().map(|(_, n)| n).sum()
+    }
+}
+
+/// Publication times on a fixed period, in integer nanoseconds of simulation time.
+#[derive(Debug, Clone, Copy)]
+struct Schedule {
+    period_nanos: u64,
+    next_nanos: u64,
+    half_step_nanos: u64,
+}
+
+impl Schedule {
+    fn new(rate_hz: f64, dt_nanos: u64) -> Schedule {
+        let period = if rate_hz > 0.0 { (1e9 / rate_hz).round() as u64 } else { u64::MAX / 4 };
+        Schedule { period_nanos: period.max(dt_nanos).max(1), next_nanos: 0, half_step_nanos: dt_nanos / 2 }
+    }
+
+    /// Whether a message is due at `t_nanos` (the step nearest each period boundary).
+    fn due(&mut self, t_nanos: u64) -> bool {
+        if t_nanos + self.half_step_nanos < self.next_nanos {
+            return false;
+        }
+        while self.next_nanos <= t_nanos + self.half_step_nanos {
+            self.next_nanos += self.period_nanos;
+        }
+        true
+    }
+}
+
+/// One `/tf` entry: `parent_from_child` of a body.
+struct TfLink {
+    parent: Option<usize>,
+    child: usize,
+    parent_frame: String,
+    child_frame: String,
+}
+
+struct ImuStream {
+    topic: Option<Topic<Imu>>,
+    schedule: Schedule,
+}
+
+/// The MCAP side.
+struct McapOut {
+    writer: LogWriter,
+    /// `None`: all topics; else the topics asked for.
+    wanted: Option<Vec<String>>,
+    joint_states: Option<Topic<JointState>>,
+    commands: Option<Topic<Float64MultiArray>>,
+    odom: Option<Topic<Odometry>>,
+    tf: Option<Topic<TfMessage>>,
+    imus: Vec<ImuStream>,
+    /// Per body: its `/contacts/<body>` topic once it has touched something.
+    contacts: Vec<Option<Topic<WrenchStamped>>>,
+    /// Messages per channel id.
+    counts: Vec<(String, u64)>,
+}
+
+impl McapOut {
+    fn count(&mut self, channel: u16) {
+        if let Some(c) = self.counts.get_mut(usize::from(channel)) {
+            c.1 += 1;
+        }
+    }
+
+    fn wants(&self, topic: &str) -> bool {
+        self.wanted
+            .as_ref()
+            .is_none_or(|w| w.iter().any(|t| t == topic || (t == "/contacts/*" && topic.starts_with("/contacts/"))))
+    }
+
+    /// Adds `topic` if it is wanted.
+    fn add_wanted<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Option<Topic<T>>> {
+        if self.wants(topic) { self.add(topic).map(Some) } else { Ok(None) }
+    }
+
+    fn add<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Topic<T>> {
+        let t = self.writer.add_topic::<T>(topic)?;
+        let id = usize::from(t.channel_id());
+        if self.counts.len() <= id {
+            self.counts.resize(id + 1, (String::new(), 0));
+        }
+        self.counts[id] = (topic.to_string(), 0);
+        Ok(t)
+    }
+}
+
+#[cfg(feature = "rerun")]
+struct RerunOut {
+    recorders: Vec<crate::viz::Recorder>,
+    schedule: Schedule,
+    joint_series: Vec<String>,
+}
+
+/// Records a run. Create it before the loop, call [`Recording::record`] once per step with the
+/// state of that step, then [`Recording::finish`].
+pub struct Recording {
+    imus: Vec<super::ImuInfo>,
+    base: Option<(usize, usize)>,
+    /// (qpos address, dof) of each `/joint_states` joint.
+    joints: Vec<(usize, usize)>,
+    joint_names: Vec<String>,
+    body_frames: Vec<String>,
+    tf_links: Vec<TfLink>,
+    state: Schedule,
+    tf_schedule: Schedule,
+    rng: rand_chacha::ChaCha8Rng,
+    mcap: Option<McapOut>,
+    #[cfg(feature = "rerun")]
+    rerun: Option<RerunOut>,
+    /// Net contact wrench per body this tick: force then torque, world frame, about the body
+    /// origin.
+    wrench: Vec<[f64; 6]>,
+    touching: Vec<bool>,
+    /// IMU values this tick (for rerun): gyro and accel, with noise.
+    imu_values: Vec<[f64; 6]>,
+    /// Which IMU topics are due this tick.
+    imu_due: Vec<bool>,
+}
+
+/// The error for rerun outputs in a build without the `rerun` feature.
+pub fn rerun_unavailable() -> Error {
+    Error::FeatureMissing { feature: "rerun", what: "a rerun recording (.rrd file or viewer)".into() }
+}
+
+fn frame_name(robot: &Robot, body: usize) -> String {
+    match robot.model.name(ObjType::Body, body) {
+        "" => format!("body_{body}"),
+        n => n.to_string(),
+    }
+}
+
+impl Recording {
+    /// Opens the outputs `options` names for `robot`.
+    ///
+    /// # Errors
+    /// [`Error::Io`] / [`Error::McapWrite`] when the MCAP file can't be created;
+    /// [`Error::Rerun`] when the `.rrd` can't be created, the viewer can't be reached, or the
+    /// `rerun` feature is off.
+    pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {
+        let model = &robot.model;
+        let dt_nanos = ((model.timestep_secs() * 1e9).round() as u64).max(1);
+        let joints: Vec<usize> = robot.joints();
+        let joint_names: Vec<String> = joints.iter().map(|&j| model.name(ObjType::Joint, j).to_string()).collect();
+        let base = robot.base_body.and_then(|b| {
+            (0..model.njnt())
+                .find(|&j| model.jnt_bodyid()[j] as usize == b && model.joint_type(j) == JointType::Free)
+                .map(|j| (b, model.jnt_dofadr()[j] as usize))
+        });
+        let body_frames: Vec<String> = (0..model.nbody()).map(|b| frame_name(robot, b)).collect();
+        let root_frame = if base.is_some() { "odom" } else { "world" };
+        let tf_links = (1..model.nbody())
+            .map(|b| {
+                let p = model.body_parentid()[b] as usize;
+                TfLink {
+                    parent: (p != 0).then_some(p),
+                    child: b,
+                    parent_frame: if p == 0 { root_frame.to_string() } else { body_frames[p].clone() },
+                    child_frame: body_frames[b].clone(),
+                }
+            })
+            .collect();
+
+        let mut rec = Recording {
+            imus: robot.imus.clone(),
+            base,
+            joints: joints.iter().map(|&j| (model.jnt_qposadr()[j] as usize, model.jnt_dofadr()[j] as usize)).collect(),
+            joint_names,
+            body_frames,
+            tf_links,
+            state: Schedule::new(options.state_rate_hz, dt_nanos),
+            tf_schedule: Schedule::new(options.tf_rate_hz, dt_nanos),
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(options.seed),
+            mcap: None,
+            #[cfg(feature = "rerun")]
+            rerun: None,
+            wrench: vec![[0.0; 6]; model.nbody()],
+            touching: vec![false; model.nbody()],
+            imu_values: vec![[0.0; 6]; robot.imus.len()],
+            imu_due: Vec::new(),
+        };
+
+        if let Some(path) = &options.mcap {
+            let writer = LogWriter::create(path, &options.writer)?;
+            let mut out = McapOut {
+                wanted: options.topics.clone(),
+                joint_states: None,
+                commands: None,
+                odom: None,
+                tf: None,
+                imus: Vec::new(),
+                contacts: vec![None; model.nbody()],
+                counts: Vec::new(),
+                writer,
+            };
+            out.joint_states = out.add_wanted("/joint_states")?;
+            for imu in &robot.imus {
+                let rate = imu.update_rate_hz.unwrap_or(options.state_rate_hz);
+                let topic = out.add_wanted(&imu.topic)?;
+                out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
+            }
+            if base.is_some() {
+                out.odom = out.add_wanted("/odom")?;
+            }
+            out.tf = out.add_wanted("/tf")?;
+            out.commands = out.add_wanted(&format!("/{}/joint_commands", robot.name))?;
+            // IMU frames that are no body: a static transform from their body.
+            let statics: Vec<&super::ImuInfo> =
+                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.frame_id)).collect();
+            if !statics.is_empty() && out.wants("/tf_static") {
+                let topic: Topic<TfMessage> = out.add("/tf_static")?;
+                let body_frames = &rec.body_frames;
+                out.writer.write_with(topic, 0, |w| {
+                    w.seq_len(statics.len());
+                    for imu in &statics {
+                        w.header(0, &body_frames[imu.body]);
+                        w.string(&imu.frame_id);
+                        w.f64_fixed(&imu.body_from_imu.0);
+                        w.f64_fixed(&xyzw(imu.body_from_imu.1));
+                    }
+                })?;
+                out.count(topic.channel_id());
+            }
+            rec.mcap = Some(out);
+        }
+
+        if options.rrd.is_some() || options.connect.is_some() {
+            #[cfg(not(feature = "rerun"))]
+            return Err(rerun_unavailable());
+            #[cfg(feature = "rerun")]
+            {
+                let mut recorders = Vec::new();
+                if let Some(path) = &options.rrd {
+                    recorders.push(crate::viz::Recorder::to_file(model, "twin", path)?);
+                }
+                if let Some(url) = &options.connect {
+                    recorders.push(crate::viz::Recorder::to_viewer(model, "twin", url)?);
+                }
+                rec.rerun = Some(RerunOut {
+                    recorders,
+                    schedule: Schedule::new(options.rerun_rate_hz, dt_nanos),
+                    joint_series: rec.joint_names.iter().map(|n| format!("joints/{n}")).collect(),
+                });
+            }
+        }
+        Ok(rec)
+    }
+
+    /// Records the instant `sample` (see [`StepSample`]): writes every stream that is due.
+    ///
+    /// # Errors
+    /// Write errors of the MCAP or rerun outputs.
+    pub fn record(&mut self, sample: &StepSample<'_>, data: &Data) -> Result<()> {
+        let t_nanos = (sample.time_secs * 1e9).round().max(0.0) as u64;
+        let stamp = t_nanos as i64;
+        let state_due = self.state.due(t_nanos);
+        let tf_due = self.tf_schedule.due(t_nanos);
+        #[cfg(feature = "rerun")]
+        let rerun_due = self.rerun.as_mut().is_some_and(|r| r.schedule.due(t_nanos));
+        #[cfg(not(feature = "rerun"))]
+        let rerun_due = false;
+
+        if state_due || rerun_due {
+            self.accumulate_contacts(data);
+        }
+        // Reused buffer: nothing is allocated per step.
+        let mut imu_due = std::mem::take(&mut self.imu_due);
+        imu_due.clear();
+        imu_due.resize(self.imus.len(), false);
+        if let Some(out) = self.mcap.as_mut() {
+            for (k, s) in out.imus.iter_mut().enumerate() {
+                imu_due[k] = s.schedule.due(t_nanos);
+            }
+        }
+        for (k, imu) in self.imus.iter().enumerate() {
+            if imu_due[k] || rerun_due {
+                let s = data.sensordata();
+                let mut v = [0.0; 6];
+                for i in 0..3 {
+                    v[i] = s[imu.gyro_adr + i] + imu.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                    v[3 + i] = s[imu.accel_adr + i] + imu.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                }
+                self.imu_values[k] = v;
+            }
+        }
+
+        if let Some(out) = self.mcap.as_mut() {
+            if state_due {
+                let (joints, names) = (&self.joints, &self.joint_names);
+                let (qpos, qvel) = (sample.qpos, sample.qvel);
+                let (actuator, applied) = (data.qfrc_actuator(), data.qfrc_applied());
+                if let Some(topic) = out.joint_states {
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.header(stamp, "");
+                        w.seq_len(names.len());
+                        for n in names {
+                            w.string(n);
+                        }
+                        let n = joints.len();
+                        w.f64_seq_iter(n, joints.iter().map(|&(adr, _)| qpos[adr]));
+                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| qvel[dof]));
+                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
+                    })?;
+                    out.count(topic.channel_id());
+                }
+
+                if let (Some(topic), Some((body, dof))) = (out.odom, self.base) {
+                    let child = &self.body_frames[body];
+                    let m = data.xmat()[body];
+                    let v_world = [qvel[dof], qvel[dof + 1], qvel[dof + 2]];
+                    let linear_body = rotate_t(&m, v_world);
+                    let angular_body = [qvel[dof + 3], qvel[dof + 4], qvel[dof + 5]];
+                    let (p, q) = (data.xpos()[body], data.xquat()[body]);
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.header(stamp, "odom");
+                        w.string(child);
+                        w.f64_fixed(&p);
+                        w.f64_fixed(&xyzw(q));
+                        w.f64_fixed(&[0.0; 36]);
+                        w.f64_fixed(&linear_body);
+                        w.f64_fixed(&angular_body);
+                        w.f64_fixed(&[0.0; 36]);
+                    })?;
+                    out.count(topic.channel_id());
+                }
+
+                for b in 1..self.touching.len() {
+                    if self.touching[b] && out.contacts[b].is_none() && out.wants("/contacts/*") {
+                        let name: String = self.body_frames[b]
+                            .chars()
+                            .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
+                            .collect();
+                        out.contacts[b] = Some(out.add(&format!("/contacts/{name}"))?);
+                    }
+                    let Some(topic) = out.contacts[b] else { continue };
+                    let m = data.xmat()[b];
+                    let wr = self.wrench[b];
+                    let force = rotate_t(&m, [wr[0], wr[1], wr[2]]);
+                    let torque = rotate_t(&m, [wr[3], wr[4], wr[5]]);
+                    let frame = &self.body_frames[b];
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.header(stamp, frame);
+                        w.f64_fixed(&force);
+                        w.f64_fixed(&torque);
+                    })?;
+                    out.count(topic.channel_id());
+                }
+
+                let command = sample.command;
+                if let Some(topic) = out.commands {
+                    out.writer.write_with(topic, t_nanos, |w| {
+                        w.seq_len(0);
+                        w.u32(0);
+                        w.f64_seq(command);
+                    })?;
+                    out.count(topic.channel_id());
+                }
+            }
+
+            for (k, imu) in self.imus.iter().enumerate() {
+                if !imu_due[k] {
+                    continue;
+                }
+                let s = data.sensordata();
+                let q = match imu.quat_adr {
+                    Some(a) => [s[a], s[a + 1], s[a + 2], s[a + 3]],
+                    None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
+                };
+                let v = self.imu_values[k];
+                let (g2, a2) = (imu.gyro_noise_std.powi(2), imu.accel_noise_std.powi(2));
+                let Some(topic) = out.imus[k].topic else { continue };
+                out.writer.write_with(topic, t_nanos, |w| {
+                    w.header(stamp, &imu.frame_id);
+                    w.f64_fixed(&xyzw(q));
+                    w.f64_fixed(&[0.0; 9]);
+                    w.f64_fixed(&v[..3]);
+                    w.f64_fixed(&[g2, 0.0, 0.0, 0.0, g2, 0.0, 0.0, 0.0, g2]);
+                    w.f64_fixed(&v[3..]);
+                    w.f64_fixed(&[a2, 0.0, 0.0, 0.0, a2, 0.0, 0.0, 0.0, a2]);
+                })?;
+                out.count(topic.channel_id());
+            }
+
+            if let (true, Some(tf)) = (tf_due, out.tf) {
+                let (xpos, xquat) = (data.xpos(), data.xquat());
+                let links = &self.tf_links;
+                out.writer.write_with(tf, t_nanos, |w| {
+                    w.seq_len(links.len());
+                    for l in links {
+                        let (p, q) = match l.parent {
+                            None => (xpos[l.child], xquat[l.child]),
+                            Some(parent) => relative(xpos[parent], xquat[parent], xpos[l.child], xquat[l.child]),
+                        };
+                        w.header(stamp, &l.parent_frame);
+                        w.string(&l.child_frame);
+                        w.f64_fixed(&p);
+                        w.f64_fixed(&xyzw(q));
+                    }
+                })?;
+                out.count(tf.channel_id());
+            }
+        }
+
+        self.imu_due = imu_due;
+
+        #[cfg(feature = "rerun")]
+        if rerun_due && let Some(r) = self.rerun.as_ref() {
+            for rec in &r.recorders {
+                rec.log_poses_at(sample.time_secs, data)?;
+                for (&(adr, _), series) in self.joints.iter().zip(&r.joint_series) {
+                    rec.scalar(series, sample.qpos[adr])?;
+                }
+                for (imu, v) in self.imus.iter().zip(&self.imu_values) {
+                    for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate()
+                    {
+                        rec.scalar(&format!("imu/{}/{axis}", imu.name), v[i])?;
+                    }
+                }
+                for b in 1..self.touching.len() {
+                    if self.touching[b] {
+                        let m = data.xmat()[b];
+                        let wr = self.wrench[b];
+                        let f = rotate_t(&m, [wr[0], wr[1], wr[2]]);
+                        for (i, axis) in ["force_x", "force_y", "force_z"].iter().enumerate() {
+                            rec.scalar(&format!("contacts/{}/{axis}", self.body_frames[b]), f[i])?;
+                        }
+                    }
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Sums each active contact's wrench onto the two bodies (world frame, about the body
+    /// origin); the world body is left out.
+    fn accumulate_contacts(&mut self, data: &Data) {
+        for (w, t) in self.wrench.iter_mut().zip(self.touching.iter_mut()) {
+            *w = [0.0; 6];
+            *t = false;
+        }
+        let model = data.model();
+        let xpos = data.xpos();
+        for i in 0..data.ncon() {
+            let Some(c) = data.contact_wrench_world(i) else { continue };
+            for (k, sign) in [(0usize, -1.0), (1, 1.0)] {
+                let g = c.geoms[k];
+                if g < 0 {
+                    continue;
+                }
+                let body = model.geom_bodyid()[g as usize] as usize;
+                if body == 0 {
+                    continue;
+                }
+                let f = c.force_n.map(|x| sign * x);
+                let r = [c.position[0] - xpos[body][0], c.position[1] - xpos[body][1], c.position[2] - xpos[body][2]];
+                let rxf = cross(r, f);
+                let w = &mut self.wrench[body];
+                for i in 0..3 {
+                    w[i] += f[i];
+                    w[3 + i] += rxf[i] + sign * c.torque_nm[i];
+                }
+                self.touching[body] = true;
+            }
+        }
+    }
+
+    /// Closes the outputs.
+    ///
+    /// # Errors
+    /// Write errors of the MCAP or rerun outputs.
+    pub fn finish(self) -> Result<RecordSummary> {
+        let mut summary = RecordSummary::default();
+        if let Some(out) = self.mcap {
+            let path = out.writer.path().to_path_buf();
+            summary.topics = out.counts.into_iter().filter(|(t, _)| !t.is_empty()).collect();
+            let written = out.writer.finish()?;
+            summary.mcap = Some((path, written));
+        }
+        #[cfg(feature = "rerun")]
+        if let Some(r) = self.rerun {
+            for rec in r.recorders {
+                let path = rec.path().map(std::path::Path::to_path_buf);
+                rec.finish()?;
+                if let Some(path) = path {
+                    let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+                    summary.rrd = Some((path, bytes));
+                }
+            }
+        }
+        Ok(summary)
+    }
+}
+
+/// Quaternion w x y z → x y z w (ROS order).
+fn xyzw(q: [f64; 4]) -> [f64; 4] {
+    [q[1], q[2], q[3], q[0]]
+}
+
+/// `Rᵀ v` for a row-major rotation matrix `R` (world from body): world → body.
+fn rotate_t(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
+    [
+        m[0] * v[0] + m[3] * v[1] + m[6] * v[2],
+        m[1] * v[0] + m[4] * v[1] + m[7] * v[2],
+        m[2] * v[0] + m[5] * v[1] + m[8] * v[2],
+    ]
+}
+
+fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
+    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+}
+
+/// Hamilton product of w x y z quaternions.
+fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
+    [
+        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
+        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
+        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
+        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
+    ]
+}
+
+/// Rotates `v` by the unit quaternion `q` (w x y z).
+fn quat_rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
+    let p = quat_mul(quat_mul(q, [0.0, v[0], v[1], v[2]]), [q[0], -q[1], -q[2], -q[3]]);
+    [p[1], p[2], p[3]]
+}
+
+/// `parent_from_child` from two world poses: translation in the parent frame and rotation.
+fn relative(p_pos: [f64; 3], p_quat: [f64; 4], c_pos: [f64; 3], c_quat: [f64; 4]) -> ([f64; 3], [f64; 4]) {
+    let inv = [p_quat[0], -p_quat[1], -p_quat[2], -p_quat[3]];
+    let d = [c_pos[0] - p_pos[0], c_pos[1] - p_pos[1], c_pos[2] - p_pos[2]];
+    (quat_rotate(inv, d), quat_mul(inv, c_quat))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn schedule_hits_each_period_once() {
+        // 200 Hz on a 2 ms step: 5 ms periods fall between steps; one message per period.
+        let mut s = Schedule::new(200.0, 2_000_000);
+        let n = (0..500u64).filter(|k| s.due(k * 2_000_000)).count();
+        assert_eq!(n, 200);
+        // A rate above 1/dt publishes every step.
+        let mut s = Schedule::new(1000.0, 2_000_000);
+        assert_eq!((0..500u64).filter(|k| s.due(k * 2_000_000)).count(), 500);
+    }
+
+    #[test]
+    fn relative_pose_inverts_composition() {
+        let p_quat = [0.9f64.cos(), 0.0, 0.0, 0.9f64.sin()];
+        let (pp, cp) = ([1.0, 2.0, 3.0], [1.5, 2.0, 3.0]);
+        let (t, q) = relative(pp, p_quat, cp, p_quat);
+        // The child is 0.5 m along world x; in the parent (rotated 1.8 rad about z) frame:
+        assert!((t[0] - 0.5 * 1.8f64.cos()).abs() < 1e-12 && (t[1] + 0.5 * 1.8f64.sin()).abs() < 1e-12);
+        assert!((q[0] - 1.0).abs() < 1e-12);
+    }
+}
