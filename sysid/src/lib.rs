@@ -103,7 +103,8 @@
 //!   zero); no total-least-squares correction is made. Joint-limit and unmeasured contact
 //!   forces are not modelled. The training NRMSE of a joint normalises by `τ + Jᵀ·w` (the
 //!   held-out NRMSE by the measured `τ`). CSV logs can't carry base motion.
-//! - Logs are read from CSV ([`log`]); the ROS 2 MCAP reader fills the same [`JointLog`].
+//! - Logs are ROS 2 bags (`sensor_msgs/msg/JointState`, plus `nav_msgs/msg/Odometry` and
+//!   `geometry_msgs/msg/WrenchStamped` for a floating base) or CSV ([`log`]).
 //! - Joints are revolute or prismatic; each must be in the log. Contacts, joint-limit forces and
 //!   transmissions other than a direct drive are not modelled: log the robot in free space,
 //!   inside its joint ranges, with joint-side torques.
