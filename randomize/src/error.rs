@@ -12,7 +12,7 @@ pub enum Error {
     Core(#[from] twin_core::Error),
 
     /// Reading or writing a file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}", path.display())]
     Io {
         /// The file or folder.
         path: PathBuf,
@@ -43,7 +43,7 @@ pub enum Error {
     },
 
     /// Applying the drawn parameters to the model failed (e.g. a negative mass).
-    #[error("episode {episode}: could not apply the drawn parameters: {source}")]
+    #[error("episode {episode}: could not apply the drawn parameters")]
     Apply {
         /// Episode index.
         episode: u64,

@@ -8,7 +8,7 @@ use std::path::PathBuf;
 #[non_exhaustive]
 pub enum Error {
     /// Reading or writing a file failed.
-    #[error("{}: {source}", path.display())]
+    #[error("{}", path.display())]
     Io {
         /// The file.
         path: PathBuf,
@@ -169,7 +169,7 @@ pub enum Error {
     },
 
     /// Writing an MCAP file failed.
-    #[error("{}: writing MCAP: {source}", path.display())]
+    #[error("{}: writing MCAP", path.display())]
     McapWrite {
         /// The file being written.
         path: PathBuf,
