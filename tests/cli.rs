@@ -10,6 +10,8 @@ mod info;
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
+#[path = "cli/reliab.rs"]
+mod reliab;
 #[path = "cli/sim.rs"]
 mod sim;
 #[path = "cli/sysid.rs"]

@@ -145,23 +145,13 @@ fn worse(a: &EpisodeResult, b: &EpisodeResult) -> std::cmp::Ordering {
     y.0.cmp(&x.0).then(y.1.total_cmp(&x.1)).then(y.2.total_cmp(&x.2)).then(y.3.cmp(&x.3))
 }
 
-/// Writes `path` atomically (temp file + rename), keeping an existing file as `<name>.bak`.
-fn write_atomic(path: &Path, f: impl FnOnce(&mut std::fs::File) -> Result<()>) -> Result<()> {
-    let io = |p: &Path| {
-        let p = p.to_path_buf();
-        move |source| Error::Io { path: p, source }
-    };
-    let dir = path.parent().unwrap_or(Path::new("."));
-    let tmp = dir.join(format!(".{}.tmp", path.file_name().map_or("out".into(), |n| n.to_string_lossy())));
-    let mut file = std::fs::File::create(&tmp).map_err(io(&tmp))?;
-    f(&mut file)?;
-    file.sync_all().map_err(io(&tmp))?;
-    if path.exists() {
-        let mut bak = path.as_os_str().to_owned();
-        bak.push(".bak");
-        std::fs::rename(path, &bak).map_err(io(path))?;
-    }
-    std::fs::rename(&tmp, path).map_err(io(path))
+/// Writes what `f` produces to `path` with twin's one atomic writer ([`twin_core::fsio`]),
+/// keeping an existing file as a numbered backup (`<name>.bak`, `.bak.1`, …).
+fn write_atomic(path: &Path, f: impl FnOnce(&mut Vec<u8>) -> Result<()>) -> Result<()> {
+    let mut bytes = Vec::new();
+    f(&mut bytes)?;
+    twin_core::fsio::write_atomic(path, &bytes, twin_core::fsio::Backup::Numbered)?;
+    Ok(())
 }
 
 /// Runs the batch (or its shard) on `options.threads` threads. Episodes run in chunks; each
@@ -259,8 +249,9 @@ pub fn run_batch(
             .map_err(|e| Error::Io { path: tmp_csv.clone(), source: std::io::Error::other(e.to_string()) })?;
         inner.flush().map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let csv_path = dir.join("episodes.csv");
-        if csv_path.exists() {
-            let _ = std::fs::rename(&csv_path, dir.join("episodes.csv.bak"));
+        twin_core::fsio::check_output(&csv_path, &[])?;
+        if csv_path.is_file() {
+            twin_core::fsio::backup_numbered(&csv_path)?;
         }
         std::fs::rename(&tmp_csv, &csv_path).map_err(|source| Error::Io { path: csv_path.clone(), source })?;
         write_summary(dir, &run, &summary)?;

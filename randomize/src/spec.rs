@@ -97,7 +97,7 @@ pub struct Term {
     /// geoms (or their bodies) for friction, bodies for masses and COM, joints for damping,
     /// friction loss, armature, encoder noise and initial pose, actuators for strength, sensors
     /// for IMU noise and bias. (default: all objects of that kind)
-    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    #[serde(default, skip_serializing_if = "Vec::is_empty", deserialize_with = "select_list")]
     pub select: Vec<String>,
     /// One independent draw per object instead of one draw shared by all of them.
     /// (default: false)
@@ -105,7 +105,55 @@ pub struct Term {
     pub independent: bool,
 }
 
+/// `select = [...]`; an explicit empty list becomes `[""]`, which validation reports (an empty
+/// pattern matches nothing), so `select = []` never silently means "every object".
+fn select_list<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Vec<String>, D::Error> {
+    let v = Vec::<String>::deserialize(d)?;
+    Ok(if v.is_empty() { vec![String::new()] } else { v })
+}
+
+/// Terms whose resulting value is a physical quantity that cannot be negative.
+const NON_NEGATIVE: [&str; 9] = [
+    "friction",
+    "mass",
+    "damping",
+    "frictionloss",
+    "armature",
+    "actuator_strength",
+    "imu_noise_std",
+    "encoder_noise_std",
+    "latency_steps",
+];
+
 impl Term {
+    /// Refuses draws that give impossible values: a negative friction, mass, damping, noise or
+    /// latency (scale or absolute mode: the draw itself must be ≥ 0), a push interval ≤ 0.
+    fn validate_range(&self, key: &str, path: Option<&Path>) -> Result<()> {
+        let err = |message: String| Error::Spec { path: path.map(Path::to_path_buf), key: key.to_string(), message };
+        let non_negative = NON_NEGATIVE.contains(&key) || key.starts_with("object_mass.");
+        let interval = key == "push.interval_secs";
+        if !(non_negative || interval) || self.mode == Mode::Add {
+            return Ok(());
+        }
+        let lowest = match self.dist {
+            Dist::Uniform | Dist::LogUniform => self.low.unwrap_or(0.0),
+            // A gaussian reaches any value; its mean at least must be in range.
+            Dist::Gaussian => self.mean.unwrap_or(0.0),
+        };
+        if interval && !(lowest > 0.0) {
+            return Err(err(format!(
+                "a push interval must be > 0 s (the lowest draw is {lowest}); e.g. low = 1.0, high = 3.0"
+            )));
+        }
+        if non_negative && lowest < 0.0 {
+            return Err(err(format!(
+                "this quantity cannot be negative but the lowest draw is {lowest} (mode {}): use a range ≥ 0",
+                if self.mode == Mode::Scale { "scale" } else { "absolute" }
+            )));
+        }
+        Ok(())
+    }
+
     /// A uniform draw in `mode`, shared by all objects.
     pub fn uniform(mode: Mode, low: f64, high: f64) -> Term {
         Term {
@@ -190,7 +238,11 @@ impl Term {
         }
         for p in &self.select {
             if p.is_empty() {
-                return Err(err("an empty `select` pattern matches nothing".into()));
+                return Err(err(
+                    "an empty `select` pattern (or `select = []`) matches nothing; leave `select` out to \
+                     apply the term to every object, or remove the term to randomize nothing"
+                        .into(),
+                ));
             }
         }
         Ok(())
@@ -303,9 +355,11 @@ impl Spec {
     /// [`Error::Io`], [`Error::SpecSyntax`] (TOML errors with line and column, unknown keys),
     /// [`Error::Spec`] for inconsistent entries.
     pub fn from_file(path: &Path) -> Result<Spec> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
-        let spec: Spec = toml::from_str(&text)
-            .map_err(|e| Error::SpecSyntax { path: path.to_path_buf(), message: e.to_string().trim().to_string() })?;
+        let text = twin_core::fsio::read_to_string(path)?;
+        let spec: Spec = toml::from_str(&text).map_err(|e| Error::SpecSyntax {
+            path: path.to_path_buf(),
+            message: twin_core::fsio::cap_message(e.to_string().trim()),
+        })?;
         spec.validate(Some(path))?;
         Ok(spec)
     }
@@ -317,7 +371,7 @@ impl Spec {
     pub fn from_toml_str(text: &str) -> Result<Spec> {
         let spec: Spec = toml::from_str(text).map_err(|e| Error::SpecSyntax {
             path: PathBuf::from("<spec>"),
-            message: e.to_string().trim().to_string(),
+            message: twin_core::fsio::cap_message(e.to_string().trim()),
         })?;
         spec.validate(None)?;
         Ok(spec)
@@ -368,6 +422,7 @@ impl Spec {
     pub fn validate(&self, path: Option<&Path>) -> Result<()> {
         for (key, term) in self.terms() {
             term.validate(&key, path)?;
+            term.validate_range(&key, path)?;
         }
         if let Some(d) = self.push.as_ref().and_then(|p| p.duration_secs)
             && !(d > 0.0 && d.is_finite())

@@ -80,9 +80,12 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
         let line = i as u64 + 2;
         let rec = rec.map_err(|e| err(Some(line), e.to_string()))?;
         let f = |k: usize| -> Result<f64> {
-            rec[k]
-                .parse::<f64>()
-                .map_err(|_| err(Some(line), format!("column {}: {:?} is not a number", names[k], &rec[k])))
+            rec[k].parse::<f64>().map_err(|_| {
+                err(
+                    Some(line),
+                    format!("column {}: {:?} is not a number", names[k], twin_core::fsio::excerpt(&rec[k], 200)),
+                )
+            })
         };
         let b = |k: usize| -> Result<bool> {
             match &rec[k] {
@@ -92,9 +95,12 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
             }
         };
         let u = |k: usize| -> Result<u64> {
-            rec[k]
-                .parse::<u64>()
-                .map_err(|_| err(Some(line), format!("column {}: {:?} is not a count", names[k], &rec[k])))
+            rec[k].parse::<u64>().map_err(|_| {
+                err(
+                    Some(line),
+                    format!("column {}: {:?} is not a count", names[k], twin_core::fsio::excerpt(&rec[k], 200)),
+                )
+            })
         };
         let r = EpisodeResult {
             index: u(0)?,

@@ -1,7 +1,6 @@
 //! `twin check [MODEL]`: incremental validation (physics, sensors, control, integration), each
 //! step PASS/FAIL with numbers and the likely cause of a failure. Exits non-zero on a failure.
 
-use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
 use twin_core::check::{CheckOptions, check};
@@ -27,8 +26,9 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    super::check_range("--hold-secs", args.hold_secs, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     let path = args.model.clone().unwrap_or_else(super::default_model);
-    let text = std::fs::read_to_string(&path).with_context(|| format!("reading {}", path.display()))?;
+    let text = twin_core::fsio::read_to_string(&path)?;
     let mut out = std::io::stdout().lock();
     let (floating, fixed) = if twin_core::urdf::is_urdf(&text) {
         // Joints that no transmission names get a motor so the PD hold can act on them.

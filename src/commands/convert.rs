@@ -5,6 +5,7 @@ use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
 use twin_core::convert::{ConvertOptions, ConvertedModel, convert_urdf};
+use twin_core::fsio;
 use twin_core::mj::Model;
 
 #[derive(Debug, clap::Args)]
@@ -34,13 +35,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let output = match &args.output {
         Some(o) => o.clone(),
         None => {
-            let text =
-                std::fs::read_to_string(&args.urdf).with_context(|| format!("reading {}", args.urdf.display()))?;
+            let text = fsio::read_to_string(&args.urdf)?;
             let name = robot_name(&text)
                 .unwrap_or_else(|| args.urdf.file_stem().and_then(|s| s.to_str()).unwrap_or("robot").to_string());
             args.urdf.parent().unwrap_or(Path::new(".")).join(format!("{name}.xml"))
         }
     };
+    // Before any work: not a folder, device or the URDF itself; symlinks followed.
+    let target = fsio::check_output(&output, &[&args.urdf])?;
     let out_dir = output.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
     let stem = output.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
     let opts = ConvertOptions {
@@ -54,7 +56,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let converted = convert_urdf(&args.urdf, &opts)?;
     let model = Model::from_xml_str(&converted.mjcf)
         .with_context(|| format!("compiling the converted {}", args.urdf.display()))?;
-    write_atomic(&output, converted.mjcf.as_bytes())?;
+    let mut tx = fsio::Transaction::new();
+    tx.stage(&target, converted.mjcf.as_bytes(), fsio::Backup::Numbered)?;
+    tx.commit()?;
     let mut out = std::io::stdout().lock();
     summary(&mut out, &output, &converted, &model)?;
     Ok(())
@@ -77,23 +81,6 @@ fn roxml_name(text: &str) -> Option<String> {
     let name: String =
         value[..end].chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' || c == '-' { c } else { '_' }).collect();
     (!name.is_empty()).then_some(name)
-}
-
-/// Writes `bytes` to `path` through a temp file and a rename; an existing file is kept as
-/// `path.bak`.
-fn write_atomic(path: &Path, bytes: &[u8]) -> anyhow::Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    let mut tmp =
-        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("creating a temp file in {}", dir.display()))?;
-    tmp.write_all(bytes).with_context(|| format!("writing {}", path.display()))?;
-    if path.is_file() {
-        let mut bak = path.as_os_str().to_owned();
-        bak.push(".bak");
-        std::fs::copy(path, &bak).with_context(|| format!("backing up {} to .bak", path.display()))?;
-    }
-    tmp.persist(path).with_context(|| format!("renaming into {}", path.display()))?;
-    Ok(())
 }
 
 fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -> std::io::Result<()> {

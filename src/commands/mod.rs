@@ -29,6 +29,25 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// Shortest simulated duration an option accepts, seconds.
+pub const MIN_SECS: f64 = 1e-6;
+/// Longest simulated duration an option accepts, seconds (one day: far beyond any twin run,
+/// small enough that a typo such as `1e300` is refused instead of running forever).
+pub const MAX_SIM_SECS: f64 = 86_400.0;
+/// Highest publishing rate, Hz (MuJoCo timesteps are ≥ 1e-5 s in practice).
+pub const MAX_RATE_HZ: f64 = 100_000.0;
+/// Highest posed frame rate of `twin view` (a rerun viewer shows at most a few hundred).
+pub const MAX_FPS: f64 = 1_000.0;
+
+/// Checks a numeric option: finite and within `min..=max` (`unit` for the message).
+pub fn check_range(option: &str, value: f64, min: f64, max: f64, unit: &str) -> anyhow::Result<()> {
+    if !(value.is_finite() && value >= min && value <= max) {
+        let unit = if unit.is_empty() { String::new() } else { format!(" {unit}") };
+        anyhow::bail!("{option} must be a number from {min} to {max}{unit}, got {value}");
+    }
+    Ok(())
+}
+
 /// The shipped humanoid, the default model of every command: `models/humanoid.urdf` in the
 /// current directory if there is one, else the copy in the source tree twin was built from.
 pub fn default_model() -> PathBuf {

@@ -6,7 +6,6 @@ use randomize::{Batch, EpisodeOptions, Layout, RunOptions, Shard, Spec};
 use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::sync::Arc;
-use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
 use twin_core::mj::Model;
 
@@ -87,6 +86,11 @@ pub enum MergeCommand {
 /// Runs `twin randomize`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(MergeCommand::Merge { dirs, out }) = args.merge {
+        if let Some(out) = &out {
+            // Never write the merge into one of the shards it reads.
+            let shards: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
+            twin_core::fsio::check_output_dir(out, &shards)?;
+        }
         let merged = randomize::merge(&dirs, out.as_deref())?;
         print!("{}", merged.summary.to_text(merged.run.episodes));
         if let Some(out) = out {
@@ -107,7 +111,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.record_worst > 0 && args.out.is_none() {
         anyhow::bail!("--record-worst needs --out DIR to write the trajectories to");
     }
+    if args.episodes == 0 {
+        anyhow::bail!("--episodes must be at least 1");
+    }
+    super::check_range("--duration", args.duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
+    super::check_range("--fall-tilt", args.fall_tilt, 0.0, std::f64::consts::PI, "rad")?;
+    super::check_range("--fall-height-fraction", args.fall_height_fraction, 0.0, 1.0, "")?;
     let model_path = args.model.unwrap_or_else(super::default_model);
+    if let Some(out) = &args.out {
+        let mut inputs = vec![model_path.as_path()];
+        inputs.extend(args.config.as_deref());
+        twin_core::fsio::check_output_dir(out, &inputs)?;
+    }
     let model = Arc::new(Model::from_file(&model_path)?);
     let spec = match &args.config {
         Some(path) => Spec::from_file(path)?,
@@ -162,17 +177,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let requested = (0..args.episodes).filter(|&i| shard.is_none_or(|s| s.contains(i))).count() as u64;
 
-    let stop = Arc::new(AtomicBool::new(false));
-    {
-        let stop = stop.clone();
-        // A second Ctrl-C while finishing still ends the process the usual way.
-        let _ = ctrlc::set_handler(move || {
-            if stop.swap(true, Ordering::SeqCst) {
-                std::process::exit(130);
-            }
-            eprintln!("\nstopping: finishing the episodes in flight (Ctrl-C again to abort)");
-        });
-    }
+    // Ctrl-C (or SIGTERM) ends the run after the episodes in flight; a second one aborts.
+    twin_core::fsio::cooperate();
+    let stop = twin_core::fsio::interrupt_flag();
     let bar = if std::io::stderr().is_terminal() {
         let bar = indicatif::ProgressBar::new(requested);
         bar.set_style(
@@ -184,7 +191,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None
     };
     let started = Instant::now();
-    let report = randomize::run_batch(&batch, run_info, &run_options, &stop, &|| {
+    let report = randomize::run_batch(&batch, run_info, &run_options, stop, &|| {
         if let Some(b) = &bar {
             b.inc(1);
         }

@@ -74,11 +74,20 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.duration > 0.0 && args.duration.is_finite()) {
-        bail!("--duration must be a positive number of seconds (got {})", args.duration);
+    super::check_range("--duration", args.duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
+    super::check_range("--rate", args.rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
+    super::check_range("--tf-rate", args.tf_rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
+    // Outputs are checked before any work: not a folder or device, not an input.
+    let model_path = args.model.clone().unwrap_or_else(super::default_model);
+    let mut inputs = vec![model_path.as_path()];
+    inputs.extend(args.trajectory.as_deref());
+    for out in [&args.record, &args.rerun].into_iter().flatten() {
+        twin_core::fsio::check_output(out, &inputs)?;
     }
-    if !(args.rate > 0.0 && args.tf_rate > 0.0) {
-        bail!("--rate and --tf-rate must be positive (Hz)");
+    if let (Some(a), Some(b)) = (&args.record, &args.rerun)
+        && twin_core::fsio::check_output(a, &[b.as_path()]).is_err()
+    {
+        bail!("--record and --rerun name the same file {}", a.display());
     }
     if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
         return Err(twin_core::sim::record::rerun_unavailable().into());

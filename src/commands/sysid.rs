@@ -4,6 +4,7 @@
 use anyhow::{Context, bail};
 use std::path::{Path, PathBuf};
 use sysid::{Base, JointLog, RobotModel, SysidOptions};
+use twin_core::fsio;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum BaseArg {
@@ -123,6 +124,22 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         ..Default::default()
     };
+    // Every output is checked before any work: not a folder or device, not an input.
+    let mut inputs: Vec<&Path> = vec![args.log.as_path()];
+    inputs.extend(args.validate.as_deref());
+    fsio::check_input(&args.log, fsio::InputKind::FileOrDir)?;
+    if let Some(v) = &args.validate {
+        fsio::check_input(v, fsio::InputKind::FileOrDir)?;
+    }
+    let urdf_target = fsio::check_output(&args.update, &inputs)?;
+    inputs.push(args.update.as_path());
+    let report_target = args.report.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
+    let mjcf_target = args.mjcf.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
+    if let (Some(r), Some(m)) = (&args.report, &args.mjcf)
+        && fsio::check_output(r, &[m.as_path()]).is_err()
+    {
+        bail!("--report and --mjcf name the same file {}", r.display());
+    }
     let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
     let robot = match opts.base {
         Base::Fixed => RobotModel::from_urdf(&args.update),
@@ -150,15 +167,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ident.report.validation_log = Some(path.display().to_string());
     }
     print!("{}", ident.report.table());
+    let (links, joints) = sysid::urdf_updates(&robot, &ident);
+    let plan = sysid::writeback::plan_urdf_update(&args.update, &links, &joints)?;
+    if args.dry_run {
+        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), plan.diff);
+    }
+    // All outputs are staged and renamed only when every one was written: a failing --mjcf
+    // leaves the URDF and the report untouched.
+    let mut tx = fsio::Transaction::new();
+    if let Some(target) = &report_target {
+        tx.stage(target, ident.report.to_json().as_bytes(), fsio::Backup::None)?;
+    }
+    if let Some(target) = &mjcf_target {
+        let text = sysid::mjcf::mjcf_text(&args.update, &robot, &ident, &links, &joints)
+            .with_context(|| format!("writing {}", target.requested.display()))?;
+        tx.stage(target, text.as_bytes(), fsio::Backup::None)?;
+    }
+    if !args.dry_run {
+        tx.stage(&urdf_target, plan.new.as_bytes(), fsio::Backup::Numbered)?;
+        tx.expect_unchanged(plan.original.as_bytes());
+    }
+    let written = tx.commit()?;
     if let Some(path) = &args.report {
-        sysid::writeback::write_atomic(path, ident.report.to_json().as_bytes())?;
         eprintln!("report written to {}", path.display());
     }
-    let (links, joints) = sysid::urdf_updates(&robot, &ident);
-    let outcome = sysid::writeback::update_urdf_file(&args.update, &links, &joints, args.dry_run)?;
-    if args.dry_run {
-        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), outcome.diff);
-    } else if let Some(backup) = &outcome.backup {
+    if let Some(backup) = written.iter().find(|w| w.path == args.update).and_then(|w| w.backup.as_ref()) {
         eprintln!(
             "updated {} ({} links, {} joints); original kept as {}",
             args.update.display(),
@@ -168,8 +201,6 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         );
     }
     if let Some(out) = &args.mjcf {
-        sysid::mjcf::write_mjcf(&args.update, &robot, &ident, &links, &joints, out)
-            .with_context(|| format!("writing {}", out.display()))?;
         eprintln!("MuJoCo model with the identified values (armature included) written to {}", out.display());
     }
     Ok(())

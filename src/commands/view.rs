@@ -36,8 +36,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.output.is_none() && args.connect.is_none() {
         bail!("give -o LOG.rrd to write a recording, or --connect URL to stream to a rerun viewer");
     }
-    if !(args.fps > 0.0 && args.fps.is_finite()) {
-        bail!("--fps must be positive (got {})", args.fps);
+    super::check_range("--fps", args.fps, 1e-3, super::MAX_FPS, "frames per second")?;
+    if let Some(out) = &args.output {
+        let model = args.model.clone().unwrap_or_else(super::default_model);
+        twin_core::fsio::check_output(out, &[args.log.as_path(), model.as_path()])?;
     }
     run_view(args)
 }

@@ -153,7 +153,8 @@ impl JointLog {
     /// number of cells or a cell that is not a number.
     pub fn read_csv(path: impl AsRef<Path>) -> Result<JointLog> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let ex = |s: &str| twin_core::fsio::excerpt(s, twin_core::fsio::EXCERPT_CHARS);
+        let text = twin_core::fsio::read_to_string(path)?;
         let csv_err = |line: usize, message: String| Error::Csv { path: path.to_path_buf(), line, message };
         let mut lines = text
             .lines()
@@ -218,7 +219,8 @@ impl JointLog {
                 if cell.is_empty() || cell.eq_ignore_ascii_case("nan") {
                     return Ok(f64::NAN);
                 }
-                cell.parse::<f64>().map_err(|_| csv_err(line_no, format!("column `{col}`: `{cell}` is not a number")))
+                cell.parse::<f64>()
+                    .map_err(|_| csv_err(line_no, format!("column `{}`: `{}` is not a number", ex(col), ex(cell))))
             };
             let t = parse(cells[0], "time_sec")?;
             if !t.is_finite() {
@@ -276,7 +278,8 @@ impl JointLog {
     /// # Errors
     /// [`Error::Io`].
     pub fn write_csv(&self, path: impl AsRef<Path>) -> Result<()> {
-        crate::writeback::write_atomic(path.as_ref(), self.to_csv().as_bytes())
+        twin_core::fsio::write_atomic(path.as_ref(), self.to_csv().as_bytes(), twin_core::fsio::Backup::None)?;
+        Ok(())
     }
 }
 

@@ -3,19 +3,18 @@
 //! command simulates: free or fixed base as the converter decides, actuators, sensors) with the
 //! identified armature of each joint, and the MJCF is written atomically.
 
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::identify::Identification;
 use crate::model::RobotModel;
-use crate::writeback::{JointUpdate, LinkUpdate, rewrite_urdf, write_atomic};
+use crate::writeback::{JointUpdate, LinkUpdate, rewrite_urdf};
 use std::path::Path;
 use twin_core::convert::{ConvertOptions, convert_urdf_str};
 use twin_core::mj::Model;
 
-/// Writes `out` (MJCF): the URDF at `urdf` with `links`/`joints` applied, converted by twin's
-/// converter with the identified armature of each joint.
+/// Writes `out` (MJCF, see [`mjcf_text`]) atomically.
 ///
 /// # Errors
-/// Reading the URDF, conversion errors, MuJoCo refusing the result, writing `out`.
+/// As [`mjcf_text`]; writing `out`.
 pub fn write_mjcf(
     urdf: &Path,
     robot: &RobotModel,
@@ -24,7 +23,24 @@ pub fn write_mjcf(
     joints: &[JointUpdate],
     out: &Path,
 ) -> Result<()> {
-    let text = std::fs::read_to_string(urdf).map_err(|source| Error::Io { path: urdf.to_path_buf(), source })?;
+    let text = mjcf_text(urdf, robot, ident, links, joints)?;
+    twin_core::fsio::write_atomic(out, text.as_bytes(), twin_core::fsio::Backup::None)?;
+    Ok(())
+}
+
+/// The MJCF: the URDF at `urdf` with `links`/`joints` applied, converted by twin's converter
+/// with the identified armature of each joint, checked by MuJoCo.
+///
+/// # Errors
+/// Reading the URDF, conversion errors, MuJoCo refusing the result.
+pub fn mjcf_text(
+    urdf: &Path,
+    robot: &RobotModel,
+    ident: &Identification,
+    links: &[LinkUpdate],
+    joints: &[JointUpdate],
+) -> Result<String> {
+    let text = twin_core::fsio::read_to_string(urdf)?;
     let updated = rewrite_urdf(urdf, &text, links, joints)?;
     let mut opts = ConvertOptions::default();
     for (j, joint) in robot.joints.iter().enumerate() {
@@ -35,5 +51,5 @@ pub fn write_mjcf(
     let converted = convert_urdf_str(urdf, &updated, &opts)?;
     // MuJoCo must accept what we write.
     Model::from_xml_str(&converted.mjcf)?;
-    write_atomic(out, converted.mjcf.as_bytes())
+    Ok(converted.mjcf)
 }

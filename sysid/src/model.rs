@@ -216,7 +216,7 @@ fn cad_params_of_body(model: &Model, b: usize) -> LinkParams {
 /// # Errors
 /// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] when the root link is `world`.
 pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<Model> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = twin_core::fsio::read_to_string(path)?;
     let root = root_link(path, &text)?;
     let urdf_elements = format!(
         "<link name=\"world\"/><joint name=\"{FLOATING_JOINT}\" type=\"floating\">\
@@ -232,7 +232,7 @@ pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<M
 /// # Errors
 /// [`Error::Io`], URDF checks of `twin-core`, MuJoCo's load error.
 pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = twin_core::fsio::read_to_string(path)?;
     load_urdf_text(path, &text, extra_mujoco, "")
 }
 

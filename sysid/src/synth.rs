@@ -400,9 +400,10 @@ pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
             friction: j.friction * factor(&mut rng),
         })
         .collect();
-    let text = std::fs::read_to_string(src).map_err(|source| crate::Error::Io { path: src.to_path_buf(), source })?;
+    let text = twin_core::fsio::read_to_string(src)?;
     let new = crate::writeback::rewrite_urdf(src, &text, &links, &joints)?;
-    crate::writeback::write_atomic(dst, new.as_bytes())
+    twin_core::fsio::write_atomic(dst, new.as_bytes(), twin_core::fsio::Backup::None)?;
+    Ok(())
 }
 
 /// MuJoCo's `xfrc_applied` entry (world frame, force then torque about the body's centre of

@@ -10,7 +10,6 @@
 use crate::error::{Error, Result};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use roxmltree::{Document, Node};
-use std::io::Write as _;
 use std::ops::Range;
 use std::path::{Path, PathBuf};
 
@@ -281,47 +280,57 @@ pub fn unified_diff(path: &Path, old: &str, new: &str) -> String {
 pub struct UpdateOutcome {
     /// Unified diff of the change (empty when nothing changed).
     pub diff: String,
-    /// The backup of the original (`ROBOT.urdf.bak`), `None` on a dry run.
+    /// The backup of the original (`ROBOT.urdf.bak`, or `.bak.1`, `.bak.2`, … when older backups
+    /// exist: an older original is never overwritten), `None` on a dry run.
     pub backup: Option<PathBuf>,
 }
 
-/// Rewrites the URDF at `path` (see [`rewrite_urdf`]): the original is kept as
-/// `ROBOT.urdf.bak` and the new file is written atomically. With `dry_run` nothing is written.
+/// A planned URDF rewrite (see [`plan_urdf_update`]): stage `new` in a
+/// [`twin_core::fsio::Transaction`] with `expect_unchanged(original)`.
+#[derive(Debug, Clone)]
+pub struct UrdfUpdate {
+    /// The file's content as read.
+    pub original: String,
+    /// The rewritten content.
+    pub new: String,
+    /// Unified diff `original` → `new`.
+    pub diff: String,
+}
+
+/// Reads the URDF at `path` and rewrites it in memory (see [`rewrite_urdf`]).
 ///
 /// # Errors
 /// [`Error::Io`], [`Error::Urdf`].
+pub fn plan_urdf_update(path: &Path, links: &[LinkUpdate], joints: &[JointUpdate]) -> Result<UrdfUpdate> {
+    let original = twin_core::fsio::read_to_string(path)?;
+    let new = rewrite_urdf(path, &original, links, joints)?;
+    let diff = unified_diff(path, &original, &new);
+    Ok(UrdfUpdate { original, new, diff })
+}
+
+/// Rewrites the URDF at `path` (see [`rewrite_urdf`]) through [`twin_core::fsio`]: the original
+/// is kept as a numbered backup, the new file is written atomically (symlinks, mode and hard
+/// links kept), and the write is refused if another process changed the file meanwhile. With
+/// `dry_run` nothing is written.
+///
+/// # Errors
+/// [`Error::Io`], [`Error::Urdf`], twin-core's path errors.
 pub fn update_urdf_file(
     path: &Path,
     links: &[LinkUpdate],
     joints: &[JointUpdate],
     dry_run: bool,
 ) -> Result<UpdateOutcome> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
-    let new = rewrite_urdf(path, &text, links, joints)?;
-    let diff = unified_diff(path, &text, &new);
+    let target = twin_core::fsio::check_output(path, &[])?;
+    let plan = plan_urdf_update(path, links, joints)?;
     if dry_run {
-        return Ok(UpdateOutcome { diff, backup: None });
+        return Ok(UpdateOutcome { diff: plan.diff, backup: None });
     }
-    let mut backup = path.as_os_str().to_owned();
-    backup.push(".bak");
-    let backup = PathBuf::from(backup);
-    write_atomic(&backup, text.as_bytes())?;
-    write_atomic(path, new.as_bytes())?;
-    Ok(UpdateOutcome { diff, backup: Some(backup) })
-}
-
-/// Writes `bytes` to `path` atomically: a temporary file in the same folder, then a rename.
-///
-/// # Errors
-/// [`Error::Io`].
-pub fn write_atomic(path: &Path, bytes: &[u8]) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let io = |source| Error::Io { path: path.to_path_buf(), source };
-    let mut tmp = tempfile::NamedTempFile::new_in(dir).map_err(io)?;
-    tmp.write_all(bytes).map_err(io)?;
-    tmp.as_file().sync_all().map_err(io)?;
-    tmp.persist(path).map_err(|e| io(e.error))?;
-    Ok(())
+    let mut tx = twin_core::fsio::Transaction::new();
+    tx.stage(&target, plan.new.as_bytes(), twin_core::fsio::Backup::Numbered)?;
+    tx.expect_unchanged(plan.original.as_bytes());
+    let backup = tx.commit()?.pop().and_then(|w| w.backup);
+    Ok(UpdateOutcome { diff: plan.diff, backup })
 }
 
 #[cfg(test)]

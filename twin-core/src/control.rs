@@ -428,7 +428,7 @@ impl JointTrajectory {
     /// [`Error::Io`]; [`Error::Trajectory`] naming the line for a bad header, a non-number, a
     /// short row or a time that does not increase.
     pub fn from_csv(path: &std::path::Path) -> Result<JointTrajectory> {
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let text = crate::fsio::read_to_string(path)?;
         let bad =
             |line: usize, message: String| Error::Trajectory { path: path.to_path_buf(), line: Some(line), message };
         let mut lines = text.lines().enumerate().filter(|(_, l)| !l.trim().is_empty());
@@ -437,7 +437,13 @@ impl JointTrajectory {
         };
         let columns: Vec<&str> = header.split(',').map(str::trim).collect();
         if columns.first().is_none_or(|c| !matches!(*c, "time_sec" | "time_secs" | "time" | "t")) || columns.len() < 2 {
-            return Err(bad(1, format!("header must be `time_sec,<joint>,…` (got `{header}`)")));
+            return Err(bad(
+                1,
+                format!(
+                    "header must be `time_sec,<joint>,…` (got `{}`)",
+                    crate::fsio::excerpt(header, crate::fsio::EXCERPT_CHARS)
+                ),
+            ));
         }
         let mut rows: Vec<Vec<f64>> = vec![Vec::new(); columns.len()];
         for (i, line) in lines {
@@ -446,11 +452,16 @@ impl JointTrajectory {
                 return Err(bad(i + 1, format!("{} values, the header has {} columns", cells.len(), columns.len())));
             }
             for (k, cell) in cells.iter().enumerate() {
-                let v: f64 = cell
-                    .parse()
-                    .ok()
-                    .filter(|v: &f64| v.is_finite())
-                    .ok_or_else(|| bad(i + 1, format!("column {}: `{cell}` is not a finite number", columns[k])))?;
+                let v: f64 = cell.parse().ok().filter(|v: &f64| v.is_finite()).ok_or_else(|| {
+                    bad(
+                        i + 1,
+                        format!(
+                            "column {}: `{}` is not a finite number",
+                            crate::fsio::excerpt(&columns[k], crate::fsio::EXCERPT_CHARS),
+                            crate::fsio::excerpt(cell, crate::fsio::EXCERPT_CHARS)
+                        ),
+                    )
+                })?;
                 rows[k].push(v);
             }
             let t = &rows[0];

@@ -16,6 +16,25 @@ pub enum Error {
         source: std::io::Error,
     },
 
+    /// A path is not what it must be (a FIFO or device as input, a folder or an input as
+    /// output, …); `message` says what it is and what to do.
+    #[error("{}: {message}", path.display())]
+    BadPath {
+        /// The path as given.
+        path: PathBuf,
+        /// What is wrong and what to do.
+        message: String,
+    },
+
+    /// A number in a model or an option is out of its valid range; the message gives the range.
+    #[error("{what}: {message}")]
+    OutOfRange {
+        /// Where the value comes from (file and element, or option).
+        what: String,
+        /// The value, the valid range and what to do.
+        message: String,
+    },
+
     /// MuJoCo refused a model (parse or compile error). `message` is MuJoCo's text, which names
     /// the element and line where it can.
     #[error("{}: MuJoCo could not load the model: {message}", path.as_deref().map_or_else(|| "<string>".into(), |p| p.display().to_string()))]

@@ -23,6 +23,7 @@ pub mod check;
 pub mod control;
 pub mod convert;
 pub mod error;
+pub mod fsio;
 pub mod log;
 pub mod mj;
 pub mod sim;

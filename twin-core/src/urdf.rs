@@ -21,7 +21,17 @@ pub fn is_urdf(text: &str) -> bool {
         } else if let Some(r) = rest.strip_prefix("<!--") {
             rest = r.split_once("-->").map_or("", |(_, t)| t);
         } else if let Some(r) = rest.strip_prefix("<!") {
-            rest = r.split_once('>').map_or("", |(_, t)| t);
+            // A DOCTYPE with an internal subset `[ … ]` holds `>` of its own declarations: skip
+            // to its `]>`, so such a file is still told a URDF (and refused by the parser the
+            // same way in every command).
+            let bracket = r.find('[');
+            let close = r.find('>');
+            rest = match (bracket, close) {
+                (Some(b), Some(c)) if b < c => {
+                    r[b..].split_once("]").map_or("", |(_, t)| t.split_once('>').map_or("", |(_, t)| t))
+                }
+                _ => r.split_once('>').map_or("", |(_, t)| t),
+            };
         } else {
             return rest.starts_with("<robot") && rest[6..].starts_with(|c: char| c.is_whitespace() || c == '>');
         }
@@ -32,7 +42,14 @@ pub fn is_urdf(text: &str) -> bool {
 pub(crate) fn parse<'a>(path: &Path, text: &'a str) -> Result<Document<'a>> {
     Document::parse(text).map_err(|e| {
         let pos = e.pos();
-        Error::Xml { path: path.to_path_buf(), line: pos.row, column: pos.col, message: e.to_string() }
+        let message = match e {
+            roxmltree::Error::DtdDetected => "the file has a DOCTYPE declaration (DTD); twin does not read DTDs, \
+                whose entities would change what the file means: expand the entities and remove the \
+                <!DOCTYPE …> (e.g. run it through xacro or xmllint --noent)"
+                .to_string(),
+            e => e.to_string(),
+        };
+        Error::Xml { path: path.to_path_buf(), line: pos.row, column: pos.col, message }
     })
 }
 

@@ -227,7 +227,7 @@ pub struct ConvertedModel {
 /// the file, line and element for invalid content (missing link, cycle, negative mass, bad
 /// inertia, missing mesh …); [`Error::Load`] if MuJoCo rejects the result.
 pub fn convert_urdf(path: &Path, opts: &ConvertOptions) -> Result<ConvertedModel> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = crate::fsio::read_to_string(path)?;
     convert_urdf_str(path, &text, opts)
 }
 
@@ -880,8 +880,14 @@ impl<'a> Converter<'a> {
             mesh::MeshKind::AsciiStl => mesh::read_ascii_stl(file)?,
             _ => mesh::read_collada(file)?,
         };
-        mesh::write_atomic(&out, &mesh::obj(&tris))
-            .map_err(|e| format!("writing converted mesh {}: {e}", out.display()))?;
+        std::fs::create_dir_all(&dir).map_err(|e| format!("creating {}: {e}", dir.display()))?;
+        // Atomic: parallel conversions of the same mesh never see a half-written file.
+        crate::fsio::write_atomic(&out, &mesh::obj(&tris), crate::fsio::Backup::None).map_err(|e| {
+            match std::error::Error::source(&e) {
+                Some(source) => format!("writing converted mesh {e}: {source}"),
+                None => format!("writing converted mesh: {e}"),
+            }
+        })?;
         self.notes.push(format!(
             "mesh {} ({}) converted to OBJ {} ({} triangles)",
             file.display(),

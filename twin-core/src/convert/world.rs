@@ -3,7 +3,7 @@
 
 use super::ir::{self, Ctx, Pose, child, child_text, children, parse_vec};
 use super::{esc, f, fv, pose_attrs};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use nalgebra::Matrix3;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -27,7 +27,7 @@ pub(crate) fn prio_tag(mu: f64) -> String {
 }
 
 pub(crate) fn load(path: &Path) -> Result<World> {
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = crate::fsio::read_to_string(path)?;
     let doc = crate::urdf::parse(path, &text)?;
     let ctx = Ctx { path, doc: &doc };
     let root = doc.root_element();

@@ -146,6 +146,9 @@ impl Log {
     /// [`Error::LogFormat`] when the path is neither, or a folder is an sqlite3 bag.
     pub fn open(path: impl AsRef<Path>, options: ReadOptions) -> Result<Log> {
         let path = path.as_ref().to_path_buf();
+        if path.exists() {
+            crate::fsio::check_input(&path, crate::fsio::InputKind::FileOrDir)?;
+        }
         let files = if path.is_dir() {
             bag_files(&path)?
         } else if path.is_file() {

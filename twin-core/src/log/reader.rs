@@ -209,7 +209,7 @@ impl<'f> Scanner<'f> {
 
     /// Walks the whole file, calling `f` for every message of a wanted channel.
     pub(crate) fn run(mut self, f: &mut dyn FnMut(RawMessage<'_>) -> Result<()>) -> Result<ScanReport> {
-        let file = File::open(&self.path).map_err(|e| self.io(e))?;
+        let file = crate::fsio::open(&self.path)?;
         let file_len = file.metadata().map_err(|e| self.io(e))?.len();
         let mut r = BufReader::with_capacity(1 << 20, file);
         let mut magic = [0u8; 8];

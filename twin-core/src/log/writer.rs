@@ -47,7 +47,8 @@ pub struct WriterOptions {
     pub chunk_size_bytes: u64,
     /// Chunk compression (default: zstd level 1: cheap enough for a simulation loop).
     pub compression: Compression,
-    /// Keep an existing file at the path as `<name>.bak` instead of failing (default: true).
+    /// Keep an existing file at the path as a numbered backup (`<name>.bak`, `.bak.1`, …, see
+    /// [`crate::fsio::Backup::Numbered`]) instead of failing (default: true).
     pub backup_existing: bool,
     /// Compress and write on a background thread; the caller only encodes (default: true).
     /// Either way the file's bytes are identical.
@@ -236,7 +237,7 @@ impl std::fmt::Debug for LogWriter {
 }
 
 impl LogWriter {
-    /// Creates the file (an existing one is kept as `<name>.bak`, see
+    /// Creates the file (an existing one is kept as a numbered `<name>.bak`, see
     /// [`WriterOptions::backup_existing`]) and starts the writer thread.
     ///
     /// # Errors
@@ -244,7 +245,9 @@ impl LogWriter {
     /// backups are off.
     pub fn create(path: impl AsRef<Path>, options: &WriterOptions) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
-        if path.exists() {
+        // Not a folder or device; a symlink is written through, mode and hard links kept.
+        let target = crate::fsio::check_output(&path, &[])?;
+        if target.existing.is_some() {
             if !options.backup_existing {
                 return Err(Error::LogFormat {
                     path,
@@ -252,11 +255,9 @@ impl LogWriter {
                     message: "file exists; remove it or choose another name".into(),
                 });
             }
-            let mut backup = path.clone().into_os_string();
-            backup.push(".bak");
-            std::fs::rename(&path, &backup).map_err(|source| Error::Io { path: path.clone(), source })?;
+            crate::fsio::backup_numbered(&target.resolved)?;
         }
-        let file = File::create(&path).map_err(|source| Error::Io { path: path.clone(), source })?;
+        let file = File::create(&target.resolved).map_err(|source| Error::Io { path: path.clone(), source })?;
         let (compression, level) = match options.compression {
             Compression::None => (None, 0),
             Compression::Zstd(level) => (Some(mcap::Compression::Zstd), level.max(1) as u32),

@@ -347,6 +347,10 @@ model_arrays! {
     actuator_biastype: i32 = nu;
 }
 
+/// Timesteps a model may have, seconds: below, a run never ends; above, nothing is simulated
+/// faithfully (and a 10 s step "simulates" seconds in zero steps).
+pub const TIMESTEP_RANGE_SECS: (f64, f64) = (1e-6, 0.1);
+
 impl Model {
     /// Loads an MJCF or URDF file. A URDF (root `<robot>`) goes through twin's converter
     /// ([`crate::convert`]) with default options: free-floating base placed on a floor, one
@@ -358,7 +362,7 @@ impl Model {
     pub fn from_file(path: impl AsRef<Path>) -> Result<Model> {
         init()?;
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let text = crate::fsio::read_to_string(path)?;
         if crate::urdf::is_urdf(&text) {
             let converted = crate::convert::convert_urdf_str(path, &text, &crate::convert::ConvertOptions::default())?;
             return Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
@@ -378,6 +382,8 @@ impl Model {
     pub fn from_mujoco_file(path: impl AsRef<Path>) -> Result<Model> {
         init()?;
         let path = path.as_ref();
+        // MuJoCo opens the file itself: a FIFO would block it forever.
+        crate::fsio::check_input(path, crate::fsio::InputKind::File)?;
         let c_path = CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
             path: Some(path.to_path_buf()),
             message: "the path contains a NUL byte".into(),
@@ -456,13 +462,47 @@ impl Model {
             return Err(Error::Load { path, message });
         }
         match NonNull::new(out) {
-            Some(ptr) => Ok(Model { ptr }),
+            Some(ptr) => {
+                let model = Model { ptr };
+                model.check_numbers(path.as_deref())?;
+                Ok(model)
+            }
             None => {
                 let message = buf_to_string(err);
                 let message = if message.is_empty() { "unknown error".to_string() } else { message };
                 Err(Error::Load { path, message })
             }
         }
+    }
+
+    /// Refuses numbers MuJoCo compiles but that make every later answer wrong or a run endless:
+    /// a timestep outside [`TIMESTEP_RANGE_SECS`] or not finite, a mass or inertia that is not
+    /// finite.
+    fn check_numbers(&self, path: Option<&Path>) -> Result<()> {
+        let what = || path.map_or_else(|| "the model".to_string(), |p| p.display().to_string());
+        let dt = self.timestep_secs();
+        let (lo, hi) = TIMESTEP_RANGE_SECS;
+        if !(dt.is_finite() && (lo..=hi).contains(&dt)) {
+            return Err(Error::OutOfRange {
+                what: format!("{}: <option timestep>", what()),
+                message: format!(
+                    "timestep {dt} s is outside {lo} … {hi} s; MuJoCo models use about 0.001 … 0.01 s \
+                     (default 0.002)"
+                ),
+            });
+        }
+        for (b, (m, inertia)) in self.body_mass().iter().zip(self.body_inertia()).enumerate() {
+            if !m.is_finite() || *m < 0.0 || !inertia.iter().all(|i| i.is_finite()) {
+                let name = self.name(ObjType::Body, b);
+                return Err(Error::OutOfRange {
+                    what: format!("{}: body \"{name}\"", what()),
+                    message: format!(
+                        "mass {m} kg, inertia {inertia:?} kg·m²: masses and inertias must be finite numbers ≥ 0"
+                    ),
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Copies this model (`mj_copyModel`).

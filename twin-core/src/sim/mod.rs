@@ -75,7 +75,7 @@ pub struct Robot {
 /// As [`Model::from_file`] / [`crate::convert::convert_urdf`].
 pub fn load_robot(path: impl AsRef<Path>) -> Result<Robot> {
     let path = path.as_ref();
-    let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+    let text = crate::fsio::read_to_string(path)?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot").to_string();
     if crate::urdf::is_urdf(&text) {
         let converted = crate::convert::convert_urdf_str(path, &text, &crate::convert::ConvertOptions::default())?;

@@ -285,6 +285,29 @@ impl Recording {
             imu_due: Vec::new(),
         };
 
+        if let (Some(path), Some(wanted)) = (&options.mcap, &options.topics) {
+            // A topic twin never publishes is a typo: refuse it before creating the file.
+            let mut known: Vec<String> = vec!["/joint_states".into(), "/tf".into(), "/tf_static".into()];
+            known.extend(robot.imus.iter().map(|i| i.topic.clone()));
+            if base.is_some() {
+                known.push("/odom".into());
+            }
+            known.push(format!("/{}/joint_commands", robot.name));
+            known.push("/contacts/*".into());
+            for t in wanted {
+                if !known.contains(t) && !t.starts_with("/contacts/") {
+                    return Err(Error::LogTopic {
+                        path: path.clone(),
+                        topic: t.clone(),
+                        message: format!(
+                            "--topics: twin sim publishes no topic {}; its topics are {} (and /contacts/<body>)",
+                            crate::fsio::excerpt(t, crate::fsio::EXCERPT_CHARS),
+                            known.join(", ")
+                        ),
+                    });
+                }
+            }
+        }
         if let Some(path) = &options.mcap {
             let writer = LogWriter::create(path, &options.writer)?;
             let mut out = McapOut {

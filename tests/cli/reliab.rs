@@ -1,0 +1,292 @@
+//! Regression tests of issue 15 (a hostile user's bad inputs): each example ends in a clear
+//! error or a correct result, within a bounded time, and leaves the user's files intact.
+
+use super::common::{output_of, repo_root, twin, write};
+use std::os::unix::fs::{MetadataExt, PermissionsExt};
+use std::path::{Path, PathBuf};
+use std::process::Stdio;
+use std::time::{Duration, Instant};
+
+/// Runs `twin args` in `dir`, killing it after `limit`: (status ok, stdout, stderr). Fails the
+/// test when the command does not end in time (a hang).
+fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) {
+    let mut child = twin()
+        .current_dir(dir)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("twin starts");
+    let started = Instant::now();
+    loop {
+        if child.try_wait().expect("wait").is_some() {
+            return output_of(child.wait_with_output().expect("output"));
+        }
+        if started.elapsed() > limit {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("twin {args:?} did not finish within {limit:?} (hang)");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+const QUICK: Duration = Duration::from_secs(60);
+
+fn humanoid() -> PathBuf {
+    repo_root().join("models/humanoid.urdf")
+}
+
+fn mkfifo(path: &Path) {
+    assert!(std::process::Command::new("mkfifo").arg(path).status().unwrap().success());
+}
+
+fn mjcf(timestep: &str, mass: &str) -> String {
+    format!(
+        r#"<mujoco model="box"><option timestep="{timestep}"/><worldbody>
+<geom type="plane" size="5 5 0.1"/>
+<body name="box" pos="0 0 0.5"><freejoint/><geom type="box" size="0.1 0.1 0.1" mass="{mass}"/></body>
+</worldbody></mujoco>"#
+    )
+}
+
+#[test]
+fn fifos_as_inputs_are_refused_without_blocking() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for name in ["m.urdf", "m.xml", "spec.toml", "traj.csv", "log.mcap", "log.csv"] {
+        mkfifo(&d.join(name));
+    }
+    let h = humanoid();
+    let h = h.to_str().unwrap();
+    let cases: Vec<Vec<&str>> = vec![
+        vec!["info", "m.urdf"],
+        vec!["check", "m.xml"],
+        vec!["convert", "m.urdf", "-o", "out.xml"],
+        vec!["randomize", h, "--config", "spec.toml", "--episodes", "1"],
+        vec!["sim", h, "--controller", "replay", "--trajectory", "traj.csv", "--duration", "0.01"],
+        vec!["log", "info", "log.mcap"],
+        vec!["sysid", "--log", "log.csv", "--update", "m.urdf"],
+    ];
+    for args in cases {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains("FIFO"), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn bad_timesteps_and_masses_are_refused_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    for (ts, mass) in [("0", "1"), ("-0.002", "1"), ("10", "1"), ("nan", "1"), ("0.002", "nan")] {
+        let model = write(d, "m.xml", &mjcf(ts, mass));
+        let m = model.to_str().unwrap();
+        for args in [
+            vec!["info", m],
+            vec!["check", m],
+            vec!["sim", m, "--duration", "0.1"],
+            vec!["randomize", m, "--episodes", "1", "--duration", "0.1"],
+        ] {
+            let (ok, out, err) = run_in(d, &args, QUICK);
+            assert!(!ok, "timestep {ts}, mass {mass}: {args:?} succeeded: {out}");
+            let expect = if mass == "nan" { "mass" } else { "timestep" };
+            assert!(err.contains(expect), "{args:?}: {err}");
+            if expect == "timestep" {
+                assert!(err.contains("1e-6") || err.contains("0.000001"), "the range is in the message: {err}");
+            }
+        }
+    }
+    // The valid model still works.
+    let model = write(d, "ok.xml", &mjcf("0.002", "1"));
+    let (ok, out, err) = run_in(d, &["info", model.to_str().unwrap()], QUICK);
+    assert!(ok, "{err}");
+    assert!(out.contains("1.000") || out.contains("mass"), "{out}");
+}
+
+#[test]
+fn absurd_numeric_options_are_refused_with_the_range() {
+    let d = tempfile::tempdir().unwrap();
+    let log = repo_root().join("data/humanoid_joint_states.mcap");
+    let log = log.to_str().unwrap();
+    let cases: Vec<(Vec<&str>, &str)> = vec![
+        (vec!["sim", "--duration", "1e300"], "--duration"),
+        (vec!["sim", "--duration", "NaN"], "--duration"),
+        (vec!["sim", "--rate", "inf"], "--rate"),
+        (vec!["check", "--hold-secs", "inf"], "--hold-secs"),
+        (vec!["check", "--hold-secs", "0"], "--hold-secs"),
+        (vec!["check", "--hold-secs=-1"], "--hold-secs"),
+        (vec!["check", "--hold-secs", "NaN"], "--hold-secs"),
+        (vec!["view", log, "-o", "x.rrd", "--fps", "1e6"], "--fps"),
+        (vec!["randomize", "--episodes", "0"], "--episodes"),
+        (vec!["randomize", "--fall-tilt", "NaN", "--episodes", "1"], "--fall-tilt"),
+        (vec!["randomize", "--duration", "inf", "--episodes", "1"], "--duration"),
+    ];
+    for (args, option) in cases {
+        let (ok, _, err) = run_in(d.path(), &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains(option), "{args:?}: {err}");
+        assert!(err.contains(" to "), "the range is in the message: {err}");
+    }
+}
+
+#[test]
+fn convert_never_damages_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let urdf = d.join("r.urdf");
+    std::fs::copy(humanoid(), &urdf).unwrap();
+    let original = std::fs::read(&urdf).unwrap();
+    // The input itself, directly or through a symlink.
+    std::os::unix::fs::symlink("r.urdf", d.join("alias.xml")).unwrap();
+    for out in ["r.urdf", "alias.xml"] {
+        let (ok, _, err) = run_in(d, &["convert", "r.urdf", "-o", out], QUICK);
+        assert!(!ok && err.contains("is the input"), "{out}: {err}");
+    }
+    assert_eq!(std::fs::read(&urdf).unwrap(), original);
+    // A folder, a device, a FIFO.
+    std::fs::create_dir(d.join("somedir")).unwrap();
+    mkfifo(&d.join("pipe.xml"));
+    for out in ["somedir", "/dev/null", "pipe.xml"] {
+        let (ok, _, err) = run_in(d, &["convert", "r.urdf", "-o", out], QUICK);
+        assert!(!ok && err.contains("twin writes only regular files"), "{out}: {err}");
+    }
+    assert!(d.join("somedir").is_dir());
+    assert!(std::fs::metadata("/dev/null").unwrap().file_type().is_char_device_like());
+    // A symlink to a real file: the target is rewritten, the link stays, the mode is kept.
+    std::fs::write(d.join("target.xml"), "old").unwrap();
+    std::fs::set_permissions(d.join("target.xml"), std::fs::Permissions::from_mode(0o664)).unwrap();
+    std::os::unix::fs::symlink("target.xml", d.join("link.xml")).unwrap();
+    let (ok, _, err) = run_in(d, &["convert", "r.urdf", "-o", "link.xml"], QUICK);
+    assert!(ok, "{err}");
+    assert!(std::fs::symlink_metadata(d.join("link.xml")).unwrap().file_type().is_symlink());
+    assert!(std::fs::read_to_string(d.join("target.xml")).unwrap().contains("<mujoco"));
+    assert_eq!(std::fs::metadata(d.join("target.xml")).unwrap().mode() & 0o777, 0o664);
+    assert_eq!(std::fs::read_to_string(d.join("target.xml.bak")).unwrap(), "old");
+    // A second conversion keeps the first backup.
+    let (ok, _, err) = run_in(d, &["convert", "r.urdf", "-o", "link.xml"], QUICK);
+    assert!(ok, "{err}");
+    assert_eq!(std::fs::read_to_string(d.join("target.xml.bak")).unwrap(), "old");
+    assert!(std::fs::read_to_string(d.join("target.xml.bak.1")).unwrap().contains("<mujoco"));
+}
+
+trait CharDevice {
+    fn is_char_device_like(&self) -> bool;
+}
+impl CharDevice for std::fs::FileType {
+    fn is_char_device_like(&self) -> bool {
+        std::os::unix::fs::FileTypeExt::is_char_device(self)
+    }
+}
+
+#[test]
+fn sim_and_view_refuse_folders_devices_and_inputs_as_outputs() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::create_dir(d.join("SOMEDIR")).unwrap();
+    let h = humanoid();
+    let h = h.to_str().unwrap();
+    for args in [
+        vec!["sim", h, "--duration", "0.01", "--record", "SOMEDIR"],
+        vec!["sim", h, "--duration", "0.01", "--rerun", "SOMEDIR"],
+        vec!["sim", h, "--duration", "0.01", "--record", "/dev/null"],
+        vec!["sim", h, "--duration", "0.01", "--record", h],
+    ] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains("twin writes only regular files") || err.contains("is the input"), "{args:?}: {err}");
+    }
+    assert!(d.join("SOMEDIR").is_dir());
+    assert!(!d.join("SOMEDIR.bak").exists());
+    let log = repo_root().join("data/humanoid_joint_states.mcap");
+    let (ok, _, err) = run_in(d, &["view", log.to_str().unwrap(), "-o", "SOMEDIR"], QUICK);
+    assert!(!ok && err.contains("twin writes only regular files"), "{err}");
+    let (ok, _, err) = run_in(d, &["view", log.to_str().unwrap(), "-o", log.to_str().unwrap()], QUICK);
+    assert!(!ok && err.contains("is the input"), "{err}");
+}
+
+#[test]
+fn sim_refuses_unknown_topics() {
+    let dir = tempfile::tempdir().unwrap();
+    let (ok, _, err) = run_in(
+        dir.path(),
+        &["sim", humanoid().to_str().unwrap(), "--duration", "0.01", "--record", "r.mcap", "--topics", "/nope"],
+        QUICK,
+    );
+    assert!(!ok, "{err}");
+    assert!(err.contains("/nope") && err.contains("/joint_states"), "{err}");
+    assert!(!dir.path().join("r.mcap").exists(), "no file is created");
+}
+
+#[test]
+fn a_urdf_with_a_dtd_is_refused_the_same_way_everywhere() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = std::fs::read_to_string(humanoid()).unwrap();
+    let body = text.trim_start_matches(|c| c != '<').replacen("<?xml version=\"1.0\"?>", "", 1);
+    write(d, "dtd.urdf", &format!("<?xml version=\"1.0\"?>\n<!DOCTYPE robot [ <!ENTITY m \"1.0\"> ]>\n{body}"));
+    for args in [
+        vec!["info", "dtd.urdf"],
+        vec!["check", "dtd.urdf"],
+        vec!["convert", "dtd.urdf", "-o", "x.xml"],
+        vec!["sim", "dtd.urdf", "--duration", "0.01"],
+        vec!["randomize", "dtd.urdf", "--episodes", "1", "--duration", "0.01"],
+    ] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains("DOCTYPE"), "{args:?}: {err}");
+    }
+}
+
+#[test]
+fn bad_randomize_specs_are_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let h = humanoid();
+    let h = h.to_str().unwrap();
+    for (spec, expect) in [
+        ("[friction]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = -0.5\nhigh = 1.0\n", "cannot be negative"),
+        ("[latency_steps]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = -2\nhigh = 1\n", "cannot be negative"),
+        (
+            "[push.interval_secs]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0\nhigh = 0\n\
+             [push.speed_mps]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0.1\nhigh = 0.2\n",
+            "push interval",
+        ),
+        ("[mass]\ndist = \"uniform\"\nlow = 0.9\nhigh = 1.1\nselect = []\n", "select = []"),
+    ] {
+        write(d, "spec.toml", spec);
+        let (ok, _, err) = run_in(d, &["randomize", h, "--config", "spec.toml", "--episodes", "1"], QUICK);
+        assert!(!ok, "{spec} accepted");
+        assert!(err.contains(expect), "{spec}: {err}");
+    }
+    // Error messages quote at most 200 characters of the bad input.
+    std::fs::write(d.join("nul.toml"), vec![0u8; 1 << 20]).unwrap();
+    let (ok, _, err) = run_in(d, &["randomize", h, "--config", "nul.toml", "--episodes", "1"], QUICK);
+    assert!(!ok);
+    assert!(err.len() < 2000, "{} bytes of error", err.len());
+}
+
+#[test]
+fn randomize_merge_never_overwrites_a_shard() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let h = humanoid();
+    let h = h.to_str().unwrap();
+    for k in ["1", "2"] {
+        let shard = format!("{k}/2");
+        let out = format!("s{k}");
+        let (ok, _, err) = run_in(
+            d,
+            &["randomize", h, "--episodes", "2", "--duration", "0.05", "--shard", &shard, "--out", &out],
+            QUICK,
+        );
+        assert!(ok, "{err}");
+    }
+    let before = std::fs::read(d.join("s1/episodes.csv")).unwrap();
+    let (ok, _, err) = run_in(d, &["randomize", "merge", "s1", "s2", "--out", "s1"], QUICK);
+    assert!(!ok && err.contains("is the input"), "{err}");
+    assert_eq!(std::fs::read(d.join("s1/episodes.csv")).unwrap(), before);
+    let (ok, _, err) = run_in(d, &["randomize", "merge", "s1", "s2", "--out", "merged"], QUICK);
+    assert!(ok, "{err}");
+}
