@@ -112,7 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--record-worst needs --out DIR to write the trajectories to");
     }
     if args.episodes == 0 {
-        anyhow::bail!("--episodes must be at least 1");
+        anyhow::bail!("--episodes must be a whole number from 1 to {}, got 0", u64::MAX);
     }
     super::check_range("--duration", args.duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     super::check_range("--fall-tilt", args.fall_tilt, 0.0, std::f64::consts::PI, "rad")?;

@@ -347,6 +347,64 @@ model_arrays! {
     actuator_biastype: i32 = nu;
 }
 
+/// Attributes that hold names or file paths, never numbers.
+const NAME_ATTRIBUTES: [&str; 24] = [
+    "name",
+    "class",
+    "childclass",
+    "joint",
+    "joint1",
+    "joint2",
+    "body",
+    "body1",
+    "body2",
+    "site",
+    "geom",
+    "geom1",
+    "geom2",
+    "tendon",
+    "actuator",
+    "objname",
+    "target",
+    "mesh",
+    "material",
+    "texture",
+    "hfield",
+    "file",
+    "model",
+    "prefix",
+];
+
+/// MuJoCo's parser takes `nan` and `inf` as numbers and then quietly replaces some (a `mass="nan"`
+/// becomes the density-based mass): refuse them with the element and line.
+fn check_finite_attributes(path: Option<&Path>, text: &str) -> Result<()> {
+    // A document roxmltree cannot read is left to MuJoCo, whose message names the problem.
+    let Ok(doc) = roxmltree::Document::parse(text) else { return Ok(()) };
+    for node in doc.descendants().filter(|n| n.is_element()) {
+        for attr in node.attributes() {
+            if NAME_ATTRIBUTES.contains(&attr.name()) {
+                continue;
+            }
+            let bad = attr.value().split_whitespace().find(|t| {
+                let t = t.trim_start_matches(['+', '-']).to_ascii_lowercase();
+                t == "nan" || t == "inf" || t == "infinity"
+            });
+            if let Some(token) = bad {
+                let line = doc.text_pos_at(node.range().start).row;
+                let file = path.map_or_else(|| "the model".to_string(), |p| p.display().to_string());
+                return Err(Error::OutOfRange {
+                    what: format!("{file}:{line}: <{} {}>", node.tag_name().name(), attr.name()),
+                    message: format!(
+                        "`{}` is not a finite number; give a finite value",
+                        crate::fsio::excerpt(token, crate::fsio::EXCERPT_CHARS)
+                    ),
+                });
+            }
+        }
+    }
+    Ok(())
+}
+
 /// Timesteps a model may have, seconds: below, a run never ends; above, nothing is simulated
 /// faithfully (and a 10 s step "simulates" seconds in zero steps).
 pub const TIMESTEP_RANGE_SECS: (f64, f64) = (1e-6, 0.1);
@@ -383,7 +441,8 @@ impl Model {
         init()?;
         let path = path.as_ref();
         // MuJoCo opens the file itself: a FIFO would block it forever.
-        crate::fsio::check_input(path, crate::fsio::InputKind::File)?;
+        let text = crate::fsio::read(path)?;
+        check_finite_attributes(Some(path), &String::from_utf8_lossy(&text))?;
         let c_path = CString::new(path.as_os_str().as_encoded_bytes()).map_err(|_| Error::Load {
             path: Some(path.to_path_buf()),
             message: "the path contains a NUL byte".into(),
@@ -419,6 +478,7 @@ impl Model {
     /// [`Error::Load`] with MuJoCo's message if MuJoCo refuses the document.
     pub fn from_xml_str(xml: &str) -> Result<Model> {
         init()?;
+        check_finite_attributes(None, xml)?;
         let c_xml = CString::new(xml)
             .map_err(|_| Error::Load { path: None, message: "the document contains a NUL byte".into() })?;
         let mut spec = std::ptr::null_mut();
