@@ -5,7 +5,7 @@
 //! The "real robot" is the shipped `models/arm6.urdf` with every mass, inertia, centre of mass,
 //! damping and friction changed by 20–40 % ([`sysid::synth::perturbed_urdf`], seed
 //! [`REAL_ROBOT_SEED`]); the bag is its `/joint_states` (position, velocity, effort with encoder
-//! quantisation and noise) over 10 s at 250 Hz. So `twin sysid --log
+//! quantisation and noise) over 8 s at 1 kHz. So `twin sysid --log
 //! data/arm6_identification.mcap --update models/arm6.urdf` moves the shipped arm's numbers to
 //! the real robot's, which a test checks.
 
@@ -18,7 +18,7 @@ fn main() {
     let real = dir.path().join("arm6_real.urdf");
     sysid::synth::perturbed_urdf(std::path::Path::new("models/arm6.urdf"), &real, REAL_ROBOT_SEED)
         .unwrap_or_else(|e| fail(&e));
-    let opts = sysid::synth::SynthOptions { duration_secs: 10.0, rate_hz: 250.0, seed: 3, ..Default::default() };
+    let opts = sysid::synth::SynthOptions { duration_secs: 8.0, rate_hz: 1000.0, seed: 3, ..Default::default() };
     let log = sysid::synth::simulate(&real, &opts).unwrap_or_else(|e| fail(&e));
     log.write_mcap(&out, "/joint_states").unwrap_or_else(|e| fail(&e));
     eprintln!("wrote {out}");

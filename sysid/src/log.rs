@@ -231,6 +231,13 @@ impl JointLog {
             e.fill(f64::NAN);
             for (k, &(j, kind)) in slots.iter().enumerate() {
                 let x = parse(cells[k + 1], columns[k + 1])?;
+                if x.is_infinite() {
+                    // NaN (an empty cell) means "not measured"; an infinity is a broken value.
+                    return Err(csv_err(
+                        line_no,
+                        format!("column `{}`: `{}` is not finite", ex(columns[k + 1]), ex(cells[k + 1])),
+                    ));
+                }
                 match kind {
                     0 => p[j] = x,
                     1 => v[j] = x,

@@ -386,3 +386,47 @@ fn concurrent_sysid_runs_never_lose_a_result_silently() {
         assert!(!d.join("arm6.urdf.bak.1").exists());
     }
 }
+
+/// The README's `twin sysid` example runs on the shipped bag and recovers the real arm's joint
+/// friction (the bag's robot is `models/arm6.urdf` perturbed with seed 11, see
+/// `sysid/examples/make_id_bag.rs`).
+#[test]
+fn readme_sysid_example_recovers_the_real_arm() {
+    let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
+    let line = readme
+        .lines()
+        .map(str::trim)
+        .find(|l| l.starts_with("cargo run --release -- sysid "))
+        .expect("README has a sysid example");
+    let args: Vec<&str> = line.trim_start_matches("cargo run --release -- ").split_whitespace().collect();
+    assert!(args.contains(&"data/arm6_identification.mcap") && args.contains(&"--dry-run"), "{line}");
+    let bag = std::fs::metadata(repo_root().join("data/arm6_identification.mcap")).unwrap().len();
+    assert!(bag <= 2 << 20, "the shipped bag is {bag} bytes");
+    let before = std::fs::read(repo_root().join("models/arm6.urdf")).unwrap();
+    let (ok, out, err) = run_in(&repo_root(), &args, Duration::from_secs(300));
+    assert!(ok, "{err}");
+    assert_eq!(std::fs::read(repo_root().join("models/arm6.urdf")).unwrap(), before, "--dry-run writes nothing");
+    // Torque error on the log after identification, per joint.
+    let nrmse: Vec<f64> = out
+        .lines()
+        .skip_while(|l| !l.starts_with("torque NRMSE on the identification log"))
+        .skip(2)
+        .take(6)
+        .map(|l| l.split_whitespace().last().unwrap().trim_end_matches('%').parse::<f64>().unwrap())
+        .collect();
+    assert_eq!(nrmse.len(), 6, "{out}");
+    assert!(nrmse.iter().all(|&e| e < 2.0), "NRMSE after {nrmse:?} %");
+    // Friction within 10 % of the real robot's.
+    let dir = tempfile::tempdir().unwrap();
+    let real = dir.path().join("real.urdf");
+    sysid::synth::perturbed_urdf(&repo_root().join("models/arm6.urdf"), &real, 11).unwrap();
+    let real = sysid::RobotModel::from_urdf(&real).unwrap();
+    for joint in &real.joints {
+        for (what, want) in [("viscous", joint.damping), ("coulomb", joint.friction)] {
+            let key = format!("{}.{what}", joint.name);
+            let row = out.lines().find(|l| l.split_whitespace().next() == Some(key.as_str())).expect(&key);
+            let got: f64 = row.split_whitespace().nth(2).unwrap().parse().unwrap();
+            assert!((got / want - 1.0).abs() < 0.10, "{key}: identified {got}, real {want}");
+        }
+    }
+}
