@@ -222,6 +222,11 @@ pub fn run_batch(
                 .collect()
         });
         for r in results {
+            // After an interrupted episode, later finished ones are dropped too: the kept set is
+            // always a prefix of the (shard's) episodes, so it can be reproduced and resumed.
+            if interrupted {
+                continue;
+            }
             let Some(r) = r else {
                 interrupted = true;
                 continue;

@@ -140,7 +140,7 @@ impl Term {
             // A gaussian reaches any value; its mean at least must be in range.
             Dist::Gaussian => self.mean.unwrap_or(0.0),
         };
-        if interval && !(lowest > 0.0) {
+        if interval && (lowest.is_nan() || lowest <= 0.0) {
             return Err(err(format!(
                 "a push interval must be > 0 s (the lowest draw is {lowest}); e.g. low = 1.0, high = 3.0"
             )));

@@ -430,3 +430,27 @@ fn readme_sysid_example_recovers_the_real_arm() {
         }
     }
 }
+
+/// One sample whose header stamp jumps a year ahead (a flipped bit): `twin view` and a replay
+/// refuse the log with the place of the jump instead of posing a year of frames.
+#[test]
+fn time_jumps_in_a_log_are_reported_not_rendered() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let arm = repo_root().join("models/arm6.urdf");
+    let mut log =
+        sysid::synth::simulate(&arm, &sysid::synth::SynthOptions { duration_secs: 0.5, ..Default::default() }).unwrap();
+    let k = log.t_nanos.len() / 2;
+    log.t_nanos[k] += 365 * 86_400 * 1_000_000_000;
+    log.write_mcap(d.join("jump.mcap"), "/joint_states").unwrap();
+    let a = arm.to_str().unwrap();
+    for args in [
+        vec!["view", "jump.mcap", "--model", a, "-o", "jump.rrd"],
+        vec!["sim", a, "--controller", "replay", "--trajectory", "jump.mcap", "--duration", "0.1"],
+    ] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains("clock is broken") && err.contains(&format!("sample {}", k)), "{args:?}: {err}");
+    }
+    assert!(!d.join("jump.rrd").exists() || std::fs::metadata(d.join("jump.rrd")).unwrap().len() < 1 << 20);
+}

@@ -372,6 +372,37 @@ pub struct JointTrajectory {
     pub joints: Vec<TrajectoryJoint>,
 }
 
+/// Refuses a joint's sample times that go backwards or jump forward by more than
+/// `max(1 s, 1000 × the median step)`: a broken clock (e.g. one flipped bit in a header stamp)
+/// would otherwise make a replay or a `twin view` span months of log time.
+fn check_time_jumps(path: &std::path::Path, topic: &str, joint: &str, times_nanos: &[i64]) -> Result<()> {
+    let mut steps: Vec<i64> = times_nanos.windows(2).map(|w| w[1].saturating_sub(w[0])).collect();
+    if steps.is_empty() {
+        return Ok(());
+    }
+    let bad = |k: usize, what: &str| Error::Trajectory {
+        path: path.to_path_buf(),
+        line: None,
+        message: format!(
+            "topic {topic}, joint {joint}: the time {what} from {:.6} s to {:.6} s at sample {} (of {}); the \
+             log's clock is broken there: cut the log before it (or fix its header stamps)",
+            (times_nanos[k] - times_nanos[0]) as f64 * 1e-9,
+            (times_nanos[k + 1] - times_nanos[0]) as f64 * 1e-9,
+            k + 1,
+            times_nanos.len()
+        ),
+    };
+    let original = steps.clone();
+    let mid = steps.len() / 2;
+    let median = *steps.select_nth_unstable(mid).1;
+    let limit = median.saturating_mul(1000).max(1_000_000_000);
+    match original.iter().position(|&s| s < 0 || s > limit) {
+        Some(k) if original[k] < 0 => Err(bad(k, "goes backwards")),
+        Some(k) => Err(bad(k, "jumps")),
+        None => Ok(()),
+    }
+}
+
 impl JointTrajectory {
     /// Duration, seconds (last sample of any joint).
     pub fn duration_secs(&self) -> f64 {
@@ -407,6 +438,9 @@ impl JointTrajectory {
                 message: format!("topic {topic} has no joint samples"),
             }
         })?;
+        for j in &series.joints {
+            check_time_jumps(path, topic, &j.name, &j.time_nanos)?;
+        }
         let joints = series
             .joints
             .into_iter()
@@ -457,7 +491,7 @@ impl JointTrajectory {
                         i + 1,
                         format!(
                             "column {}: `{}` is not a finite number",
-                            crate::fsio::excerpt(&columns[k], crate::fsio::EXCERPT_CHARS),
+                            crate::fsio::excerpt(columns[k], crate::fsio::EXCERPT_CHARS),
                             crate::fsio::excerpt(cell, crate::fsio::EXCERPT_CHARS)
                         ),
                     )
