@@ -450,7 +450,8 @@ fn time_jumps_in_a_log_are_reported_not_rendered() {
     ] {
         let (ok, _, err) = run_in(d, &args, QUICK);
         assert!(!ok, "{args:?} succeeded");
-        assert!(err.contains("clock is broken") && err.contains(&format!("sample {}", k)), "{args:?}: {err}");
+        // Samples are ordered by time, so the year-late one comes last: the jump is named there.
+        assert!(err.contains("clock is broken") && err.contains("31536000."), "{args:?}: {err}");
     }
     assert!(!d.join("jump.rrd").exists() || std::fs::metadata(d.join("jump.rrd")).unwrap().len() < 1 << 20);
 }
