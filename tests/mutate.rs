@@ -3,8 +3,8 @@
 //! ROS 2 bags, randomization specs and CSV logs, fed in-process through every parser and loader
 //! of twin. Each case must end in a typed error or a result — never a panic, never a hang (a
 //! watchdog aborts the process when one case takes longer than `CASE_LIMIT`), never a change to
-//! the input file. The run stops at a fixed time budget and prints the counts of cases and
-//! outcomes per input kind.
+//! the input file. The first `MIN_MUTATIONS` mutations of each input always run; more follow
+//! until a fixed time budget is spent. The counts of cases and outcomes per input are printed.
 //!
 //! `TWIN_MUTATE_SECS` changes the budget (default 20 s; CI uses the default).
 
@@ -13,6 +13,10 @@ use std::path::{Path, PathBuf};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
+
+/// Mutations of each input that always run (the same ones every time), whatever the budget;
+/// more follow until the budget is spent.
+const MIN_MUTATIONS: u64 = 100;
 
 /// The longest one case may take before the harness calls it a hang.
 const CASE_LIMIT: Duration = Duration::from_secs(30);
@@ -422,7 +426,7 @@ fn mutated_inputs_never_panic_hang_or_damage() {
         }
         let kind_start = Instant::now();
         let mut n = 0u64;
-        while kind_start.elapsed() < per_kind {
+        while n < MIN_MUTATIONS || kind_start.elapsed() < per_kind {
             let (bytes, how) = mutate(&kind.valid, n, kind.text_like);
             n += 1;
             std::fs::write(&path, &bytes).unwrap();
@@ -476,8 +480,6 @@ fn mutated_inputs_never_panic_hang_or_damage() {
     // Every kind ran a meaningful number of cases, and some of each ended in an error: the
     // mutations reach the parsers.
     for (name, c) in &report {
-        assert!(c.cases >= 20, "{name}: only {} cases in the budget", c.cases);
         assert!(c.errors > 0, "{name}: no mutation was refused");
     }
-    assert!(total >= 1000, "only {total} cases in {budget:?}");
 }
