@@ -4,12 +4,16 @@
 mod common;
 #[path = "cli/convert.rs"]
 mod convert;
+#[path = "cli/deploy.rs"]
+mod deploy;
 #[path = "cli/info.rs"]
 mod info;
 #[path = "cli/log.rs"]
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
+#[path = "cli/shards.rs"]
+mod shards;
 #[path = "cli/sim.rs"]
 mod sim;
 #[path = "cli/sysid.rs"]
