@@ -246,10 +246,18 @@ fn find_shards(dirs: &[PathBuf]) -> Result<Found<'_>> {
             };
             return Err(Error::Results { path, line: None, message: message.into() });
         };
+        if m.shard.index == 0 || m.shard.index > m.shard.count {
+            return Err(Error::Results {
+                path,
+                line: None,
+                message: format!("shard {} is not a shard K/N with 1 ≤ K ≤ N: the file was edited", m.shard),
+            });
+        }
         let Some((first_dir, f)) = &first else {
             shards = vec![None; m.shard.count as usize];
+            let index = (m.shard.index - 1) as usize;
             first = Some((dir, m.clone()));
-            shards[(m.shard.index - 1) as usize] = Some((dir, m));
+            shards[index] = Some((dir, m));
             continue;
         };
         let differ = |what: String| Error::Results {
@@ -385,7 +393,10 @@ pub fn merge(dirs: &[PathBuf], out_dir: Option<&Path>) -> Result<Merged> {
         .filter(|p| p.state != ShardState::Done)
         .map(|p| {
             let (dir, why) = match &p.dir {
-                Some(d) => (d.clone(), format!("{} of {} episodes finished: cancelled, failed or still running", p.done, p.total)),
+                Some(d) => (
+                    d.clone(),
+                    format!("{} of {} episodes finished: cancelled, failed or still running", p.done, p.total),
+                ),
                 None => (sibling_dir(first_dir, f.shard.index, p.shard.index), "no folder of it was given".into()),
             };
             // A shard's own command line when it left one, else the first shard's adapted.

@@ -173,7 +173,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // already finished in its folder by this binary is not run again.
     if let Some(out) = &args.out {
         let cwd = std::env::current_dir().context("current folder")?;
-        if let Some(manifest) = randomize::ShardManifest::new(&run_info, super::VERSION_LINE, std::env::args().collect(), cwd)
+        if let Some(manifest) =
+            randomize::ShardManifest::new(&run_info, super::VERSION_LINE, std::env::args().collect(), cwd)
             && let randomize::ShardStart::AlreadyDone(done) = randomize::merge::start_shard(out, &manifest)?
         {
             print!("{}", done.summary.to_text(requested));

@@ -23,10 +23,7 @@ fn path_with_twin() -> String {
 fn yaml_documents(file: &Path) -> Vec<Value> {
     let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
     let out = Command::new(&python)
-        .args([
-            "-c",
-            "import json, sys, yaml; print(json.dumps(list(yaml.safe_load_all(open(sys.argv[1])))))",
-        ])
+        .args(["-c", "import json, sys, yaml; print(json.dumps(list(yaml.safe_load_all(open(sys.argv[1])))))"])
         .arg(file)
         .output()
         .unwrap_or_else(|e| panic!("{python} (TWIN_PYTHON) with PyYAML is needed to check the manifests: {e}"));

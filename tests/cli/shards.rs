@@ -104,7 +104,10 @@ fn a_killed_shard_is_refused_with_its_rerun_command_and_rerunning_it_completes_t
     let whole = ok(&[&common[..], &["--threads", "2", "--out", &d("all")]].concat());
     assert_eq!(merged, whole);
     same_files(&p("all"), &p("merged"));
-    assert!(ok(&["randomize", "merge", "--status", &d("s1"), &d("s2")]).contains("total: 120/120 episodes (100.0 %), 2 of 2 shards done"));
+    assert!(
+        ok(&["randomize", "merge", "--status", &d("s1"), &d("s2")])
+            .contains("total: 120/120 episodes (100.0 %), 2 of 2 shards done")
+    );
 }
 
 #[test]
@@ -129,10 +132,11 @@ fn shards_of_another_spec_seed_or_binary_are_refused() {
     ok(&[&common[..], &["--seed", "1", "--shard", "2/2", "--out", &d("s2")]].concat());
     ok(&["randomize", "merge", &d("s1"), &d("s2")]);
     let manifest = p("s2/shard.json");
-    let text = std::fs::read_to_string(&manifest).unwrap();
-    let version = format!("\"twin_version\": \"{}\"", env!("CARGO_PKG_VERSION"));
-    assert!(text.contains(&version), "{text}");
-    std::fs::write(&manifest, text.replace(&version, "\"twin_version\": \"0.0.9 (MuJoCo 3.3.0)\"")).unwrap();
+    let mut json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&manifest).unwrap()).unwrap();
+    let version = json["twin_version"].as_str().unwrap();
+    assert!(version.starts_with(env!("CARGO_PKG_VERSION")) && version.contains("MuJoCo"), "{version}");
+    json["twin_version"] = "0.0.9 (MuJoCo 3.3.0)".into();
+    std::fs::write(&manifest, serde_json::to_string_pretty(&json).unwrap()).unwrap();
     let err = fails(&["randomize", "merge", &d("s1"), &d("s2")]);
     assert!(err.contains("made by twin \"0.0.9 (MuJoCo 3.3.0)\""), "{err}");
 
@@ -167,7 +171,20 @@ fn rerunning_a_finished_shard_changes_nothing() {
     assert_eq!(again, first, "the stored summary is printed");
     assert_eq!(files(&out), before, "no file rewritten, no backup made");
     // Another batch in the same folder runs (and the merge sees the new batch).
-    let (success, _, stderr) = run(&["randomize", &model, "--episodes", "5", "--duration", "0.2", "--seed", "4", "--shard", "1/2", "--out", &o]);
+    let (success, _, stderr) = run(&[
+        "randomize",
+        &model,
+        "--episodes",
+        "5",
+        "--duration",
+        "0.2",
+        "--seed",
+        "4",
+        "--shard",
+        "1/2",
+        "--out",
+        &o,
+    ]);
     assert!(success && !stderr.contains("already complete"), "{stderr}");
     assert!(std::fs::read_to_string(out.join("shard.json")).unwrap().contains("\"seed\": 4"));
 }
