@@ -226,18 +226,28 @@ struct Found<'a> {
     first: (&'a Path, ShardManifest),
     /// Per shard (index − 1): its folder and manifest.
     shards: Vec<Option<(&'a Path, ShardManifest)>>,
+    /// Folders with no files of a shard yet (with `starting_ok`).
+    starting: Vec<&'a Path>,
 }
 
 /// Reads every folder's manifest and checks they are shards of one batch, made by one binary.
-fn find_shards(dirs: &[PathBuf]) -> Result<Found<'_>> {
+/// With `starting_ok`, a folder holding none of a shard's files yet (a shard between creating
+/// its folder and writing `shard.json`) is listed in [`Found::starting`] instead of refused.
+fn find_shards(dirs: &[PathBuf], starting_ok: bool) -> Result<Found<'_>> {
     if dirs.is_empty() {
         return Err(Error::Options("merge needs at least one shard output folder".into()));
     }
     let mut first: Option<(&Path, ShardManifest)> = None;
     let mut shards: Vec<Option<(&Path, ShardManifest)>> = Vec::new();
+    let mut starting = Vec::new();
     for dir in dirs {
         let path = dir.join(MANIFEST);
         let Some(m) = read_manifest(dir)? else {
+            let shard_files = [MANIFEST, PARTIAL_CSV, "episodes.csv", "summary.json"];
+            if starting_ok && dir.is_dir() && !shard_files.iter().any(|f| dir.join(f).exists()) {
+                starting.push(dir.as_path());
+                continue;
+            }
             let message = if dir.join("summary.json").is_file() {
                 "no shard.json next to summary.json: not the output of `twin randomize --shard` \
                  (or of a twin before 0.1 recorded shards): rerun the shard"
@@ -298,7 +308,12 @@ fn find_shards(dirs: &[PathBuf]) -> Result<Found<'_>> {
         }
         *slot = Some((dir, m));
     }
-    Ok(Found { first: first.expect("at least one folder"), shards })
+    let first = first.ok_or_else(|| Error::Results {
+        path: dirs[0].join(MANIFEST),
+        line: None,
+        message: "no shard has written its shard.json yet: ask again in a moment".into(),
+    })?;
+    Ok(Found { first, shards, starting })
 }
 
 /// Rows finished so far in `dir` (complete lines of the partial CSV, header excluded).
@@ -311,13 +326,27 @@ fn partial_rows(dir: &Path) -> Result<u64> {
     }
 }
 
-/// Progress of every shard of the batch in `dirs` (one entry per shard 1…N, missing ones
-/// included), for `twin randomize merge --status` while the shards run.
+/// Progress of a batch's shards, from [`status`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct Status {
+    /// One entry per shard 1…N, missing ones included.
+    pub shards: Vec<ShardProgress>,
+    /// Folders given that hold nothing yet (a shard starting up).
+    pub starting: Vec<PathBuf>,
+}
+
+/// Progress of every shard of the batch in `dirs`, for `twin randomize merge --status` while
+/// the shards run.
 ///
 /// # Errors
 /// As [`merge`] for folders that are not shards of one batch.
-pub fn status(dirs: &[PathBuf]) -> Result<Vec<ShardProgress>> {
-    let found = find_shards(dirs)?;
+pub fn status(dirs: &[PathBuf]) -> Result<Status> {
+    let found = find_shards(dirs, true)?;
+    Ok(Status { shards: progress(&found)?, starting: found.starting.iter().map(|d| d.to_path_buf()).collect() })
+}
+
+/// Progress of each shard of `found`.
+fn progress(found: &Found<'_>) -> Result<Vec<ShardProgress>> {
     let f = &found.first.1;
     let mut out = Vec::new();
     for (i, slot) in found.shards.iter().enumerate() {
@@ -344,9 +373,10 @@ pub fn status(dirs: &[PathBuf]) -> Result<Vec<ShardProgress>> {
 }
 
 /// [`status`] as text: a line per shard (`shard K/N  DONE/TOTAL  STATE  FOLDER`), then the total.
-pub fn status_text(progress: &[ShardProgress]) -> String {
+pub fn status_text(status: &Status) -> String {
     use std::fmt::Write as _;
     let mut s = String::new();
+    let progress = &status.shards;
     for p in progress {
         let dir = p.dir.as_ref().map_or_else(|| "-".into(), |d| d.display().to_string());
         let counts = format!("{}/{}", p.done, p.total);
@@ -354,6 +384,9 @@ pub fn status_text(progress: &[ShardProgress]) -> String {
     }
     let (done, total): (u64, u64) = progress.iter().fold((0, 0), |(d, t), p| (d + p.done, t + p.total));
     let finished = progress.iter().filter(|p| p.state == ShardState::Done).count();
+    for dir in &status.starting {
+        let _ = writeln!(s, "(starting: nothing written yet in {})", dir.display());
+    }
     let _ = writeln!(
         s,
         "total: {done}/{total} episodes ({:.1} %), {finished} of {} shards done",
@@ -385,9 +418,9 @@ pub struct Merged {
 /// seed, twin version, …), a shard is repeated, or a file is malformed; when shards are missing
 /// or unfinished, one error naming each with the command that reruns only it.
 pub fn merge(dirs: &[PathBuf], out_dir: Option<&Path>) -> Result<Merged> {
-    let found = find_shards(dirs)?;
+    let found = find_shards(dirs, false)?;
     let (first_dir, f) = &found.first;
-    let progress = status(dirs)?;
+    let progress = progress(&found)?;
     let unfinished: Vec<String> = progress
         .iter()
         .filter(|p| p.state != ShardState::Done)
