@@ -139,7 +139,7 @@ pub enum ShardStart {
     Run,
     /// The folder already holds this shard, finished by the same binary with the same batch:
     /// its summary. Running it again would write the same bytes.
-    AlreadyDone(SummaryFile),
+    AlreadyDone(Box<SummaryFile>),
 }
 
 /// Prepares `dir` for the shard of `manifest`: if it already holds that shard, complete, from
@@ -156,7 +156,7 @@ pub fn start_shard(dir: &Path, manifest: &ShardManifest) -> Result<ShardStart> {
     {
         let done = read_summary(dir)?;
         if done.run == manifest.run && done.summary.episodes == manifest.shard_episodes {
-            return Ok(ShardStart::AlreadyDone(done));
+            return Ok(ShardStart::AlreadyDone(Box::new(done)));
         }
     }
     std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
