@@ -4,6 +4,8 @@
 mod common;
 #[path = "cli/convert.rs"]
 mod convert;
+#[path = "cli/deploy.rs"]
+mod deploy;
 #[path = "cli/info.rs"]
 mod info;
 #[path = "cli/log.rs"]
@@ -12,6 +14,8 @@ mod log;
 mod randomize;
 #[path = "cli/reliab.rs"]
 mod reliab;
+#[path = "cli/shards.rs"]
+mod shards;
 #[path = "cli/sim.rs"]
 mod sim;
 #[path = "cli/sysid.rs"]

@@ -11,7 +11,9 @@
 //! - [`episode`]: one rollout with noise, latency, pushes, fall and divergence detection, and
 //!   its metrics.
 //! - [`run`]: the batch on a rayon pool, per-episode random streams from (seed, index), shards,
-//!   outputs (`episodes.csv`, `summary.json`, `worst/`), merging shards.
+//!   outputs (`episodes.csv`, `summary.json`, `worst/`).
+//! - [`merge`]: what each shard records (`shard.json`: twin version, spec hash, command), shard
+//!   progress, and merging shards into the single-machine outputs.
 //! - [`summary`]: success rate with a Wilson interval, metric quantiles, and the parameters
 //!   that separate failures from successes.
 //!
@@ -40,6 +42,7 @@
 pub mod draw;
 pub mod episode;
 pub mod error;
+pub mod merge;
 pub mod run;
 pub mod spec;
 pub mod summary;
@@ -47,7 +50,8 @@ pub mod summary;
 pub use draw::Layout;
 pub use episode::{Batch, EpisodeOptions, EpisodeResult, Worker};
 pub use error::{Error, Result};
-pub use run::{Merged, Report, RunInfo, RunOptions, Shard, merge, run_batch};
+pub use merge::{Merged, ShardManifest, ShardStart, merge};
+pub use run::{Report, RunInfo, RunOptions, Shard, run_batch};
 pub use spec::{Mode, Spec, Term};
 pub use summary::Summary;
 

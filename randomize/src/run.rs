@@ -1,8 +1,8 @@
-//! Running a batch on all cores, writing its outputs, and merging shards.
+//! Running a batch on all cores and writing its outputs (merging shards: [`crate::merge`]).
 
 use crate::episode::{Batch, EpisodeResult, Trajectory, Worker};
 use crate::error::{Error, Result};
-use crate::summary::{Summary, SummaryBuilder, read_csv, write_csv};
+use crate::summary::{Summary, SummaryBuilder};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -147,7 +147,7 @@ fn worse(a: &EpisodeResult, b: &EpisodeResult) -> std::cmp::Ordering {
 
 /// Writes what `f` produces to `path` with twin's one atomic writer ([`twin_core::fsio`]),
 /// keeping an existing file as a numbered backup (`<name>.bak`, `.bak.1`, …).
-fn write_atomic(path: &Path, f: impl FnOnce(&mut Vec<u8>) -> Result<()>) -> Result<()> {
+pub(crate) fn write_atomic(path: &Path, f: impl FnOnce(&mut Vec<u8>) -> Result<()>) -> Result<()> {
     let mut bytes = Vec::new();
     f(&mut bytes)?;
     twin_core::fsio::write_atomic(path, &bytes, twin_core::fsio::Backup::Numbered)?;
@@ -184,7 +184,7 @@ pub fn run_batch(
     let tmp_csv;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
-        tmp_csv = dir.join(".episodes.csv.tmp");
+        tmp_csv = dir.join(crate::merge::PARTIAL_CSV);
         let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
         w.write_record(crate::summary::csv_header(params)).map_err(|e| csv_io(&tmp_csv, e))?;
@@ -244,6 +244,10 @@ pub fn run_batch(
                     worst.truncate(options.record_worst);
                 }
             }
+        }
+        // Finished rows reach the disk chunk by chunk: `twin randomize merge --status` counts them.
+        if let Some(w) = csv_writer.as_mut() {
+            w.flush().map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         }
     }
     let summary = builder.finish();
@@ -359,147 +363,4 @@ pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path, model_pa
         }
     }
     Ok(written)
-}
-
-/// Reads one output folder's `summary.json`.
-///
-/// # Errors
-/// [`Error::Io`], [`Error::Results`] for a file that is not a `twin randomize` summary.
-pub fn read_summary(dir: &Path) -> Result<SummaryFile> {
-    let path = dir.join("summary.json");
-    let text = std::fs::read_to_string(&path).map_err(|source| Error::Io { path: path.clone(), source })?;
-    serde_json::from_str(&text).map_err(|e| Error::Results {
-        path: path.clone(),
-        line: Some(e.line() as u64),
-        message: format!("not a `twin randomize` summary: {e}"),
-    })
-}
-
-/// The result of [`merge`].
-#[derive(Debug, Clone)]
-pub struct Merged {
-    /// The batch (shard `None`).
-    pub run: RunInfo,
-    /// Parameter columns.
-    pub params: Vec<String>,
-    /// All rows, in episode order.
-    pub rows: Vec<EpisodeResult>,
-    /// Their summary: what one machine running the whole batch prints.
-    pub summary: Summary,
-}
-
-/// Merges the outputs of shards 1/N … N/N of one batch. With `out_dir`, writes the merged
-/// `episodes.csv`, `summary.json` and `spec.toml` there.
-///
-/// # Errors
-/// [`Error::Results`] when folders belong to different batches, a shard is missing or
-/// repeated, or a file is malformed.
-pub fn merge(dirs: &[PathBuf], out_dir: Option<&Path>) -> Result<Merged> {
-    let first = dirs.first().ok_or_else(|| Error::Options("merge needs at least one output folder".into()))?;
-    let mut run: Option<RunInfo> = None;
-    let mut params: Option<Vec<String>> = None;
-    let mut seen: Vec<Option<&PathBuf>> = Vec::new();
-    let mut rows = Vec::new();
-    for dir in dirs {
-        let file = read_summary(dir)?;
-        let shard = file.run.shard.ok_or_else(|| Error::Results {
-            path: dir.join("summary.json"),
-            line: None,
-            message: "this output is not a shard (no --shard): nothing to merge".into(),
-        })?;
-        let mut info = file.run.clone();
-        info.shard = None;
-        match &run {
-            None => {
-                seen = vec![None; shard.count as usize];
-                run = Some(info);
-            }
-            Some(r) if *r != info => {
-                return Err(Error::Results {
-                    path: dir.join("summary.json"),
-                    line: None,
-                    message: format!(
-                        "belongs to a different batch than {} (model, seed, episodes, duration, \
-                         controller and spec must all match)",
-                        first.display()
-                    ),
-                });
-            }
-            Some(_) => {}
-        }
-        if seen.len() as u64 != shard.count {
-            return Err(Error::Results {
-                path: dir.join("summary.json"),
-                line: None,
-                message: format!("shard {shard} does not split the batch into {} shards", seen.len()),
-            });
-        }
-        if let Some(other) = seen[(shard.index - 1) as usize] {
-            return Err(Error::Results {
-                path: dir.join("summary.json"),
-                line: None,
-                message: format!("shard {shard} is also in {}", other.display()),
-            });
-        }
-        seen[(shard.index - 1) as usize] = Some(dir);
-        let csv_path = dir.join("episodes.csv");
-        let (p, r) = read_csv(&csv_path)?;
-        if let Some(r) = r.iter().find(|r| !shard.contains(r.index)) {
-            return Err(Error::Results {
-                path: csv_path,
-                line: None,
-                message: format!("episode {} does not belong to shard {shard}", r.index),
-            });
-        }
-        let expected = (0..file.run.episodes).filter(|&i| shard.contains(i)).count();
-        if r.len() != expected {
-            return Err(Error::Results {
-                path: csv_path,
-                line: None,
-                message: format!(
-                    "shard {shard} is incomplete ({} of {expected} episodes, e.g. interrupted): \
-                     run it again before merging",
-                    r.len()
-                ),
-            });
-        }
-        match &params {
-            None => params = Some(p),
-            Some(q) if *q != p => {
-                return Err(Error::Results {
-                    path: csv_path,
-                    line: Some(1),
-                    message: "parameter columns differ from the other shards".into(),
-                });
-            }
-            Some(_) => {}
-        }
-        rows.extend(r);
-    }
-    if let Some(missing) = seen.iter().position(Option::is_none) {
-        return Err(Error::Results {
-            path: first.join("summary.json"),
-            line: None,
-            message: format!("shard {}/{} is missing: pass every shard's output folder", missing + 1, seen.len()),
-        });
-    }
-    let run = run.expect("at least one folder read");
-    let params = params.unwrap_or_default();
-    rows.sort_by_key(|r| r.index);
-    let mut builder = SummaryBuilder::new(&params);
-    for r in &rows {
-        builder.push(r);
-    }
-    let summary = builder.finish();
-    if let Some(dir) = out_dir {
-        std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
-        let csv_path = dir.join("episodes.csv");
-        write_atomic(&csv_path, |f| write_csv(&csv_path, std::io::BufWriter::new(f), &params, &rows))?;
-        write_summary(dir, &run, &summary)?;
-        let spec_path = dir.join("spec.toml");
-        write_atomic(&spec_path, |f| {
-            f.write_all(run.spec.as_bytes()).map_err(|source| Error::Io { path: spec_path.clone(), source })
-        })?;
-    }
-    Ok(Merged { run, params, rows, summary })
 }

@@ -74,18 +74,26 @@ pub struct Args {
 pub enum MergeCommand {
     /// Combine the outputs of shards 1/N … N/N into the summary one machine would print.
     Merge {
-        /// Output folders of the shards (each with episodes.csv and summary.json).
+        /// Output folders of the shards (each with shard.json, and episodes.csv and summary.json
+        /// once finished).
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
         /// Write the merged episodes.csv and summary.json here.
-        #[arg(long)]
+        #[arg(long, conflicts_with = "status")]
         out: Option<PathBuf>,
+        /// Only report each shard's finished/total episodes (works while they run); merge nothing.
+        #[arg(long)]
+        status: bool,
     },
 }
 
 /// Runs `twin randomize`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if let Some(MergeCommand::Merge { dirs, out }) = args.merge {
+    if let Some(MergeCommand::Merge { dirs, out, status }) = args.merge {
+        if status {
+            print!("{}", randomize::merge::status_text(&randomize::merge::status(&dirs)?));
+            return Ok(());
+        }
         if let Some(out) = &out {
             // Never write the merge into one of the shards it reads.
             let shards: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
@@ -176,6 +184,23 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         record_worst: args.record_worst,
     };
     let requested = (0..args.episodes).filter(|&i| shard.is_none_or(|s| s.contains(i))).count() as u64;
+    // A shard records what it runs before its first episode (for merge and --status); a shard
+    // already finished in its folder by this binary is not run again.
+    if let Some(out) = &args.out {
+        let cwd = std::env::current_dir().context("current folder")?;
+        if let Some(manifest) =
+            randomize::ShardManifest::new(&run_info, super::VERSION_LINE, std::env::args().collect(), cwd)
+            && let randomize::ShardStart::AlreadyDone(done) = randomize::merge::start_shard(out, &manifest)?
+        {
+            print!("{}", done.summary.to_text(requested));
+            eprintln!(
+                "shard {} is already complete in {} (same batch, same twin): nothing to do",
+                manifest.shard,
+                out.display()
+            );
+            return Ok(());
+        }
+    }
 
     // Ctrl-C (or SIGTERM) ends the run after the episodes in flight; a second one aborts.
     twin_core::fsio::cooperate();
