@@ -4,6 +4,8 @@
 mod common;
 #[path = "cli/convert.rs"]
 mod convert;
+#[path = "cli/engine.rs"]
+mod engine;
 #[path = "cli/info.rs"]
 mod info;
 #[path = "cli/log.rs"]

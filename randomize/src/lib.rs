@@ -45,7 +45,7 @@ pub mod spec;
 pub mod summary;
 
 pub use draw::Layout;
-pub use episode::{Batch, EpisodeOptions, EpisodeResult, Worker};
+pub use episode::{Batch, CheckFactory, ControllerFactory, EpisodeOptions, EpisodeResult, Worker};
 pub use error::{Error, Result};
 pub use run::{Merged, Report, RunInfo, RunOptions, Shard, merge, run_batch};
 pub use spec::{Mode, Spec, Term};
@@ -59,7 +59,7 @@ pub fn run_info(batch: &Batch, model: &str, spec: &Spec, episodes: u64, shard: O
         episodes,
         duration_secs: batch.options.duration_secs,
         timestep_secs: batch.nominal.timestep_secs(),
-        controller: batch.options.controller.clone(),
+        controller: batch.controller_name().to_string(),
         fall_height_fraction: batch.options.fall_height_fraction,
         fall_tilt_rad: batch.options.fall_tilt_rad,
         feet: batch.feet(),

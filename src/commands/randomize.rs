@@ -8,7 +8,7 @@ use std::path::PathBuf;
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::time::Instant;
-use twin_core::mj::Model;
+use twin_core::robot::Robot;
 
 /// Arguments of `twin randomize`.
 #[derive(Debug, ClapArgs)]
@@ -57,7 +57,8 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub record_worst: usize,
 
-    /// Controller driving the robot: pd-hold (hold the home pose) or passive (no torque).
+    /// Controller driving the robot: pd-hold (alias hold: hold the home pose) or passive (no
+    /// torque).
     #[arg(long, default_value = "pd-hold")]
     pub controller: String,
 
@@ -108,12 +109,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--record-worst needs --out DIR to write the trajectories to");
     }
     let model_path = args.model.unwrap_or_else(super::default_model);
-    let model = Arc::new(Model::from_file(&model_path)?);
+    let robot = Robot::load(&model_path)?;
+    let model = robot.model.clone();
     let spec = match &args.config {
         Some(path) => Spec::from_file(path)?,
         None => {
             let mut spec = Spec::default_spec();
-            if twin_core::control::base_body(&model).is_none() {
+            if robot.base.is_none() {
                 spec.push = None;
                 eprintln!(
                     "note: {} has no floating base (free joint): the default spec's pushes are \
@@ -151,7 +153,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fall_tilt_rad: args.fall_tilt,
         controller: args.controller.clone(),
     };
-    let batch = Batch::new(model, layout, options, args.seed)?;
+    let batch = Batch::from_robot(robot, layout, options, args.seed)?;
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {
         episodes: args.episodes,

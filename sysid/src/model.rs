@@ -302,12 +302,11 @@ impl RobotModel {
     /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
     pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
         let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
-        let free =
-            (0..model.njnt()).find(|&j| matches!(model.joint_type(j), JointType::Free)).ok_or_else(|| Error::Urdf {
-                path: urdf_path.to_path_buf(),
-                message: "the model has no free joint for a floating base".into(),
-            })?;
-        let body = model.jnt_bodyid()[free] as usize;
+        let free = model.free_joint().ok_or_else(|| Error::Urdf {
+            path: urdf_path.to_path_buf(),
+            message: "the model has no free joint for a floating base".into(),
+        })?;
+        let body = free.body;
         let parent = model.body_parentid();
         let in_subtree = |mut b: usize| {
             while b != 0 {
@@ -342,8 +341,8 @@ impl RobotModel {
         robot.floating = Some(FloatingBase {
             name: model.name(ObjType::Body, body).to_string(),
             body,
-            dof: model.jnt_dofadr()[free] as usize,
-            qpos_adr: model.jnt_qposadr()[free] as usize,
+            dof: free.dof,
+            qpos_adr: free.qpos_adr,
         });
         Ok(robot)
     }

@@ -27,7 +27,7 @@ use crate::log::{
     Float64MultiArray, Imu, JointState, LogWriter, Odometry, TfMessage, Topic, WrenchStamped, WriteSummary,
     WriterOptions,
 };
-use crate::mj::{Data, JointType, ObjType};
+use crate::mj::{Data, ObjType};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use std::path::PathBuf;
@@ -200,7 +200,7 @@ struct RerunOut {
 /// Records a run. Create it before the loop, call [`Recording::record`] once per step with the
 /// state of that step, then [`Recording::finish`].
 pub struct Recording {
-    imus: Vec<super::ImuInfo>,
+    imus: Vec<crate::robot::Imu>,
     base: Option<(usize, usize)>,
     /// (qpos address, dof) of each `/joint_states` joint.
     joints: Vec<(usize, usize)>,
@@ -245,13 +245,9 @@ impl Recording {
     pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {
         let model = &robot.model;
         let dt_nanos = ((model.timestep_secs() * 1e9).round() as u64).max(1);
-        let joints: Vec<usize> = robot.joints();
+        let joints: Vec<usize> = robot.joints.iter().map(|j| j.id).collect();
         let joint_names: Vec<String> = joints.iter().map(|&j| model.name(ObjType::Joint, j).to_string()).collect();
-        let base = robot.base_body.and_then(|b| {
-            (0..model.njnt())
-                .find(|&j| model.jnt_bodyid()[j] as usize == b && model.joint_type(j) == JointType::Free)
-                .map(|j| (b, model.jnt_dofadr()[j] as usize))
-        });
+        let base = robot.base.map(|b| (b.body, b.dof));
         let body_frames: Vec<String> = (0..model.nbody()).map(|b| frame_name(robot, b)).collect();
         let root_frame = if base.is_some() { "odom" } else { "world" };
         let tf_links = (1..model.nbody())
@@ -300,8 +296,8 @@ impl Recording {
             };
             out.joint_states = out.add_wanted("/joint_states")?;
             for imu in &robot.imus {
-                let rate = imu.update_rate_hz.unwrap_or(options.state_rate_hz);
-                let topic = out.add_wanted(&imu.topic)?;
+                let rate = imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz);
+                let topic = out.add_wanted(imu.topic())?;
                 out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
             }
             if base.is_some() {
@@ -310,8 +306,8 @@ impl Recording {
             out.tf = out.add_wanted("/tf")?;
             out.commands = out.add_wanted(&format!("/{}/joint_commands", robot.name))?;
             // IMU frames that are no body: a static transform from their body.
-            let statics: Vec<&super::ImuInfo> =
-                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.frame_id)).collect();
+            let statics: Vec<&crate::robot::Imu> =
+                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
             if !statics.is_empty() && out.wants("/tf_static") {
                 let topic: Topic<TfMessage> = out.add("/tf_static")?;
                 let body_frames = &rec.body_frames;
@@ -319,7 +315,7 @@ impl Recording {
                     w.seq_len(statics.len());
                     for imu in &statics {
                         w.header(0, &body_frames[imu.body]);
-                        w.string(&imu.frame_id);
+                        w.string(&imu.meta.frame_id);
                         w.f64_fixed(&imu.body_from_imu.0);
                         w.f64_fixed(&xyzw(imu.body_from_imu.1));
                     }
@@ -382,8 +378,9 @@ impl Recording {
                 let s = data.sensordata();
                 let mut v = [0.0; 6];
                 for i in 0..3 {
-                    v[i] = s[imu.gyro_adr + i] + imu.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                    v[3 + i] = s[imu.accel_adr + i] + imu.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                    v[i] = s[imu.gyro_adr + i] + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                    v[3 + i] =
+                        s[imu.accel_adr + i] + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
                 }
                 self.imu_values[k] = v;
             }
@@ -472,10 +469,10 @@ impl Recording {
                     None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
                 };
                 let v = self.imu_values[k];
-                let (g2, a2) = (imu.gyro_noise_std.powi(2), imu.accel_noise_std.powi(2));
+                let (g2, a2) = (imu.meta.gyro_noise_std.powi(2), imu.meta.accel_noise_std.powi(2));
                 let Some(topic) = out.imus[k].topic else { continue };
                 out.writer.write_with(topic, t_nanos, |w| {
-                    w.header(stamp, &imu.frame_id);
+                    w.header(stamp, &imu.meta.frame_id);
                     w.f64_fixed(&xyzw(q));
                     w.f64_fixed(&[0.0; 9]);
                     w.f64_fixed(&v[..3]);
@@ -518,7 +515,7 @@ impl Recording {
                 for (imu, v) in self.imus.iter().zip(&self.imu_values) {
                     for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate()
                     {
-                        rec.scalar(&format!("imu/{}/{axis}", imu.name), v[i])?;
+                        rec.scalar(&format!("imu/{}/{axis}", imu.meta.name), v[i])?;
                     }
                 }
                 for b in 1..self.touching.len() {
@@ -593,6 +590,16 @@ impl Recording {
             }
         }
         Ok(summary)
+    }
+}
+
+/// A recording is the engine's recorder: it records each step's instant t (see
+/// [`crate::engine::StepView`]).
+impl crate::engine::Observer for Recording {
+    fn observe(&mut self, step: &crate::engine::StepView<'_>) -> Result<crate::engine::Flow> {
+        let sample = StepSample { time_secs: step.time_secs, qpos: step.qpos, qvel: step.qvel, command: step.command };
+        self.record(&sample, step.data)?;
+        Ok(crate::engine::Flow::Continue)
     }
 }
 
