@@ -276,6 +276,11 @@ impl Worker {
         })
     }
 
+    /// The simulation as the last episode left it.
+    pub fn data(&self) -> Option<&twin_core::mj::Data> {
+        self.engine.data()
+    }
+
     /// Runs episode `index` of `batch`; with `trajectory`, records every step.
     ///
     /// A MuJoCo error or divergence during the episode is a result (`unstable`), not an

@@ -163,11 +163,27 @@ impl Robot {
     /// # Errors
     /// As [`Robot::load`].
     pub fn load_with(path: impl AsRef<Path>, options: &ConvertOptions) -> Result<Robot> {
+        Robot::load_with_extra(path, options, "")
+    }
+
+    /// [`Robot::load_with`], with `extra_mjcf` (MJCF elements such as `<option>`) added inside
+    /// the converted URDF's `<mujoco>` element (e.g. `twin sysid`'s timestep and flags).
+    /// Ignored for MJCF files.
+    ///
+    /// # Errors
+    /// As [`Robot::load`].
+    pub fn load_with_extra(path: impl AsRef<Path>, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
         let path = path.as_ref();
         let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
         if crate::urdf::is_urdf(&text) {
             let converted = crate::convert::convert_urdf_str(path, &text, options)?;
-            let model = Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
+            let mjcf = match converted.mjcf.rfind("</mujoco>") {
+                Some(end) if !extra_mjcf.is_empty() => {
+                    format!("{}{extra_mjcf}\n{}", &converted.mjcf[..end], &converted.mjcf[end..])
+                }
+                _ => converted.mjcf,
+            };
+            let model = Model::from_xml_str(&mjcf).map_err(|e| match e {
                 Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
                 other => other,
             })?;
