@@ -37,6 +37,8 @@
 //!   their own friction.
 //! - Pushes change the floating base's velocity; fixed-base models can't be pushed.
 
+#![forbid(unsafe_code)]
+
 pub mod draw;
 pub mod episode;
 pub mod error;

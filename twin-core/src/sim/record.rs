@@ -221,6 +221,8 @@ pub struct Recording {
     imu_values: Vec<[f64; 6]>,
     /// Which IMU topics are due this tick.
     imu_due: Vec<bool>,
+    /// `/contacts/<body>` topic of each body (from the topic table).
+    contact_topics: Vec<String>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
@@ -279,6 +281,7 @@ impl Recording {
             touching: vec![false; model.nbody()],
             imu_values: vec![[0.0; 6]; robot.imus.len()],
             imu_due: Vec::new(),
+            contact_topics: Vec::new(),
         };
 
         if let Some(path) = &options.mcap {
@@ -294,22 +297,37 @@ impl Recording {
                 counts: Vec::new(),
                 writer,
             };
-            out.joint_states = out.add_wanted("/joint_states")?;
+            // Topic names come from the robot's one topic table.
+            let table = crate::topics::TopicTable::new(
+                robot,
+                &crate::topics::TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
+            );
+            let name = |kind| table.of_kind(kind).map(|t| t.name.clone());
+            use crate::topics::TopicKind;
+            let (js, odom, tf, commands, tf_static) = (
+                name(TopicKind::JointStates).unwrap_or_default(),
+                name(TopicKind::Odometry),
+                name(TopicKind::Tf).unwrap_or_default(),
+                name(TopicKind::Commands).unwrap_or_default(),
+                name(TopicKind::TfStatic),
+            );
+            rec.contact_topics = (0..model.nbody()).map(|b| name(TopicKind::Contacts(b)).unwrap_or_default()).collect();
+            out.joint_states = out.add_wanted(&js)?;
             for imu in &robot.imus {
                 let rate = imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz);
                 let topic = out.add_wanted(imu.topic())?;
                 out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
             }
-            if base.is_some() {
-                out.odom = out.add_wanted("/odom")?;
+            if let Some(odom) = odom {
+                out.odom = out.add_wanted(&odom)?;
             }
-            out.tf = out.add_wanted("/tf")?;
-            out.commands = out.add_wanted(&format!("/{}/joint_commands", robot.name))?;
+            out.tf = out.add_wanted(&tf)?;
+            out.commands = out.add_wanted(&commands)?;
             // IMU frames that are no body: a static transform from their body.
             let statics: Vec<&crate::robot::Imu> =
                 robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
-            if !statics.is_empty() && out.wants("/tf_static") {
-                let topic: Topic<TfMessage> = out.add("/tf_static")?;
+            if let Some(tf_static) = tf_static.filter(|t| out.wants(t)) {
+                let topic: Topic<TfMessage> = out.add(&tf_static)?;
                 let body_frames = &rec.body_frames;
                 out.writer.write_with(topic, 0, |w| {
                     w.seq_len(statics.len());
@@ -428,11 +446,7 @@ impl Recording {
 
                 for b in 1..self.touching.len() {
                     if self.touching[b] && out.contacts[b].is_none() && out.wants("/contacts/*") {
-                        let name: String = self.body_frames[b]
-                            .chars()
-                            .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
-                            .collect();
-                        out.contacts[b] = Some(out.add(&format!("/contacts/{name}"))?);
+                        out.contacts[b] = Some(out.add(&self.contact_topics[b])?);
                     }
                     let Some(topic) = out.contacts[b] else { continue };
                     let m = data.xmat()[b];
