@@ -488,8 +488,7 @@ impl ModelLayout {
     /// The layout of `model`.
     pub fn of(model: &Model) -> ModelLayout {
         let m = model.raw();
-        let mut sizes = [0i64; MODEL_SIZE_FIELDS.len()];
-        let fields = [
+        let sizes = [
             m.nq,
             m.nv,
             m.nu,
@@ -589,9 +588,6 @@ impl ModelLayout {
             m.narena,
             m.nbuffer,
         ];
-        for (s, f) in sizes.iter_mut().zip(fields) {
-            *s = f as i64;
-        }
         ModelLayout { sizes }
     }
 

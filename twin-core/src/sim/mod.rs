@@ -95,7 +95,7 @@ impl Observer for Timing<'_> {
                 return Ok(flow);
             }
         }
-        if step.index % self.report_every == 0 {
+        if step.index.is_multiple_of(self.report_every) {
             (self.progress)(step.index as f64 / self.steps as f64);
         }
         Ok(Flow::Continue)
