@@ -1,5 +1,7 @@
 //! `twin`: digital-twin orchestrator for legged and armed robots, with MuJoCo as physics engine.
 
+#![forbid(unsafe_code)]
+
 mod cli;
 mod commands;
 

@@ -6,6 +6,8 @@ mod common;
 mod convert;
 #[path = "cli/deploy.rs"]
 mod deploy;
+#[path = "cli/engine.rs"]
+mod engine;
 #[path = "cli/info.rs"]
 mod info;
 #[path = "cli/log.rs"]

@@ -6,7 +6,7 @@ use crate::spec::{Dist, Mode, Spec, Term, matches};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
-use twin_core::control::{Actuation, base_body, reset_to_home};
+use twin_core::control::{Actuation, reset_to_home};
 use twin_core::mj::{Data, JointType, Model, ObjType};
 
 /// The random stream of episode `index` under master seed `seed`: `stream` 0 draws the
@@ -269,7 +269,7 @@ impl Layout {
                 objects.push((0, String::new(), 0.0, 0));
             }
             "push" => {
-                if base_body(model).is_none() {
+                if model.free_joint().is_none() {
                     return Err(spec_err(
                         "pushes need a floating base (a free joint); remove [push] for fixed-base \
                          models"
@@ -425,7 +425,7 @@ impl Layout {
                         let joint = (0..nominal.njnt())
                             .find(|&j| nominal.jnt_qposadr()[j] as usize == object)
                             .expect("bound to a joint's qpos address");
-                        init_qpos[object] = if nominal.jnt_limited()[joint] != 0 {
+                        init_qpos[object] = if nominal.jnt_limited()[joint] {
                             let [lo, hi] = nominal.jnt_range()[joint];
                             v.clamp(lo, hi)
                         } else {

@@ -39,6 +39,8 @@
 //!   their own friction.
 //! - Pushes change the floating base's velocity; fixed-base models can't be pushed.
 
+#![forbid(unsafe_code)]
+
 pub mod draw;
 pub mod episode;
 pub mod error;
@@ -48,7 +50,7 @@ pub mod spec;
 pub mod summary;
 
 pub use draw::Layout;
-pub use episode::{Batch, EpisodeOptions, EpisodeResult, Worker};
+pub use episode::{Batch, CheckFactory, ControllerFactory, EpisodeOptions, EpisodeResult, Worker};
 pub use error::{Error, Result};
 pub use merge::{Merged, ShardManifest, ShardStart, merge};
 pub use run::{Report, RunInfo, RunOptions, Shard, run_batch};
@@ -63,7 +65,7 @@ pub fn run_info(batch: &Batch, model: &str, spec: &Spec, episodes: u64, shard: O
         episodes,
         duration_secs: batch.options.duration_secs,
         timestep_secs: batch.nominal.timestep_secs(),
-        controller: batch.options.controller.clone(),
+        controller: batch.controller_name().to_string(),
         fall_height_fraction: batch.options.fall_height_fraction,
         fall_tilt_rad: batch.options.fall_tilt_rad,
         feet: batch.feet(),

@@ -187,7 +187,8 @@ pub fn run_batch(
         tmp_csv = dir.join(crate::merge::PARTIAL_CSV);
         let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
-        w.write_record(crate::summary::csv_header(params)).map_err(|e| csv_io(&tmp_csv, e))?;
+        w.write_record(crate::summary::csv_header(params, !batch.check_names()?.is_empty()))
+            .map_err(|e| csv_io(&tmp_csv, e))?;
         csv_writer = Some(w);
     } else {
         tmp_csv = PathBuf::new();
@@ -269,7 +270,7 @@ pub fn run_batch(
             f.write_all(run.spec.as_bytes()).map_err(|source| Error::Io { path: spec_path.clone(), source })
         })?;
         if !worst.is_empty() {
-            record_worst(batch, &worst, &dir.join("worst"), &run.model)?;
+            record_worst(batch, &worst, &dir.join("worst"))?;
         }
     }
     Ok(Report {
@@ -298,37 +299,17 @@ pub fn write_summary(dir: &Path, run: &RunInfo, summary: &Summary) -> Result<()>
     write_atomic(&path, |f| f.write_all(text.as_bytes()).map_err(|source| Error::Io { path: path.clone(), source }))
 }
 
-/// The robot as recordings see it: IMU topics, rates and noise from the model file when
-/// twin's converter gives them (URDF), else found in the compiled model; always the batch's
-/// nominal model.
-fn recording_robot(batch: &Batch, model_path: &str) -> twin_core::sim::Robot {
-    let path = Path::new(model_path);
-    let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
-    let fallback = || twin_core::sim::Robot::from_model(batch.nominal.clone(), stem, path);
-    match twin_core::sim::load_robot(path) {
-        Ok(robot)
-            if robot.model.nq() == batch.nominal.nq()
-                && robot.model.nsensordata() == batch.nominal.nsensordata()
-                && robot.model.nbody() == batch.nominal.nbody() =>
-        {
-            twin_core::sim::Robot { model: batch.nominal.clone(), ..robot }
-        }
-        _ => fallback(),
-    }
-}
-
 /// Re-simulates `worst` episodes with recording, checks that each reproduces its batch
 /// metrics bit for bit, and writes into `dir`, per episode: `episode_<index>.csv` (a row per
 /// step), `worst_<index>.mcap` (the topics of `twin sim`, see `twin_core::sim::record`) and,
-/// with the `rerun` feature, `worst_<index>.rrd`. `model_path` is the model file of the batch
-/// (for the IMUs' topics and the robot name).
+/// with the `rerun` feature, `worst_<index>.rrd`, with the topics of the batch's robot.
 ///
 /// # Errors
 /// [`Error::NotReproducible`] if a re-run differs; [`Error::Io`]; recording errors.
-pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path, model_path: &str) -> Result<Vec<PathBuf>> {
+pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path) -> Result<Vec<PathBuf>> {
     std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
     let mut worker = Worker::new(batch)?;
-    let robot = recording_robot(batch, model_path);
+    let robot = &batch.robot;
     let mut written = Vec::new();
     for original in worst {
         let mut trajectory = Trajectory::default();
@@ -341,7 +322,7 @@ pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path, model_pa
             seed: batch.seed ^ original.index,
             ..Default::default()
         };
-        let mut recording = twin_core::sim::Recording::new(&robot, &options)?;
+        let mut recording = twin_core::sim::Recording::new(robot, &options)?;
         let again = worker.run_recorded(batch, original.index, Some(&mut trajectory), Some(&mut recording))?;
         recording.finish()?;
         if &again != original {

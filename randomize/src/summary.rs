@@ -27,9 +27,19 @@ pub const METRIC_COLUMNS: [&str; 13] = [
     "energy_j",
 ];
 
-/// The CSV header for parameter columns `params`.
-pub fn csv_header(params: &[String]) -> Vec<String> {
-    METRIC_COLUMNS.iter().map(|s| s.to_string()).chain(params.iter().cloned()).collect()
+/// The column of check verdicts (`name=PASS;name=FAIL`), after [`METRIC_COLUMNS`], in
+/// batches with checks only.
+pub const CHECKS_COLUMN: &str = "checks";
+
+/// The CSV header for parameter columns `params`, with the [`CHECKS_COLUMN`] when the batch
+/// has checks.
+pub fn csv_header(params: &[String], with_checks: bool) -> Vec<String> {
+    METRIC_COLUMNS
+        .iter()
+        .map(|s| s.to_string())
+        .chain(with_checks.then(|| CHECKS_COLUMN.to_string()))
+        .chain(params.iter().cloned())
+        .collect()
 }
 
 /// One CSV record. Floats use Rust's shortest round-trip form, so parsing gives back the exact
@@ -50,6 +60,11 @@ pub fn csv_record(r: &EpisodeResult) -> Vec<String> {
         r.saturation_secs.to_string(),
         r.energy_j.to_string(),
     ];
+    if !r.checks.is_empty() {
+        let verdicts: Vec<String> =
+            r.checks.iter().map(|c| format!("{}={}", c.name, if c.passed { "PASS" } else { "FAIL" })).collect();
+        out.push(verdicts.join(";"));
+    }
     out.extend(r.params.iter().map(f64::to_string));
     out
 }
@@ -74,7 +89,9 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
             format!("not a `twin randomize` episodes file: the header must start with {}", METRIC_COLUMNS.join(",")),
         ));
     }
-    let params: Vec<String> = names[METRIC_COLUMNS.len()..].iter().map(|s| s.to_string()).collect();
+    let with_checks = names.get(METRIC_COLUMNS.len()) == Some(&CHECKS_COLUMN);
+    let first_param = METRIC_COLUMNS.len() + usize::from(with_checks);
+    let params: Vec<String> = names[first_param..].iter().map(|s| s.to_string()).collect();
     let mut rows = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
         let line = i as u64 + 2;
@@ -115,14 +132,42 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
             max_tilt_rad: f(10)?,
             saturation_secs: f(11)?,
             energy_j: f(12)?,
-            params: (METRIC_COLUMNS.len()..names.len()).map(f).collect::<Result<_>>()?,
+            params: (first_param..names.len()).map(f).collect::<Result<_>>()?,
+            checks: if with_checks {
+                read_verdicts(&rec[METRIC_COLUMNS.len()]).map_err(|m| err(Some(line), m))?
+            } else {
+                Vec::new()
+            },
         };
         if b(1)? != r.success() {
-            return Err(err(Some(line), "column success disagrees with fell/unstable".into()));
+            return Err(err(Some(line), "column success disagrees with fell/unstable/checks".into()));
         }
         rows.push(r);
     }
     Ok((params, rows))
+}
+
+/// The verdicts of a [`CHECKS_COLUMN`] cell (names and PASS/FAIL; the numbers stay in memory).
+fn read_verdicts(cell: &str) -> std::result::Result<Vec<twin_core::engine::Verdict>, String> {
+    cell.split(';')
+        .filter(|v| !v.is_empty())
+        .map(|v| {
+            let (name, verdict) =
+                v.rsplit_once('=').ok_or_else(|| format!("column checks: {v:?} is not name=PASS|FAIL"))?;
+            let passed = match verdict {
+                "PASS" => true,
+                "FAIL" => false,
+                _ => return Err(format!("column checks: {v:?} is not name=PASS|FAIL")),
+            };
+            Ok(twin_core::engine::Verdict {
+                name: name.to_string(),
+                passed,
+                metrics: Vec::new(),
+                details: Vec::new(),
+                cause: None,
+            })
+        })
+        .collect()
 }
 
 /// Writes rows as CSV (header first).
@@ -136,8 +181,10 @@ pub fn write_csv<'a>(
     rows: impl IntoIterator<Item = &'a EpisodeResult>,
 ) -> Result<()> {
     let io = |e: csv::Error| Error::Io { path: path.to_path_buf(), source: std::io::Error::other(e) };
+    let rows: Vec<&EpisodeResult> = rows.into_iter().collect();
+    let with_checks = rows.iter().any(|r| !r.checks.is_empty());
     let mut wtr = csv::Writer::from_writer(w);
-    wtr.write_record(csv_header(params)).map_err(io)?;
+    wtr.write_record(csv_header(params, with_checks)).map_err(io)?;
     for r in rows {
         wtr.write_record(csv_record(r)).map_err(io)?;
     }

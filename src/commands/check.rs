@@ -72,7 +72,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if report.passed() {
         Ok(())
     } else {
-        let failed: Vec<&str> = report.steps.iter().filter(|s| !s.passed).map(|s| s.name).collect();
+        let failed: Vec<&str> = report.steps.iter().filter(|s| !s.passed).map(|s| s.name.as_str()).collect();
         anyhow::bail!("check failed: {}", failed.join(", "))
     }
 }

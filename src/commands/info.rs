@@ -48,7 +48,7 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
     )?;
     for j in 0..m.njnt() {
         let kind = m.joint_type(j);
-        let range = if m.jnt_limited()[j] != 0 {
+        let range = if m.jnt_limited()[j] {
             let [lo, hi] = m.jnt_range()[j];
             format!("[{lo:.4}, {hi:.4}]")
         } else {
@@ -72,7 +72,7 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
         let target = m.actuator_trnid()[a][0];
         let target = if target >= 0 { m.name(ObjType::Joint, target as usize) } else { "-" };
         let [lo, hi] = m.actuator_ctrlrange()[a];
-        let range = if m.actuator_ctrllimited()[a] != 0 { format!("[{lo}, {hi}]") } else { "unlimited".into() };
+        let range = if m.actuator_ctrllimited()[a] { format!("[{lo}, {hi}]") } else { "unlimited".into() };
         writeln!(
             out,
             "  {:<28} joint {:<28} gear {:<8} ctrlrange {}",

@@ -5,9 +5,8 @@ use clap::{Args as ClapArgs, Subcommand};
 use randomize::{Batch, EpisodeOptions, Layout, RunOptions, Shard, Spec};
 use std::io::IsTerminal;
 use std::path::PathBuf;
-use std::sync::Arc;
 use std::time::Instant;
-use twin_core::mj::Model;
+use twin_core::robot::Robot;
 
 /// Arguments of `twin randomize`.
 #[derive(Debug, ClapArgs)]
@@ -56,7 +55,8 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub record_worst: usize,
 
-    /// Controller driving the robot: pd-hold (hold the home pose) or passive (no torque).
+    /// Controller driving the robot: pd-hold (alias hold: hold the home pose) or passive (no
+    /// torque).
     #[arg(long, default_value = "pd-hold")]
     pub controller: String,
 
@@ -131,12 +131,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         inputs.extend(args.config.as_deref());
         twin_core::fsio::check_output_dir(out, &inputs)?;
     }
-    let model = Arc::new(Model::from_file(&model_path)?);
+    let robot = Robot::load(&model_path)?;
+    let model = robot.model.clone();
     let spec = match &args.config {
         Some(path) => Spec::from_file(path)?,
         None => {
             let mut spec = Spec::default_spec();
-            if twin_core::control::base_body(&model).is_none() {
+            if robot.base.is_none() {
                 spec.push = None;
                 eprintln!(
                     "note: {} has no floating base (free joint): the default spec's pushes are \
@@ -174,7 +175,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fall_tilt_rad: args.fall_tilt,
         controller: args.controller.clone(),
     };
-    let batch = Batch::new(model, layout, options, args.seed)?;
+    let batch = Batch::from_robot(robot, layout, options, args.seed)?;
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {
         episodes: args.episodes,

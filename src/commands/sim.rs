@@ -1,20 +1,14 @@
-//! `twin sim [MODEL] --duration S --controller hold|replay …`: runs the twin under a built-in
-//! controller and records ROS 2 topics (MCAP) and a rerun recording, stamped in simulation time.
+//! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay …`: runs the twin under a
+//! controller of twin's registry (`twin_core::control::by_name_with`) and records ROS 2 topics
+//! (MCAP) and a rerun recording, stamped in simulation time.
 
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use twin_core::control::{Controller, JointTrajectory, PdHold, PdHoldOptions, Replay, ReplayOptions};
+use twin_core::control::{ControllerOptions, JointTrajectory};
 use twin_core::log::{Compression, WriterOptions};
+use twin_core::robot::Robot;
 use twin_core::sim::{self, RecordOptions, Recording, SimOptions};
-
-#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
-pub enum ControllerKind {
-    /// PD hold of the nominal pose (keyframe `home`).
-    Hold,
-    /// Track a joint trajectory (`--trajectory`) with PD and velocity feed-forward.
-    Replay,
-}
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum CompressionKind {
@@ -33,9 +27,10 @@ pub struct Args {
     /// Simulated time, seconds.
     #[arg(long, default_value_t = 5.0)]
     pub duration: f64,
-    /// Built-in controller.
-    #[arg(long, value_enum, default_value_t = ControllerKind::Hold)]
-    pub controller: ControllerKind,
+    /// Controller: pd-hold (alias hold: PD hold of the home pose), passive (no torque) or
+    /// replay (track --trajectory with PD and velocity feed-forward).
+    #[arg(long, default_value = "pd-hold")]
+    pub controller: String,
     /// Trajectory for `--controller replay`: a ROS 2 log (.mcap or rosbag2 folder) with a
     /// JointState topic, or a CSV `time_sec,<joint>,…`.
     #[arg(long, value_name = "LOG_OR_CSV")]
@@ -93,22 +88,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Err(twin_core::sim::record::rerun_unavailable().into());
     }
     let path = args.model.clone().unwrap_or_else(super::default_model);
-    let robot = sim::load_robot(&path).with_context(|| format!("loading {}", path.display()))?;
-    let mut controller: Box<dyn Controller> = match args.controller {
-        ControllerKind::Hold => {
-            if args.trajectory.is_some() {
-                bail!("--trajectory is for --controller replay");
-            }
-            Box::new(PdHold::new(&robot.model, PdHoldOptions::default()))
+    let robot = Robot::load(&path)?;
+    let trajectory = match (&args.trajectory, args.controller.as_str()) {
+        (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
+        (Some(_), _) => bail!("--trajectory is for --controller replay"),
+        (None, "replay") => {
+            bail!("--controller replay needs --trajectory LOG_OR_CSV (a ROS 2 log or a CSV time_sec,<joint>,…)")
         }
-        ControllerKind::Replay => {
-            let Some(file) = &args.trajectory else {
-                bail!("--controller replay needs --trajectory LOG_OR_CSV (a ROS 2 log or a CSV time_sec,<joint>,…)");
-            };
-            let trajectory = JointTrajectory::load(file, &args.trajectory_topic)?;
-            Box::new(Replay::new(&robot.model, trajectory, ReplayOptions::default())?)
-        }
+        (None, _) => None,
     };
+    let controller_options = ControllerOptions { trajectory, ..ControllerOptions::default() };
+    let mut controller = twin_core::control::by_name_with(&args.controller, &robot.model, &controller_options)?;
     let options = RecordOptions {
         mcap: args.record.clone(),
         rrd: args.rerun.clone(),

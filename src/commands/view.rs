@@ -58,7 +58,7 @@ fn run_view(args: Args) -> anyhow::Result<()> {
 
     let log = Log::open(&args.log, ReadOptions { strict: args.strict })?;
     let model_path = args.model.clone().unwrap_or_else(super::default_model);
-    let robot = twin_core::sim::load_robot(&model_path).with_context(|| format!("loading {}", model_path.display()))?;
+    let robot = twin_core::robot::Robot::load(&model_path)?;
     let recorder = match (&args.output, &args.connect) {
         (_, Some(url)) => Recorder::to_viewer(&robot.model, "twin", url)?,
         (Some(path), None) => Recorder::to_file(&robot.model, "twin", path)?,

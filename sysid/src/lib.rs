@@ -116,6 +116,8 @@
 //! - Regressor samples after decimation are correlated (5× the cut-off), so σ is optimistic by
 //!   about √(5/2).
 
+#![forbid(unsafe_code)]
+
 pub mod condition;
 pub mod error;
 pub mod estimate;

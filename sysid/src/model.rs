@@ -156,7 +156,7 @@ pub const FLOATING_JOINT: &str = "twin_floating_base";
 pub struct RobotModel {
     /// The URDF file.
     pub urdf_path: PathBuf,
-    /// MuJoCo's compile of the URDF.
+    /// The twin's compile of the URDF.
     pub model: Arc<Model>,
     /// 1-DOF joints, in MuJoCo DOF order.
     pub joints: Vec<JointInfo>,
@@ -209,67 +209,50 @@ fn cad_params_of_body(model: &Model, b: usize) -> LinkParams {
         .to_params()
 }
 
-/// As [`load_urdf_in_mujoco`], with a free joint ([`FLOATING_JOINT`]) between the world and the
-/// URDF's root link (a `world` link and a `floating` joint are added to the text MuJoCo reads;
-/// the file is not changed).
+/// As [`load_urdf_in_mujoco`], with a free joint between the world and the URDF's root link
+/// (the converter's `floating_base`), which then moves with the logged base motion.
 ///
 /// # Errors
 /// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] when the root link is `world`.
 pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<Model> {
     let text = twin_core::fsio::read_to_string(path)?;
-    let root = root_link(path, &text)?;
-    let urdf_elements = format!(
-        "<link name=\"world\"/><joint name=\"{FLOATING_JOINT}\" type=\"floating\">\
-         <parent link=\"world\"/><child link=\"{root}\"/></joint>"
-    );
-    load_urdf_text(path, &text, extra_mujoco, &urdf_elements)
+    root_link(path, &text)?;
+    load_urdf_text(path, &text, extra_mujoco, true)
 }
 
-/// Loads a URDF with MuJoCo's own importer and `extra_mujoco` (MJCF elements such as
-/// `<option>`) inside the URDF's `<mujoco>` extension. Links joined by fixed joints are kept as
-/// separate bodies (`fusestatic="false"`) so that each URDF link's inertia is its own.
+/// Compiles a URDF the way the twin runs it: through twin's converter
+/// (`twin_core::robot::Robot::load_with`, which resolves `package://` meshes and converts
+/// Collada/ASCII STL), fixed base, no floor, no visuals, each URDF link its own body, with
+/// `extra_mujoco` (MJCF elements such as `<option>`) added to the model.
 ///
 /// # Errors
-/// [`Error::Io`], URDF checks of `twin-core`, MuJoCo's load error.
+/// [`Error::Io`]; the converter's errors (naming the file, line and element); MuJoCo's load
+/// error.
 pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
     let text = twin_core::fsio::read_to_string(path)?;
-    load_urdf_text(path, &text, extra_mujoco, "")
+    load_urdf_text(path, &text, extra_mujoco, false)
 }
 
-/// Loads URDF `text` (of `path`) with `extra_mujoco` inside the injected `<mujoco>` block and
-/// `urdf_elements` right after it.
-fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, urdf_elements: &str) -> Result<Model> {
-    twin_core::urdf::validate(path, text)?;
+/// Converts URDF `text` (of `path`) and compiles it with `extra_mujoco` appended inside
+/// `<mujoco>`.
+fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, floating: bool) -> Result<Model> {
     let doc = roxmltree::Document::parse(text)
         .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
-    let root = doc.root_element();
-    if root.children().any(|n| n.has_tag_name("mujoco")) {
+    if doc.root_element().children().any(|n| n.has_tag_name("mujoco")) {
         return Err(Error::Urdf {
             path: path.to_path_buf(),
             message: "the URDF has its own <mujoco> block; remove it for `twin sysid` (it may fuse links and hide their inertias)".into(),
         });
     }
-    // Insert right after the <robot ...> start tag.
-    let start = root.range().start;
-    let close = text[start..].find('>').map(|i| start + i + 1).unwrap_or(start);
-    let dir = path
-        .parent()
-        .filter(|p| !p.as_os_str().is_empty())
-        .map(|p| p.canonicalize().unwrap_or_else(|_| p.to_path_buf()))
-        .unwrap_or_else(|| std::env::current_dir().unwrap_or_default());
-    let dir = dir.display().to_string().replace('"', "&quot;");
-    let injected = format!(
-        "{}<mujoco><compiler fusestatic=\"false\" discardvisual=\"true\" meshdir=\"{dir}/\"/>{extra_mujoco}</mujoco>{urdf_elements}{}",
-        &text[..close],
-        &text[close..]
-    );
-    let model = Model::from_xml_str(&injected).map_err(|e| match e {
-        twin_core::Error::Load { message, .. } => {
-            Error::Urdf { path: path.to_path_buf(), message: format!("MuJoCo could not load it: {message}") }
-        }
-        other => Error::Core(other),
-    })?;
-    Ok(model)
+    let options = twin_core::convert::ConvertOptions {
+        fixed_base: !floating,
+        floor: false,
+        visuals: false,
+        joint_sensors: false,
+        ..twin_core::convert::ConvertOptions::default()
+    };
+    let robot = twin_core::robot::Robot::load_with_extra(path, &options, extra_mujoco)?;
+    Ok(Arc::try_unwrap(robot.model).unwrap_or_else(|shared| (*shared).clone()))
 }
 
 impl RobotModel {
@@ -302,12 +285,11 @@ impl RobotModel {
     /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
     pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
         let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
-        let free =
-            (0..model.njnt()).find(|&j| matches!(model.joint_type(j), JointType::Free)).ok_or_else(|| Error::Urdf {
-                path: urdf_path.to_path_buf(),
-                message: "the model has no free joint for a floating base".into(),
-            })?;
-        let body = model.jnt_bodyid()[free] as usize;
+        let free = model.free_joint().ok_or_else(|| Error::Urdf {
+            path: urdf_path.to_path_buf(),
+            message: "the model has no free joint for a floating base".into(),
+        })?;
+        let body = free.body;
         let parent = model.body_parentid();
         let in_subtree = |mut b: usize| {
             while b != 0 {
@@ -342,8 +324,8 @@ impl RobotModel {
         robot.floating = Some(FloatingBase {
             name: model.name(ObjType::Body, body).to_string(),
             body,
-            dof: model.jnt_dofadr()[free] as usize,
-            qpos_adr: model.jnt_qposadr()[free] as usize,
+            dof: free.dof,
+            qpos_adr: free.qpos_adr,
         });
         Ok(robot)
     }

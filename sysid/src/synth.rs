@@ -217,7 +217,7 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
     let mut freq = vec![[0.0; 5]; nj];
     for (j, joint) in robot.joints.iter().enumerate() {
         let jid = model.dof_jntid()[joint.dof] as usize;
-        let (lo, hi) = if model.jnt_limited()[jid] != 0 {
+        let (lo, hi) = if model.jnt_limited()[jid] {
             let r = model.jnt_range()[jid];
             (r[0], r[1])
         } else {

@@ -198,3 +198,84 @@ fn sysid_floating_base_from_a_bag_and_refusal_without_odometry() {
     }
     twin_core::mj::Model::from_file(&start).unwrap();
 }
+
+/// `twin sysid --update` on a real arm whose URDF uses `package://` meshes, STL and Collada (the
+/// UR5 of example-robot-data, cached by `convert::real_public_urdfs_convert_load_and_stand`):
+/// the model is built by twin's converter, as every command builds it, and the write-back only
+/// touches the identified numbers.
+#[test]
+#[ignore = "loads and simulates through the converter, but the UR5's estimation stops with \
+            \"barrier Hessian not positive definite\" (open: see the engine report)"]
+fn sysid_updates_a_urdf_with_package_meshes() {
+    let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
+        "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",
+    );
+    let share = cache.join("cmeel.prefix/share");
+    let truth = share.join("example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    assert!(truth.is_file(), "{} is missing: fetch example-robot-data into TWIN_URDF_CACHE", truth.display());
+    let text = std::fs::read_to_string(&truth).unwrap();
+    assert!(text.contains("package://") && text.contains(".dae") && text.contains(".stl"));
+    // The same package layout in a temp dir (meshes linked), so package:// resolves there too.
+    let dir = tempfile::tempdir().unwrap();
+    let pkg = dir.path().join("share/example-robot-data/robots/ur_description");
+    std::fs::create_dir_all(pkg.join("urdf")).unwrap();
+    std::os::unix::fs::symlink(share.join("example-robot-data/robots/ur_description/meshes"), pkg.join("meshes"))
+        .unwrap();
+    let urdf = pkg.join("urdf/ur5_robot.urdf");
+    sysid::synth::perturbed_urdf(&truth, &urdf, 3).unwrap();
+    let before = std::fs::read_to_string(&urdf).unwrap();
+    for (name, seed, secs) in [("train.mcap", 1, 12.0), ("val.mcap", 9, 6.0)] {
+        let log = simulate(&truth, &SynthOptions { duration_secs: secs, seed, ..Default::default() }).unwrap();
+        log.write_mcap(dir.path().join(name), "/joint_states").unwrap();
+    }
+    let urdf_arg = urdf.to_str().unwrap();
+    let out = twin(
+        dir.path(),
+        &["sysid", "--log", "train.mcap", "--update", urdf_arg, "--validate", "val.mcap", "--report", "r.json"],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let after = std::fs::read_to_string(&urdf).unwrap();
+    assert_ne!(after, before);
+    // Outside the identified numbers (inertial blocks, joint dynamics) the bytes are unchanged.
+    let (a, b): (Vec<&str>, Vec<&str>) = (before.lines().collect(), after.lines().collect());
+    assert_eq!(a.len(), b.len());
+    let mut in_inertial = false;
+    for (x, y) in a.iter().zip(&b) {
+        let t = x.trim_start();
+        in_inertial = (in_inertial || t.starts_with("<inertial")) && !t.starts_with("</inertial");
+        if x != y {
+            let identified = t.starts_with("<dynamics")
+                || (in_inertial && (t.starts_with("<mass") || t.starts_with("<inertia") || t.starts_with("<origin")));
+            assert!(identified, "a line outside the identified numbers changed:\n{x}\n{y}");
+        }
+    }
+    // The identified model predicts held-out torques better than the perturbed one.
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("r.json")).unwrap()).unwrap();
+    for row in report["validation_nrmse"].as_array().unwrap() {
+        let (before, after) = (row["before"].as_f64().unwrap(), row["after"].as_f64().unwrap());
+        assert!(after < 0.05 && after < before, "{row}");
+    }
+}
+
+/// The UR5 of example-robot-data (`package://` STL and Collada meshes) loads for
+/// identification through twin's converter: six joints, and the links carry the URDF's masses.
+#[test]
+fn sysid_loads_a_urdf_with_package_meshes_through_the_converter() {
+    let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
+        "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",
+    );
+    let truth = cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    let robot = sysid::RobotModel::from_urdf(&truth).unwrap();
+    let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
+    assert_eq!(
+        names,
+        ["shoulder_pan_joint", "shoulder_lift_joint", "elbow_joint", "wrist_1_joint", "wrist_2_joint", "wrist_3_joint"]
+    );
+    // <link name="upper_arm_link"> … <mass value="8.393"/> in the URDF.
+    let upper = robot.links.iter().find(|l| l.name == "upper_arm_link").unwrap();
+    assert!((upper.cad[0] - 8.393).abs() < 1e-9, "{}", upper.cad[0]);
+    // A synthetic log of it simulates (the model the twin runs).
+    let log = simulate(&truth, &SynthOptions { duration_secs: 1.0, ..Default::default() }).unwrap();
+    assert_eq!(log.joint_names.len(), 6);
+}

@@ -78,6 +78,22 @@ static void reset_stack(mjData* d) {
   tls_jump = prev;                                  \
   return 0;
 
+// C++ frames under the guard of load and compile. mj_loadXML, mj_parseXMLString and mj_compile are
+// C entry points into MuJoCo's C++ parser and compiler (src/xml/*.cc, src/user/user_model.cc).
+// Frames that can be on the stack below this setjmp when MuJoCo raises:
+//   twin_load_xml → mj_loadXML → mjXReader/mjXSchema (tinyxml2 document, std::string, std::vector)
+//                 → mjCModel::Compile → mj_setConst / mj_makeData (C engine)
+//   twin_parse_xml_string → mj_parseXMLString → the same parser frames
+//   twin_compile → mj_compile → mjCModel::Compile → the same compile frames
+// While compiling, MuJoCo installs its own thread-local error callback, which turns mju_error into
+// a C++ exception (mjCError) caught inside mjCModel::Compile and the parser and returned as `err`;
+// mju_error consults that callback before mju_user_error, so twin's handler — and its longjmp —
+// does not run inside those C++ frames: the failure comes back as a NULL model and a message. The
+// handler only fires for errors raised outside that window (e.g. by the C engine after the C++
+// frames returned). If it ever fired inside them, the longjmp would skip their destructors
+// (leaking the parser's and compiler's memory, never corrupting it: the Itanium C++ ABI unwinds
+// nothing on longjmp and no MuJoCo lock is held across these calls); that is the residual risk,
+// bounded by one leaked model per failed load.
 int twin_load_xml(const char* filename, mjModel** out, char* err, int err_sz) {
   *out = NULL;
   TWIN_GUARD(*out = mj_loadXML(filename, NULL, err, err_sz), (void)0)

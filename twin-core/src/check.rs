@@ -16,9 +16,11 @@
 //! 5 Hz natural frequency on the joint's inertia) and critical damping; the velocity term runs in
 //! MuJoCo's implicit integrator, which keeps stiff damping on light joints stable.
 
+use crate::control::{PdHoldOptions, pd_gains};
 use crate::convert::actuated_joints;
+use crate::engine::{Measurement, Verdict};
 use crate::error::Result;
-use crate::mj::{Data, JointType, Model, ObjType};
+use crate::mj::{Data, Model, ObjType};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::sync::Arc;
 
@@ -61,31 +63,11 @@ impl Default for CheckOptions {
     }
 }
 
-/// One measured number.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Metric {
-    /// What it is.
-    pub name: String,
-    /// Its value.
-    pub value: f64,
-    /// Its unit.
-    pub unit: &'static str,
-}
+/// One measured number (the engine's [`Measurement`]).
+pub type Metric = Measurement;
 
-/// Result of one step.
-#[derive(Debug, Clone)]
-pub struct StepReport {
-    /// `physics`, `sensors`, `control` or `integration`.
-    pub name: &'static str,
-    /// Whether the step passed.
-    pub passed: bool,
-    /// Measurements.
-    pub metrics: Vec<Metric>,
-    /// Extra lines (per-joint failures, what was skipped).
-    pub details: Vec<String>,
-    /// Likely cause when it failed.
-    pub cause: Option<String>,
-}
+/// Result of one step: a [`Verdict`] named `physics`, `sensors`, `control` or `integration`.
+pub type StepReport = Verdict;
 
 /// Result of [`check`].
 #[derive(Debug, Clone)]
@@ -102,7 +84,7 @@ impl CheckReport {
 }
 
 fn metric(name: impl Into<String>, value: f64, unit: &'static str) -> Metric {
-    Metric { name: name.into(), value, unit }
+    Measurement::new(name, value, unit)
 }
 
 /// The model with every joint actuator turned into a PD servo; returns also, per servo, the
@@ -117,36 +99,32 @@ fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)
     for (j, a) in actuated_joints(model) {
         let dof = model.jnt_dofadr()[j] as usize;
         let gear = model.actuator_gear()[a][0];
-        let effort = if model.actuator_forcelimited()[a] != 0 {
+        let effort = if model.actuator_forcelimited()[a] {
             let [lo, hi] = model.actuator_forcerange()[a];
             Some(lo.abs().min(hi.abs()) * gear.abs())
-        } else if model.jnt_actfrclimited()[j] != 0 {
+        } else if model.jnt_actfrclimited()[j] {
             let [lo, hi] = model.jnt_actfrcrange()[j];
             Some(lo.abs().min(hi.abs()))
         } else {
             None
         };
         let inertia = model.dof_m0()[dof] + model.dof_armature()[dof];
-        let omega = 2.0 * std::f64::consts::PI * opts.fallback_freq_hz;
-        // Joint-space gains, then expressed for the actuator (force = gear · actuator force,
-        // length = gear · q).
-        let kp_joint = match effort {
-            Some(e) if e > 0.0 => e / opts.full_effort_error_rad,
-            _ => inertia * omega * omega,
+        // Joint-space gains by twin's one rule, then expressed for the actuator (force = gear ·
+        // actuator force, length = gear · q).
+        let rule = PdHoldOptions {
+            saturation_error: opts.full_effort_error_rad,
+            damping_ratio: 1.0,
+            min_natural_freq_hz: Some(opts.fallback_freq_hz),
+            stability_dt_secs: Some(dt),
+            ..PdHoldOptions::default()
         };
-        // Explicit stiffness must keep ω·dt below 1 on the joint's own inertia.
-        let kp_joint = kp_joint.min(inertia / (dt * dt)).max(inertia * omega * omega);
-        let kv_joint = 2.0 * (kp_joint * inertia).sqrt();
+        let (kp_joint, kv_joint) = pd_gains(effort, inertia, &rule);
         let g2 = gear * gear;
         edit.set_actuator_servo(a, kp_joint / g2, kv_joint / g2)?;
         servos.push((a, j, gear));
     }
     edit.set_integrator(mujoco_sys::mjtIntegrator_mjINT_IMPLICITFAST as i32);
     Ok((edit.finish()?, servos))
-}
-
-fn free_joint(model: &Model) -> Option<usize> {
-    (0..model.njnt()).find(|&j| model.joint_type(j) == JointType::Free)
 }
 
 fn set_targets(data: &mut Data, servos: &[(usize, usize, f64)], q: &[f64]) {
@@ -170,7 +148,7 @@ pub fn check(floating: &Model, fixed: Option<&Model>, opts: &CheckOptions) -> Re
     steps.push(physics);
     steps.push(if diverged {
         StepReport {
-            name: "sensors",
+            name: "sensors".into(),
             passed: false,
             metrics: vec![],
             details: vec![],
@@ -197,8 +175,8 @@ fn physics_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &Check
     data.qpos_mut().copy_from_slice(&home);
     set_targets(&mut data, servos, &home);
     data.forward()?;
-    let free = free_joint(model);
-    let base_body = free.map(|j| model.jnt_bodyid()[j] as usize);
+    let free = model.free_joint();
+    let base_body = free.map(|f| f.body);
     let base_pos = |d: &Data| base_body.map_or([0.0; 3], |b| d.xpos()[b]);
     let start = base_pos(&data);
     let start_quat = base_body.map(|b| data.xquat()[b]);
@@ -304,7 +282,7 @@ fn physics_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &Check
     };
     Ok((
         StepReport {
-            name: "physics",
+            name: "physics".into(),
             passed: cause.is_none(),
             metrics,
             details: vec![format!("PD hold of the home pose for {} s with {} servos", opts.hold_secs, servos.len())],
@@ -409,12 +387,12 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
     } else {
         None
     };
-    Ok(StepReport { name: "sensors", passed: cause.is_none(), metrics, details, cause })
+    Ok(StepReport { name: "sensors".into(), passed: cause.is_none(), metrics, details, cause })
 }
 
 fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckOptions) -> Result<StepReport> {
     let home = crate::control::nominal_pose(&model);
-    let free = free_joint(&model);
+    let free = model.free_joint();
     let dt = model.timestep_secs();
     let mut data = Data::new(model.clone())?;
     let mut details = Vec::new();
@@ -423,8 +401,7 @@ fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckO
     let mut growing_any = false;
     let pin = |d: &mut Data| {
         if let Some(f) = free {
-            let qa = model.jnt_qposadr()[f] as usize;
-            let va = model.jnt_dofadr()[f] as usize;
+            let (qa, va) = (f.qpos_adr, f.dof);
             d.qpos_mut()[qa..qa + 7].copy_from_slice(&home[qa..qa + 7]);
             d.qvel_mut()[va..va + 6].fill(0.0);
         }
@@ -433,7 +410,7 @@ fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckO
         let adr = model.jnt_qposadr()[j] as usize;
         let dof = model.jnt_dofadr()[j] as usize;
         let q0 = home[adr];
-        let amp = if model.jnt_limited()[j] != 0 {
+        let amp = if model.jnt_limited()[j] {
             let [lo, hi] = model.jnt_range()[j];
             let width = hi - lo;
             let a = opts.step_amplitude.min(0.25 * width);
@@ -537,7 +514,7 @@ fn control_step(model: Arc<Model>, servos: &[(usize, usize, f64)], opts: &CheckO
         Some("tracking error: effort limits or gains too low for the load".to_string())
     };
     Ok(StepReport {
-        name: "control",
+        name: "control".into(),
         passed: failures == 0 && !servos.is_empty() || servos.is_empty(),
         metrics: vec![
             metric("worst step error (last 0.1 s, of step)", worst_err * 100.0, "%"),
@@ -568,7 +545,7 @@ fn integration_step(model: &Arc<Model>, servos: &[(usize, usize, f64)], opts: &C
         )
     });
     Ok(StepReport {
-        name: "integration",
+        name: "integration".into(),
         passed: cause.is_none(),
         metrics: vec![
             metric("real-time factor", rtf, "×"),

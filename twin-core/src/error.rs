@@ -210,6 +210,10 @@ pub enum Error {
 
     #[error("invalid model edit: {0}")]
     InvalidEdit(String),
+
+    /// Options that don't fit together (e.g. the replay controller without a trajectory).
+    #[error("{0}")]
+    Options(String),
 }
 
 /// `Result` with [`Error`].

@@ -1,7 +1,11 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
-//! URDF/Gazebo → MJCF converter ([`convert`]), the step-by-step model validation ([`check`]),
-//! controllers ([`control`]), ROS 2 logs ([`log`]), simulation runs with recording ([`sim`])
-//! and, with the cargo feature `rerun`, rerun recordings (`viz`).
+//! URDF/Gazebo → MJCF converter ([`convert`]), the robot loaded once ([`robot`]), the one
+//! rollout engine ([`engine`]), the step-by-step model validation ([`check`]), controllers
+//! ([`control`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
+//! simulation runs with recording ([`sim`]) and, with the cargo feature `rerun`, rerun
+//! recordings (`viz`).
+//!
+//! `unsafe` code is denied everywhere but in [`mj`], the MuJoCo wrapper.
 //!
 //! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
 //! a small C shim and comes back as [`Error::MuJoCo`].
@@ -19,14 +23,20 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
+#![deny(unsafe_code)]
+
 pub mod check;
 pub mod control;
 pub mod convert;
+pub mod engine;
 pub mod error;
 pub mod fsio;
 pub mod log;
+#[allow(unsafe_code)]
 pub mod mj;
+pub mod robot;
 pub mod sim;
+pub mod topics;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;

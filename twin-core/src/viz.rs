@@ -354,11 +354,7 @@ pub fn record_log(
     summary.duration_secs = trajectory.duration_secs();
 
     let topics = log.info()?.topics;
-    let free_adr = robot.base_body.and_then(|b| {
-        (0..model.njnt())
-            .find(|&j| model.jnt_bodyid()[j] as usize == b && model.jnt_type()[j] as u32 == sys::mjtJoint_mjJNT_FREE)
-            .map(|j| model.jnt_qposadr()[j] as usize)
-    });
+    let free_adr = robot.base.map(|b| b.qpos_adr);
     let mut odom: Vec<(f64, [f64; 3], [f64; 4])> = Vec::new();
     if free_adr.is_some() && topics.iter().any(|t| t.topic == options.odom_topic) {
         let (msgs, _) = log.read_typed::<Odometry>(&options.odom_topic)?;

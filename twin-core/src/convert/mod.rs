@@ -289,7 +289,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
 fn home_pose(model: &Model) -> Vec<f64> {
     let mut q = model.qpos0().to_vec();
     for j in 0..model.njnt() {
-        if model.jnt_limited()[j] != 0 && matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
+        if model.jnt_limited()[j] && matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
             let [lo, hi] = model.jnt_range()[j];
             let a = model.jnt_qposadr()[j] as usize;
             q[a] = q[a].clamp(lo, hi);

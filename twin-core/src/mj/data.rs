@@ -1,5 +1,5 @@
 use super::model::{raw_slice, raw_slice_mut};
-use super::{Model, ffi, guarded, init};
+use super::{Model, ModelLayout, ffi, guarded, init};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
 use std::ffi::c_int;
@@ -188,29 +188,12 @@ impl Data {
     /// `mjData` per randomized episode.
     ///
     /// # Errors
-    /// [`Error::Size`] if `model` does not have the current model's sizes; [`Error::MuJoCo`] as
+    /// [`Error::Size`] naming the first size field (of all `nq` … `nbuffer`) in which `model`
+    /// differs from the current model; [`Error::MuJoCo`] as
     /// [`Data::reset`].
     pub fn set_model(&mut self, model: Arc<Model>) -> Result<()> {
-        let sizes = |m: &Model| {
-            [
-                ("nq of the model given to Data::set_model", m.nq()),
-                ("nv of the model given to Data::set_model", m.nv()),
-                ("nu of the model given to Data::set_model", m.nu()),
-                ("na of the model given to Data::set_model", m.raw().na as usize),
-                ("nbody of the model given to Data::set_model", m.nbody()),
-                ("njnt of the model given to Data::set_model", m.njnt()),
-                ("ngeom of the model given to Data::set_model", m.ngeom()),
-                ("nsite of the model given to Data::set_model", m.nsite()),
-                ("nsensordata of the model given to Data::set_model", m.nsensordata()),
-                ("nbuffer of the model given to Data::set_model", m.nbuffer()),
-                ("narena of the model given to Data::set_model", m.narena()),
-            ]
-        };
-        if let Some(((what, expected), (_, got))) =
-            sizes(&self.model).into_iter().zip(sizes(&model)).find(|((_, a), (_, b))| a != b)
-        {
-            return Err(Error::Size { what, expected, got });
-        }
+        // Every size must match: the mjData buffer's layout depends on all of them.
+        ModelLayout::of(&self.model).require_same(&ModelLayout::of(&model))?;
         self.model = model;
         self.reset()
     }

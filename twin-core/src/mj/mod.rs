@@ -11,7 +11,7 @@ mod model;
 
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
-pub use model::{JointType, Model, ObjType};
+pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 
 use crate::error::{Error, Result};
 use std::ffi::{CStr, c_char, c_int};

@@ -187,22 +187,32 @@ pub(super) unsafe fn raw_slice_mut<'a, T>(ptr: *mut T, len: usize) -> &'a mut [T
     }
 }
 
-/// Read-only typed views of `mjModel` arrays: `name: element type = row count field`.
-/// Arrays with several columns are viewed as fixed-size rows (`[f64; 3]` for `nbody x 3`).
+/// Read-only typed views of `mjModel` arrays. Each row states the C element type, the row width
+/// and the count field: `name: elem x width = count;` views `count` rows of `[elem; width]`
+/// (`name: elem = count;` rows of one `elem`). The element type is checked against the C field
+/// at compile time (a pointer of another type does not coerce); the width is MuJoCo's documented
+/// one (`mjmodel.h`, e.g. `nbody x 3`).
 macro_rules! model_arrays {
-    ($( $(#[$doc:meta])* $name:ident : $ty:ty = $count:ident; )*) => {
+    (@one $(#[$doc:meta])* $name:ident, $elem:ident, $row:ty, $count:ident) => {
+        $(#[$doc])*
+        pub fn $name(&self) -> &[$row] {
+            let m = self.raw();
+            let ptr: *mut $elem = m.$name;
+            // SAFETY: MuJoCo allocates this array with `$count` rows of `$row` (the element type
+            // is checked above; the width is the one mjmodel.h documents), aligned for `$elem`;
+            // the model is immutable while `self` is borrowed.
+            unsafe { raw_slice(ptr as *const $row, m.$count as usize) }
+        }
+    };
+    ($( $(#[$doc:meta])* $name:ident : $elem:ident $(x $width:literal)? = $count:ident; )*) => {
         impl Model {
             $(
-                $(#[$doc])*
-                pub fn $name(&self) -> &[$ty] {
-                    let m = self.raw();
-                    // SAFETY: MuJoCo allocates this array with `$count` rows of exactly the row
-                    // type's size and alignment; the model is immutable while `self` is borrowed.
-                    unsafe { raw_slice(m.$name as *const $ty, m.$count as usize) }
-                }
+                model_arrays!(@one $(#[$doc])* $name, $elem, model_arrays!(@row $elem $(, $width)?), $count);
             )*
         }
     };
+    (@row $elem:ident) => { $elem };
+    (@row $elem:ident, $width:literal) => { [$elem; $width] };
 }
 
 model_arrays! {
@@ -213,11 +223,11 @@ model_arrays! {
     /// Mass of each body in kg (len `nbody`).
     body_mass: f64 = nbody;
     /// Principal inertia of each body in kg·m², in its inertial frame (len `nbody`).
-    body_inertia: [f64; 3] = nbody;
+    body_inertia: f64 x 3 = nbody;
     /// Centre of mass in the body frame, metres (len `nbody`).
-    body_ipos: [f64; 3] = nbody;
+    body_ipos: f64 x 3 = nbody;
     /// Orientation of the inertial frame in the body frame, quaternion w x y z (len `nbody`).
-    body_iquat: [f64; 4] = nbody;
+    body_iquat: f64 x 4 = nbody;
     /// Mass of each body's subtree, kg (len `nbody`; derived, set by `mj_setConst`).
     body_subtreemass: f64 = nbody;
     /// First joint of each body, -1 if none (len `nbody`).
@@ -241,11 +251,11 @@ model_arrays! {
     /// Address of each joint's first DOF in `qvel` (len `njnt`).
     jnt_dofadr: i32 = njnt;
     /// Joint axis in the body frame (len `njnt`).
-    jnt_axis: [f64; 3] = njnt;
+    jnt_axis: f64 x 3 = njnt;
     /// Whether each joint's range is enforced (len `njnt`).
-    jnt_limited: u8 = njnt;
+    jnt_limited: bool = njnt;
     /// Joint range, radians or metres (len `njnt`).
-    jnt_range: [f64; 2] = njnt;
+    jnt_range: f64 x 2 = njnt;
     /// Joint each DOF belongs to (len `nv`).
     dof_jntid: i32 = nv;
     /// Viscous damping per DOF, N·m·s/rad or N·s/m (len `nv`).
@@ -254,9 +264,9 @@ model_arrays! {
     /// `mj_setConst`): 1 / effective inertia, 1/(kg·m²) or 1/kg.
     dof_invweight0: f64 = nv;
     /// Whether each joint's total actuator force is limited (len `njnt`).
-    jnt_actfrclimited: u8 = njnt;
+    jnt_actfrclimited: bool = njnt;
     /// Range of each joint's total actuator force, N·m or N (URDF `effort`) (len `njnt`).
-    jnt_actfrcrange: [f64; 2] = njnt;
+    jnt_actfrcrange: f64 x 2 = njnt;
     /// Dry friction loss per DOF, N·m or N (len `nv`).
     dof_frictionloss: f64 = nv;
     /// Armature (reflected rotor inertia) per DOF, kg·m² or kg (len `nv`).
@@ -264,31 +274,31 @@ model_arrays! {
     /// Body each geom belongs to (len `ngeom`).
     geom_bodyid: i32 = ngeom;
     /// Sliding, torsional and rolling friction of each geom (len `ngeom`).
-    geom_friction: [f64; 3] = ngeom;
+    geom_friction: f64 x 3 = ngeom;
     /// Geometric type of each geom (`mjtGeom`) (len `ngeom`).
     geom_type: i32 = ngeom;
     /// Type-specific size parameters of each geom, metres (len `ngeom`).
-    geom_size: [f64; 3] = ngeom;
+    geom_size: f64 x 3 = ngeom;
     /// Radius of each geom's bounding sphere, metres (len `ngeom`).
     geom_rbound: f64 = ngeom;
     /// Transmission type of each actuator (`mjtTrn`) (len `nu`).
     actuator_trntype: i32 = nu;
     /// Transmission target ids of each actuator (len `nu`).
-    actuator_trnid: [i32; 2] = nu;
+    actuator_trnid: i32 x 2 = nu;
     /// Gear of each actuator (len `nu`).
-    actuator_gear: [f64; 6] = nu;
+    actuator_gear: f64 x 6 = nu;
     /// Whether each actuator's control is clamped to its range (len `nu`).
-    actuator_ctrllimited: u8 = nu;
+    actuator_ctrllimited: bool = nu;
     /// Control range of each actuator (len `nu`).
-    actuator_ctrlrange: [f64; 2] = nu;
+    actuator_ctrlrange: f64 x 2 = nu;
     /// Whether each actuator's force is clamped to its force range (len `nu`).
-    actuator_forcelimited: u8 = nu;
+    actuator_forcelimited: bool = nu;
     /// Force range of each actuator, N·m or N (len `nu`).
-    actuator_forcerange: [f64; 2] = nu;
+    actuator_forcerange: f64 x 2 = nu;
     /// Gain parameters of each actuator (`kp` of position actuators is entry 0) (len `nu`).
-    actuator_gainprm: [f64; 10] = nu;
+    actuator_gainprm: f64 x 10 = nu;
     /// Bias parameters of each actuator (len `nu`).
-    actuator_biasprm: [f64; 10] = nu;
+    actuator_biasprm: f64 x 10 = nu;
     /// Type of each sensor (`mjtSensor`) (len `nsensor`).
     sensor_type: i32 = nsensor;
     /// Number of values each sensor writes (len `nsensor`).
@@ -312,13 +322,13 @@ model_arrays! {
     /// Visibility group of each geom (len `ngeom`).
     geom_group: i32 = ngeom;
     /// Position of each geom in its body frame, metres (len `ngeom`).
-    geom_pos: [f64; 3] = ngeom;
+    geom_pos: f64 x 3 = ngeom;
     /// Orientation of each geom in its body frame, quaternion w x y z (len `ngeom`).
-    geom_quat: [f64; 4] = ngeom;
+    geom_quat: f64 x 4 = ngeom;
     /// Colour of each geom when it has no material (len `ngeom`).
-    geom_rgba: [f32; 4] = ngeom;
+    geom_rgba: f32 x 4 = ngeom;
     /// Colour of each material (len `nmat`).
-    mat_rgba: [f32; 4] = nmat;
+    mat_rgba: f32 x 4 = nmat;
     /// First vertex of each mesh in [`Model::mesh_vert`] (len `nmesh`).
     mesh_vertadr: i32 = nmesh;
     /// Vertex count of each mesh (len `nmesh`).
@@ -328,23 +338,274 @@ model_arrays! {
     /// Face count of each mesh (len `nmesh`).
     mesh_facenum: i32 = nmesh;
     /// Vertices of all meshes, in their geom's frame, metres (len `nmeshvert`).
-    mesh_vert: [f32; 3] = nmeshvert;
+    mesh_vert: f32 x 3 = nmeshvert;
     /// Triangles of all meshes as vertex indices relative to the mesh's first vertex (len `nmeshface`).
-    mesh_face: [i32; 3] = nmeshface;
+    mesh_face: i32 x 3 = nmeshface;
     /// Contact priority of each geom (len `ngeom`).
     geom_priority: i32 = ngeom;
     /// Body each site belongs to (len `nsite`).
     site_bodyid: i32 = nsite;
     /// Position of each site in its body frame, metres (len `nsite`).
-    site_pos: [f64; 3] = nsite;
+    site_pos: f64 x 3 = nsite;
     /// Orientation of each site in its body frame, quaternion w x y z (len `nsite`).
-    site_quat: [f64; 4] = nsite;
+    site_quat: f64 x 4 = nsite;
     /// Id of the body each body is welded to (itself when it has joints) (len `nbody`).
     body_weldid: i32 = nbody;
     /// Gain type of each actuator (`mjtGain`) (len `nu`).
     actuator_gaintype: i32 = nu;
     /// Bias type of each actuator (`mjtBias`) (len `nu`).
     actuator_biastype: i32 = nu;
+    /// Body each camera is attached to (len `ncam`).
+    cam_bodyid: i32 = ncam;
+}
+
+/// The free joint of a floating-base model: which body it moves and where its state is.
+/// `qpos[qpos_adr..+7]` = base position (world, m) then orientation `w x y z`
+/// (world_from_base); `qvel[dof..+6]` = linear velocity (world, m/s) then angular velocity
+/// (base frame, rad/s).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct FreeJoint {
+    /// Joint id.
+    pub joint: usize,
+    /// The body it moves (the floating base).
+    pub body: usize,
+    /// Address of its 7 entries in `qpos`.
+    pub qpos_adr: usize,
+    /// Address of its 6 DOFs in `qvel`.
+    pub dof: usize,
+}
+
+/// Every size of a model (`nq` … `nbuffer`, the `mjModel` fields that fix the memory layout of
+/// its `mjData`): two models with equal layouts can share one `mjData`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct ModelLayout {
+    sizes: [i64; MODEL_SIZE_FIELDS.len()],
+}
+
+/// Names of the `mjModel` size fields, in struct order (`nq` first, `nbuffer` last).
+const MODEL_SIZE_FIELDS: [&str; 98] = [
+    "nq",
+    "nv",
+    "nu",
+    "nactuator",
+    "nout",
+    "na",
+    "nbody",
+    "nbvh",
+    "nbvhstatic",
+    "nbvhdynamic",
+    "noct",
+    "njnt",
+    "ntree",
+    "nM",
+    "nB",
+    "nC",
+    "nD",
+    "ngeom",
+    "nsite",
+    "ncam",
+    "nlight",
+    "nflex",
+    "nflexnode",
+    "nflexvert",
+    "nflexedge",
+    "nflexelem",
+    "nflexelemdata",
+    "nflexstiffness",
+    "nflexbending",
+    "nefm0dof",
+    "nefm0L",
+    "nefmCvert",
+    "nflexelemedge",
+    "nflexshelldata",
+    "nflextexcoord",
+    "nJfe",
+    "nmesh",
+    "nmeshvert",
+    "nmeshnormal",
+    "nmeshtexcoord",
+    "nmeshface",
+    "nmeshgraph",
+    "nmeshpoly",
+    "nmeshpolyvert",
+    "nmeshpolymap",
+    "nskin",
+    "nskinvert",
+    "nskintexvert",
+    "nskinface",
+    "nskinbone",
+    "nskinbonevert",
+    "nhfield",
+    "nhfielddata",
+    "ntex",
+    "ntexdata",
+    "nmat",
+    "npair",
+    "nexclude",
+    "neq",
+    "ntendon",
+    "nJten",
+    "nwrap",
+    "nsensor",
+    "nnumeric",
+    "nnumericdata",
+    "ntext",
+    "ntextdata",
+    "ntuple",
+    "ntupledata",
+    "nkey",
+    "nmocap",
+    "nplugin",
+    "npluginattr",
+    "nuser_body",
+    "nuser_jnt",
+    "nuser_geom",
+    "nuser_site",
+    "nuser_cam",
+    "nuser_tendon",
+    "nuser_actuator",
+    "nuser_sensor",
+    "nnames",
+    "npaths",
+    "nplastic",
+    "nnames_map",
+    "nJmom",
+    "ngravcomp",
+    "nemax",
+    "njmax",
+    "nconmax",
+    "npolygonmax",
+    "nmeshdegmax",
+    "nuserdata",
+    "nsensordata",
+    "npluginstate",
+    "nhistory",
+    "narena",
+    "nbuffer",
+];
+
+impl ModelLayout {
+    /// The layout of `model`.
+    pub fn of(model: &Model) -> ModelLayout {
+        let m = model.raw();
+        let sizes = [
+            m.nq,
+            m.nv,
+            m.nu,
+            m.nactuator,
+            m.nout,
+            m.na,
+            m.nbody,
+            m.nbvh,
+            m.nbvhstatic,
+            m.nbvhdynamic,
+            m.noct,
+            m.njnt,
+            m.ntree,
+            m.nM,
+            m.nB,
+            m.nC,
+            m.nD,
+            m.ngeom,
+            m.nsite,
+            m.ncam,
+            m.nlight,
+            m.nflex,
+            m.nflexnode,
+            m.nflexvert,
+            m.nflexedge,
+            m.nflexelem,
+            m.nflexelemdata,
+            m.nflexstiffness,
+            m.nflexbending,
+            m.nefm0dof,
+            m.nefm0L,
+            m.nefmCvert,
+            m.nflexelemedge,
+            m.nflexshelldata,
+            m.nflextexcoord,
+            m.nJfe,
+            m.nmesh,
+            m.nmeshvert,
+            m.nmeshnormal,
+            m.nmeshtexcoord,
+            m.nmeshface,
+            m.nmeshgraph,
+            m.nmeshpoly,
+            m.nmeshpolyvert,
+            m.nmeshpolymap,
+            m.nskin,
+            m.nskinvert,
+            m.nskintexvert,
+            m.nskinface,
+            m.nskinbone,
+            m.nskinbonevert,
+            m.nhfield,
+            m.nhfielddata,
+            m.ntex,
+            m.ntexdata,
+            m.nmat,
+            m.npair,
+            m.nexclude,
+            m.neq,
+            m.ntendon,
+            m.nJten,
+            m.nwrap,
+            m.nsensor,
+            m.nnumeric,
+            m.nnumericdata,
+            m.ntext,
+            m.ntextdata,
+            m.ntuple,
+            m.ntupledata,
+            m.nkey,
+            m.nmocap,
+            m.nplugin,
+            m.npluginattr,
+            m.nuser_body,
+            m.nuser_jnt,
+            m.nuser_geom,
+            m.nuser_site,
+            m.nuser_cam,
+            m.nuser_tendon,
+            m.nuser_actuator,
+            m.nuser_sensor,
+            m.nnames,
+            m.npaths,
+            m.nplastic,
+            m.nnames_map,
+            m.nJmom,
+            m.ngravcomp,
+            m.nemax,
+            m.njmax,
+            m.nconmax,
+            m.npolygonmax,
+            m.nmeshdegmax,
+            m.nuserdata,
+            m.nsensordata,
+            m.npluginstate,
+            m.nhistory,
+            m.narena,
+            m.nbuffer,
+        ];
+        ModelLayout { sizes }
+    }
+
+    /// `Ok` when `other` has this layout, else [`Error::Size`] naming the first size field
+    /// that differs (e.g. `njnt: expected 2, got 1`).
+    ///
+    /// # Errors
+    /// [`Error::Size`].
+    pub fn require_same(&self, other: &ModelLayout) -> Result<()> {
+        match self.sizes.iter().zip(&other.sizes).position(|(a, b)| a != b) {
+            None => Ok(()),
+            Some(k) => Err(Error::Size {
+                what: MODEL_SIZE_FIELDS[k],
+                expected: self.sizes[k] as usize,
+                got: other.sizes[k] as usize,
+            }),
+        }
+    }
 }
 
 /// Attributes that hold names or file paths, never numbers.
@@ -699,6 +960,16 @@ impl Model {
         self.body_mass().iter().sum()
     }
 
+    /// The free joint (the floating base), if the model has one: the first in joint order.
+    pub fn free_joint(&self) -> Option<FreeJoint> {
+        (0..self.njnt()).find(|&j| self.joint_type(j) == JointType::Free).map(|j| FreeJoint {
+            joint: j,
+            body: self.jnt_bodyid()[j] as usize,
+            qpos_adr: self.jnt_qposadr()[j] as usize,
+            dof: self.jnt_dofadr()[j] as usize,
+        })
+    }
+
     /// Type of joint `id`.
     pub fn joint_type(&self, id: usize) -> JointType {
         match self.jnt_type()[id] as u32 {
@@ -729,6 +1000,18 @@ impl Model {
     /// [`Error::NotFound`].
     pub fn require_id(&self, obj: ObjType, name: &str) -> Result<usize> {
         self.id(obj, name).ok_or_else(|| Error::NotFound { kind: obj.label(), name: name.to_string() })
+    }
+
+    /// The model's own name (`<mujoco model="…">`, the URDF's `<robot name>`); empty when
+    /// unnamed.
+    pub fn model_name(&self) -> &str {
+        // The model's name is the first string of the name buffer (mjModel.names).
+        let p = self.raw().names;
+        if p.is_null() || self.raw().nnames == 0 {
+            return "";
+        }
+        // SAFETY: MuJoCo names are NUL-terminated; the buffer outlives the borrow of self.
+        unsafe { CStr::from_ptr(p) }.to_str().unwrap_or("")
     }
 
     /// Name of object `id` of kind `obj`; empty for unnamed objects or out-of-range ids.

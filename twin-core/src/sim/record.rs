@@ -27,7 +27,7 @@ use crate::log::{
     Float64MultiArray, Imu, JointState, LogWriter, Odometry, TfMessage, Topic, WrenchStamped, WriteSummary,
     WriterOptions,
 };
-use crate::mj::{Data, JointType, ObjType};
+use crate::mj::{Data, ObjType};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use std::path::PathBuf;
@@ -200,7 +200,7 @@ struct RerunOut {
 /// Records a run. Create it before the loop, call [`Recording::record`] once per step with the
 /// state of that step, then [`Recording::finish`].
 pub struct Recording {
-    imus: Vec<super::ImuInfo>,
+    imus: Vec<crate::robot::Imu>,
     base: Option<(usize, usize)>,
     /// (qpos address, dof) of each `/joint_states` joint.
     joints: Vec<(usize, usize)>,
@@ -221,6 +221,8 @@ pub struct Recording {
     imu_values: Vec<[f64; 6]>,
     /// Which IMU topics are due this tick.
     imu_due: Vec<bool>,
+    /// `/contacts/<body>` topic of each body (from the topic table).
+    contact_topics: Vec<String>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
@@ -245,13 +247,9 @@ impl Recording {
     pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {
         let model = &robot.model;
         let dt_nanos = ((model.timestep_secs() * 1e9).round() as u64).max(1);
-        let joints: Vec<usize> = robot.joints();
+        let joints: Vec<usize> = robot.joints.iter().map(|j| j.id).collect();
         let joint_names: Vec<String> = joints.iter().map(|&j| model.name(ObjType::Joint, j).to_string()).collect();
-        let base = robot.base_body.and_then(|b| {
-            (0..model.njnt())
-                .find(|&j| model.jnt_bodyid()[j] as usize == b && model.joint_type(j) == JointType::Free)
-                .map(|j| (b, model.jnt_dofadr()[j] as usize))
-        });
+        let base = robot.base.map(|b| (b.body, b.dof));
         let body_frames: Vec<String> = (0..model.nbody()).map(|b| frame_name(robot, b)).collect();
         let root_frame = if base.is_some() { "odom" } else { "world" };
         let tf_links = (1..model.nbody())
@@ -283,12 +281,13 @@ impl Recording {
             touching: vec![false; model.nbody()],
             imu_values: vec![[0.0; 6]; robot.imus.len()],
             imu_due: Vec::new(),
+            contact_topics: Vec::new(),
         };
 
         if let (Some(path), Some(wanted)) = (&options.mcap, &options.topics) {
             // A topic twin never publishes is a typo: refuse it before creating the file.
             let mut known: Vec<String> = vec!["/joint_states".into(), "/tf".into(), "/tf_static".into()];
-            known.extend(robot.imus.iter().map(|i| i.topic.clone()));
+            known.extend(robot.imus.iter().map(|i| i.topic().to_string()));
             if base.is_some() {
                 known.push("/odom".into());
             }
@@ -321,28 +320,43 @@ impl Recording {
                 counts: Vec::new(),
                 writer,
             };
-            out.joint_states = out.add_wanted("/joint_states")?;
+            // Topic names come from the robot's one topic table.
+            let table = crate::topics::TopicTable::new(
+                robot,
+                &crate::topics::TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
+            );
+            let name = |kind| table.of_kind(kind).map(|t| t.name.clone());
+            use crate::topics::TopicKind;
+            let (js, odom, tf, commands, tf_static) = (
+                name(TopicKind::JointStates).unwrap_or_default(),
+                name(TopicKind::Odometry),
+                name(TopicKind::Tf).unwrap_or_default(),
+                name(TopicKind::Commands).unwrap_or_default(),
+                name(TopicKind::TfStatic),
+            );
+            rec.contact_topics = (0..model.nbody()).map(|b| name(TopicKind::Contacts(b)).unwrap_or_default()).collect();
+            out.joint_states = out.add_wanted(&js)?;
             for imu in &robot.imus {
-                let rate = imu.update_rate_hz.unwrap_or(options.state_rate_hz);
-                let topic = out.add_wanted(&imu.topic)?;
+                let rate = imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz);
+                let topic = out.add_wanted(imu.topic())?;
                 out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
             }
-            if base.is_some() {
-                out.odom = out.add_wanted("/odom")?;
+            if let Some(odom) = odom {
+                out.odom = out.add_wanted(&odom)?;
             }
-            out.tf = out.add_wanted("/tf")?;
-            out.commands = out.add_wanted(&format!("/{}/joint_commands", robot.name))?;
+            out.tf = out.add_wanted(&tf)?;
+            out.commands = out.add_wanted(&commands)?;
             // IMU frames that are no body: a static transform from their body.
-            let statics: Vec<&super::ImuInfo> =
-                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.frame_id)).collect();
-            if !statics.is_empty() && out.wants("/tf_static") {
-                let topic: Topic<TfMessage> = out.add("/tf_static")?;
+            let statics: Vec<&crate::robot::Imu> =
+                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
+            if let Some(tf_static) = tf_static.filter(|t| out.wants(t)) {
+                let topic: Topic<TfMessage> = out.add(&tf_static)?;
                 let body_frames = &rec.body_frames;
                 out.writer.write_with(topic, 0, |w| {
                     w.seq_len(statics.len());
                     for imu in &statics {
                         w.header(0, &body_frames[imu.body]);
-                        w.string(&imu.frame_id);
+                        w.string(&imu.meta.frame_id);
                         w.f64_fixed(&imu.body_from_imu.0);
                         w.f64_fixed(&xyzw(imu.body_from_imu.1));
                     }
@@ -405,8 +419,9 @@ impl Recording {
                 let s = data.sensordata();
                 let mut v = [0.0; 6];
                 for i in 0..3 {
-                    v[i] = s[imu.gyro_adr + i] + imu.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                    v[3 + i] = s[imu.accel_adr + i] + imu.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                    v[i] = s[imu.gyro_adr + i] + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                    v[3 + i] =
+                        s[imu.accel_adr + i] + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
                 }
                 self.imu_values[k] = v;
             }
@@ -454,11 +469,7 @@ impl Recording {
 
                 for b in 1..self.touching.len() {
                     if self.touching[b] && out.contacts[b].is_none() && out.wants("/contacts/*") {
-                        let name: String = self.body_frames[b]
-                            .chars()
-                            .map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' })
-                            .collect();
-                        out.contacts[b] = Some(out.add(&format!("/contacts/{name}"))?);
+                        out.contacts[b] = Some(out.add(&self.contact_topics[b])?);
                     }
                     let Some(topic) = out.contacts[b] else { continue };
                     let m = data.xmat()[b];
@@ -495,10 +506,10 @@ impl Recording {
                     None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
                 };
                 let v = self.imu_values[k];
-                let (g2, a2) = (imu.gyro_noise_std.powi(2), imu.accel_noise_std.powi(2));
+                let (g2, a2) = (imu.meta.gyro_noise_std.powi(2), imu.meta.accel_noise_std.powi(2));
                 let Some(topic) = out.imus[k].topic else { continue };
                 out.writer.write_with(topic, t_nanos, |w| {
-                    w.header(stamp, &imu.frame_id);
+                    w.header(stamp, &imu.meta.frame_id);
                     w.f64_fixed(&xyzw(q));
                     w.f64_fixed(&[0.0; 9]);
                     w.f64_fixed(&v[..3]);
@@ -541,7 +552,7 @@ impl Recording {
                 for (imu, v) in self.imus.iter().zip(&self.imu_values) {
                     for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate()
                     {
-                        rec.scalar(&format!("imu/{}/{axis}", imu.name), v[i])?;
+                        rec.scalar(&format!("imu/{}/{axis}", imu.meta.name), v[i])?;
                     }
                 }
                 for b in 1..self.touching.len() {
@@ -616,6 +627,16 @@ impl Recording {
             }
         }
         Ok(summary)
+    }
+}
+
+/// A recording is the engine's recorder: it records each step's instant t (see
+/// [`crate::engine::StepView`]).
+impl crate::engine::Observer for Recording {
+    fn observe(&mut self, step: &crate::engine::StepView<'_>) -> Result<crate::engine::Flow> {
+        let sample = StepSample { time_secs: step.time_secs, qpos: step.qpos, qvel: step.qvel, command: step.command };
+        self.record(&sample, step.data)?;
+        Ok(crate::engine::Flow::Continue)
     }
 }
 

@@ -1,0 +1,425 @@
+//! The one rollout engine: every simulation twin runs (`twin sim`, each `twin randomize`
+//! episode, `twin check`'s steps) is a configuration of [`Engine::run`].
+//!
+//! Each step runs the same fixed phases:
+//!
+//! 1. **sensors**: the observation the controller gets: the state and `sensordata` as the last
+//!    physics step left them, corrupted by the [`SensorModel`] (white noise, bias) and delayed
+//!    by its latency (a ring of past observations);
+//! 2. **controller**: [`Controller::compute`] writes the command, which is scaled
+//!    ([`Episode::command_scale`]), checked for saturation and applied ([`Actuation::apply`]);
+//! 3. **disturbances**: each [`Disturbance`] acts on the state (pushes, pinned bases);
+//! 4. **physics**: one `mj_step`;
+//! 5. **observers**: each [`Observer`] sees the step ([`StepView`]) in order and may end the
+//!    rollout ([`Flow`]). Fall and divergence detection, metrics ([`Metric`]), verdicts
+//!    ([`Check`]) and recorders are observers.
+//!
+//! Random numbers (sensor noise, disturbances) come from one stream given to [`Engine::run`],
+//! drawn in this fixed order, so a rollout is a pure function of its inputs and seed.
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use rand::SeedableRng;
+//! use twin_core::control::{PdHold, PdHoldOptions};
+//! use twin_core::engine::{Engine, Episode, observers::Divergence};
+//! use twin_core::robot::Robot;
+//!
+//! let robot = Robot::load("models/humanoid.urdf")?;
+//! let mut controller = PdHold::new(&robot.model, PdHoldOptions::default());
+//! let mut divergence = Divergence::default();
+//! let episode = Episode { steps: 1000, ..Episode::default() };
+//! let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+//! let outcome = Engine::new().run(&robot.model, &episode, &mut controller, &mut [], &mut [&mut divergence], &mut rng)?;
+//! println!("{} steps", outcome.steps);
+//! # Ok::<(), twin_core::Error>(())
+//! ```
+
+pub mod disturb;
+pub mod observers;
+
+pub use crate::control::{Actuation, Controller, Observation};
+
+use crate::error::{Error, Result};
+use crate::mj::{Data, Model};
+use rand::Rng;
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
+use std::sync::Arc;
+
+/// What an observer wants after a step.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Flow {
+    /// Go on.
+    Continue,
+    /// End the rollout after this step; the remaining observers still see it.
+    EndAfterStep,
+    /// End the rollout now; the remaining observers do not see this step (e.g. a diverged
+    /// state that would poison their numbers).
+    EndNow,
+}
+
+/// One step as observers see it. `time_secs`, `qpos`, `qvel` and `command` describe the
+/// instant t at the start of the step; `data` is the state after the physics step: its
+/// `qpos`/`qvel`/`time` are at t + dt, while its derived quantities (body poses, sensors,
+/// contacts, actuator forces) come from the forward pass at t, so they match `qpos`/`qvel`.
+#[derive(Clone, Copy)]
+pub struct StepView<'a> {
+    /// Step index, from 0.
+    pub index: u64,
+    /// Time at the start of the step, seconds.
+    pub time_secs: f64,
+    /// Simulated time after the step, seconds (`(index + 1) · dt`).
+    pub sim_secs: f64,
+    /// Timestep, seconds.
+    pub dt_secs: f64,
+    /// Joint positions at `time_secs` (len `nq`).
+    pub qpos: &'a [f64],
+    /// Joint velocities at `time_secs` (len `nv`).
+    pub qvel: &'a [f64],
+    /// The command applied during the step (after scaling).
+    pub command: &'a [f64],
+    /// Whether some command entry was at a finite limit.
+    pub saturated: bool,
+    /// Where the command went.
+    pub actuation: Actuation,
+    /// The simulation after the step (see above).
+    pub data: &'a Data,
+}
+
+/// Watches a rollout: fall and divergence detection, metrics, checks, recorders.
+pub trait Observer {
+    /// Called once the initial state is set (positions, velocities and derived quantities at
+    /// time 0), before the first step. `model` is this rollout's model.
+    ///
+    /// # Errors
+    /// When the observer can't watch this model.
+    fn start(&mut self, _model: &Model, _data: &Data) -> Result<()> {
+        Ok(())
+    }
+
+    /// Called after every physics step.
+    ///
+    /// # Errors
+    /// Ends the rollout with this error (e.g. a recorder that can't write).
+    fn observe(&mut self, step: &StepView<'_>) -> Result<Flow>;
+}
+
+/// One measured number.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Measurement {
+    /// What it is.
+    pub name: String,
+    /// Its value.
+    pub value: f64,
+    /// Its unit.
+    pub unit: &'static str,
+}
+
+impl Measurement {
+    /// A measurement.
+    pub fn new(name: impl Into<String>, value: f64, unit: &'static str) -> Measurement {
+        Measurement { name: name.into(), value, unit }
+    }
+}
+
+/// An observer that measures something over a rollout.
+pub trait Metric: Observer {
+    /// The measurements so far.
+    fn measurements(&self) -> Vec<Measurement>;
+}
+
+/// A verdict: PASS or FAIL, with the numbers it rests on.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Verdict {
+    /// What was checked.
+    pub name: String,
+    /// Whether it passed.
+    pub passed: bool,
+    /// The numbers behind the verdict.
+    pub metrics: Vec<Measurement>,
+    /// Extra lines (per-joint failures, what was skipped).
+    pub details: Vec<String>,
+    /// The likely cause when it failed.
+    pub cause: Option<String>,
+}
+
+/// An observer that gives a verdict on a rollout (`Send`: batches make them per worker thread).
+pub trait Check: Observer + Send {
+    /// Name of the check (column and report label).
+    fn name(&self) -> &str;
+
+    /// The verdict on the rollout so far (called after it ends).
+    fn verdict(&self) -> Verdict;
+}
+
+/// Acts on the simulation between the controller and the physics step.
+pub trait Disturbance: Send {
+    /// Called once the initial state is set, before the first step.
+    ///
+    /// # Errors
+    /// When the disturbance can't act on this model.
+    fn start(&mut self, _model: &Model, _data: &Data) -> Result<()> {
+        Ok(())
+    }
+
+    /// Acts on `data` (velocities, applied forces) before the physics step; random draws
+    /// come from `rng`, the rollout's stream.
+    fn apply(&mut self, data: &mut Data, rng: &mut ChaCha8Rng);
+}
+
+/// How the controller's observation differs from the simulation: noise, bias, latency.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct SensorModel {
+    /// White-noise standard deviation per `qpos` entry (len `nq`, or empty: none).
+    pub qpos_noise_std: Vec<f64>,
+    /// White-noise standard deviation per `sensordata` entry (len `nsensordata`, or empty).
+    pub sensor_noise_std: Vec<f64>,
+    /// Constant bias per `sensordata` entry (len `nsensordata`, or empty).
+    pub sensor_bias: Vec<f64>,
+    /// The controller sees the observation of this many steps ago.
+    pub latency_steps: usize,
+}
+
+impl SensorModel {
+    fn is_exact(&self) -> bool {
+        self.latency_steps == 0 && !self.noisy_qpos() && !self.noisy_sensors()
+    }
+
+    fn noisy_qpos(&self) -> bool {
+        self.qpos_noise_std.iter().any(|&s| s > 0.0)
+    }
+
+    fn noisy_sensors(&self) -> bool {
+        self.sensor_noise_std.iter().any(|&s| s > 0.0) || self.sensor_bias.iter().any(|&b| b != 0.0)
+    }
+}
+
+/// One rollout's configuration.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Episode {
+    /// Initial joint positions (len `nq`); `None`: the home pose
+    /// ([`crate::control::reset_to_home`]). The controller may adjust them
+    /// ([`Controller::initial_qpos`]). (default: `None`)
+    pub initial_qpos: Option<Vec<f64>>,
+    /// Physics steps to run (fewer when an observer ends the rollout). (default: 0)
+    pub steps: u64,
+    /// The sensor model. (default: exact observations)
+    pub sensors: SensorModel,
+    /// Factor on each command entry (len of the command, or empty: none). (default: none)
+    pub command_scale: Vec<f64>,
+}
+
+/// How a rollout ended.
+#[derive(Debug)]
+pub struct Outcome {
+    /// Physics steps completed.
+    pub steps: u64,
+    /// Simulated time completed, seconds (`steps · dt`).
+    pub sim_secs: f64,
+    /// Index of the observer that ended the rollout, if one did.
+    pub ended_by: Option<usize>,
+    /// The physics step failed (MuJoCo raised an error): the rollout stopped there.
+    pub physics_error: Option<Error>,
+}
+
+/// Per-thread scratch for rollouts: one `Data` reused across rollouts (moved onto each
+/// rollout's model), the observation ring, the command.
+#[derive(Debug, Default)]
+pub struct Engine {
+    data: Option<Data>,
+    history: Vec<f64>,
+    command: Vec<f64>,
+    qpos_t: Vec<f64>,
+    qvel_t: Vec<f64>,
+}
+
+impl Engine {
+    /// An engine with no `Data` yet.
+    pub fn new() -> Engine {
+        Engine::default()
+    }
+
+    /// The simulation as the last rollout left it.
+    pub fn data(&self) -> Option<&Data> {
+        self.data.as_ref()
+    }
+
+    /// Runs `episode` on `model` under `controller`, with `disturbances` and `observers`, random
+    /// numbers from `rng` (see the module docs for the step order).
+    ///
+    /// A MuJoCo error during a step ends the rollout and is reported in
+    /// [`Outcome::physics_error`], not as an error.
+    ///
+    /// # Errors
+    /// [`Error::MuJoCo`] when the initial state can't be set; errors of the controller's
+    /// reset, of disturbances' and observers' `start`, and of observers.
+    pub fn run(
+        &mut self,
+        model: &Arc<Model>,
+        episode: &Episode,
+        controller: &mut dyn Controller,
+        disturbances: &mut [&mut dyn Disturbance],
+        observers: &mut [&mut dyn Observer],
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Outcome> {
+        let data = match self.data.as_mut() {
+            Some(d) => {
+                d.set_model(model.clone())?;
+                d
+            }
+            None => self.data.insert(Data::new(model.clone())?),
+        };
+        match &episode.initial_qpos {
+            Some(q) => {
+                data.qpos_mut().copy_from_slice(q);
+                data.forward()?;
+            }
+            None => crate::control::reset_to_home(data)?,
+        }
+        // Only a controller that moves the start pays for a second forward pass.
+        self.qpos_t.clear();
+        self.qpos_t.extend_from_slice(data.qpos());
+        controller.initial_qpos(model, data.qpos_mut());
+        if data.qpos() != self.qpos_t.as_slice() {
+            data.forward()?;
+        }
+
+        let (nq, nv, ns) = (model.nq(), model.nv(), model.nsensordata());
+        let sensors = &episode.sensors;
+        let exact = sensors.is_exact();
+        let obs_len = nq + nv + ns;
+        let depth = sensors.latency_steps + 1;
+        let (noisy_q, noisy_s) = (sensors.noisy_qpos(), sensors.noisy_sensors());
+        let capture = |data: &Data, history: &mut [f64], slot: usize, rng: &mut ChaCha8Rng| {
+            let o = &mut history[slot * obs_len..(slot + 1) * obs_len];
+            o[..nq].copy_from_slice(data.qpos());
+            o[nq..nq + nv].copy_from_slice(data.qvel());
+            o[nq + nv..].copy_from_slice(data.sensordata());
+            if noisy_q {
+                for (q, &s) in o[..nq].iter_mut().zip(&sensors.qpos_noise_std) {
+                    if s > 0.0 {
+                        *q += s * rng.sample::<f64, _>(StandardNormal);
+                    }
+                }
+            }
+            if noisy_s {
+                let bias = sensors.sensor_bias.iter().copied().chain(std::iter::repeat(0.0));
+                for ((v, &s), b) in o[nq + nv..].iter_mut().zip(&sensors.sensor_noise_std).zip(bias) {
+                    *v += b;
+                    if s > 0.0 {
+                        *v += s * rng.sample::<f64, _>(StandardNormal);
+                    }
+                }
+            }
+        };
+        self.history.clear();
+        if !exact {
+            // The whole delay line starts with the initial observation.
+            self.history.resize(obs_len * depth, 0.0);
+            for slot in 0..depth {
+                capture(data, &mut self.history, slot, rng);
+            }
+            controller.reset(model, &slot_observation(&self.history, 0, (nq, nv, ns), data.time_secs()))?;
+        } else {
+            controller.reset(model, &Observation::of(data))?;
+        }
+
+        let actuation = Actuation::of(model);
+        let limits = actuation.limits(model);
+        self.command.clear();
+        self.command.resize(actuation.len(model), 0.0);
+        self.qpos_t.resize(nq, 0.0);
+        self.qvel_t.clear();
+        self.qvel_t.resize(nv, 0.0);
+        for d in disturbances.iter_mut() {
+            d.start(model, data)?;
+        }
+        for o in observers.iter_mut() {
+            o.start(model, data)?;
+        }
+
+        let dt = model.timestep_secs();
+        let mut outcome = Outcome { steps: 0, sim_secs: 0.0, ended_by: None, physics_error: None };
+        let mut oldest = 0usize;
+        for step in 0..episode.steps {
+            // 1–2. The controller sees the observation captured `latency_steps` steps ago.
+            let time_secs = data.time_secs();
+            if exact {
+                controller.compute(model, &Observation::of(data), &mut self.command);
+            } else {
+                let observation = slot_observation(&self.history, oldest * obs_len, (nq, nv, ns), time_secs);
+                controller.compute(model, &observation, &mut self.command);
+            }
+            let mut saturated = false;
+            let scale = episode.command_scale.iter().copied().chain(std::iter::repeat(1.0));
+            for ((c, &[lo, hi]), k) in self.command.iter_mut().zip(&limits).zip(scale) {
+                *c *= k;
+                if (*c <= lo && lo.is_finite()) || (*c >= hi && hi.is_finite()) {
+                    saturated = saturated || lo != hi;
+                }
+            }
+            actuation.apply(data, &self.command);
+            // 3.
+            for d in disturbances.iter_mut() {
+                d.apply(data, rng);
+            }
+            // 4.
+            self.qpos_t.copy_from_slice(data.qpos());
+            self.qvel_t.copy_from_slice(data.qvel());
+            if let Err(e) = data.step() {
+                outcome.physics_error = Some(e);
+                break;
+            }
+            outcome.steps = step + 1;
+            outcome.sim_secs = (step + 1) as f64 * dt;
+            // 5.
+            let view = StepView {
+                index: step,
+                time_secs,
+                sim_secs: outcome.sim_secs,
+                dt_secs: dt,
+                qpos: &self.qpos_t,
+                qvel: &self.qvel_t,
+                command: &self.command,
+                saturated,
+                actuation,
+                data,
+            };
+            let mut end = false;
+            for (k, o) in observers.iter_mut().enumerate() {
+                match o.observe(&view)? {
+                    Flow::Continue => {}
+                    Flow::EndAfterStep => {
+                        end = true;
+                        outcome.ended_by.get_or_insert(k);
+                    }
+                    Flow::EndNow => {
+                        end = true;
+                        outcome.ended_by.get_or_insert(k);
+                        break;
+                    }
+                }
+            }
+            if end {
+                break;
+            }
+            if !exact {
+                // The newest observation replaces the oldest; the next oldest is one further.
+                capture(data, &mut self.history, oldest, rng);
+                oldest = (oldest + 1) % depth;
+            }
+        }
+        Ok(outcome)
+    }
+}
+
+/// The observation stored at `start` of `history`: `qpos`, `qvel`, `sensordata` back to back.
+fn slot_observation(
+    history: &[f64],
+    start: usize,
+    (nq, nv, ns): (usize, usize, usize),
+    time_secs: f64,
+) -> Observation<'_> {
+    let o = &history[start..start + nq + nv + ns];
+    Observation { time_secs, qpos: &o[..nq], qvel: &o[nq..nq + nv], sensordata: &o[nq + nv..] }
+}

@@ -1,0 +1,290 @@
+//! The one ROS 2 topic table of a twin, derived from its [`Robot`]: each topic's name, message
+//! type, rate, `frame_id` and QoS intent. Recordings ([`crate::sim::Recording`]) write exactly
+//! these topics into their sinks ([`Sink`]: the MCAP writer today, a live DDS publisher next),
+//! as typed messages ([`TypedMessage`], the types of [`crate::log`]) built once per step.
+//!
+//! Topics (`<robot>` = [`Robot::name`]):
+//! - `/joint_states` (`sensor_msgs/msg/JointState`) at the state rate;
+//! - each IMU on its topic (`sensor_msgs/msg/Imu`) at its rate (else the state rate);
+//! - `/odom` (`nav_msgs/msg/Odometry`, floating bases) at the state rate;
+//! - `/tf` (`tf2_msgs/msg/TFMessage`) at the tf rate; `/tf_static` once (latched), when an IMU
+//!   frame is not a body;
+//! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`) per body, from its first contact on;
+//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent.
+
+use crate::error::Result;
+use crate::log::{Float64MultiArray, Imu, JointState, Odometry, RosMessage, TfMessage, WrenchStamped};
+use crate::mj::ObjType;
+use crate::robot::Robot;
+
+/// Whether every message must arrive (`Reliable`) or the newest matters (`BestEffort`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Reliability {
+    /// Retransmit until received.
+    Reliable,
+    /// Send once; drop when late.
+    BestEffort,
+}
+
+/// Whether late joiners get the last message (`TransientLocal`, "latched") or not.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Durability {
+    /// Only messages published after subscribing.
+    Volatile,
+    /// The last `depth` messages are kept for late joiners.
+    TransientLocal,
+}
+
+/// The QoS a topic is offered with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Qos {
+    /// Reliability.
+    pub reliability: Reliability,
+    /// Durability.
+    pub durability: Durability,
+    /// History depth (keep-last); 0: keep all (what rosbag2 records).
+    pub depth: u32,
+}
+
+impl Qos {
+    /// Streams: reliable, volatile, keep all (rosbag2's recorded profile).
+    pub const STREAM: Qos = Qos { reliability: Reliability::Reliable, durability: Durability::Volatile, depth: 0 };
+    /// Latched: reliable, transient-local, keep last 1 (`/tf_static`).
+    pub const LATCHED: Qos =
+        Qos { reliability: Reliability::Reliable, durability: Durability::TransientLocal, depth: 1 };
+    /// High-rate sensor data: best effort, volatile, keep last 5 (ROS 2's sensor-data profile).
+    pub const SENSOR_DATA: Qos =
+        Qos { reliability: Reliability::BestEffort, durability: Durability::Volatile, depth: 5 };
+}
+
+/// What a topic carries, with the indices it needs.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TopicKind {
+    /// Every 1-DOF joint of [`Robot::joints`].
+    JointStates,
+    /// IMU `k` of [`Robot::imus`].
+    Imu(usize),
+    /// The floating base in `odom`.
+    Odometry,
+    /// Every body relative to its parent.
+    Tf,
+    /// IMU frames that are no body, relative to their body (once).
+    TfStatic,
+    /// Net contact wrench on this body.
+    Contacts(usize),
+    /// The command sent.
+    Commands,
+}
+
+/// One topic of the table.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicInfo {
+    /// Topic name (e.g. `/joint_states`).
+    pub name: String,
+    /// ROS 2 message type (`pkg/msg/Type`).
+    pub type_name: &'static str,
+    /// Publication rate, Hz (`None`: once).
+    pub rate_hz: Option<f64>,
+    /// `frame_id` of its headers (empty when it has none or several).
+    pub frame_id: String,
+    /// QoS intent.
+    pub qos: Qos,
+    /// What it carries.
+    pub kind: TopicKind,
+}
+
+/// Rates of the table's streams.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicRates {
+    /// `/joint_states`, `/odom`, contacts, commands, and IMUs without their own rate, Hz.
+    /// (default: 500)
+    pub state_rate_hz: f64,
+    /// `/tf`, Hz. (default: 100)
+    pub tf_rate_hz: f64,
+}
+
+impl Default for TopicRates {
+    fn default() -> Self {
+        TopicRates { state_rate_hz: 500.0, tf_rate_hz: 100.0 }
+    }
+}
+
+/// The topics of a robot, in publication order.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TopicTable {
+    /// The topics.
+    pub topics: Vec<TopicInfo>,
+}
+
+/// A topic-name-safe version of `name` (ASCII letters, digits, `_`).
+pub fn topic_safe(name: &str) -> String {
+    name.chars().map(|c| if c.is_ascii_alphanumeric() || c == '_' { c } else { '_' }).collect()
+}
+
+/// Name of body `b` as a frame (`body_<b>` when unnamed).
+pub fn body_frame(robot: &Robot, b: usize) -> String {
+    match robot.model.name(ObjType::Body, b) {
+        "" => format!("body_{b}"),
+        n => n.to_string(),
+    }
+}
+
+impl TopicTable {
+    /// The table of `robot` at `rates`.
+    pub fn new(robot: &Robot, rates: &TopicRates) -> TopicTable {
+        let model = &robot.model;
+        let state = Some(rates.state_rate_hz);
+        let root_frame = if robot.base.is_some() { "odom" } else { "world" };
+        let mut topics = vec![TopicInfo {
+            name: "/joint_states".into(),
+            type_name: JointState::TYPE_NAME,
+            rate_hz: state,
+            frame_id: String::new(),
+            qos: Qos::STREAM,
+            kind: TopicKind::JointStates,
+        }];
+        for (k, imu) in robot.imus.iter().enumerate() {
+            topics.push(TopicInfo {
+                name: imu.topic().to_string(),
+                type_name: Imu::TYPE_NAME,
+                rate_hz: Some(imu.meta.update_rate_hz.unwrap_or(rates.state_rate_hz)),
+                frame_id: imu.meta.frame_id.clone(),
+                qos: Qos::STREAM,
+                kind: TopicKind::Imu(k),
+            });
+        }
+        if robot.base.is_some() {
+            topics.push(TopicInfo {
+                name: "/odom".into(),
+                type_name: Odometry::TYPE_NAME,
+                rate_hz: state,
+                frame_id: "odom".into(),
+                qos: Qos::STREAM,
+                kind: TopicKind::Odometry,
+            });
+        }
+        topics.push(TopicInfo {
+            name: "/tf".into(),
+            type_name: TfMessage::TYPE_NAME,
+            rate_hz: Some(rates.tf_rate_hz),
+            frame_id: root_frame.into(),
+            qos: Qos::STREAM,
+            kind: TopicKind::Tf,
+        });
+        topics.push(TopicInfo {
+            name: format!("/{}/joint_commands", robot.name),
+            type_name: Float64MultiArray::TYPE_NAME,
+            rate_hz: state,
+            frame_id: String::new(),
+            qos: Qos::STREAM,
+            kind: TopicKind::Commands,
+        });
+        let frames: Vec<String> = (0..model.nbody()).map(|b| body_frame(robot, b)).collect();
+        if robot.imus.iter().any(|i| !frames.contains(&i.meta.frame_id)) {
+            topics.push(TopicInfo {
+                name: "/tf_static".into(),
+                type_name: TfMessage::TYPE_NAME,
+                rate_hz: None,
+                frame_id: String::new(),
+                qos: Qos::LATCHED,
+                kind: TopicKind::TfStatic,
+            });
+        }
+        for (b, frame) in frames.iter().enumerate().skip(1) {
+            topics.push(TopicInfo {
+                name: format!("/contacts/{}", topic_safe(frame)),
+                type_name: WrenchStamped::TYPE_NAME,
+                rate_hz: state,
+                frame_id: frame.clone(),
+                qos: Qos::STREAM,
+                kind: TopicKind::Contacts(b),
+            });
+        }
+        TopicTable { topics }
+    }
+
+    /// The topic called `name`.
+    pub fn find(&self, name: &str) -> Option<&TopicInfo> {
+        self.topics.iter().find(|t| t.name == name)
+    }
+
+    /// The first topic of `kind`.
+    pub fn of_kind(&self, kind: TopicKind) -> Option<&TopicInfo> {
+        self.topics.iter().find(|t| t.kind == kind)
+    }
+}
+
+/// One message of the table's types, borrowed from the recording's buffers.
+#[derive(Debug, Clone, Copy)]
+pub enum TypedMessage<'a> {
+    /// `sensor_msgs/msg/JointState`.
+    JointState(&'a JointState),
+    /// `sensor_msgs/msg/Imu`.
+    Imu(&'a Imu),
+    /// `nav_msgs/msg/Odometry`.
+    Odometry(&'a Odometry),
+    /// `tf2_msgs/msg/TFMessage` (`/tf` and `/tf_static`).
+    Tf(&'a TfMessage),
+    /// `geometry_msgs/msg/WrenchStamped`.
+    Wrench(&'a WrenchStamped),
+    /// `std_msgs/msg/Float64MultiArray`.
+    Float64MultiArray(&'a Float64MultiArray),
+}
+
+impl TypedMessage<'_> {
+    /// The ROS 2 type name.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            TypedMessage::JointState(_) => JointState::TYPE_NAME,
+            TypedMessage::Imu(_) => Imu::TYPE_NAME,
+            TypedMessage::Odometry(_) => Odometry::TYPE_NAME,
+            TypedMessage::Tf(_) => TfMessage::TYPE_NAME,
+            TypedMessage::Wrench(_) => WrenchStamped::TYPE_NAME,
+            TypedMessage::Float64MultiArray(_) => Float64MultiArray::TYPE_NAME,
+        }
+    }
+}
+
+/// Where a recording's messages go: an MCAP file, a live DDS bridge, a test's buffer.
+/// `add_topic` is called once per topic before its first message; `write` per message, in
+/// log-time order per topic.
+pub trait Sink: Send {
+    /// Announces `topic` (its name, type and QoS).
+    ///
+    /// # Errors
+    /// When the sink can't offer it (e.g. the file can't be written).
+    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()>;
+
+    /// Writes one message of `topic`, stamped `log_time_nanos` (simulation time).
+    ///
+    /// # Errors
+    /// When the sink can't take it.
+    fn write(&mut self, topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()>;
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::path::Path;
+    use std::sync::Arc;
+
+    #[test]
+    fn table_follows_the_robot() {
+        let xml = r#"<mujoco><worldbody><body name="base" pos="0 0 1"><freejoint/>
+            <geom type="box" size="0.1 0.1 0.1"/><site name="imu" pos="0 0 0.1"/>
+            <body name="arm"><joint name="j" axis="0 1 0"/><geom type="sphere" size="0.05"/></body></body>
+            </worldbody><sensor><gyro name="imu_gyro" site="imu"/><accelerometer name="imu_accel" site="imu"/>
+            </sensor></mujoco>"#;
+        let model = Arc::new(crate::mj::Model::from_xml_str(xml).unwrap());
+        let robot = Robot::from_model(model, "bot", Path::new("bot.xml")).unwrap();
+        let table = TopicTable::new(&robot, &TopicRates::default());
+        let names: Vec<&str> = table.topics.iter().map(|t| t.name.as_str()).collect();
+        assert_eq!(
+            names,
+            ["/joint_states", "/bot/imu", "/odom", "/tf", "/bot/joint_commands", "/contacts/base", "/contacts/arm"]
+        );
+        let imu = table.find("/bot/imu").unwrap();
+        assert_eq!((imu.type_name, imu.frame_id.as_str(), imu.rate_hz), ("sensor_msgs/msg/Imu", "base", Some(500.0)));
+        assert_eq!(table.of_kind(TopicKind::Tf).unwrap().rate_hz, Some(100.0));
+    }
+}
