@@ -68,8 +68,9 @@ pub struct Robot {
 }
 
 /// Loads a robot from a URDF (through twin's converter, which gives the IMUs' topics, rates and
-/// noise) or an MJCF (IMUs found as `<name>_gyro` + `<name>_accel` sensor pairs, with their
-/// `noise` attribute, published on `/<robot>/<name>`).
+/// noise) or an MJCF: one written by `twin convert` carries the same metadata
+/// ([`crate::convert::RobotMeta`]); in others, IMUs are found as `<name>_gyro` + `<name>_accel`
+/// sensor pairs, with their `noise` attribute, published on `/<robot>/<name>`.
 ///
 /// # Errors
 /// As [`Model::from_file`] / [`crate::convert::convert_urdf`].
@@ -77,26 +78,30 @@ pub fn load_robot(path: impl AsRef<Path>) -> Result<Robot> {
     let path = path.as_ref();
     let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
     let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot").to_string();
-    if crate::urdf::is_urdf(&text) {
+    let (model, meta) = if crate::urdf::is_urdf(&text) {
         let converted = crate::convert::convert_urdf_str(path, &text, &crate::convert::ConvertOptions::default())?;
         let model = Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
             Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
             other => other,
         })?;
-        let mut robot = Robot::from_model(Arc::new(model), &converted.robot_name, path);
-        for meta in &converted.imus {
-            if let Some(imu) = robot.imus.iter_mut().find(|i| i.name == meta.name) {
-                imu.topic = meta.topic.clone().unwrap_or_else(|| format!("/{}/{}", converted.robot_name, meta.name));
-                imu.frame_id = meta.frame_id.clone();
-                imu.update_rate_hz = meta.update_rate_hz.filter(|r| *r > 0.0);
-                imu.gyro_noise_std = meta.gyro_noise_std;
-                imu.accel_noise_std = meta.accel_noise_std;
-            }
+        (model, Some(converted.meta))
+    } else {
+        let model = Model::from_mujoco_file(path)?;
+        // An MJCF written by `twin convert` carries the URDF's ROS side.
+        let meta = crate::convert::RobotMeta::from_model(&model);
+        (model, meta)
+    };
+    let mut robot = Robot::from_model(Arc::new(model), meta.as_ref().map_or(stem.as_str(), |m| m.name.as_str()), path);
+    for meta in meta.iter().flat_map(|m| &m.imus) {
+        if let Some(imu) = robot.imus.iter_mut().find(|i| i.name == meta.name) {
+            imu.topic = meta.topic.clone().unwrap_or_else(|| format!("/{}/{}", robot.name, meta.name));
+            imu.frame_id = meta.frame_id.clone();
+            imu.update_rate_hz = meta.update_rate_hz.filter(|r| *r > 0.0);
+            imu.gyro_noise_std = meta.gyro_noise_std;
+            imu.accel_noise_std = meta.accel_noise_std;
         }
-        return Ok(robot);
     }
-    let model = Model::from_mujoco_file(path)?;
-    Ok(Robot::from_model(Arc::new(model), &stem, path))
+    Ok(robot)
 }
 
 impl Robot {
