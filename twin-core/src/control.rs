@@ -150,8 +150,7 @@ pub trait Controller: Send {
 #[derive(Debug, Clone, PartialEq)]
 pub struct PdHoldOptions {
     /// Joint angle error (radians; metres for slides) at which a joint's PD torque reaches its
-    /// effort limit: `kp = effort / saturation_error` (capped at `0.5·I/dt²` on light joints so the
-    /// explicit loop stays stable). Stiff enough for the shipped humanoid's
+    /// effort limit: `kp = effort / saturation_error`. Stiff enough for the shipped humanoid's
     /// ankles to hold its whole weight. (default: 0.25)
     pub saturation_error: f64,
     /// Damping ratio of each joint on its own effective inertia (`1 / dof_invweight0`):
@@ -209,12 +208,9 @@ impl PdHold {
         let o = &self.options;
         let gains = |effort: f64, dof: usize, gear: f64| {
             let effort = if effort.is_finite() && effort > 0.0 { effort } else { o.default_effort };
+            let kp = effort / o.saturation_error;
             let inertia = 1.0 / model.dof_invweight0()[dof].max(1e-12);
-            // The PD runs explicitly at the model's step: on light joints (small servos, fingers,
-            // pendulums) keep the discrete loop stable, kp·dt²/I ≤ 0.5 and kd·dt/I ≤ 1.
-            let dt = model.timestep_secs();
-            let kp = (effort / o.saturation_error).min(0.5 * inertia / (dt * dt));
-            let kd = (2.0 * o.damping_ratio * (kp * inertia).sqrt()).min(inertia / dt);
+            let kd = 2.0 * o.damping_ratio * (kp * inertia).sqrt();
             // Joint-space gains, expressed in command units (torque = gear · ctrl).
             (kp / gear, kd / gear)
         };

@@ -64,12 +64,13 @@ fn humanoid_matches_mujoco_own_import_and_adds_actuators_sensors_friction() {
         assert!(d.abs().max() < 1e-9, "{name} inertia differs by {}", d.abs().max());
         compared += 1;
     }
-    // 25 links, imu_link fused into torso_link.
-    assert_eq!(compared, 24);
+    // 25 links: imu_link fused into torso_link, the welded root into the world.
+    assert_eq!(compared, 23);
     let imu = ours.require_id(ObjType::Body, "imu_link").unwrap();
     assert_eq!(ours.body_mass()[imu], 0.0, "lumped into torso_link");
-    // MuJoCo keeps the welded root's mass in its body; totals agree.
-    assert!((their_mass - ours.total_mass_kg()).abs() < 1e-9, "{their_mass}");
+    // MuJoCo's fusestatic folds the welded root into the world, dropping its mass; twin keeps it.
+    let root_mass = ours.body_mass()[1];
+    assert!((their_mass + root_mass - ours.total_mass_kg()).abs() < 1e-9, "{their_mass} + {root_mass}");
     for j in 0..theirs.njnt() {
         let name = theirs.name(ObjType::Joint, j);
         let oj = ours.require_id(ObjType::Joint, name).unwrap();
@@ -400,29 +401,36 @@ fn differential_transmissions_map_efforts_like_ros_control() {
     assert!((tau("j4") - (ta4 * ar2 + tj3 / jr1) * jr2).abs() < 1e-9, "{}", tau("j4"));
 }
 
-/// Gazebo contact stiffness: a box resting on the floor sinks m·g/kp, as in Gazebo.
+/// Gazebo contact stiffness: a ball resting on the floor sinks m·g/kp, as in Gazebo; a box on
+/// its four corners m·g/(4·kp), as in Gazebo (ODE applies kp at each contact point).
 #[test]
 fn gazebo_kp_kd_become_direct_solref() {
-    let (mass, kp) = (2.0, 2.0e4);
-    let kd = 2.0 * (kp * mass as f64).sqrt();
-    let urdf = format!(
-        r#"<robot name="box"><link name="box"><inertial><mass value="{mass}"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial>
-  <collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
-  <gazebo reference="box"><kp>{kp}</kp><kd>{kd}</kd><mu1>0.9</mu1><mu2>0.9</mu2></gazebo></robot>"#
-    );
-    let c = convert_urdf_str(Path::new("box.urdf"), &urdf, &ConvertOptions::default()).unwrap();
-    let m = std::sync::Arc::new(Model::from_xml_str(&c.mjcf).unwrap());
-    let g = m.require_id(ObjType::Geom, "box_collision_0").unwrap();
-    assert!(m.geom_solref()[g][0] < 0.0, "direct form");
-    let mut d = Data::new(m.clone()).unwrap();
-    d.reset_to_keyframe(m.require_id(ObjType::Key, "home").unwrap()).unwrap();
-    for _ in 0..2000 {
-        d.step().unwrap();
+    let (mass, kp) = (2.0_f64, 2.0e4);
+    let kd = 2.0 * (kp * mass).sqrt();
+    for (shape, contacts, half_height) in
+        [("<sphere radius=\"0.1\"/>", 1.0, 0.1), ("<box size=\"0.2 0.2 0.2\"/>", 4.0, 0.1)]
+    {
+        let urdf = format!(
+            r#"<robot name="body"><link name="body"><inertial><mass value="{mass}"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial>
+  <collision><geometry>{shape}</geometry></collision></link>
+  <gazebo reference="body"><kp>{kp}</kp><kd>{kd}</kd><mu1>0.9</mu1><mu2>0.9</mu2></gazebo></robot>"#
+        );
+        let c = convert_urdf_str(Path::new("body.urdf"), &urdf, &ConvertOptions::default()).unwrap();
+        let m = std::sync::Arc::new(Model::from_xml_str(&c.mjcf).unwrap());
+        let g = m.require_id(ObjType::Geom, "body_collision_0").unwrap();
+        assert!(m.geom_solref()[g][0] < 0.0, "direct form");
+        let mut d = Data::new(m.clone()).unwrap();
+        d.reset_to_keyframe(m.require_id(ObjType::Key, "home").unwrap()).unwrap();
+        for _ in 0..2000 {
+            d.step().unwrap();
+        }
+        let penetration = -(d.qpos()[2] - half_height);
+        let expected = mass * 9.81 / (contacts * kp);
+        assert!(
+            (penetration - expected).abs() < 0.05 * expected,
+            "{shape}: penetration {penetration} m, Gazebo {expected} m"
+        );
     }
-    // Box bottom at z = root z − 0.1; penetration below the floor.
-    let penetration = -(d.qpos()[2] - 0.1);
-    let expected = mass * 9.81 / kp;
-    assert!((penetration - expected).abs() < 0.05 * expected, "penetration {penetration} m, Gazebo {expected} m");
 }
 
 fn cube_ascii_stl(half: f64) -> String {

@@ -840,22 +840,23 @@ impl<'a> Converter<'a> {
 
     /// MuJoCo's direct-form `solref = (−K, −B)` reproducing Gazebo's contact `kp` (N/m) and
     /// `kd` (N·s/m) for the robot's weight: with a constant impedance `d` (`solimp d d`), a
-    /// contact at rest penetrates `(1 − d)·g / (d·k)` with `k = K/d²`, so `K = (1 − d)·d·kp/m`
-    /// gives Gazebo's `m·g/kp`; `B = sqrt(1 − d)·kd/m` keeps Gazebo's damping ratio. `m` is the
+    /// body resting on `n` contacts penetrates `(1 − d)·g / (n·K)` (measured; independent of the
+    /// body's inertia and the friction cone), so `K = (1 − d)·kp/m` gives Gazebo's `m·g/(n·kp)`
+    /// (ODE applies `kp` at each of the `n` contact points); `B = sqrt(1 − d)·kd/m` keeps Gazebo's damping ratio. `m` is the
     /// robot's mass (exact for a body resting on this link's contacts). Stiffness beyond what
     /// the timestep integrates stably, and damping below critical, are clamped, with a note.
     fn direct_solref(&mut self, link: &str, line: u32, kp: f64, kd: f64) -> [f64; 2] {
         let d = CONTACT_IMPEDANCE;
         let mass: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
         let dt = self.opts.timestep_secs;
-        let mut k = (1.0 - d) * d * kp / mass;
+        let mut k = (1.0 - d) * kp / mass;
         // Natural frequency ω² = K/d; keep ω·dt ≤ 1.
         let k_max = d / (dt * dt);
         if k > k_max {
             self.notes.push(format!(
                 "link \"{link}\" (line {line}): Gazebo kp {kp} N/m is too stiff for a {dt} s step with a {mass:.3} kg robot: contact stiffness clamped to {:.4e} N/m (penetration {:.3e} m instead of {:.3e} m)",
-                k_max * mass / ((1.0 - d) * d),
-                (1.0 - d) * d * 9.81 / k_max,
+                k_max * mass / (1.0 - d),
+                (1.0 - d) * 9.81 / k_max,
                 mass * 9.81 / kp
             ));
             k = k_max;
@@ -1265,7 +1266,16 @@ impl<'a> Converter<'a> {
             // is then the contact's too: take Gazebo's min with the world's.
             prio = self.priority.len() as i32;
             mu = mu.min(self.world_min_mu);
-            solref = format!(" solref=\"{} {}\" solimp=\"{d} {d} 0.001\"", f(k), f(b), d = CONTACT_IMPEDANCE);
+            // MuJoCo's pyramidal friction cone carries the normal force on edges n ± μ·t, which
+            // scales the contact's constraint-space stiffness by 2/(μ²(1 + μ²)) (measured: exact
+            // for the resting penetration); compensate so the penetration stays Gazebo's.
+            let cone = if mu > 0.0 { mu * mu * (1.0 + mu * mu) / 2.0 } else { 1.0 };
+            solref = format!(
+                " solref=\"{} {}\" solimp=\"{d} {d} 0.001\"",
+                f(k * cone),
+                f(b * cone.sqrt()),
+                d = CONTACT_IMPEDANCE
+            );
         }
         let prio = if prio != 0 { format!(" priority=\"{prio}\"") } else { String::new() };
         let rgba_c = link.visuals.first().and_then(|v| v.rgba).or(gz_rgba);
