@@ -71,7 +71,12 @@ struct Row {
 fn run_one(path: &Path) -> Result<Row, String> {
     let text = std::fs::read_to_string(path).unwrap();
     let (urdf_mass, has_links) = urdf_mass(&text);
-    let robot = path.file_stem().unwrap().to_string_lossy().into_owned();
+    // Folder and file: some stems repeat (two `anymal.urdf`).
+    let robot = format!(
+        "{}/{}",
+        path.parent().and_then(|p| p.parent()).and_then(|p| p.file_name()).unwrap().to_string_lossy(),
+        path.file_stem().unwrap().to_string_lossy()
+    );
     let started = Instant::now();
     let converted = convert_urdf(path, &ConvertOptions::default());
     let ms = started.elapsed().as_secs_f64() * 1e3;
@@ -184,7 +189,7 @@ fn run_one(path: &Path) -> Result<Row, String> {
         sensors: model.nsensor(),
         notes: c.notes.len(),
         ms,
-        status: format!("ok, {mass:.3} kg, max |q̇| {max_qvel:.2} in 1 s hold"),
+        status: format!("ok: {mass:.3} kg, max q̇ {max_qvel:.2} in the 1 s hold"),
     })
 }
 

@@ -50,9 +50,9 @@
 //!   [`ConvertOptions::self_collision`] add bit 4. Gazebo `mu1`/`mu2` → `friction`; since MuJoCo
 //!   takes the max of two geoms' friction and Gazebo the min, every geom gets a `priority` that
 //!   ranks lower friction higher, which reproduces the min. Gazebo `kp`/`kd` → `solref` in its
-//!   direct form (−stiffness, −damping) with a constant impedance, so a body resting on those
-//!   contacts sinks Gazebo's `m·g/kp` (m: the robot's mass); those geoms take the highest
-//!   priority and the min of their friction and the world's.
+//!   direct form (−stiffness, −damping) with a constant impedance, scaled by the link's effective
+//!   mass at the home pose, so each contact point sinks Gazebo's `force/kp`; those geoms take
+//!   the highest priority and the min of their friction and the world's.
 //! - What twin publishes the robot by (name, IMU topics, rates, noise, frame ids, joint limits,
 //!   command interfaces, differentials) in `<custom><text name="twin:…">` ([`RobotMeta`]), read
 //!   back when the MJCF is loaded.
@@ -247,6 +247,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     let base_height_m = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
         let model = conv.compile(&probe)?;
+        conv.contact_solrefs(&model);
         let lowest = lowest_collision_z(&model)?;
         match lowest {
             Some(z) if conv.world_root => (-z).max(0.0),
@@ -369,7 +370,9 @@ struct Converter<'a> {
     meshes: Vec<MeshAsset>,
     /// Friction per link.
     mu: Vec<f64>,
-    /// Direct-form contact `solref` per link, from Gazebo kp/kd.
+    /// Gazebo contact `kp`, `kd` and line per link.
+    gazebo_contact: Vec<Option<(f64, f64, u32)>>,
+    /// Direct-form contact `solref` per link, from Gazebo kp/kd (set after the probe compile).
     contact: Vec<Option<[f64; 2]>>,
     /// Lowest friction among the world's geoms (set by `emit`).
     world_min_mu: f64,
@@ -468,6 +471,7 @@ impl<'a> Converter<'a> {
             mesh_of: HashMap::new(),
             meshes: Vec::new(),
             mu: vec![1.0; n],
+            gazebo_contact: vec![None; n],
             contact: vec![None; n],
             world_min_mu: 1.0,
             priority: BTreeMap::new(),
@@ -592,7 +596,7 @@ impl<'a> Converter<'a> {
                     ));
                 }
                 if let Some(kp) = g.kp.filter(|k| *k > 0.0) {
-                    self.contact[li] = Some(self.direct_solref(&link.name, g.line, kp, g.kd.unwrap_or(0.0).max(0.0)));
+                    self.gazebo_contact[li] = Some((kp, g.kd.unwrap_or(0.0).max(0.0), g.line));
                 } else if g.kd.is_some() {
                     self.notes.push(format!(
                         "link \"{}\" (line {}): Gazebo kd without kp: not converted (MuJoCo's default soft contact is used)",
@@ -838,26 +842,37 @@ impl<'a> Converter<'a> {
         }
     }
 
+    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe `model`: each
+    /// link's effective mass at its contacts is `1 / body_invweight0` at the home pose.
+    fn contact_solrefs(&mut self, model: &Model) {
+        let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
+        for li in 0..self.robot.links.len() {
+            let Some((kp, kd, line)) = self.gazebo_contact[li] else { continue };
+            let name = &self.robot.links[li].name;
+            let inv = model.id(ObjType::Body, name).map_or(0.0, |b| model.body_invweight0()[b][0]);
+            let mass = if inv > 0.0 { 1.0 / inv } else { total };
+            self.contact[li] = Some(self.direct_solref(name, line, kp, kd, mass));
+        }
+    }
+
     /// MuJoCo's direct-form `solref = (−K, −B)` reproducing Gazebo's contact `kp` (N/m) and
-    /// `kd` (N·s/m) for the robot's weight: with a constant impedance `d` (`solimp d d`), a
-    /// body resting on `n` contacts penetrates `(1 − d)·g / (n·K)` (measured; independent of the
-    /// body's inertia and the friction cone), so `K = (1 − d)·kp/m` gives Gazebo's `m·g/(n·kp)`
-    /// (ODE applies `kp` at each of the `n` contact points); `B = sqrt(1 − d)·kd/m` keeps Gazebo's damping ratio. `m` is the
-    /// robot's mass (exact for a body resting on this link's contacts). Stiffness beyond what
-    /// the timestep integrates stably, and damping below critical, are clamped, with a note.
-    fn direct_solref(&mut self, link: &str, line: u32, kp: f64, kd: f64) -> [f64; 2] {
+    /// `kd` (N·s/m) on a contact whose effective mass is `mass`: with a constant impedance `d`
+    /// (`solimp d d`), a contact carrying force `f` settles where `(1 − d)·f/(mass·K)` (measured
+    /// on resting bodies: independent of the contact count and of the friction cone once the
+    /// pyramid's factor is applied at emission), so `K = (1 − d)·kp/mass` gives Gazebo's
+    /// `f/kp` per contact point (ODE applies `kp` at each). `B = sqrt(1 − d)·kd/mass` keeps the
+    /// damping ratio. Stiffness beyond what the timestep integrates stably, and damping below
+    /// critical, are clamped, with a note.
+    fn direct_solref(&mut self, link: &str, line: u32, kp: f64, kd: f64, mass: f64) -> [f64; 2] {
         let d = CONTACT_IMPEDANCE;
-        let mass: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
         let dt = self.opts.timestep_secs;
         let mut k = (1.0 - d) * kp / mass;
         // Natural frequency ω² = K/d; keep ω·dt ≤ 1.
         let k_max = d / (dt * dt);
         if k > k_max {
             self.notes.push(format!(
-                "link \"{link}\" (line {line}): Gazebo kp {kp} N/m is too stiff for a {dt} s step with a {mass:.3} kg robot: contact stiffness clamped to {:.4e} N/m (penetration {:.3e} m instead of {:.3e} m)",
-                k_max * mass / (1.0 - d),
-                (1.0 - d) * 9.81 / k_max,
-                mass * 9.81 / kp
+                "link \"{link}\" (line {line}): Gazebo kp {kp} N/m is too stiff for a {dt} s step on a contact of effective mass {mass:.3} kg: contact stiffness clamped to {:.4e} N/m",
+                k_max * mass / (1.0 - d)
             ));
             k = k_max;
         }

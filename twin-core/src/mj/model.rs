@@ -256,6 +256,9 @@ model_arrays! {
     /// Diagonal of the inverse inertia at `qpos0` per DOF (len `nv`; derived, set by
     /// `mj_setConst`): 1 / effective inertia, 1/(kg·m²) or 1/kg.
     dof_invweight0: f64 = nv;
+    /// Inverse effective mass (translation, 1/kg) and inertia (rotation) of each body at
+    /// `qpos0`, as the constraint solver sees it (len `nbody`).
+    body_invweight0: [f64; 2] = nbody;
     /// Whether each joint's total actuator force is limited (len `njnt`).
     jnt_actfrclimited: u8 = njnt;
     /// Range of each joint's total actuator force, N·m or N (URDF `effort`) (len `njnt`).
