@@ -118,12 +118,12 @@ fn run_one(path: &Path) -> Result<Row, String> {
     let dt = model.timestep_secs();
     let mut stiffest: f64 = 0.0;
     let mut servo_target = vec![None; model.nu()];
-    for u in 0..model.nu() {
+    for (u, target) in servo_target.iter_mut().enumerate() {
         let is_joint = model.actuator_trntype()[u] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT;
         let bias = model.actuator_biasprm()[u];
         if bias[1] != 0.0 || bias[2] != 0.0 {
             // Position servo (bias −kp·length) or velocity servo (−kv·velocity).
-            servo_target[u] = Some(if bias[1] != 0.0 && is_joint {
+            *target = Some(if bias[1] != 0.0 && is_joint {
                 let j = model.actuator_trnid()[u][0] as usize;
                 data.qpos()[model.jnt_qposadr()[j] as usize] * model.actuator_gear()[u][0]
             } else {
