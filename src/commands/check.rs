@@ -4,7 +4,7 @@
 use std::io::Write;
 use std::path::PathBuf;
 use twin_core::check::{CheckOptions, check};
-use twin_core::convert::{ConvertOptions, Interface};
+use twin_core::convert::ConvertOptions;
 use twin_core::mj::Model;
 
 #[derive(Debug, clap::Args)]
@@ -17,9 +17,9 @@ pub struct Args {
     /// Convert a URDF with a fixed base (for arms bolted to a table).
     #[arg(long)]
     pub fixed_base: bool,
-    /// Fix invalid inertias by the smallest change instead of failing.
+    /// Refuse invalid inertias instead of repairing them by the smallest change.
     #[arg(long)]
-    pub repair_inertia: bool,
+    pub strict_inertia: bool,
     /// Duration of the standing hold, seconds.
     #[arg(long, default_value_t = 5.0)]
     pub hold_secs: f64,
@@ -31,12 +31,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let text = twin_core::fsio::read_to_string(&path)?;
     let mut out = std::io::stdout().lock();
     let (floating, fixed) = if twin_core::urdf::is_urdf(&text) {
-        // Joints that no transmission names get a motor so the PD hold can act on them.
+        // Joints that no transmission names get a motor (--actuators auto) so the PD hold can
+        // act on them.
         let opts = ConvertOptions {
             fixed_base: args.fixed_base,
             package_paths: args.package_paths.clone(),
-            repair_inertia: args.repair_inertia,
-            untransmitted: Some(Interface::Effort),
+            strict_inertia: args.strict_inertia,
             ..ConvertOptions::default()
         };
         let floating = Model::from_urdf(&path, &opts)?;

@@ -4,7 +4,7 @@
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use twin_core::convert::{ConvertOptions, ConvertedModel, convert_urdf};
+use twin_core::convert::{ActuatorMode, ConvertOptions, ConvertedModel, convert_urdf};
 use twin_core::fsio;
 use twin_core::mj::Model;
 
@@ -22,9 +22,15 @@ pub struct Args {
     /// ROS_PACKAGE_PATH).
     #[arg(long = "package-path", value_name = "DIR")]
     pub package_paths: Vec<PathBuf>,
-    /// Fix invalid inertias by the smallest change (reported) instead of failing.
+    /// Refuse inertias that no rigid body has (triangle inequality, not positive definite)
+    /// instead of repairing them by the smallest change (listed in the notes).
     #[arg(long)]
-    pub repair_inertia: bool,
+    pub strict_inertia: bool,
+    /// Which joints get actuators: `auto` (transmissions / ros2_control where declared, a motor
+    /// within ±effort on every other joint with an effort limit), `transmissions` (only
+    /// declared ones), `motor`, `position` (every movable joint), `none`.
+    #[arg(long, default_value = "auto", value_name = "MODE")]
+    pub actuators: ActuatorMode,
     /// Gazebo SDF world or MJCF file to compose the robot into (default: a floor and a light).
     #[arg(long, value_name = "FILE")]
     pub world: Option<PathBuf>,
@@ -48,7 +54,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = ConvertOptions {
         fixed_base: args.fixed_base,
         package_paths: args.package_paths.clone(),
-        repair_inertia: args.repair_inertia,
+        strict_inertia: args.strict_inertia,
+        actuators: args.actuators,
         mesh_dir: Some(out_dir.join(format!("{stem}_meshes"))),
         world: args.world.clone(),
         ..ConvertOptions::default()

@@ -126,46 +126,27 @@ fn check_names_low_friction_when_the_feet_slide() {
 }
 
 /// Real robot descriptions from PyPI (example-robot-data ships URDFs with package:// meshes,
-/// Collada, Gazebo tags, transmissions and mimic joints). Downloaded once into a cache; the test
-/// skips with a note when pip or the network is unavailable.
+/// Collada, Gazebo tags, transmissions and mimic joints). Downloaded once into a cache (see
+/// twin-core's corpus test, which converts all of them); fails when pip cannot fetch it.
 #[test]
 fn real_public_urdfs_convert_load_and_stand() {
     let cache = std::env::var_os("TWIN_URDF_CACHE")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
+    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = repo().join("twin-core/tests/python/fetch_example_robot_data.py");
+    let ok = Command::new(&python).arg(&script).arg(&cache).status().is_ok_and(|s| s.success());
+    assert!(ok, "could not fetch example-robot-data from PyPI with {python}: set TWIN_PYTHON to a Python with pip");
     let robots = cache.join("cmeel.prefix/share/example-robot-data/robots");
-    if !robots.join("talos_data/robots/talos_reduced.urdf").is_file() {
-        let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-        std::fs::create_dir_all(&cache).unwrap();
-        let script = r#"
-import subprocess, sys, zipfile, glob
-cache = sys.argv[1]
-subprocess.run([sys.executable, "-m", "pip", "download", "--no-deps", "--only-binary=:all:", "-q",
-                "example-robot-data==6.0.0", "-d", cache], check=True, timeout=900)
-keep = ["talos_data", "anymal_b_simple_description", "ur_description", "solo_description",
-        "baxter_description", "panda_description"]
-for whl in glob.glob(cache + "/example_robot_data-*.whl"):
-    with zipfile.ZipFile(whl) as z:
-        for n in z.namelist():
-            if any("/robots/" + k + "/" in n for k in keep):
-                z.extract(n, cache)
-"#;
-        let ok =
-            Command::new(&python).args(["-c", script, cache.to_str().unwrap()]).status().is_ok_and(|s| s.success());
-        if !ok {
-            eprintln!("note: skipping real_public_urdfs: could not fetch example-robot-data from PyPI with {python}");
-            return;
-        }
-    }
     let pkg = robots.to_str().unwrap();
     // (URDF, extra flags): a humanoid with Gazebo tags, mimic joints and package:// meshes;
     // a quadruped with Collada meshes; arms on a world link or welded.
     let cases: [(&str, &[&str]); 6] = [
-        ("talos_data/robots/talos_reduced.urdf", &["--repair-inertia"]),
-        ("anymal_b_simple_description/robots/anymal.urdf", &["--repair-inertia"]),
-        ("solo_description/robots/solo12.urdf", &["--repair-inertia"]),
+        ("talos_data/robots/talos_reduced.urdf", &[]),
+        ("anymal_b_simple_description/robots/anymal.urdf", &[]),
+        ("solo_description/robots/solo12.urdf", &[]),
         ("ur_description/urdf/ur5_robot.urdf", &[]),
-        ("baxter_description/urdf/baxter.urdf", &["--repair-inertia"]),
+        ("baxter_description/urdf/baxter.urdf", &[]),
         ("panda_description/urdf/panda.urdf", &["--fixed-base"]),
     ];
     let dir = tempfile::tempdir().unwrap();
@@ -192,4 +173,45 @@ for whl in glob.glob(cache + "/example_robot_data-*.whl"):
     }
     let panda = std::fs::read_to_string(dir.path().join("panda.xml")).unwrap();
     assert!(panda.contains("<equality>"), "panda's finger mimic");
+}
+
+/// `twin convert` then `twin sim robot.xml` publishes exactly what `twin sim robot.urdf` does:
+/// the ROS side (robot name, IMU topic, rate, noise, frame) travels inside the MJCF.
+#[test]
+fn sim_of_the_converted_mjcf_publishes_what_the_urdf_does() {
+    let dir = tempfile::tempdir().unwrap();
+    // A seed-style robot: one link, an IMU at 100 Hz with noise, a namespaced topic.
+    let urdf = r#"<robot name="humanoid_robot">
+  <link name="torso"><inertial><mass value="3"/><inertia ixx="0.05" iyy="0.05" izz="0.05"/></inertial>
+    <collision><geometry><box size="0.3 0.2 0.4"/></geometry></collision></link>
+  <gazebo reference="torso"><sensor name="torso_imu" type="imu"><update_rate>100</update_rate>
+    <imu><angular_velocity><x><noise type="gaussian"><stddev>0.003</stddev></noise></x></angular_velocity>
+      <linear_acceleration><x><noise type="gaussian"><stddev>0.02</stddev></noise></x></linear_acceleration></imu>
+    <plugin name="imu" filename="libgazebo_ros_imu_sensor.so"><ros><namespace>/humanoid</namespace>
+      <remapping>~/out:=imu/data</remapping></ros><frame_name>imu_frame</frame_name></plugin></sensor></gazebo>
+</robot>"#;
+    std::fs::write(dir.path().join("seed.urdf"), urdf).unwrap();
+    let o = twin(&["convert", "seed.urdf", "-o", "seed.xml"], dir.path());
+    assert!(o.status.success(), "{}", text(&o));
+    let mut infos = Vec::new();
+    for model in ["seed.urdf", "seed.xml"] {
+        let mcap = format!("{model}.mcap");
+        let o = twin(&["sim", model, "--duration", "1", "--record", &mcap, "--seed", "1"], dir.path());
+        assert!(o.status.success(), "{model}: {}", text(&o));
+        let o = twin(&["log", "info", &mcap], dir.path());
+        assert!(o.status.success(), "{}", text(&o));
+        infos.push(String::from_utf8_lossy(&o.stdout).into_owned());
+    }
+    // Everything but the file name line agrees.
+    let strip = |s: &str| s.lines().filter(|l| !l.contains(".mcap")).collect::<Vec<_>>().join("\n");
+    assert_eq!(strip(&infos[0]), strip(&infos[1]));
+    assert!(infos[1].contains("/humanoid/imu/data"), "{}", infos[1]);
+    assert!(
+        infos[1].contains("/humanoid_robot/joint_commands") || !infos[0].contains("joint_commands"),
+        "{}",
+        infos[1]
+    );
+    // 100 messages in 1 s on the IMU topic.
+    let imu_line = infos[1].lines().find(|l| l.contains("/humanoid/imu/data")).unwrap();
+    assert!(imu_line.split_whitespace().any(|w| w == "100" || w == "101"), "{imu_line}");
 }

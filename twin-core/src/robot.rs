@@ -113,10 +113,13 @@ pub struct RobotMetadata {
 
 impl RobotMetadata {
     /// Metadata stored inside an MJCF, for a model loaded from one. This is the single place
-    /// where MJCF-stored robot metadata enters a [`Robot`]: today MJCFs carry none beyond the
-    /// model itself (sensor noise, `actuatorfrcrange`), which [`Robot::from_parts`] reads.
-    pub fn from_mjcf(_model: &Model) -> Option<RobotMetadata> {
-        None
+    /// where MJCF-stored robot metadata enters a [`Robot`]: an MJCF written by `twin convert`
+    /// carries the URDF's ROS side in `<custom>` texts ([`crate::convert::RobotMeta`]); other
+    /// MJCFs carry none beyond the model itself (sensor noise, `actuatorfrcrange`), which
+    /// [`Robot::from_parts`] reads.
+    pub fn from_mjcf(model: &Model) -> Option<RobotMetadata> {
+        crate::convert::RobotMeta::from_model(model)
+            .map(|m| RobotMetadata { name: Some(m.name), imus: m.imus, joints: m.joints })
     }
 }
 

@@ -6,9 +6,8 @@
 //! masses, inertia tensors, and that mesh files exist.
 
 use crate::error::{Error, Result};
-use nalgebra::{Matrix3, SymmetricEigen};
 use roxmltree::{Document, Node};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 
 /// Whether `text` looks like a URDF document (root element `<robot>`).
 pub fn is_urdf(text: &str) -> bool {
@@ -90,7 +89,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
             None => default.ok_or_else(|| err(node, format!("missing attribute {attr}"))),
         }
     };
-    let base_dir = path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let (urdf_dir, search) = crate::convert::mesh::search_paths(path, &[]);
 
     for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
         if let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) {
@@ -112,7 +111,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
             let Some(filename) = mesh.attribute("filename") else {
                 return Err(err(mesh, "<mesh> without filename attribute".into()));
             };
-            if let Err(message) = resolve_mesh(&base_dir, filename) {
+            if let Err(message) = crate::convert::mesh::resolve(filename, &urdf_dir, &search) {
                 return Err(err(mesh, message));
             }
         }
@@ -123,43 +122,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
 /// Checks an inertia tensor `[ixx, ixy, ixz, iyy, iyz, izz]` (kg·m²): symmetric positive
 /// definite and its principal moments satisfy the triangle inequality. The message says why not.
 pub fn check_inertia(v: [f64; 6]) -> std::result::Result<(), String> {
-    let [ixx, ixy, ixz, iyy, iyz, izz] = v;
-    let tensor = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
-    let mut p: Vec<f64> = SymmetricEigen::new(tensor).eigenvalues.iter().copied().collect();
-    p.sort_by(f64::total_cmp);
-    if p[0] <= 0.0 {
-        return Err(format!(
-            "inertia is not positive definite (principal moments {:.6e}, {:.6e}, {:.6e} kg·m²); \
-             fix ixx..izz (check units and signs of the products of inertia)",
-            p[0], p[1], p[2]
-        ));
-    }
-    // Relative tolerance: CAD exports of thin shapes sit exactly on the boundary.
-    if p[0] + p[1] < p[2] * (1.0 - 1e-9) {
-        return Err(format!(
-            "principal moments {:.6e}, {:.6e}, {:.6e} kg·m² violate the triangle inequality \
-             ({:.6e} + {:.6e} < {:.6e}): no rigid body has this inertia; fix ixx..izz",
-            p[0], p[1], p[2], p[0], p[1], p[2]
-        ));
-    }
-    Ok(())
-}
-
-/// Finds a mesh file the way MuJoCo will look for it (relative to the URDF's folder).
-fn resolve_mesh(base_dir: &Path, filename: &str) -> std::result::Result<PathBuf, String> {
-    if filename.starts_with("package://") {
-        return Err(format!(
-            "mesh \"{filename}\" uses a package:// URI, which MuJoCo cannot resolve; use a path \
-             relative to the URDF, or `twin convert --package-path DIR`"
-        ));
-    }
-    let plain = filename.strip_prefix("file://").unwrap_or(filename);
-    let candidate = base_dir.join(plain);
-    if candidate.is_file() {
-        Ok(candidate)
-    } else {
-        Err(format!("mesh file not found: \"{filename}\" (looked at {})", candidate.display()))
-    }
+    crate::convert::inertia::check(&crate::convert::inertia::tensor(v))
 }
 
 #[cfg(test)]

@@ -20,12 +20,12 @@ fn inertia_tensor(m: &Model, b: usize) -> Matrix3<f64> {
 
 #[test]
 fn humanoid_matches_mujoco_own_import_and_adds_actuators_sensors_friction() {
-    // MuJoCo's importer fuses fixed children and drops visuals by default; ask it not to, so
-    // bodies correspond one to one.
+    // MuJoCo's importer fuses fixed children into their parent (fusestatic); twin lumps their
+    // mass the same way but keeps their bodies: the moving bodies must agree exactly.
     let text = std::fs::read_to_string(humanoid()).unwrap();
     let text = text.replacen(
         "<robot name=\"humanoid\">",
-        "<robot name=\"humanoid\">\n<mujoco><compiler fusestatic=\"false\" discardvisual=\"false\"/></mujoco>",
+        "<robot name=\"humanoid\">\n<mujoco><compiler fusestatic=\"true\" discardvisual=\"false\"/></mujoco>",
         1,
     );
     let dir = tempfile::tempdir().unwrap();
@@ -64,9 +64,13 @@ fn humanoid_matches_mujoco_own_import_and_adds_actuators_sensors_friction() {
         assert!(d.abs().max() < 1e-9, "{name} inertia differs by {}", d.abs().max());
         compared += 1;
     }
-    assert_eq!(compared, 25);
-    // MuJoCo keeps the welded root's mass in its body; totals agree.
-    assert!((their_mass - ours.total_mass_kg()).abs() < 1e-9, "{their_mass}");
+    // 25 links: imu_link fused into torso_link, the welded root into the world.
+    assert_eq!(compared, 23);
+    let imu = ours.require_id(ObjType::Body, "imu_link").unwrap();
+    assert_eq!(ours.body_mass()[imu], 0.0, "lumped into torso_link");
+    // MuJoCo's fusestatic folds the welded root into the world, dropping its mass; twin keeps it.
+    let root_mass = ours.body_mass()[1];
+    assert!((their_mass + root_mass - ours.total_mass_kg()).abs() < 1e-9, "{their_mass} + {root_mass}");
     for j in 0..theirs.njnt() {
         let name = theirs.name(ObjType::Joint, j);
         let oj = ours.require_id(ObjType::Joint, name).unwrap();
@@ -232,16 +236,17 @@ fn malformed_input_gives_one_clear_error() {
         "mesh",
         "--package-path",
     );
-    // Triangle inequality: reported with the link, fixed only when asked.
+    // Triangle inequality: repaired by default with a note naming the link, refused when strict.
     let bad = "<robot name=\"r\">\n<link name=\"a\">\n<inertial><mass value=\"1\"/>\n<inertia ixx=\"0.01\" iyy=\"0.01\" izz=\"0.05\"/>\n</inertial>\n</link>\n</robot>";
-    expect_urdf_error(bad, 4, "inertia", "--repair-inertia");
-    let c = convert_urdf_str(
-        Path::new("bad.urdf"),
-        bad,
-        &ConvertOptions { repair_inertia: true, ..ConvertOptions::default() },
-    )
-    .unwrap();
-    assert!(c.notes.iter().any(|n| n.contains("link \"a\"") && n.contains("repaired")), "{:?}", c.notes);
+    let strict = ConvertOptions { strict_inertia: true, ..ConvertOptions::default() };
+    let err = convert_urdf_str(Path::new("bad.urdf"), bad, &strict).unwrap_err().to_string();
+    assert!(err.contains("bad.urdf:4") && err.contains("triangle") && err.contains("--strict-inertia"), "{err}");
+    let c = convert_urdf_str(Path::new("bad.urdf"), bad, &ConvertOptions::default()).unwrap();
+    assert!(
+        c.notes.iter().any(|n| n.contains("link \"a\" (line 4)") && n.contains("repaired") && n.contains("→")),
+        "{:?}",
+        c.notes
+    );
     let m = Model::from_xml_str(&c.mjcf).unwrap();
     let i = m.body_inertia()[1];
     let mut s = i;
@@ -249,6 +254,183 @@ fn malformed_input_gives_one_clear_error() {
     assert!(s[0] + s[1] >= s[2] * (1.0 - 1e-9), "{i:?}");
     // Smallest change: (0.05 − 0.02)/3 moved between moments.
     assert!((s[2] - 0.04).abs() < 1e-6, "{s:?}");
+}
+
+/// What ROS and Gazebo accept, the converter accepts, with a note saying what it assumed.
+#[test]
+fn gazebo_leftovers_and_noise_are_notes_not_errors() {
+    let urdf = r#"<robot name="lenient">
+  <link name="base"><inertial><mass value="2"/><inertia ixx="0.1" iyy="0.1" izz="0.1"/></inertial>
+    <collision><geometry><box size="0.2 0.2 0.2"/></geometry></collision></link>
+  <link name="arm"><inertial><origin xyz="0 0 0.1"/><mass value="1"/>
+    <inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="1e-19" izz="-2.220446e-16"/></inertial></link>
+  <link name="tool_frame"><inertial><mass value="0.01"/><inertia ixx="0" iyy="0" izz="0"/></inertial></link>
+  <joint name="j" type="revolute"><parent link="base"/><child link="arm"/><axis xyz="0 1 0"/>
+    <limit lower="-1" upper="1" effort="10" velocity="3"/></joint>
+  <joint name="tool" type="fixed"><parent link="arm"/><child link="tool_frame"/><origin xyz="0 0 0.3"/></joint>
+  <gazebo reference="base"><mu1></mu1><mu2>0.8</mu2></gazebo>
+  <gazebo reference="wheel_{side}_joint"><mu1>1</mu1></gazebo>
+  <gazebo reference="j"><implicitSpringDamper>1</implicitSpringDamper></gazebo>
+  <transmission name="t"><type>transmission_interface/SimpleTransmission</type>
+    <joint name="j"><hardwareInterface>hardware_interface/JointStateInterface</hardwareInterface>
+      <hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>
+    <actuator name="m"><mechanicalReduction>1</mechanicalReduction></actuator></transmission>
+</robot>"#;
+    let c = convert_urdf_str(Path::new("lenient.urdf"), urdf, &ConvertOptions::default()).unwrap();
+    let notes = c.notes.join("\n");
+    assert!(notes.contains("<mu1></mu1> is not a number") && notes.contains("ignored"), "{notes}");
+    assert!(notes.contains("wheel_{side}_joint") && notes.contains("unexpanded xacro"), "{notes}");
+    assert!(notes.contains("tool_frame → arm"), "{notes}");
+    let m = Model::from_xml_str(&c.mjcf).unwrap();
+    // The 10 g tool frame keeps its body; its mass moved into the arm (parallel-axis theorem).
+    let tool = m.require_id(ObjType::Body, "tool_frame").unwrap();
+    let arm = m.require_id(ObjType::Body, "arm").unwrap();
+    assert_eq!(m.body_mass()[tool], 0.0);
+    assert!((m.body_mass()[arm] - 1.01).abs() < 1e-12);
+    assert!((m.body_ipos()[arm][2] - (0.1 * 1.0 + 0.3 * 0.01) / 1.01).abs() < 1e-12);
+    assert!((m.total_mass_kg() - 3.01).abs() < 1e-12);
+    // The JointStateInterface is skipped, the effort interface drives the joint.
+    let a = m.require_id(ObjType::Actuator, "j").unwrap();
+    assert_eq!(m.actuator_gainprm()[a][0], 1.0, "a motor");
+    // Friction from mu2 alone.
+    let g = m.require_id(ObjType::Geom, "base_collision_0").unwrap();
+    assert_eq!(m.geom_friction()[g][0], 0.8);
+    // A file that is not a robot is still an error.
+    expect_urdf_error("<robot name=\"r\">\n</robot>", 1, "robot", "no <link>");
+}
+
+/// `--actuators`: auto motors for untransmitted joints with effort, none for mimics.
+#[test]
+fn actuator_modes() {
+    use twin_core::convert::ActuatorMode;
+    let urdf = r#"<robot name="acts">
+  <link name="base"><inertial><mass value="2"/><inertia ixx="0.1" iyy="0.1" izz="0.1"/></inertial></link>
+  <link name="a"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial></link>
+  <link name="b"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial></link>
+  <link name="c"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial></link>
+  <joint name="ja" type="revolute"><parent link="base"/><child link="a"/><limit lower="-1" upper="1" effort="7" velocity="3"/></joint>
+  <joint name="jb" type="revolute"><parent link="a"/><child link="b"/><limit lower="-1" upper="1" effort="5" velocity="3"/>
+    <mimic joint="ja"/></joint>
+  <joint name="jc" type="continuous"><parent link="b"/><child link="c"/></joint>
+  <transmission name="t"><type>transmission_interface/SimpleTransmission</type>
+    <joint name="ja"><hardwareInterface>hardware_interface/PositionJointInterface</hardwareInterface></joint>
+    <actuator name="m"><mechanicalReduction>1</mechanicalReduction></actuator></transmission>
+</robot>"#;
+    let nu = |mode: ActuatorMode| {
+        let c = convert_urdf_str(
+            Path::new("acts.urdf"),
+            urdf,
+            &ConvertOptions { actuators: mode, ..ConvertOptions::default() },
+        )
+        .unwrap();
+        let m = Model::from_xml_str(&c.mjcf).unwrap();
+        (0..m.nu()).map(|a| (m.name(ObjType::Actuator, a).to_string(), m.actuator_biasprm()[a][1])).collect::<Vec<_>>()
+    };
+    // auto: ja's declared position servo (bias −kp); jb mimics; jc has no effort limit.
+    assert_eq!(nu(ActuatorMode::Auto), vec![("ja".to_string(), -140.0)]);
+    assert_eq!(nu(ActuatorMode::Transmissions), vec![("ja".to_string(), -140.0)]);
+    assert_eq!(nu(ActuatorMode::Motor), vec![("ja".to_string(), 0.0), ("jc".to_string(), 0.0)]);
+    assert_eq!(nu(ActuatorMode::Position).len(), 2);
+    assert!(nu(ActuatorMode::None).is_empty());
+}
+
+/// Differential and half-differential transmissions: commanding the two actuators gives the
+/// joint torques of ros_control's (and PAL's) actuator-to-joint effort maps.
+#[test]
+fn differential_transmissions_map_efforts_like_ros_control() {
+    let link = |n: &str| {
+        format!(
+            r#"<link name="{n}"><inertial><mass value="1"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial></link>"#
+        )
+    };
+    let trans = |name: &str, ty: &str, j: [&str; 2], ar: [f64; 2], jr: [f64; 2]| {
+        format!(
+            r#"<transmission name="{name}"><type>transmission_interface/{ty}</type>
+  <actuator name="{name}_m1"><role>actuator1</role><mechanicalReduction>{}</mechanicalReduction></actuator>
+  <actuator name="{name}_m2"><role>actuator2</role><mechanicalReduction>{}</mechanicalReduction></actuator>
+  <joint name="{}"><role>joint1</role><offset>0</offset><mechanicalReduction>{}</mechanicalReduction>
+    <hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint>
+  <joint name="{}"><role>joint2</role><mechanicalReduction>{}</mechanicalReduction>
+    <hardwareInterface>hardware_interface/EffortJointInterface</hardwareInterface></joint></transmission>"#,
+            ar[0], ar[1], j[0], jr[0], j[1], jr[1]
+        )
+    };
+    let joint = |n: &str, p: &str, c: &str, axis: &str| {
+        format!(
+            r#"<joint name="{n}" type="revolute"><parent link="{p}"/><child link="{c}"/><axis xyz="{axis}"/><limit lower="-1" upper="1" effort="1000" velocity="3"/></joint>"#
+        )
+    };
+    let urdf = format!(
+        "<robot name=\"diff\">{}{}{}{}{}{}{}{}{}{}{}</robot>",
+        link("base"),
+        link("a"),
+        link("b"),
+        link("c"),
+        link("d"),
+        joint("j1", "base", "a", "0 0 1"),
+        joint("j2", "a", "b", "0 1 0"),
+        joint("j3", "b", "c", "1 0 0"),
+        joint("j4", "c", "d", "0 1 0"),
+        trans("wrist", "DifferentialTransmission", ["j1", "j2"], [-1.5, 2.0], [3.0, 0.5]),
+        trans("head", "HalfDifferentialTransmission", ["j3", "j4"], [1.25, -0.75], [1.0, 2.0]),
+    );
+    let c = convert_urdf_str(
+        Path::new("diff.urdf"),
+        &urdf,
+        &ConvertOptions { fixed_base: true, ..ConvertOptions::default() },
+    )
+    .unwrap();
+    assert_eq!(c.differentials.len(), 2);
+    let m = std::sync::Arc::new(Model::from_xml_str(&c.mjcf).unwrap());
+    assert_eq!(m.nu(), 4);
+    let mut d = Data::new(m.clone()).unwrap();
+    let (ta1, ta2, ta3, ta4) = (0.7, -1.3, 2.1, 0.4);
+    for (name, v) in [("wrist_m1", ta1), ("wrist_m2", ta2), ("head_m1", ta3), ("head_m2", ta4)] {
+        d.ctrl_mut()[m.require_id(ObjType::Actuator, name).unwrap()] = v;
+    }
+    d.forward().unwrap();
+    let tau = |j: &str| d.qfrc_actuator()[m.jnt_dofadr()[m.require_id(ObjType::Joint, j).unwrap()] as usize];
+    // ros_control DifferentialTransmission::actuatorToJointEffort.
+    let (ar1, ar2, jr1, jr2) = (-1.5, 2.0, 3.0, 0.5);
+    assert!((tau("j1") - jr1 * (ta1 * ar1 + ta2 * ar2)).abs() < 1e-9, "{}", tau("j1"));
+    assert!((tau("j2") - jr2 * (ta1 * ar1 - ta2 * ar2)).abs() < 1e-9, "{}", tau("j2"));
+    // PAL HalfDifferentialTransmission::actuatorToJointEffort.
+    let (ar1, ar2, jr1, jr2) = (1.25, -0.75, 1.0, 2.0);
+    let tj3 = ta3 * ar1 * jr1;
+    assert!((tau("j3") - tj3).abs() < 1e-9, "{}", tau("j3"));
+    assert!((tau("j4") - (ta4 * ar2 + tj3 / jr1) * jr2).abs() < 1e-9, "{}", tau("j4"));
+}
+
+/// Gazebo contact stiffness: a ball resting on the floor sinks m·g/kp, as in Gazebo; a box on
+/// its four corners m·g/(4·kp), as in Gazebo (ODE applies kp at each contact point).
+#[test]
+fn gazebo_kp_kd_become_direct_solref() {
+    let (mass, kp) = (2.0_f64, 2.0e4);
+    let kd = 2.0 * (kp * mass).sqrt();
+    for (shape, contacts, half_height) in
+        [("<sphere radius=\"0.1\"/>", 1.0, 0.1), ("<box size=\"0.2 0.2 0.2\"/>", 4.0, 0.1)]
+    {
+        let urdf = format!(
+            r#"<robot name="body"><link name="body"><inertial><mass value="{mass}"/><inertia ixx="0.01" iyy="0.01" izz="0.01"/></inertial>
+  <collision><geometry>{shape}</geometry></collision></link>
+  <gazebo reference="body"><kp>{kp}</kp><kd>{kd}</kd><mu1>0.9</mu1><mu2>0.9</mu2></gazebo></robot>"#
+        );
+        let c = convert_urdf_str(Path::new("body.urdf"), &urdf, &ConvertOptions::default()).unwrap();
+        let m = std::sync::Arc::new(Model::from_xml_str(&c.mjcf).unwrap());
+        let g = m.require_id(ObjType::Geom, "body_collision_0").unwrap();
+        assert!(m.geom_solref()[g][0] < 0.0, "direct form");
+        let mut d = Data::new(m.clone()).unwrap();
+        d.reset_to_keyframe(m.require_id(ObjType::Key, "home").unwrap()).unwrap();
+        for _ in 0..2000 {
+            d.step().unwrap();
+        }
+        let penetration = -(d.qpos()[2] - half_height);
+        let expected = mass * 9.81 / (contacts * kp);
+        assert!(
+            (penetration - expected).abs() < 0.05 * expected,
+            "{shape}: penetration {penetration} m, Gazebo {expected} m"
+        );
+    }
 }
 
 fn cube_ascii_stl(half: f64) -> String {

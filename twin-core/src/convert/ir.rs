@@ -141,8 +141,65 @@ pub(crate) struct SensorIr {
     pub pose: Pose,
     pub update_rate_hz: Option<f64>,
     pub line: u32,
-    /// Byte range of the `<sensor>` element in the file, to read its details later.
-    pub node_range: std::ops::Range<usize>,
+    /// ROS topic from the sensor's plugin or `<topic>`.
+    pub topic: Option<String>,
+    /// The plugin's `frame_name`.
+    pub frame_name: Option<String>,
+    /// IMU gyroscope / accelerometer white-noise standard deviations (0 when none).
+    pub gyro_noise_std: f64,
+    pub accel_noise_std: f64,
+    /// `<camera>` children.
+    pub cameras: Vec<CameraIr>,
+    /// `<ray>` / `<lidar>` scan.
+    pub ray: Option<RayIr>,
+}
+
+#[derive(Debug, Clone)]
+pub(crate) struct CameraIr {
+    /// Horizontal field of view, radians.
+    pub hfov: f64,
+    pub width: f64,
+    pub height: f64,
+    /// `sensor_from_camera` (Gazebo convention: view along +X).
+    pub pose: Pose,
+}
+
+#[derive(Debug, Clone)]
+pub(crate) struct RayIr {
+    /// (samples, min angle, max angle), radians.
+    pub horizontal: (usize, f64, f64),
+    pub vertical: (usize, f64, f64),
+    pub max_range_m: f64,
+}
+
+/// A ros_control `DifferentialTransmission` or PAL's `HalfDifferentialTransmission`.
+#[derive(Debug, Clone)]
+pub(crate) struct DifferentialIr {
+    pub name: String,
+    /// Half differential: joint 1 is driven by actuator 1 alone.
+    pub half: bool,
+    /// (joint, mechanical reduction, offset) by role (joint1, joint2).
+    pub joints: [(String, f64, f64); 2],
+    /// (actuator, mechanical reduction) by role (actuator1, actuator2).
+    pub actuators: [(String, f64); 2],
+    pub interface: Interface,
+    pub line: u32,
+}
+
+impl DifferentialIr {
+    /// `coef[a][j]`: torque on joint `j` per unit effort of actuator `a`, as ros_control maps it
+    /// (`actuatorToJointEffort`). Differential: τj1 = jr1·(ar1·τa1 + ar2·τa2),
+    /// τj2 = jr2·(ar1·τa1 − ar2·τa2). Half differential: τj1 = jr1·ar1·τa1,
+    /// τj2 = jr2·(ar1·τa1 + ar2·τa2).
+    pub fn coefficients(&self) -> [[f64; 2]; 2] {
+        let (jr1, jr2) = (self.joints[0].1, self.joints[1].1);
+        let (ar1, ar2) = (self.actuators[0].1, self.actuators[1].1);
+        if self.half {
+            [[jr1 * ar1, jr2 * ar1], [0.0, jr2 * ar2]]
+        } else {
+            [[jr1 * ar1, jr2 * ar1], [jr1 * ar2, -jr2 * ar2]]
+        }
+    }
 }
 
 #[derive(Debug, Clone, Default)]
@@ -153,6 +210,12 @@ pub(crate) struct GazeboLink {
     pub kd: Option<f64>,
     pub material: Option<String>,
     pub self_collide: Option<bool>,
+    /// Gazebo `minDepth`, metres.
+    pub min_depth: Option<f64>,
+    /// Gazebo `fdir1` (first friction direction), as written.
+    pub fdir1: Option<String>,
+    /// The reference names a joint, not a link.
+    pub is_joint: bool,
     pub line: u32,
 }
 
@@ -165,6 +228,7 @@ pub(crate) struct RobotIr {
     pub gazebo: HashMap<String, GazeboLink>,
     pub sensors: Vec<SensorIr>,
     pub drives: HashMap<String, Drive>,
+    pub differentials: Vec<DifferentialIr>,
     pub notes: Vec<String>,
 }
 
@@ -529,21 +593,22 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
             line,
         });
     }
-    for j in &joints {
+    // A mimic of a joint that does not exist (often a missing xacro prefix): the joint moves
+    // on its own, as robot_state_publisher and Gazebo treat it.
+    for j in &mut joints {
         if let Some(m) = &j.mimic
             && !seen_joints.contains_key(&m.joint)
         {
-            return Err(Error::Urdf {
-                path: ctx.path.to_path_buf(),
-                line: m.line,
-                element: "mimic".into(),
-                name: Some(j.name.clone()),
-                message: format!("mimic names joint \"{}\", which does not exist: fix the name", m.joint),
-            });
+            notes.push(format!(
+                "joint \"{}\": <mimic joint=\"{}\"> (line {}) names no joint of this robot: mimic ignored, the joint moves on its own",
+                j.name, m.joint, m.line
+            ));
+            j.mimic = None;
         }
     }
 
-    // <gazebo> extensions.
+    // <gazebo> extensions. Gazebo ignores what it does not understand: so does the converter,
+    // with a note each.
     let mut gazebo: HashMap<String, GazeboLink> = HashMap::new();
     let mut sensors = Vec::new();
     for g in children(root, "gazebo") {
@@ -568,24 +633,52 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
                 let is_link = seen_links.contains_key(reference);
                 let is_joint = seen_joints.contains_key(reference);
                 if !is_link && !is_joint {
-                    return Err(ctx.err(
-                        g,
-                        format!("<gazebo reference=\"{reference}\"> names no link or joint: fix the reference"),
+                    let why = if reference.contains('{') || reference.contains('$') {
+                        "an unexpanded xacro name"
+                    } else {
+                        "no link or joint of this robot"
+                    };
+                    notes.push(format!(
+                        "<gazebo reference=\"{reference}\"> (line {}) names {why}: ignored, as Gazebo does",
+                        ctx.line(g)
                     ));
+                    continue;
                 }
                 let entry = gazebo.entry(reference.to_string()).or_default();
                 entry.line = ctx.line(g);
-                if let Some(v) = ctx.child_num(g, "mu1")? {
+                entry.is_joint = !is_link;
+                let mut num = |tag: &str| -> Option<f64> {
+                    let c = child(g, tag)?;
+                    let t = c.text().unwrap_or("").trim();
+                    match parse_num(t) {
+                        Some(v) => Some(v),
+                        None => {
+                            notes.push(format!(
+                                "<gazebo reference=\"{reference}\"> (line {}): <{tag}>{t}</{tag}> is not a number{}: ignored (Gazebo's default applies)",
+                                ctx.line(c),
+                                xacro_hint(t)
+                            ));
+                            None
+                        }
+                    }
+                };
+                if let Some(v) = num("mu1") {
                     entry.mu1 = Some(v);
                 }
-                if let Some(v) = ctx.child_num(g, "mu2")? {
+                if let Some(v) = num("mu2") {
                     entry.mu2 = Some(v);
                 }
-                if let Some(v) = ctx.child_num(g, "kp")? {
+                if let Some(v) = num("kp") {
                     entry.kp = Some(v);
                 }
-                if let Some(v) = ctx.child_num(g, "kd")? {
+                if let Some(v) = num("kd") {
                     entry.kd = Some(v);
+                }
+                if let Some(v) = num("minDepth") {
+                    entry.min_depth = Some(v);
+                }
+                if let Some(f) = child_text(g, "fdir1") {
+                    entry.fdir1 = Some(f.to_string());
                 }
                 if let Some(m) = child(g, "material") {
                     let text = m.text().unwrap_or("").trim();
@@ -601,26 +694,7 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
                     entry.self_collide = Some(t == "true" || t == "1");
                 }
                 for s in children(g, "sensor") {
-                    let kind = s.attribute("type").unwrap_or("").to_string();
-                    let name = s.attribute("name").map(str::to_string).unwrap_or_else(|| format!("{reference}_{kind}"));
-                    let pose = match child_text(s, "pose") {
-                        Some(t) => {
-                            let v = parse_vec::<6>(t).ok_or_else(|| {
-                                ctx.err(child(s, "pose").unwrap_or(s), "<pose> must be 6 numbers: x y z roll pitch yaw")
-                            })?;
-                            Pose::from_xyz_rpy([v[0], v[1], v[2]], [v[3], v[4], v[5]])
-                        }
-                        None => Pose::IDENTITY,
-                    };
-                    sensors.push(SensorIr {
-                        name,
-                        kind,
-                        reference: reference.to_string(),
-                        pose,
-                        update_rate_hz: ctx.child_num(s, "update_rate")?,
-                        line: ctx.line(s),
-                        node_range: s.range(),
-                    });
+                    sensors.push(parse_sensor(ctx, s, reference)?);
                 }
             }
         }
@@ -640,51 +714,126 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
             None
         }
     };
+    let mut differentials: Vec<DifferentialIr> = Vec::new();
+    // The command interface named by a transmission joint/actuator: the first one that
+    // commands something (ROS 1 `JointStateInterface` only reads state).
+    let command_interface = |nodes: &[Node<'_, '_>]| -> (Option<Interface>, Vec<String>) {
+        let mut unknown = Vec::new();
+        for n in nodes {
+            for h in children(*n, "hardwareInterface") {
+                let text = h.text().unwrap_or("").trim();
+                match interface_of(text) {
+                    Some(i) => return (Some(i), unknown),
+                    None => unknown.push(text.to_string()),
+                }
+            }
+        }
+        (None, unknown)
+    };
+    let reduction = |n: Node<'_, '_>| -> Result<f64> {
+        let Some(r) = child(n, "mechanicalReduction") else { return Ok(1.0) };
+        let text = r.text().unwrap_or("").trim();
+        let g = parse_num(text)
+            .ok_or_else(|| ctx.err(r, format!("mechanicalReduction \"{text}\" is not a number{}", xacro_hint(text))))?;
+        if g == 0.0 {
+            return Err(ctx.err(r, "mechanicalReduction must not be 0: give the gear ratio (1 for direct drive)"));
+        }
+        Ok(g)
+    };
     for t in children(root, "transmission") {
-        let ty = child_text(t, "type").or(t.attribute("type")).unwrap_or("");
+        let tname = t.attribute("name").unwrap_or("").to_string();
+        let tline = ctx.line(t);
+        let ty = child_text(t, "type").or(t.attribute("type")).unwrap_or("").to_string();
         let tjoints: Vec<Node<'_, '_>> = children(t, "joint").collect();
-        if tjoints.len() != 1 || !ty.contains("SimpleTransmission") {
+        let tacts: Vec<Node<'_, '_>> = children(t, "actuator").collect();
+        let mut known_joints = Vec::new();
+        for tj in &tjoints {
+            let jname = tj.attribute("name").ok_or_else(|| ctx.err(*tj, "transmission <joint> without name"))?;
+            if seen_joints.contains_key(jname) {
+                known_joints.push(*tj);
+            } else {
+                notes.push(format!(
+                    "transmission \"{tname}\" (line {}) names joint \"{jname}\", which does not exist{}: ignored",
+                    ctx.line(*tj),
+                    if jname.contains("${") || jname.contains('{') { " (unexpanded xacro name)" } else { "" }
+                ));
+            }
+        }
+        if known_joints.len() != tjoints.len() || tjoints.is_empty() {
+            if tjoints.is_empty() {
+                notes.push(format!("transmission \"{tname}\" (line {tline}) of type {ty} names no <joint>: ignored"));
+            }
+            continue;
+        }
+        let (iface, unknown) = command_interface(&[tjoints.as_slice(), tacts.as_slice()].concat());
+        for u in unknown {
+            if !u.contains("JointStateInterface") {
+                notes.push(format!(
+                    "transmission \"{tname}\" (line {tline}): hardwareInterface \"{u}\" is not a command interface twin knows (Effort/Position/Velocity); skipped"
+                ));
+            }
+        }
+        let Some(interface) = iface else {
             notes.push(format!(
-                "transmission \"{}\" (line {}) of type {ty} with {} joints: only SimpleTransmission is converted; ignored",
-                t.attribute("name").unwrap_or(""),
-                ctx.line(t),
-                tjoints.len()
+                "transmission \"{tname}\" (line {tline}) declares no command interface (only state interfaces): no actuator from it"
+            ));
+            continue;
+        };
+        let is_diff = ty.ends_with("DifferentialTransmission");
+        if is_diff && tjoints.len() == 2 && tacts.len() == 2 {
+            let role = |n: Node<'_, '_>, base: &str, k: usize| -> usize {
+                match child_text(n, "role") {
+                    Some(r) if r == format!("{base}1") => 0,
+                    Some(r) if r == format!("{base}2") => 1,
+                    _ => k,
+                }
+            };
+            let mut joints_d: [(String, f64, f64); 2] = Default::default();
+            let mut acts_d: [(String, f64); 2] = Default::default();
+            for (k, tj) in tjoints.iter().enumerate() {
+                let offset = match child(*tj, "offset") {
+                    Some(o) => {
+                        let text = o.text().unwrap_or("").trim();
+                        parse_num(text).ok_or_else(|| ctx.err(o, format!("<offset>{text}</offset> is not a number")))?
+                    }
+                    None => 0.0,
+                };
+                joints_d[role(*tj, "joint", k)] =
+                    (tj.attribute("name").unwrap_or("").to_string(), reduction(*tj)?, offset);
+            }
+            for (k, ta) in tacts.iter().enumerate() {
+                acts_d[role(*ta, "actuator", k)] = (
+                    ta.attribute("name").map(str::to_string).unwrap_or_else(|| format!("{tname}_actuator{}", k + 1)),
+                    reduction(*ta)?,
+                );
+            }
+            differentials.push(DifferentialIr {
+                name: tname,
+                half: ty.ends_with("HalfDifferentialTransmission"),
+                joints: joints_d,
+                actuators: acts_d,
+                interface,
+                line: tline,
+            });
+            continue;
+        }
+        if tjoints.len() != 1 || tacts.len() > 1 {
+            notes.push(format!(
+                "transmission \"{tname}\" (line {tline}) of type {ty} with {} joints and {} actuators is not converted; its joints get the actuators that --actuators gives untransmitted joints",
+                tjoints.len(),
+                tacts.len()
             ));
             continue;
         }
-        let tj = tjoints[0];
-        let jname = tj.attribute("name").ok_or_else(|| ctx.err(tj, "transmission <joint> without name"))?;
-        if !seen_joints.contains_key(jname) {
-            return Err(
-                ctx.err(tj, format!("transmission names joint \"{jname}\", which does not exist: fix the name"))
-            );
+        if !ty.contains("SimpleTransmission") {
+            notes.push(format!(
+                "transmission \"{tname}\" (line {tline}) of type {ty}: one joint, one actuator: converted as a SimpleTransmission (reducer)"
+            ));
         }
-        let actuator = child(t, "actuator");
-        let iface_text = children(tj, "hardwareInterface")
-            .chain(actuator.into_iter().flat_map(|a| children(a, "hardwareInterface")))
-            .filter_map(|n| n.text())
-            .next()
-            .unwrap_or("EffortJointInterface");
-        let interface = interface_of(iface_text).ok_or_else(|| {
-            ctx.err(
-                tj,
-                format!("unknown hardwareInterface \"{iface_text}\": use Effort/Position/VelocityJointInterface"),
-            )
-        })?;
-        let reduction_node =
-            actuator.and_then(|a| child(a, "mechanicalReduction")).or_else(|| child(t, "mechanicalReduction"));
-        let gear = match reduction_node {
-            Some(n) => {
-                let text = n.text().unwrap_or("").trim();
-                let g = parse_num(text)
-                    .ok_or_else(|| ctx.err(n, format!("mechanicalReduction \"{text}\" is not a number")))?;
-                if g == 0.0 {
-                    return Err(ctx.err(n, "mechanicalReduction must not be 0"));
-                }
-                g
-            }
-            None => 1.0,
-        };
+        let tj = tjoints[0];
+        let jname = tj.attribute("name").unwrap_or("");
+        let reduction_node = tacts.first().copied().filter(|a| child(*a, "mechanicalReduction").is_some()).unwrap_or(t);
+        let gear = reduction(reduction_node)?;
         drives.insert(jname.to_string(), Drive { interface, gear, cmd_range: None });
     }
     for rc in children(root, "ros2_control") {
@@ -693,9 +842,11 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
                 continue;
             };
             if !seen_joints.contains_key(jname) {
-                return Err(
-                    ctx.err(j, format!("ros2_control names joint \"{jname}\", which does not exist: fix the name"))
-                );
+                notes.push(format!(
+                    "ros2_control joint \"{jname}\" (line {}) does not exist in the URDF: ignored",
+                    ctx.line(j)
+                ));
+                continue;
             }
             let cmds: Vec<Node<'_, '_>> = children(j, "command_interface").collect();
             let Some(cmd) = cmds.first() else { continue };
@@ -744,6 +895,141 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
         gazebo,
         sensors,
         drives,
+        differentials,
         notes,
     })
+}
+/// A Gazebo `<sensor>` with everything the conversion needs from it.
+fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<SensorIr> {
+    let kind = s.attribute("type").unwrap_or("").to_string();
+    let name = s.attribute("name").map(str::to_string).unwrap_or_else(|| format!("{reference}_{kind}"));
+    let pose = match child_text(s, "pose") {
+        Some(t) => {
+            let v = parse_vec::<6>(t).ok_or_else(|| {
+                ctx.err(child(s, "pose").unwrap_or(s), "<pose> must be 6 numbers: x y z roll pitch yaw")
+            })?;
+            Pose::from_xyz_rpy([v[0], v[1], v[2]], [v[3], v[4], v[5]])
+        }
+        None => Pose::IDENTITY,
+    };
+    let update_rate_hz = match child(s, "update_rate") {
+        Some(c) => {
+            let t = c.text().unwrap_or("").trim();
+            Some(parse_num(t).ok_or_else(|| {
+                ctx.err(c, format!("<update_rate>{t}</update_rate> is not a number: give the rate in Hz"))
+            })?)
+        }
+        None => None,
+    };
+    let (gyro_noise_std, accel_noise_std) = imu_noise(s);
+    let frame_name = child(s, "plugin")
+        .and_then(|p| child_text(p, "frame_name").or_else(|| child_text(p, "frameName")))
+        .map(str::to_string);
+    let cameras = children(s, "camera")
+        .map(|cam| {
+            let img = child(cam, "image");
+            CameraIr {
+                hfov: child_text(cam, "horizontal_fov").and_then(parse_num).unwrap_or(1.047),
+                width: img.and_then(|i| child_text(i, "width")).and_then(parse_num).unwrap_or(320.0),
+                height: img.and_then(|i| child_text(i, "height")).and_then(parse_num).unwrap_or(240.0),
+                pose: match child_text(cam, "pose").and_then(parse_vec::<6>) {
+                    Some(v) => Pose::from_xyz_rpy([v[0], v[1], v[2]], [v[3], v[4], v[5]]),
+                    None => Pose::IDENTITY,
+                },
+            }
+        })
+        .collect();
+    let ray = child(s, "ray").or_else(|| child(s, "lidar")).map(|r| {
+        let scan = child(r, "scan");
+        let axis = |tag: &str| -> (usize, f64, f64) {
+            let a = scan.and_then(|s| child(s, tag));
+            let samples = a.and_then(|a| child_text(a, "samples")).and_then(parse_num).unwrap_or(1.0).max(1.0) as usize;
+            let lo = a.and_then(|a| child_text(a, "min_angle")).and_then(parse_num).unwrap_or(0.0);
+            let hi = a.and_then(|a| child_text(a, "max_angle")).and_then(parse_num).unwrap_or(0.0);
+            (samples, lo, hi)
+        };
+        RayIr {
+            horizontal: axis("horizontal"),
+            vertical: axis("vertical"),
+            max_range_m: child(r, "range").and_then(|r| child_text(r, "max")).and_then(parse_num).unwrap_or(10.0),
+        }
+    });
+    Ok(SensorIr {
+        name,
+        kind,
+        reference: reference.to_string(),
+        pose,
+        update_rate_hz,
+        line: ctx.line(s),
+        topic: resolve_topic(s),
+        frame_name,
+        gyro_noise_std,
+        accel_noise_std,
+        cameras,
+        ray,
+    })
+}
+
+/// Gyro and accelerometer noise standard deviations of a Gazebo `<sensor type="imu">`.
+fn imu_noise(sensor: Node<'_, '_>) -> (f64, f64) {
+    let Some(imu) = child(sensor, "imu") else {
+        return (0.0, 0.0);
+    };
+    let stddev_under = |n: Option<Node<'_, '_>>| -> f64 {
+        n.map(|n| {
+            n.descendants()
+                .filter(|d| d.has_tag_name("stddev"))
+                .filter_map(|d| d.text().and_then(parse_num))
+                .fold(0.0, f64::max)
+        })
+        .unwrap_or(0.0)
+    };
+    let mut gyro = stddev_under(child(imu, "angular_velocity"));
+    let mut accel = stddev_under(child(imu, "linear_acceleration"));
+    // Gazebo classic's older form: <imu><noise><rate><stddev>, <accel><stddev>.
+    if let Some(n) = child(imu, "noise") {
+        gyro = gyro.max(stddev_under(child(n, "rate")));
+        accel = accel.max(stddev_under(child(n, "accel")));
+    }
+    (gyro, accel)
+}
+
+/// ROS topic of a Gazebo sensor from its plugin: ROS 2 `<ros><namespace>` + `<remapping>`
+/// (`~/out:=imu/data`), ROS 1 `<robotNamespace>` + `<topicName>`, or the sensor's `<topic>`.
+pub(crate) fn resolve_topic(sensor: Node<'_, '_>) -> Option<String> {
+    let join = |ns: &str, rel: &str| -> String {
+        if rel.starts_with('/') {
+            rel.to_string()
+        } else {
+            let ns = ns.trim_end_matches('/');
+            let ns = if ns.starts_with('/') || ns.is_empty() { ns.to_string() } else { format!("/{ns}") };
+            format!("{ns}/{rel}")
+        }
+    };
+    if let Some(p) = child(sensor, "plugin") {
+        let plugin_name = p.attribute("name").unwrap_or("plugin");
+        if let Some(ros) = child(p, "ros") {
+            let ns = child_text(ros, "namespace").unwrap_or("");
+            let mut out = None;
+            for r in children(ros, "remapping") {
+                let t = r.text().unwrap_or("").trim();
+                if let Some((from, to)) = t.split_once(":=")
+                    && (from == "~/out" || from == "out")
+                {
+                    out = Some(to.to_string());
+                }
+            }
+            let topic = match out {
+                Some(to) if to.starts_with("~/") => join(ns, &format!("{plugin_name}/{}", &to[2..])),
+                Some(to) => join(ns, &to),
+                None => join(ns, &format!("{plugin_name}/out")),
+            };
+            return Some(topic);
+        }
+        if let Some(t) = child_text(p, "topicName").or_else(|| child_text(p, "topic_name")) {
+            let ns = child_text(p, "robotNamespace").unwrap_or("");
+            return Some(join(ns, t));
+        }
+    }
+    child_text(sensor, "topic").map(|t| join("", t))
 }

@@ -36,6 +36,24 @@ pub(crate) fn find_package(pkg: &str, search: &[PathBuf]) -> Option<PathBuf> {
     None
 }
 
+/// Where `package://` URIs of the URDF at `urdf_path` are looked for: `package_paths` (the
+/// user's), then `ROS_PACKAGE_PATH`, then the URDF's folder's ancestors (a vendored
+/// description package keeps the URDF in `PKG/urdf/`), then its folder. Returns the URDF's
+/// absolute folder (for relative mesh paths) and that search list. The one place that decides
+/// how twin finds meshes.
+pub(crate) fn search_paths(urdf_path: &Path, package_paths: &[PathBuf]) -> (PathBuf, Vec<PathBuf>) {
+    let mut search = package_paths.to_vec();
+    if let Some(env) = std::env::var_os("ROS_PACKAGE_PATH") {
+        search.extend(std::env::split_paths(&env).filter(|p| !p.as_os_str().is_empty()));
+    }
+    let urdf_dir = urdf_path.parent().map(Path::to_path_buf).unwrap_or_default();
+    let urdf_dir = if urdf_dir.as_os_str().is_empty() { PathBuf::from(".") } else { urdf_dir };
+    let abs_dir = std::path::absolute(&urdf_dir).unwrap_or(urdf_dir);
+    search.extend(abs_dir.ancestors().skip(1).take(4).map(Path::to_path_buf));
+    search.push(abs_dir.clone());
+    (abs_dir, search)
+}
+
 /// Resolves a URDF mesh `filename` to a file on disk. `search` lists package paths (user's,
 /// then `ROS_PACKAGE_PATH`, then the URDF's ancestor folders).
 pub(crate) fn resolve(filename: &str, urdf_dir: &Path, search: &[PathBuf]) -> std::result::Result<PathBuf, String> {

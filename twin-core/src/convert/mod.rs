@@ -10,9 +10,16 @@
 //! ```
 //!
 //! ## What the generated model contains
-//! - One `body` per link, names kept (fixed-joint children stay bodies: `fusestatic="false"`),
-//!   `inertial pos fullinertia` from the URDF inertial (rotated origin applied), no inertia from
-//!   geometry (`inertiafromgeom="false"`).
+//! - One `body` per link, names kept (fixed-joint children stay bodies: `fusestatic="false"`,
+//!   so their frames, geoms and sensors survive), no inertia from geometry
+//!   (`inertiafromgeom="false"`).
+//! - Inertias as ROS and Gazebo take them: each link's tensor (rotated inertial
+//!   origin applied) is checked with a tolerance for floating-point noise; mass on fixed-joint
+//!   links is lumped into the body that moves them (parallel-axis theorem, as Gazebo and
+//!   MuJoCo's `fusestatic` do); a real violation (triangle inequality, negative moment) is
+//!   repaired by the smallest change of principal moments and listed in the notes with the link,
+//!   line and before/after ([`ConvertOptions::strict_inertia`] refuses instead). A moving link
+//!   without mass gets 1e-12 of the robot's mass, so the total equals the URDF's.
 //! - The root link gets a free joint named `floating_base` unless the URDF attaches it to a
 //!   `world` link or [`ConvertOptions::fixed_base`] is set. The root is placed so that the lowest
 //!   collision geom touches the floor (z = 0) at the zero joint pose, and keyframe `home` stores
@@ -21,10 +28,16 @@
 //!   spherical → ball, planar → two slides (`<joint>_tx`, `<joint>_ty`) + hinge, floating → free;
 //!   `<dynamics damping friction>` → `damping` / `frictionloss`; effort → `actuatorfrcrange`;
 //!   velocity limits are kept in [`JointMeta`]; `<mimic>` → `<equality joint polycoef>`.
-//! - Actuators, one per joint named in a `SimpleTransmission` or `ros2_control` block, named
-//!   after the joint: effort → `motor` (`forcerange` = `ctrlrange` = ±effort/gear), position →
-//!   `position` (kp = [`ConvertOptions::position_kp_per_effort`] × effort), velocity →
-//!   `velocity`; `mechanicalReduction` → `gear`, so `ctrl` is in actuator (motor-side) units.
+//! - Actuators ([`ActuatorMode`], default `auto`), named after the joint: each joint named in a
+//!   `SimpleTransmission` (or a one-joint reducer) or `ros2_control` block gets its declared
+//!   interface: effort → `motor` (`forcerange` = `ctrlrange` = ±effort/gear), position →
+//!   `position` (kp = [`ConvertOptions::position_kp_per_effort`] × effort, kv =
+//!   [`ConvertOptions::position_kv_per_kp`] × kp), velocity → `velocity`; `mechanicalReduction`
+//!   → `gear`, so `ctrl` is in actuator (motor-side) units. Every other movable joint with an
+//!   effort limit gets a `motor` within ±effort; mimic joints get none (the equality drives them).
+//!   ros_control `DifferentialTransmission` and PAL's `HalfDifferentialTransmission` become two
+//!   fixed tendons with the coefficients of the actuator-to-joint effort map, one actuator each
+//!   (named like the transmission's actuators; see [`DifferentialMeta`]).
 //! - Sensors: every 1-DOF joint gets `<joint>_pos` (`jointpos`) and `<joint>_vel` (`jointvel`)
 //!   when [`ConvertOptions::joint_sensors`]; Gazebo IMU → site + `<imu>_quat` (`framequat`),
 //!   `<imu>_gyro`, `<imu>_accel` with the plugin's noise stored as `noise` (MuJoCo does not apply
@@ -36,107 +49,62 @@
 //!   world objects (`1/1`) but not each other (Gazebo's default); `selfCollide` links and
 //!   [`ConvertOptions::self_collision`] add bit 4. Gazebo `mu1`/`mu2` → `friction`; since MuJoCo
 //!   takes the max of two geoms' friction and Gazebo the min, every geom gets a `priority` that
-//!   ranks lower friction higher, which reproduces the min.
+//!   ranks lower friction higher, which reproduces the min. Gazebo `kp`/`kd` → `solref` in its
+//!   direct form (−stiffness, −damping) with a constant impedance, scaled by the link's effective
+//!   mass at the home pose, so each contact point sinks Gazebo's `force/kp`; those geoms take
+//!   the highest priority and the min of their friction and the world's.
+//! - What twin publishes the robot by (name, IMU topics, rates, noise, frame ids, joint limits,
+//!   command interfaces, differentials) in `<custom><text name="twin:…">` ([`RobotMeta`]), read
+//!   back when the MJCF is loaded.
 //! - `<option integrator="implicitfast">` (stable with stiff PD gains and joint damping),
 //!   timestep [`ConvertOptions::timestep_secs`], no default armature (URDF has none; see
 //!   [`ConvertOptions::armature`]).
 //!
+//! ## Leniency
+//! What Gazebo and ROS ignore, the converter ignores with a note saying what it assumed: empty or
+//! non-numeric Gazebo tags, `<gazebo reference>` naming nothing (often an unexpanded xacro name),
+//! ROS 1 state interfaces (`JointStateInterface`), transmissions and `ros2_control` entries
+//! naming missing joints, mimics of missing joints, visual meshes that cannot be found or read.
+//! A file with no `<link>` is still an error, as are bad numbers in links and joints and
+//! missing collision meshes: one error with the file, line, element and what to do.
+//!
 //! ## Limitations
-//! Gazebo `kp`/`kd` contact stiffness, anisotropic friction (`mu1` ≠ `mu2` uses the smaller),
-//! `safety_controller`, `calibration`, non-simple transmissions and Gazebo plugins other than
-//! sensors and ros2_control are not converted; each is listed in the notes. Collada `up_axis`
-//! and materials are ignored (geometry and `<unit>` are honoured).
+//! Anisotropic friction (`mu1` ≠ `mu2` uses the smaller; `fdir1` noted), `minDepth`,
+//! `safety_controller`, `calibration`, transmissions with more than one joint other than
+//! differentials (e.g. PR2's `WristTransmission`: its joints get `auto` motors), differential
+//! joint offsets (they shift actuator positions only), and Gazebo plugins other than sensors and
+//! ros2_control are not converted; each is listed in the notes. Collada `up_axis` and materials
+//! are ignored (geometry and `<unit>` are honoured).
+//!
+//! ## Corpus
+//! Every URDF of PyPI's `example-robot-data` 6.0.0 converts without flags, loads, weighs what
+//! the URDF says and holds its home pose: see `corpus.md` next to this file (the table printed
+//! by `cargo test -p twin-core --test corpus -- --nocapture`).
 
+pub(crate) mod inertia;
 mod ir;
-mod mesh;
+pub(crate) mod mesh;
+mod meta;
+mod options;
+mod sensors;
+mod transmission;
+mod tree;
 mod world;
+
+pub use meta::RobotMeta;
+pub use options::{ActuatorMode, ConvertOptions};
 
 pub use ir::Interface;
 
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model, ObjType};
-use ir::{Ctx, GeomIr, JointIr, JointKind, LinkIr, Pose, RobotIr, SensorIr, Shape};
-use nalgebra::{Matrix3, SymmetricEigen, UnitQuaternion, Vector3};
+use inertia::MassProps;
+use ir::{Ctx, GeomIr, JointIr, JointKind, LinkIr, Pose, RobotIr, Shape};
+use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
-
-/// Options of the conversion. Every field documents its default.
-#[derive(Debug, Clone)]
-pub struct ConvertOptions {
-    /// Weld the root link to the world instead of giving it a free joint (default: false).
-    pub fixed_base: bool,
-    /// Folders to search for `package://NAME/…` (a folder `NAME`, or one with a `package.xml`
-    /// naming it, directly inside one of these); `ROS_PACKAGE_PATH` and the URDF's ancestor
-    /// folders are searched after them (default: empty).
-    pub package_paths: Vec<PathBuf>,
-    /// Fix inertias that are not positive definite or violate the triangle inequality by the
-    /// smallest change of principal moments, reported in the notes; otherwise they are errors
-    /// (default: false).
-    pub repair_inertia: bool,
-    /// Where meshes converted to OBJ are written (default: `None`: a cache folder in the
-    /// system temp dir, keyed by the source file).
-    pub mesh_dir: Option<PathBuf>,
-    /// Gazebo SDF world or MJCF file composed with the robot (default: `None`: a floor plane and
-    /// a light, see [`ConvertOptions::floor`]).
-    pub world: Option<PathBuf>,
-    /// Add a floor plane and a light when no world is given (default: true).
-    pub floor: bool,
-    /// Let robot links collide with each other (default: false, as in Gazebo).
-    pub self_collision: bool,
-    /// Keep visual geoms (group 2, no contacts) (default: true).
-    pub visuals: bool,
-    /// Add `jointpos`/`jointvel` sensors for every 1-DOF joint (default: true).
-    pub joint_sensors: bool,
-    /// Simulation timestep, seconds (default: 0.002, Gazebo's `max_step_size`; a world file's
-    /// own step wins).
-    pub timestep_secs: f64,
-    /// Armature (reflected rotor inertia) added to every joint, kg·m² or kg (default: 0).
-    pub armature: f64,
-    /// Armature of individual joints by URDF joint name, kg·m² or kg, replacing
-    /// [`ConvertOptions::armature`] for those joints (e.g. identified by `twin sysid`; URDF has
-    /// no place for it) (default: empty).
-    pub joint_armature: std::collections::BTreeMap<String, f64>,
-    /// Stiffness of `position` actuators per N·m of effort limit, 1/rad: kp = this × effort
-    /// (default: 20, full effort at 0.05 rad error; 100 N·m/rad when no effort is given).
-    pub position_kp_per_effort: f64,
-    /// Damping of `position` actuators as a fraction of kp, seconds: kv = this × kp
-    /// (default: 0.05).
-    pub position_kv_per_kp: f64,
-    /// Gain of `velocity` actuators per N·m of effort limit, s/rad (default: 1; 10 when no
-    /// effort is given).
-    pub velocity_kv_per_effort: f64,
-    /// Actuator for movable joints that no transmission or ros2_control block names
-    /// (default: `None`: they stay passive, listed in the notes).
-    pub untransmitted: Option<Interface>,
-    /// At most this many rangefinder rays per ray/lidar sensor; denser scans are subsampled
-    /// evenly, said in the notes (default: 32).
-    pub max_rays: usize,
-}
-
-impl Default for ConvertOptions {
-    fn default() -> Self {
-        ConvertOptions {
-            fixed_base: false,
-            package_paths: Vec::new(),
-            repair_inertia: false,
-            mesh_dir: None,
-            world: None,
-            floor: true,
-            self_collision: false,
-            visuals: true,
-            joint_sensors: true,
-            timestep_secs: 0.002,
-            armature: 0.0,
-            joint_armature: std::collections::BTreeMap::new(),
-            position_kp_per_effort: 20.0,
-            position_kv_per_kp: 0.05,
-            velocity_kv_per_effort: 1.0,
-            untransmitted: None,
-            max_rays: 32,
-        }
-    }
-}
+use tree::Tree;
 
 /// An IMU of the robot, with what logging and noise models need.
 #[derive(Debug, Clone, PartialEq)]
@@ -172,6 +140,8 @@ pub struct SensorMeta {
     pub update_rate_hz: Option<f64>,
     /// ROS topic, when a plugin names one.
     pub topic: Option<String>,
+    /// `frame_id` from the plugin's `frame_name`, when given.
+    pub frame_id: Option<String>,
     /// Names of the MuJoCo sensors or cameras created for it.
     pub mujoco: Vec<String>,
 }
@@ -195,11 +165,33 @@ pub struct JointMeta {
     pub gear: f64,
     /// Leader joint when this joint mimics another.
     pub mimic_of: Option<String>,
+    /// Differential transmission driving it (through fixed tendons), if any.
+    pub transmission: Option<String>,
+}
+
+/// A differential transmission as converted: two fixed tendons (named like the actuators),
+/// each driven by one actuator of the same name.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DifferentialMeta {
+    /// Transmission name.
+    pub name: String,
+    /// PAL's half differential rather than ros_control's differential.
+    pub half: bool,
+    /// Actuator (and tendon) names, by role.
+    pub actuators: [String; 2],
+    /// Joint names, by role.
+    pub joints: [String; 2],
+    /// `coefficients[a][j]`: joint `j` torque per unit effort of actuator `a`.
+    pub coefficients: [[f64; 2]; 2],
+    /// Command interface of the actuators.
+    pub interface: Interface,
 }
 
 /// The result of a conversion.
 #[derive(Debug, Clone)]
 pub struct ConvertedModel {
+    /// What twin publishes the robot by (also inside [`ConvertedModel::mjcf`]).
+    pub meta: RobotMeta,
     /// The MJCF document (mesh files referenced by absolute path).
     pub mjcf: String,
     /// Robot name (`<robot name>`).
@@ -214,6 +206,8 @@ pub struct ConvertedModel {
     pub sensors: Vec<SensorMeta>,
     /// Joints in URDF order (fixed joints included).
     pub joints: Vec<JointMeta>,
+    /// Differential transmissions, converted to tendons.
+    pub differentials: Vec<DifferentialMeta>,
     /// Everything that was approximated, repaired or dropped, one line each.
     pub notes: Vec<String>,
     /// Mesh files written by the conversion (ASCII STL / Collada → OBJ).
@@ -241,7 +235,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     let ctx = Ctx { path, doc: &doc };
     let robot = ir::parse_robot(&ctx)?;
     let tree = Tree::build(&robot)?;
-    let mut conv = Converter::new(&robot, &tree, &doc, opts)?;
+    let mut conv = Converter::new(&robot, &tree, opts)?;
     conv.prepare()?;
 
     let world = match &opts.world {
@@ -253,6 +247,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     let base_height_m = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
         let model = conv.compile(&probe)?;
+        conv.contact_solrefs(&model);
         let lowest = lowest_collision_z(&model)?;
         match lowest {
             Some(z) if conv.world_root => (-z).max(0.0),
@@ -272,6 +267,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
         notes.extend(w.notes.iter().cloned());
     }
     Ok(ConvertedModel {
+        meta: conv.meta(),
         mjcf,
         robot_name: robot.name.clone(),
         floating_base: conv.floating,
@@ -279,6 +275,7 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
         imus: conv.imus,
         sensors: conv.sensor_meta,
         joints: conv.joint_meta,
+        differentials: conv.differential_meta,
         notes,
         converted_meshes: conv.converted,
     })
@@ -344,99 +341,8 @@ fn lowest_collision_z(model: &Model) -> Result<Option<f64>> {
     Ok(lowest)
 }
 
-/// Kinematic tree of the URDF.
-struct Tree {
-    root: usize,
-    /// Joint indices by parent link index, in URDF order.
-    children: Vec<Vec<usize>>,
-    link_index: HashMap<String, usize>,
-}
-
-impl Tree {
-    fn build(robot: &RobotIr) -> Result<Tree> {
-        let link_index: HashMap<String, usize> =
-            robot.links.iter().enumerate().map(|(i, l)| (l.name.clone(), i)).collect();
-        let mut parent_joint: Vec<Option<usize>> = vec![None; robot.links.len()];
-        let mut children = vec![Vec::new(); robot.links.len()];
-        let err = |j: &JointIr, message: String| Error::Urdf {
-            path: robot.path.clone(),
-            line: j.line,
-            element: "joint".into(),
-            name: Some(j.name.clone()),
-            message,
-        };
-        for (ji, j) in robot.joints.iter().enumerate() {
-            let c = link_index[&j.child];
-            if let Some(prev) = parent_joint[c] {
-                let p = &robot.joints[prev];
-                return Err(err(
-                    j,
-                    format!(
-                        "link \"{}\" is already the child of joint \"{}\" (line {}): a URDF must be a tree; \
-                         remove one of the joints or use <mimic>/a closed-loop constraint instead",
-                        j.child, p.name, p.line
-                    ),
-                ));
-            }
-            if j.parent == j.child {
-                return Err(err(j, format!("joint connects link \"{}\" to itself: fix parent or child", j.child)));
-            }
-            parent_joint[c] = Some(ji);
-            children[link_index[&j.parent]].push(ji);
-        }
-        let roots: Vec<usize> = (0..robot.links.len()).filter(|&i| parent_joint[i].is_none()).collect();
-        let root = match roots.as_slice() {
-            [r] => *r,
-            [] => {
-                let j = &robot.joints[0];
-                return Err(err(
-                    j,
-                    "the joints form a cycle: every link is some joint's child, so there is no root link; \
-                     break the loop (a URDF must be a tree)"
-                        .into(),
-                ));
-            }
-            many => {
-                let names: Vec<&str> = many.iter().map(|&i| robot.links[i].name.as_str()).collect();
-                let l = &robot.links[many[1]];
-                return Err(Error::Urdf {
-                    path: robot.path.clone(),
-                    line: l.line,
-                    element: "link".into(),
-                    name: Some(l.name.clone()),
-                    message: format!(
-                        "the robot has {} root links ({}): connect each to the tree with a joint",
-                        many.len(),
-                        names.join(", ")
-                    ),
-                });
-            }
-        };
-        // Links not reachable from the root sit on a cycle.
-        let mut reached = vec![false; robot.links.len()];
-        let mut stack = vec![root];
-        while let Some(l) = stack.pop() {
-            reached[l] = true;
-            for &j in &children[l] {
-                let c = link_index[&robot.joints[j].child];
-                if !reached[c] {
-                    stack.push(c);
-                }
-            }
-        }
-        if let Some(l) = (0..robot.links.len()).find(|&l| !reached[l]) {
-            let j = &robot.joints[parent_joint[l].expect("unreached links have a parent joint")];
-            return Err(err(
-                j,
-                format!(
-                    "link \"{}\" is on a cycle of joints (not reachable from the root \"{}\"): a URDF must be a tree; break the loop",
-                    robot.links[l].name, robot.links[root].name
-                ),
-            ));
-        }
-        Ok(Tree { root, children, link_index })
-    }
-}
+/// Constant impedance of contacts converted from Gazebo kp/kd (`solimp="d d …"`).
+const CONTACT_IMPEDANCE: f64 = 0.9;
 
 /// A collision or visual geom resolved for output.
 struct MeshAsset {
@@ -451,7 +357,6 @@ type BodyInertial = ([f64; 3], [f64; 6], f64);
 struct Converter<'a> {
     robot: &'a RobotIr,
     tree: &'a Tree,
-    doc: &'a roxmltree::Document<'a>,
     opts: &'a ConvertOptions,
     /// Root link is a `world` link: its children hang from the world body.
     world_root: bool,
@@ -465,6 +370,12 @@ struct Converter<'a> {
     meshes: Vec<MeshAsset>,
     /// Friction per link.
     mu: Vec<f64>,
+    /// Gazebo contact `kp`, `kd` and line per link.
+    gazebo_contact: Vec<Option<(f64, f64, u32)>>,
+    /// Direct-form contact `solref` per link, from Gazebo kp/kd (set after the probe compile).
+    contact: Vec<Option<[f64; 2]>>,
+    /// Lowest friction among the world's geoms (set by `emit`).
+    world_min_mu: f64,
     priority: BTreeMap<u64, i32>,
     imus: Vec<ImuMeta>,
     sensor_meta: Vec<SensorMeta>,
@@ -478,6 +389,10 @@ struct Converter<'a> {
     /// Per link: cameras.
     cameras: Vec<Vec<String>>,
     sensor_xml: Vec<String>,
+    /// Fixed tendons of differential transmissions, and their actuators.
+    tendon_xml: Vec<String>,
+    tendon_act_xml: Vec<String>,
+    differential_meta: Vec<DifferentialMeta>,
 }
 
 fn f(x: f64) -> String {
@@ -530,50 +445,8 @@ fn gazebo_rgba(name: &str) -> Option<[f64; 4]> {
     Some([rgb[0], rgb[1], rgb[2], 1.0])
 }
 
-/// Repairs an inertia tensor by the smallest change of its principal moments: eigenvalues
-/// raised to a small positive floor, then projected onto `a + b ≥ c`. Returns the new tensor
-/// `[ixx, ixy, ixz, iyy, iyz, izz]` and a sentence saying what changed.
-fn repair_inertia(v: [f64; 6]) -> ([f64; 6], String) {
-    let [ixx, ixy, ixz, iyy, iyz, izz] = v;
-    let t = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
-    let eig = SymmetricEigen::new(t);
-    let before: Vec<f64> = eig.eigenvalues.iter().copied().collect();
-    let mut order = [0usize, 1, 2];
-    order.sort_by(|&a, &b| before[a].total_cmp(&before[b]));
-    let mut p = [before[order[0]], before[order[1]], before[order[2]]];
-    let floor = (p[2].abs() * 1e-6).max(1e-12);
-    for x in &mut p {
-        *x = x.max(floor);
-    }
-    if p[0] + p[1] < p[2] {
-        // Orthogonal projection onto the plane a + b = c (normal (1, 1, −1)), a hair inside.
-        let d = (p[2] - p[0] - p[1]) / 3.0 * (1.0 + 1e-9);
-        p[0] += d;
-        p[1] += d;
-        p[2] -= d;
-    }
-    let mut newp = before.clone();
-    for (k, &i) in order.iter().enumerate() {
-        newp[i] = p[k];
-    }
-    let q = eig.eigenvectors;
-    let r = q * Matrix3::from_diagonal(&Vector3::new(newp[0], newp[1], newp[2])) * q.transpose();
-    let mut sb = before.clone();
-    sb.sort_by(f64::total_cmp);
-    let msg = format!(
-        "principal moments {:.6e}, {:.6e}, {:.6e} → {:.6e}, {:.6e}, {:.6e} kg·m² (smallest change that makes the tensor positive definite and satisfy the triangle inequality; principal axes kept)",
-        sb[0], sb[1], sb[2], p[0], p[1], p[2]
-    );
-    ([r[(0, 0)], r[(0, 1)], r[(0, 2)], r[(1, 1)], r[(1, 2)], r[(2, 2)]], msg)
-}
-
 impl<'a> Converter<'a> {
-    fn new(
-        robot: &'a RobotIr,
-        tree: &'a Tree,
-        doc: &'a roxmltree::Document<'a>,
-        opts: &'a ConvertOptions,
-    ) -> Result<Converter<'a>> {
+    fn new(robot: &'a RobotIr, tree: &'a Tree, opts: &'a ConvertOptions) -> Result<Converter<'a>> {
         let root = &robot.links[tree.root];
         let world_root = root.name == "world";
         if world_root && (root.inertial.is_some() || !root.collisions.is_empty()) {
@@ -590,7 +463,6 @@ impl<'a> Converter<'a> {
         Ok(Converter {
             robot,
             tree,
-            doc,
             opts,
             world_root,
             floating,
@@ -599,6 +471,9 @@ impl<'a> Converter<'a> {
             mesh_of: HashMap::new(),
             meshes: Vec::new(),
             mu: vec![1.0; n],
+            gazebo_contact: vec![None; n],
+            contact: vec![None; n],
+            world_min_mu: 1.0,
             priority: BTreeMap::new(),
             imus: Vec::new(),
             sensor_meta: Vec::new(),
@@ -610,6 +485,9 @@ impl<'a> Converter<'a> {
             sites: vec![Vec::new(); n],
             cameras: vec![Vec::new(); n],
             sensor_xml: Vec::new(),
+            tendon_xml: Vec::new(),
+            tendon_act_xml: Vec::new(),
+            differential_meta: Vec::new(),
         })
     }
 
@@ -621,80 +499,9 @@ impl<'a> Converter<'a> {
     /// joint metadata.
     fn prepare(&mut self) -> Result<()> {
         let robot = self.robot;
-        // Inertials.
-        for (li, link) in robot.links.iter().enumerate() {
-            let Some(inertial) = &link.inertial else {
-                continue;
-            };
-            if inertial.mass == 0.0 {
-                continue;
-            }
-            let mut v = inertial.inertia;
-            if let Err(problem) = crate::urdf::check_inertia(v) {
-                if self.opts.repair_inertia {
-                    let (fixed, how) = repair_inertia(v);
-                    self.notes.push(format!(
-                        "link \"{}\" (line {}): inertia repaired: {how}",
-                        link.name, inertial.inertia_line
-                    ));
-                    v = fixed;
-                } else {
-                    return Err(self.urdf_err(
-                        inertial.inertia_line,
-                        "inertia",
-                        &link.name,
-                        format!("{problem}; or convert with --repair-inertia to apply the smallest fix"),
-                    ));
-                }
-            }
-            let [ixx, ixy, ixz, iyy, iyz, izz] = v;
-            let t = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
-            let r = inertial.pose.rot.to_rotation_matrix();
-            let b = r.matrix() * t * r.matrix().transpose();
-            self.inertials[li] = Some((
-                [inertial.pose.xyz.x, inertial.pose.xyz.y, inertial.pose.xyz.z],
-                [b[(0, 0)], b[(1, 1)], b[(2, 2)], b[(0, 1)], b[(0, 2)], b[(1, 2)]],
-                inertial.mass,
-            ));
-        }
-        // Movable bodies need mass (MuJoCo refuses them otherwise).
-        for (ji, j) in robot.joints.iter().enumerate() {
-            if j.kind == JointKind::Fixed {
-                continue;
-            }
-            let c = self.tree.link_index[&j.child];
-            if self.subtree_mass(c) <= 0.0 {
-                let link = &robot.links[c];
-                if self.opts.repair_inertia {
-                    self.inertials[c] = Some(([0.0; 3], [1e-6, 1e-6, 1e-6, 0.0, 0.0, 0.0], 1e-3));
-                    self.notes.push(format!(
-                        "link \"{}\" (line {}) moves (joint \"{}\") but has no mass: given 1 g and 1e-6 kg·m² (repair)",
-                        link.name, link.line, j.name
-                    ));
-                } else {
-                    return Err(self.urdf_err(
-                        link.line,
-                        "link",
-                        &link.name,
-                        format!(
-                            "link moves (joint \"{}\", line {}) but it and its fixed children have no mass: add an <inertial> with the real mass, or convert with --repair-inertia",
-                            j.name, robot.joints[ji].line
-                        ),
-                    ));
-                }
-            }
-        }
+        self.inertials()?;
         // Meshes.
-        let mut search = self.opts.package_paths.clone();
-        if let Some(env) = std::env::var_os("ROS_PACKAGE_PATH") {
-            search.extend(std::env::split_paths(&env).filter(|p| !p.as_os_str().is_empty()));
-        }
-        let urdf_dir = robot.path.parent().map(Path::to_path_buf).unwrap_or_default();
-        let urdf_dir = if urdf_dir.as_os_str().is_empty() { PathBuf::from(".") } else { urdf_dir };
-        let abs_dir = std::path::absolute(&urdf_dir).unwrap_or(urdf_dir.clone());
-        // A vendored description package usually holds the URDF in PKG/urdf/: its ancestors.
-        search.extend(abs_dir.ancestors().skip(1).take(4).map(Path::to_path_buf));
-        search.push(abs_dir.clone());
+        let (abs_dir, search) = mesh::search_paths(&robot.path, &self.opts.package_paths);
         let mut by_key: HashMap<(PathBuf, [u64; 3]), usize> = HashMap::new();
         let mut used_names: HashMap<String, usize> = HashMap::new();
         for (li, link) in robot.links.iter().enumerate() {
@@ -704,15 +511,30 @@ impl<'a> Converter<'a> {
                     let Shape::Mesh { filename, scale, line } = &g.shape else {
                         continue;
                     };
-                    let file = mesh::resolve(filename, &abs_dir, &search)
-                        .map_err(|m| self.urdf_err(*line, "mesh", &link.name, m))?;
-                    let file = std::path::absolute(&file).unwrap_or(file);
-                    let key = (file.clone(), scale.map(f64::to_bits));
-                    let idx = match by_key.get(&key) {
-                        Some(&i) => i,
-                        None => {
-                            let file =
-                                self.native_mesh(&file).map_err(|m| self.urdf_err(*line, "mesh", &link.name, m))?;
+                    // A visual only draws: one that cannot be read is skipped with a note, as
+                    // rviz and Gazebo go on without it. A collision mesh is physics: an error.
+                    let resolved = mesh::resolve(filename, &abs_dir, &search)
+                        .map(|file| std::path::absolute(&file).unwrap_or(file))
+                        .and_then(|file| {
+                            let key = (file.clone(), scale.map(f64::to_bits));
+                            if by_key.contains_key(&key) {
+                                Ok((key, None))
+                            } else {
+                                self.native_mesh(&file).map(|n| (key, Some(n)))
+                            }
+                        });
+                    let (key, native) = match resolved {
+                        Ok(r) => r,
+                        Err(m) if visual => {
+                            self.notes.push(format!("link \"{}\" (line {line}): visual mesh skipped: {m}", link.name));
+                            continue;
+                        }
+                        Err(m) => return Err(self.urdf_err(*line, "mesh", &link.name, m)),
+                    };
+                    let idx = match (by_key.get(&key), native) {
+                        (Some(&i), _) => i,
+                        (None, native) => {
+                            let file = native.unwrap_or_else(|| key.0.clone());
                             let stem: String = key
                                 .0
                                 .file_stem()
@@ -761,41 +583,76 @@ impl<'a> Converter<'a> {
                     }
                     self.mu[li] = mu;
                 }
-                if g.kp.is_some() || g.kd.is_some() {
+                if let Some(f1) = &g.fdir1 {
                     self.notes.push(format!(
-                        "link \"{}\" (line {}): Gazebo contact kp/kd not converted (MuJoCo's default soft contact is used)",
+                        "link \"{}\" (line {}): fdir1 \"{f1}\" (anisotropic friction direction) has no MuJoCo geom equivalent: isotropic friction used",
+                        link.name, g.line
+                    ));
+                }
+                if let Some(d) = g.min_depth.filter(|d| *d > 0.0) {
+                    self.notes.push(format!(
+                        "link \"{}\" (line {}): Gazebo minDepth {d} m not converted (MuJoCo's soft contacts have no dead band)",
+                        link.name, g.line
+                    ));
+                }
+                if let Some(kp) = g.kp.filter(|k| *k > 0.0) {
+                    self.gazebo_contact[li] = Some((kp, g.kd.unwrap_or(0.0).max(0.0), g.line));
+                } else if g.kd.is_some() {
+                    self.notes.push(format!(
+                        "link \"{}\" (line {}): Gazebo kd without kp: not converted (MuJoCo's default soft contact is used)",
                         link.name, g.line
                     ));
                 }
             }
         }
-        // Joint metadata and actuator notes.
+        // Joint metadata and actuators.
+        let mode = self.opts.actuators;
+        let differential_joints: HashMap<&str, &str> =
+            if matches!(mode, ActuatorMode::Auto | ActuatorMode::Transmissions) {
+                robot
+                    .differentials
+                    .iter()
+                    .flat_map(|d| d.joints.iter().map(move |j| (j.0.as_str(), d.name.as_str())))
+                    .collect()
+            } else {
+                HashMap::new()
+            };
         let mut passive = Vec::new();
+        let mut auto_motors = 0usize;
         for j in &robot.joints {
-            let movable = !matches!(j.kind, JointKind::Fixed);
+            let one_dof = matches!(j.kind, JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic);
             let drive = robot.drives.get(&j.name);
+            let effort = j.limit.as_ref().map(|l| l.effort).filter(|e| *e > 0.0);
             let mut actuator = None;
             let mut gear = 1.0;
-            if let Some(d) = drive {
-                if !movable {
-                    self.notes.push(format!("transmission on fixed joint \"{}\": ignored", j.name));
-                } else if j.mimic.is_some() {
+            if drive.is_some() && !one_dof {
+                self.notes.push(format!(
+                    "transmission on {} joint \"{}\": not converted (only 1-DOF joints take actuators)",
+                    format!("{:?}", j.kind).to_lowercase(),
+                    j.name
+                ));
+            } else if one_dof && j.mimic.is_some() {
+                if drive.is_some() {
                     self.notes.push(format!(
                         "joint \"{}\" mimics another joint: its transmission is not converted (the equality drives it)",
                         j.name
                     ));
-                } else if matches!(j.kind, JointKind::Floating | JointKind::Planar | JointKind::Spherical) {
-                    self.notes.push(format!("transmission on multi-DOF joint \"{}\": not converted", j.name));
-                } else {
-                    actuator = Some((j.name.clone(), d.interface));
-                    gear = d.gear;
                 }
-            } else if movable
-                && j.mimic.is_none()
-                && matches!(j.kind, JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic)
-            {
-                match self.opts.untransmitted {
-                    Some(i) => actuator = Some((j.name.clone(), i)),
+            } else if one_dof && !differential_joints.contains_key(j.name.as_str()) && mode != ActuatorMode::None {
+                let interface = match (mode, drive) {
+                    (ActuatorMode::Motor | ActuatorMode::Position, _) => mode.forced(),
+                    (_, Some(d)) => Some(d.interface),
+                    (ActuatorMode::Auto, None) if effort.is_some() => {
+                        auto_motors += 1;
+                        Some(Interface::Effort)
+                    }
+                    _ => None,
+                };
+                match interface {
+                    Some(i) => {
+                        actuator = Some((j.name.clone(), i));
+                        gear = drive.map_or(1.0, |d| d.gear);
+                    }
                     None => passive.push(j.name.clone()),
                 }
             }
@@ -803,7 +660,7 @@ impl<'a> Converter<'a> {
             self.joint_meta.push(JointMeta {
                 name: j.name.clone(),
                 urdf_type: format!("{:?}", j.kind).to_lowercase(),
-                effort_limit: j.limit.as_ref().and_then(|l| nz(l.effort)),
+                effort_limit: effort,
                 velocity_limit: j.limit.as_ref().and_then(|l| nz(l.velocity)),
                 range: match (j.kind, &j.limit) {
                     (JointKind::Revolute | JointKind::Prismatic, Some(l)) => Some([l.lower, l.upper]),
@@ -812,7 +669,16 @@ impl<'a> Converter<'a> {
                 actuator,
                 gear,
                 mimic_of: j.mimic.as_ref().map(|m| m.joint.clone()),
+                transmission: differential_joints.get(j.name.as_str()).map(|s| s.to_string()),
             });
+        }
+        if auto_motors > 0 {
+            self.notes.push(format!(
+                "{auto_motors} movable joint(s) without a transmission or ros2_control entry got a motor within ±effort (--actuators auto; `transmissions` keeps them passive)"
+            ));
+        }
+        if !differential_joints.is_empty() {
+            self.differentials()?;
         }
         for j in &robot.joints {
             if let Some(m) = &j.mimic {
@@ -832,8 +698,9 @@ impl<'a> Converter<'a> {
         }
         if !passive.is_empty() {
             self.notes.push(format!(
-                "{} movable joint(s) have no transmission or ros2_control entry and stay passive (no actuator): {}",
+                "{} movable joint(s) stay passive (no actuator under --actuators {:?}, or no effort limit for auto): {}",
                 passive.len(),
+                self.opts.actuators,
                 passive.join(", ")
             ));
         }
@@ -846,12 +713,182 @@ impl<'a> Converter<'a> {
         Ok(())
     }
 
-    fn subtree_mass(&self, link: usize) -> f64 {
-        let own = self.inertials[link].map_or(0.0, |i| i.2);
-        own + self.tree.children[link]
-            .iter()
-            .map(|&j| self.subtree_mass(self.tree.link_index[&self.robot.joints[j].child]))
-            .sum::<f64>()
+    /// Body inertials: each link's own tensor checked (noise tolerated, real violations
+    /// repaired or, with `strict_inertia`, refused), fixed-joint links lumped into the body
+    /// that moves them, bodies MuJoCo would refuse made admissible with the smallest change.
+    fn inertials(&mut self) -> Result<()> {
+        let robot = self.robot;
+        let n = robot.links.len();
+        let mut own: Vec<Option<MassProps>> = vec![None; n];
+        for (li, link) in robot.links.iter().enumerate() {
+            let Some(i) = &link.inertial else { continue };
+            if i.mass <= 0.0 {
+                continue;
+            }
+            let mut t = inertia::tensor(i.inertia);
+            if let Err(problem) = inertia::check(&t) {
+                if self.opts.strict_inertia {
+                    return Err(self.urdf_err(
+                        i.inertia_line,
+                        "inertia",
+                        &link.name,
+                        format!("{problem}; or convert without --strict-inertia to apply the smallest fix"),
+                    ));
+                }
+                let (fixed, fix) = inertia::admissible(&t, 0.0);
+                if let inertia::Fix::Repaired(how) = fix {
+                    self.notes.push(format!("link \"{}\" (line {}): {how}", link.name, i.inertia_line));
+                }
+                t = fixed;
+            }
+            let r = i.pose.rot.to_rotation_matrix();
+            own[li] =
+                Some(MassProps { mass: i.mass, com: i.pose.xyz, inertia: r.matrix() * t * r.matrix().transpose() });
+        }
+        // Lump fixed-joint links into the nearest body that moves (or the root / a body welded
+        // to the world link): Gazebo and MuJoCo's fusestatic do the same.
+        let mut lumped: Vec<Option<MassProps>> = own.clone();
+        let mut moved: Vec<String> = Vec::new();
+        for li in 0..n {
+            let Some(p) = own[li] else { continue };
+            let mut target = li;
+            let mut target_from_link = Pose::IDENTITY;
+            while let Some(j) = self.tree.parent_joint[target] {
+                let joint = &robot.joints[j];
+                let parent = self.tree.link_index[&joint.parent];
+                if joint.kind != JointKind::Fixed || (self.world_root && parent == self.tree.root) {
+                    break;
+                }
+                target_from_link = joint.origin.then(&target_from_link);
+                target = parent;
+            }
+            if target == li {
+                continue;
+            }
+            let r = target_from_link.rot.to_rotation_matrix();
+            let moved_props = MassProps {
+                mass: p.mass,
+                com: target_from_link.xyz + r * p.com,
+                inertia: r.matrix() * p.inertia * r.matrix().transpose(),
+            };
+            lumped[li] = None;
+            lumped[target] = Some(match lumped[target] {
+                Some(t) => t.lump(&moved_props),
+                None => moved_props,
+            });
+            moved.push(format!("{} → {}", robot.links[li].name, robot.links[target].name));
+        }
+        if !moved.is_empty() {
+            self.notes.push(format!(
+                "mass of {} fixed-joint link(s) lumped into the body that moves them (parallel-axis theorem, as Gazebo does; the links keep their bodies, frames, geoms and sensors): {}",
+                moved.len(),
+                moved.join(", ")
+            ));
+        }
+        // Bodies that move need mass and inertia (MuJoCo refuses them otherwise): a massless
+        // one gets a negligible mass, 1e-12 of the robot's, so the total stays the URDF's.
+        let total: f64 = own.iter().flatten().map(|p| p.mass).sum();
+        let eps_mass = (total * 1e-12).max(1e-12);
+        let eps_inertia = (eps_mass * 1e-2).max(1e-13);
+        let moves = |li: usize| -> bool {
+            match self.tree.parent_joint[li] {
+                None => self.floating,
+                Some(j) => robot.joints[j].kind != JointKind::Fixed,
+            }
+        };
+        let mut massless = Vec::new();
+        for (li, slot) in lumped.iter_mut().enumerate() {
+            if slot.is_none() && moves(li) {
+                *slot = Some(MassProps { mass: eps_mass, com: Vector3::zeros(), inertia: Matrix3::zeros() });
+                massless.push(robot.links[li].name.clone());
+            }
+        }
+        if !massless.is_empty() {
+            self.notes.push(format!(
+                "{} moving link(s) without mass given {eps_mass:.1e} kg (MuJoCo needs mass on every moving body; the total mass is unchanged to 1e-12): {}",
+                massless.len(),
+                massless.join(", ")
+            ));
+        }
+        for (li, p) in lumped.iter().enumerate() {
+            let Some(p) = p else { continue };
+            let (t, fix) = inertia::admissible(&p.inertia, eps_inertia);
+            if let inertia::Fix::Noise(how) | inertia::Fix::Repaired(how) = &fix
+                && !massless.contains(&robot.links[li].name)
+            {
+                self.notes.push(format!(
+                    "link \"{}\" (line {}): zero or rounding-level principal moments made positive for MuJoCo: {how}",
+                    robot.links[li].name, robot.links[li].line
+                ));
+            }
+            self.inertials[li] = Some((
+                [p.com.x, p.com.y, p.com.z],
+                [t[(0, 0)], t[(1, 1)], t[(2, 2)], t[(0, 1)], t[(0, 2)], t[(1, 2)]],
+                p.mass,
+            ));
+        }
+        Ok(())
+    }
+
+    /// What twin publishes the robot by, as it travels inside the MJCF.
+    fn meta(&self) -> RobotMeta {
+        RobotMeta {
+            name: self.robot.name.clone(),
+            floating_base: self.floating,
+            imus: self.imus.clone(),
+            sensors: self.sensor_meta.clone(),
+            joints: self.joint_meta.clone(),
+            differentials: self.differential_meta.clone(),
+        }
+    }
+
+    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe `model`: each
+    /// link's effective mass at its contacts is `1 / body_invweight0` at the home pose.
+    fn contact_solrefs(&mut self, model: &Model) {
+        let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
+        for li in 0..self.robot.links.len() {
+            let Some((kp, kd, line)) = self.gazebo_contact[li] else { continue };
+            let name = &self.robot.links[li].name;
+            let inv = model.id(ObjType::Body, name).map_or(0.0, |b| model.body_invweight0()[b][0]);
+            let mass = if inv > 0.0 { 1.0 / inv } else { total };
+            self.contact[li] = Some(self.direct_solref(name, line, kp, kd, mass));
+        }
+    }
+
+    /// MuJoCo's direct-form `solref = (−K, −B)` reproducing Gazebo's contact `kp` (N/m) and
+    /// `kd` (N·s/m) on a contact whose effective mass is `mass`: with a constant impedance `d`
+    /// (`solimp d d`), a contact carrying force `f` settles where `(1 − d)·f/(mass·K)` (measured
+    /// on resting bodies: independent of the contact count and of the friction cone once the
+    /// pyramid's factor is applied at emission), so `K = (1 − d)·kp/mass` gives Gazebo's
+    /// `f/kp` per contact point (ODE applies `kp` at each). `B = sqrt(1 − d)·kd/mass` keeps the
+    /// damping ratio. Stiffness beyond what the timestep integrates stably, and damping below
+    /// critical, are clamped, with a note.
+    fn direct_solref(&mut self, link: &str, line: u32, kp: f64, kd: f64, mass: f64) -> [f64; 2] {
+        let d = CONTACT_IMPEDANCE;
+        let dt = self.opts.timestep_secs;
+        let mut k = (1.0 - d) * kp / mass;
+        // Natural frequency ω² = K/d; keep ω·dt ≤ 1.
+        let k_max = d / (dt * dt);
+        if k > k_max {
+            self.notes.push(format!(
+                "link \"{link}\" (line {line}): Gazebo kp {kp} N/m is too stiff for a {dt} s step on a contact of effective mass {mass:.3} kg: contact stiffness clamped to {:.4e} N/m",
+                k_max * mass / (1.0 - d)
+            ));
+            k = k_max;
+        }
+        let omega = (k / d).sqrt();
+        // Damping ratio B/(2ω) equal to Gazebo's kd/(2·sqrt(kp·m)).
+        let b_crit = 2.0 * omega;
+        let mut b = (1.0 - d).sqrt() * kd / mass;
+        if b < b_crit {
+            if kd > 0.0 {
+                self.notes.push(format!(
+                    "link \"{link}\" (line {line}): Gazebo kd {kd} N·s/m is below critical damping for this stiffness: raised to critical (ODE's implicit step damps likewise)"
+                ));
+            }
+            b = b_crit;
+        }
+        [-k, -b]
     }
 
     /// Path of a mesh MuJoCo can read: the file itself, or a converted OBJ.
@@ -898,237 +935,6 @@ impl<'a> Converter<'a> {
         self.converted.push(out.clone());
         self.converted_from.insert(file.to_path_buf(), out.clone());
         Ok(out)
-    }
-
-    fn sensor_node(&self, s: &SensorIr) -> roxmltree::Node<'a, 'a> {
-        self.doc.descendants().find(|n| n.range() == s.node_range).expect("sensor node recorded from this document")
-    }
-
-    /// Link that a `<gazebo reference>` of a sensor resolves to, and the pose of the reference
-    /// frame in that link.
-    fn sensor_link(&self, s: &SensorIr) -> (usize, Pose) {
-        if let Some(&l) = self.tree.link_index.get(&s.reference) {
-            return (l, Pose::IDENTITY);
-        }
-        let j = self.robot.joints.iter().find(|j| j.name == s.reference).expect("reference checked at parse time");
-        (self.tree.link_index[&j.child], Pose::IDENTITY)
-    }
-
-    fn unique_sensor_name(&mut self, base: &str) -> String {
-        let mut name = base.to_string();
-        let mut k = 1;
-        while !self.sensor_names.insert(name.clone()) {
-            k += 1;
-            name = format!("{base}_{k}");
-        }
-        name
-    }
-
-    fn sensors(&mut self) -> Result<()> {
-        let robot = self.robot;
-        for s in &robot.sensors {
-            let node = self.sensor_node(s);
-            let (link, frame) = self.sensor_link(s);
-            let pose = frame.then(&s.pose);
-            let link_name = robot.links[link].name.clone();
-            let unique = self.unique_sensor_name(&s.name);
-            if unique != s.name {
-                self.notes.push(format!(
-                    "sensor \"{}\" (line {}) repeats an earlier sensor's name: converted as \"{unique}\"",
-                    s.name, s.line
-                ));
-            }
-            let name = esc(&unique);
-            let topic = resolve_topic(node);
-            match s.kind.as_str() {
-                "imu" => {
-                    let (gyro, accel) = imu_noise(node);
-                    self.sites[link]
-                        .push(format!("<site name=\"{name}\"{} size=\"0.005\" group=\"4\"/>", pose_attrs(&pose)));
-                    let noise = |x: f64| {
-                        if x > 0.0 { format!(" noise=\"{}\"", f(x)) } else { String::new() }
-                    };
-                    self.sensor_xml
-                        .push(format!("<framequat name=\"{name}_quat\" objtype=\"site\" objname=\"{name}\"/>"));
-                    self.sensor_xml.push(format!("<gyro name=\"{name}_gyro\" site=\"{name}\"{}/>", noise(gyro)));
-                    self.sensor_xml
-                        .push(format!("<accelerometer name=\"{name}_accel\" site=\"{name}\"{}/>", noise(accel)));
-                    let frame_id = ir::child(node, "plugin")
-                        .and_then(|p| ir::child_text(p, "frame_name").or_else(|| ir::child_text(p, "frameName")))
-                        .map(str::to_string)
-                        .unwrap_or_else(|| link_name.clone());
-                    self.imus.push(ImuMeta {
-                        name: s.name.clone(),
-                        link: link_name,
-                        site: s.name.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        gyro_noise_std: gyro,
-                        accel_noise_std: accel,
-                        topic,
-                        frame_id,
-                    });
-                }
-                "camera" | "depth" | "depth_camera" | "rgbd_camera" | "wideanglecamera" | "multicamera" => {
-                    let cams: Vec<roxmltree::Node<'_, '_>> = ir::children(node, "camera").collect();
-                    let mut made = Vec::new();
-                    for (k, cam) in cams.iter().enumerate() {
-                        let hfov = ir::child_text(*cam, "horizontal_fov").and_then(ir::parse_num).unwrap_or(1.047);
-                        let img = ir::child(*cam, "image");
-                        let w = img.and_then(|i| ir::child_text(i, "width")).and_then(ir::parse_num).unwrap_or(320.0);
-                        let h = img.and_then(|i| ir::child_text(i, "height")).and_then(ir::parse_num).unwrap_or(240.0);
-                        let fovy = 2.0 * ((hfov / 2.0).tan() * h / w).atan();
-                        let cam_pose = match ir::child_text(*cam, "pose").and_then(ir::parse_vec::<6>) {
-                            Some(v) => Pose::from_xyz_rpy([v[0], v[1], v[2]], [v[3], v[4], v[5]]),
-                            None => Pose::IDENTITY,
-                        };
-                        // Gazebo: view along +X, up +Z. MuJoCo: view along −Z, up +Y.
-                        let gz_from_mj =
-                            UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_matrix_unchecked(
-                                Matrix3::new(0.0, 0.0, -1.0, -1.0, 0.0, 0.0, 0.0, 1.0, 0.0),
-                            ));
-                        let p = pose.then(&cam_pose).then(&Pose { xyz: Vector3::zeros(), rot: gz_from_mj });
-                        let cname = if cams.len() == 1 { name.clone() } else { format!("{name}_{k}") };
-                        self.cameras[link].push(format!(
-                            "<camera name=\"{cname}\"{} fovy=\"{}\" resolution=\"{} {}\"/>",
-                            pose_attrs(&p),
-                            f(fovy.to_degrees()),
-                            w as i64,
-                            h as i64
-                        ));
-                        made.push(cname);
-                    }
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic,
-                        mujoco: made,
-                    });
-                }
-                "ray" | "gpu_ray" | "lidar" | "gpu_lidar" => {
-                    let ray = ir::child(node, "ray").or_else(|| ir::child(node, "lidar"));
-                    let scan = ray.and_then(|r| ir::child(r, "scan"));
-                    let axis = |tag: &str| -> (usize, f64, f64) {
-                        let a = scan.and_then(|s| ir::child(s, tag));
-                        let samples = a
-                            .and_then(|a| ir::child_text(a, "samples"))
-                            .and_then(ir::parse_num)
-                            .unwrap_or(1.0)
-                            .max(1.0) as usize;
-                        let lo = a.and_then(|a| ir::child_text(a, "min_angle")).and_then(ir::parse_num).unwrap_or(0.0);
-                        let hi = a.and_then(|a| ir::child_text(a, "max_angle")).and_then(ir::parse_num).unwrap_or(0.0);
-                        (samples, lo, hi)
-                    };
-                    let (hn, hlo, hhi) = axis("horizontal");
-                    let (vn, vlo, vhi) = axis("vertical");
-                    let range = ray.and_then(|r| ir::child(r, "range"));
-                    let max_range =
-                        range.and_then(|r| ir::child_text(r, "max")).and_then(ir::parse_num).unwrap_or(10.0);
-                    let total = hn * vn;
-                    let keep = total.min(self.opts.max_rays.max(1));
-                    if keep < total {
-                        self.notes.push(format!(
-                            "ray sensor \"{}\": {total} rays subsampled to {keep} rangefinders (ConvertOptions::max_rays)",
-                            s.name
-                        ));
-                    }
-                    let mut made = Vec::new();
-                    for k in 0..keep {
-                        let idx = if keep == 1 { 0 } else { k * (total - 1) / (keep - 1) };
-                        let (hi_i, vi_i) = (idx % hn, idx / hn);
-                        let lerp = |n: usize, lo: f64, hi: f64, i: usize| {
-                            if n <= 1 { lo } else { lo + (hi - lo) * i as f64 / (n - 1) as f64 }
-                        };
-                        let yaw = lerp(hn, hlo, hhi, hi_i);
-                        let pitch = lerp(vn, vlo, vhi, vi_i);
-                        // Ray direction in the sensor frame; rangefinders look along site +Z.
-                        let dir = Vector3::new(yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), -pitch.sin());
-                        let rot = UnitQuaternion::rotation_between(&Vector3::z(), &dir).unwrap_or_else(|| {
-                            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-                        });
-                        let p = pose.then(&Pose { xyz: Vector3::zeros(), rot });
-                        let site = format!("{name}_ray{k}");
-                        self.sites[link]
-                            .push(format!("<site name=\"{site}\"{} size=\"0.003\" group=\"4\"/>", pose_attrs(&p)));
-                        self.sensor_xml.push(format!(
-                            "<rangefinder name=\"{site}\" site=\"{site}\" cutoff=\"{}\"/>",
-                            f(max_range)
-                        ));
-                        made.push(site);
-                    }
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic,
-                        mujoco: made,
-                    });
-                }
-                "force_torque" => {
-                    let site = format!("{name}_site");
-                    self.sites[link]
-                        .push(format!("<site name=\"{site}\"{} size=\"0.005\" group=\"4\"/>", pose_attrs(&pose)));
-                    self.sensor_xml.push(format!("<force name=\"{name}_force\" site=\"{site}\"/>"));
-                    self.sensor_xml.push(format!("<torque name=\"{name}_torque\" site=\"{site}\"/>"));
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic,
-                        mujoco: vec![format!("{}_force", s.name), format!("{}_torque", s.name)],
-                    });
-                }
-                "contact" => {
-                    let l = &robot.links[link];
-                    let Some(g) = l.collisions.first() else {
-                        self.notes.push(format!(
-                            "contact sensor \"{}\": link \"{}\" has no collision geom; not converted",
-                            s.name, l.name
-                        ));
-                        continue;
-                    };
-                    // The touch sensor counts contacts inside the site: cover the geom, 5 % larger.
-                    let (ty, size) = match &g.shape {
-                        Shape::Box(sz) => ("box", vec![sz[0] * 0.525, sz[1] * 0.525, sz[2] * 0.525]),
-                        Shape::Sphere(r) => ("sphere", vec![r * 1.05]),
-                        Shape::Cylinder { radius, length } => ("cylinder", vec![radius * 1.05, length * 0.525]),
-                        Shape::Capsule { radius, length } => ("capsule", vec![radius * 1.05, length * 0.525]),
-                        Shape::Mesh { .. } => {
-                            self.notes.push(format!(
-                                "contact sensor \"{}\": mesh collision (line {}) approximated by a 10 cm sphere site",
-                                s.name, g.line
-                            ));
-                            ("sphere", vec![0.1])
-                        }
-                    };
-                    let site = format!("{name}_site");
-                    self.sites[link].push(format!(
-                        "<site name=\"{site}\" type=\"{ty}\" size=\"{}\"{} group=\"4\" rgba=\"1 0 0 0.2\"/>",
-                        fv(&size),
-                        pose_attrs(&g.pose)
-                    ));
-                    self.sensor_xml.push(format!("<touch name=\"{name}\" site=\"{site}\"/>"));
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic,
-                        mujoco: vec![s.name.clone()],
-                    });
-                }
-                other => {
-                    self.notes.push(format!(
-                        "sensor \"{}\" of type {other} (line {}) has no MuJoCo equivalent here: not converted",
-                        s.name, s.line
-                    ));
-                }
-            }
-        }
-        Ok(())
     }
 
     fn compile(&self, mjcf: &str) -> Result<Model> {
@@ -1180,6 +986,7 @@ impl<'a> Converter<'a> {
         if let Some(w) = world {
             mus.extend(w.mus.iter().copied());
         }
+        self.world_min_mu = world.map_or(1.0, |w| w.mus.iter().copied().fold(1.0, f64::min));
         mus.sort_by(|a, b| b.total_cmp(a));
         mus.dedup();
         self.priority = mus.iter().enumerate().map(|(i, m)| (m.to_bits(), i as i32)).collect();
@@ -1210,7 +1017,7 @@ impl<'a> Converter<'a> {
             let scale = if m.scale == [1.0; 3] { String::new() } else { format!(" scale=\"{}\"", fv(&m.scale)) };
             let _ = writeln!(
                 x,
-                "    <mesh name=\"{}\" file=\"{}\"{scale}/>",
+                "    <mesh name=\"{}\" file=\"{}\"{scale} inertia=\"shell\"/>",
                 esc(&m.name),
                 esc(&m.file.display().to_string())
             );
@@ -1300,6 +1107,7 @@ impl<'a> Converter<'a> {
             let line = match iface {
                 Interface::Effort => {
                     let range = drive
+                        .filter(|d| d.interface == *iface)
                         .and_then(|d| d.cmd_range)
                         .map(|r| [r[0] / g.abs(), r[1] / g.abs()])
                         .or(effort.map(|e| [-e / g.abs(), e / g.abs()]));
@@ -1337,6 +1145,16 @@ impl<'a> Converter<'a> {
             };
             let _ = writeln!(act, "    {line}");
         }
+        for line in &self.tendon_act_xml {
+            let _ = writeln!(act, "    {line}");
+        }
+        if !self.tendon_xml.is_empty() {
+            let _ = writeln!(x, "  <tendon>");
+            for t in &self.tendon_xml {
+                let _ = writeln!(x, "    {t}");
+            }
+            let _ = writeln!(x, "  </tendon>");
+        }
         if !act.is_empty() {
             let _ = writeln!(x, "  <actuator>\n{act}  </actuator>");
         }
@@ -1360,6 +1178,7 @@ impl<'a> Converter<'a> {
         if let Some(q) = home {
             let _ = writeln!(x, "  <keyframe>\n    <key name=\"home\" qpos=\"{}\"/>\n  </keyframe>", fv(q));
         }
+        x.push_str(&self.meta().to_custom_xml());
         let _ = writeln!(x, "</mujoco>");
         Ok(x)
     }
@@ -1460,8 +1279,25 @@ impl<'a> Converter<'a> {
         }
         let gz_rgba = self.robot.gazebo.get(&link.name).and_then(|g| g.material.as_deref()).and_then(gazebo_rgba);
         let (ct, ca) = self.contype(link);
-        let mu = self.mu[li];
-        let prio = self.priority_of(mu);
+        let mut mu = self.mu[li];
+        let mut prio = self.priority_of(mu);
+        let mut solref = String::new();
+        if let Some([k, b]) = self.contact[li] {
+            // Highest priority, so this geom's solref/solimp are the contact's; its friction
+            // is then the contact's too: take Gazebo's min with the world's.
+            prio = self.priority.len() as i32;
+            mu = mu.min(self.world_min_mu);
+            // MuJoCo's pyramidal friction cone carries the normal force on edges n ± μ·t, which
+            // scales the contact's constraint-space stiffness by 2/(μ²(1 + μ²)) (measured: exact
+            // for the resting penetration); compensate so the penetration stays Gazebo's.
+            let cone = if mu > 0.0 { mu * mu * (1.0 + mu * mu) / 2.0 } else { 1.0 };
+            solref = format!(
+                " solref=\"{} {}\" solimp=\"{d} {d} 0.001\"",
+                f(k * cone),
+                f(b * cone.sqrt()),
+                d = CONTACT_IMPEDANCE
+            );
+        }
         let prio = if prio != 0 { format!(" priority=\"{prio}\"") } else { String::new() };
         let rgba_c = link.visuals.first().and_then(|v| v.rgba).or(gz_rgba);
         // Zero friction: frictionless contacts (a zero-width friction cone is degenerate).
@@ -1470,7 +1306,7 @@ impl<'a> Converter<'a> {
             let rgba = rgba_c.map(|c| format!(" rgba=\"{}\"", fv(&c))).unwrap_or_default();
             let _ = writeln!(
                 x,
-                "{ind}<geom name=\"{}_collision_{gi}\"{} contype=\"{ct}\" conaffinity=\"{ca}\" group=\"3\" friction=\"{} 0.005 0.0001\"{condim}{prio}{rgba}/>",
+                "{ind}<geom name=\"{}_collision_{gi}\"{} contype=\"{ct}\" conaffinity=\"{ca}\" group=\"3\" friction=\"{} 0.005 0.0001\"{condim}{prio}{solref}{rgba}/>",
                 esc(&link.name),
                 self.geom_attrs(li, false, gi, g),
                 f(mu)
@@ -1478,6 +1314,9 @@ impl<'a> Converter<'a> {
         }
         if self.opts.visuals {
             for (gi, g) in link.visuals.iter().enumerate() {
+                if matches!(g.shape, Shape::Mesh { .. }) && !self.mesh_of.contains_key(&(li, true, gi)) {
+                    continue;
+                }
                 let rgba = g.rgba.or(gz_rgba).map(|c| format!(" rgba=\"{}\"", fv(&c))).unwrap_or_default();
                 let _ = writeln!(
                     x,
@@ -1518,70 +1357,6 @@ impl<'a> Converter<'a> {
     }
 }
 
-/// Gyro and accelerometer noise standard deviations of a Gazebo `<sensor type="imu">`.
-fn imu_noise(sensor: roxmltree::Node<'_, '_>) -> (f64, f64) {
-    let Some(imu) = ir::child(sensor, "imu") else {
-        return (0.0, 0.0);
-    };
-    let stddev_under = |n: Option<roxmltree::Node<'_, '_>>| -> f64 {
-        n.map(|n| {
-            n.descendants()
-                .filter(|d| d.has_tag_name("stddev"))
-                .filter_map(|d| d.text().and_then(ir::parse_num))
-                .fold(0.0, f64::max)
-        })
-        .unwrap_or(0.0)
-    };
-    let mut gyro = stddev_under(ir::child(imu, "angular_velocity"));
-    let mut accel = stddev_under(ir::child(imu, "linear_acceleration"));
-    // Gazebo classic's older form: <imu><noise><rate><stddev>, <accel><stddev>.
-    if let Some(n) = ir::child(imu, "noise") {
-        gyro = gyro.max(stddev_under(ir::child(n, "rate")));
-        accel = accel.max(stddev_under(ir::child(n, "accel")));
-    }
-    (gyro, accel)
-}
-
-/// ROS topic of a Gazebo sensor from its plugin: ROS 2 `<ros><namespace>` + `<remapping>`
-/// (`~/out:=imu/data`), ROS 1 `<robotNamespace>` + `<topicName>`, or the sensor's `<topic>`.
-fn resolve_topic(sensor: roxmltree::Node<'_, '_>) -> Option<String> {
-    let join = |ns: &str, rel: &str| -> String {
-        if rel.starts_with('/') {
-            rel.to_string()
-        } else {
-            let ns = ns.trim_end_matches('/');
-            let ns = if ns.starts_with('/') || ns.is_empty() { ns.to_string() } else { format!("/{ns}") };
-            format!("{ns}/{rel}")
-        }
-    };
-    if let Some(p) = ir::child(sensor, "plugin") {
-        let plugin_name = p.attribute("name").unwrap_or("plugin");
-        if let Some(ros) = ir::child(p, "ros") {
-            let ns = ir::child_text(ros, "namespace").unwrap_or("");
-            let mut out = None;
-            for r in ir::children(ros, "remapping") {
-                let t = r.text().unwrap_or("").trim();
-                if let Some((from, to)) = t.split_once(":=")
-                    && (from == "~/out" || from == "out")
-                {
-                    out = Some(to.to_string());
-                }
-            }
-            let topic = match out {
-                Some(to) if to.starts_with("~/") => join(ns, &format!("{plugin_name}/{}", &to[2..])),
-                Some(to) => join(ns, &to),
-                None => join(ns, &format!("{plugin_name}/out")),
-            };
-            return Some(topic);
-        }
-        if let Some(t) = ir::child_text(p, "topicName").or_else(|| ir::child_text(p, "topic_name")) {
-            let ns = ir::child_text(p, "robotNamespace").unwrap_or("");
-            return Some(join(ns, t));
-        }
-    }
-    ir::child_text(sensor, "topic").map(|t| join("", t))
-}
-
 /// Metadata of a compiled model for callers that only have a [`Model`]: the joints with an
 /// actuator, with the actuator id (first actuator acting on each joint).
 pub fn actuated_joints(model: &Model) -> Vec<(usize, usize)> {
@@ -1607,36 +1382,21 @@ mod tests {
     use super::*;
 
     #[test]
-    fn repair_makes_valid_inertia_with_small_change() {
-        let bad = [1.0, 0.0, 0.0, 1.0, 0.0, 3.0];
-        assert!(crate::urdf::check_inertia(bad).is_err());
-        let (fixed, msg) = repair_inertia(bad);
-        assert!(crate::urdf::check_inertia(fixed).is_ok(), "{fixed:?}");
-        // Projection onto a + b = c: each moment moves by (3 − 2)/3.
-        assert!((fixed[0] - (1.0 + 1.0 / 3.0)).abs() < 1e-6, "{fixed:?}");
-        assert!((fixed[5] - (3.0 - 1.0 / 3.0)).abs() < 1e-6, "{fixed:?}");
-        assert!(msg.contains("triangle"));
-        let not_pd = [1.0, 2.0, 0.0, 1.0, 0.0, 1.0];
-        let (fixed, _) = repair_inertia(not_pd);
-        assert!(crate::urdf::check_inertia(fixed).is_ok(), "{fixed:?}");
-    }
-
-    #[test]
     fn topics_resolve_like_gazebo_ros() {
         let doc = roxmltree::Document::parse(
             "<sensor><plugin name=\"imu_plugin\"><ros><namespace>/humanoid</namespace><remapping>~/out:=imu/data</remapping></ros></plugin></sensor>",
         )
         .unwrap();
-        assert_eq!(resolve_topic(doc.root_element()).as_deref(), Some("/humanoid/imu/data"));
+        assert_eq!(ir::resolve_topic(doc.root_element()).as_deref(), Some("/humanoid/imu/data"));
         let doc = roxmltree::Document::parse(
             "<sensor><plugin name=\"p\"><ros><namespace>robot</namespace></ros></plugin></sensor>",
         )
         .unwrap();
-        assert_eq!(resolve_topic(doc.root_element()).as_deref(), Some("/robot/p/out"));
+        assert_eq!(ir::resolve_topic(doc.root_element()).as_deref(), Some("/robot/p/out"));
         let doc = roxmltree::Document::parse(
             "<sensor><plugin name=\"p\"><robotNamespace>r1</robotNamespace><topicName>imu</topicName></plugin></sensor>",
         )
         .unwrap();
-        assert_eq!(resolve_topic(doc.root_element()).as_deref(), Some("/r1/imu"));
+        assert_eq!(ir::resolve_topic(doc.root_element()).as_deref(), Some("/r1/imu"));
     }
 }

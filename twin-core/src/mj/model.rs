@@ -216,6 +216,9 @@ macro_rules! model_arrays {
 }
 
 model_arrays! {
+    /// Contact `solref` of each geom: time constant and damping ratio, or (negative) direct
+    /// stiffness and damping (len `ngeom`).
+    geom_solref: f64 x 2 = ngeom;
     /// Default joint positions (len `nq`).
     qpos0: f64 = nq;
     /// Parent body id of each body (len `nbody`; the world's parent is itself).
@@ -263,6 +266,9 @@ model_arrays! {
     /// Diagonal of the inverse inertia at `qpos0` per DOF (len `nv`; derived, set by
     /// `mj_setConst`): 1 / effective inertia, 1/(kg·m²) or 1/kg.
     dof_invweight0: f64 = nv;
+    /// Inverse effective mass (translation, 1/kg) and inertia (rotation) of each body at
+    /// `qpos0`, as the constraint solver sees it (len `nbody`).
+    body_invweight0: f64 x 2 = nbody;
     /// Whether each joint's total actuator force is limited (len `njnt`).
     jnt_actfrclimited: bool = njnt;
     /// Range of each joint's total actuator force, N·m or N (URDF `effort`) (len `njnt`).
@@ -984,6 +990,65 @@ impl Model {
     pub fn sensor_is_imu(&self, id: usize) -> bool {
         let ty = self.sensor_type()[id] as u32;
         ty == sys::mjtSensor_mjSENS_GYRO || ty == sys::mjtSensor_mjSENS_ACCELEROMETER
+    }
+
+    /// Custom text elements (`<custom><text name="…" data="…"/>`), `(name, data)` in model
+    /// order; an element whose bytes are not UTF-8 reads as empty.
+    pub fn custom_texts(&self) -> Vec<(&str, &str)> {
+        let m = self.raw();
+        let n = m.ntext as usize;
+        // SAFETY: MuJoCo allocates text_adr and text_size with ntext ints each, and text_data
+        // with ntextdata bytes; the model is immutable while self is borrowed.
+        let (adr, size, data) = unsafe {
+            (
+                raw_slice(m.text_adr as *const c_int, n),
+                raw_slice(m.text_size as *const c_int, n),
+                raw_slice(m.text_data as *const u8, m.ntextdata as usize),
+            )
+        };
+        (0..n)
+            .map(|i| {
+                let (a, len) = (adr[i].max(0) as usize, size[i].max(0) as usize);
+                let bytes = data.get(a..(a + len).min(data.len())).unwrap_or(&[]);
+                // text_size counts the terminating NUL.
+                let bytes = bytes.split(|&b| b == 0).next().unwrap_or(&[]);
+                (self.raw_name(sys::mjtObj_mjOBJ_TEXT, i), std::str::from_utf8(bytes).unwrap_or(""))
+            })
+            .collect()
+    }
+
+    /// Custom numeric elements (`<custom><numeric name="…" data="…"/>`), `(name, values)` in
+    /// model order.
+    pub fn custom_numerics(&self) -> Vec<(&str, &[f64])> {
+        let m = self.raw();
+        let n = m.nnumeric as usize;
+        // SAFETY: MuJoCo allocates numeric_adr and numeric_size with nnumeric ints each and
+        // numeric_data with nnumericdata values; the model is immutable while self is borrowed.
+        let (adr, size, data) = unsafe {
+            (
+                raw_slice(m.numeric_adr as *const c_int, n),
+                raw_slice(m.numeric_size as *const c_int, n),
+                raw_slice(m.numeric_data as *const f64, m.nnumericdata as usize),
+            )
+        };
+        (0..n)
+            .map(|i| {
+                let (a, len) = (adr[i].max(0) as usize, size[i].max(0) as usize);
+                (self.raw_name(sys::mjtObj_mjOBJ_NUMERIC, i), data.get(a..(a + len).min(data.len())).unwrap_or(&[]))
+            })
+            .collect()
+    }
+
+    /// Name of object `id` of raw kind `obj` (caller keeps `id` in range).
+    fn raw_name(&self, obj: sys::mjtObj, id: usize) -> &str {
+        // SAFETY: id is in range (callers iterate the object's count); the pointer is into the
+        // model's name buffer, which lives as long as self.
+        let p = unsafe { sys::mj_id2name(self.as_ptr(), obj as c_int, id as c_int) };
+        if p.is_null() {
+            return "";
+        }
+        // SAFETY: MuJoCo names are NUL-terminated; the buffer outlives the borrow of self.
+        unsafe { CStr::from_ptr(p) }.to_str().unwrap_or("")
     }
 
     /// Id of the object of kind `obj` named `name`, if any.

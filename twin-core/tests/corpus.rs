@@ -1,0 +1,265 @@
+//! Every URDF of the `example-robot-data` wheel (PyPI, 69 files: humanoids, quadrupeds, arms,
+//! hands, drones) converts without flags, loads, weighs what the URDF says, and holds its home
+//! pose for 1 s under PD without diverging. The only files allowed to fail are those that are
+//! not robots (no `<link>`).
+//!
+//! The wheel is downloaded once into `TWIN_URDF_CACHE` (default: the target's tmp dir) with
+//! `TWIN_PYTHON`'s pip; without it the test fails. Prints the corpus table of
+//! `twin-core/src/convert/corpus.md` (`cargo test -p twin-core --test corpus -- --nocapture`).
+
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::sync::{Arc, Mutex};
+use std::time::Instant;
+use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions};
+use twin_core::convert::{ConvertOptions, convert_urdf};
+use twin_core::mj::{Data, JointType, Model, ObjType, Warning};
+
+/// The extracted robots folder of example-robot-data 6.0.0.
+pub fn example_robot_data() -> PathBuf {
+    let cache = std::env::var_os("TWIN_URDF_CACHE")
+        .map(PathBuf::from)
+        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
+    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/fetch_example_robot_data.py");
+    let status = Command::new(&python).arg(&script).arg(&cache).status();
+    assert!(
+        status.as_ref().is_ok_and(|s| s.success()),
+        "could not fetch example-robot-data 6.0.0 with {python} {} ({status:?}): set TWIN_PYTHON to a Python with pip and network access to PyPI",
+        script.display()
+    );
+    cache.join("cmeel.prefix/share/example-robot-data/robots")
+}
+
+fn urdfs(dir: &Path, out: &mut Vec<PathBuf>) {
+    let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+    entries.sort();
+    for p in entries {
+        if p.is_dir() {
+            urdfs(&p, out);
+        } else if p.extension().is_some_and(|e| e == "urdf") {
+            out.push(p);
+        }
+    }
+}
+
+/// Sum of `<link><inertial><mass value>` in the URDF, and whether it has any `<link>`.
+fn urdf_mass(text: &str) -> (f64, bool) {
+    let doc = roxmltree::Document::parse(text).unwrap();
+    let links: Vec<_> = doc.root_element().children().filter(|n| n.has_tag_name("link")).collect();
+    let mass = links
+        .iter()
+        .filter_map(|l| l.children().find(|n| n.has_tag_name("inertial")))
+        .filter_map(|i| i.children().find(|n| n.has_tag_name("mass")))
+        .map(|m| m.attribute("value").unwrap().trim().parse::<f64>().unwrap())
+        .sum();
+    (mass, !links.is_empty())
+}
+
+struct Row {
+    robot: String,
+    links: usize,
+    movable: usize,
+    actuators: usize,
+    sensors: usize,
+    notes: usize,
+    ms: f64,
+    status: String,
+}
+
+/// Converts, loads and holds one URDF; `Err` says what went wrong.
+fn run_one(path: &Path) -> Result<Row, String> {
+    let text = std::fs::read_to_string(path).unwrap();
+    let (urdf_mass, has_links) = urdf_mass(&text);
+    // Folder and file: some stems repeat (two `anymal.urdf`).
+    let robot = format!(
+        "{}/{}",
+        path.parent().and_then(|p| p.parent()).and_then(|p| p.file_name()).unwrap().to_string_lossy(),
+        path.file_stem().unwrap().to_string_lossy()
+    );
+    let started = Instant::now();
+    let converted = convert_urdf(path, &ConvertOptions::default());
+    let ms = started.elapsed().as_secs_f64() * 1e3;
+    let c = match converted {
+        Err(e) if !has_links => {
+            let message = e.to_string();
+            if !message.contains("no <link>") {
+                return Err(format!("{robot}: not a robot, but the error does not say so: {message}"));
+            }
+            return Ok(Row {
+                robot,
+                links: 0,
+                movable: 0,
+                actuators: 0,
+                sensors: 0,
+                notes: 0,
+                ms,
+                status: "not a robot (no `<link>`): refused".into(),
+            });
+        }
+        Err(e) => return Err(format!("{robot}: conversion failed: {e}")),
+        Ok(c) => c,
+    };
+    let model = Arc::new(Model::from_xml_str(&c.mjcf).map_err(|e| format!("{robot}: does not load: {e}"))?);
+    let mass = model.total_mass_kg();
+    if (mass - urdf_mass).abs() > 1e-9 * urdf_mass.max(1e-9) {
+        return Err(format!("{robot}: total mass {mass} kg, URDF says {urdf_mass} kg"));
+    }
+    // 1 s of PD hold at the home pose.
+    let mut data = Data::new(model.clone()).unwrap();
+    let home = model.require_id(ObjType::Key, "home").unwrap();
+    data.reset_to_keyframe(home).unwrap();
+    data.forward().unwrap();
+    // The hold: servos (position / velocity actuators, with the gains the converter gave them)
+    // get the home pose / zero velocity; motors get twin's PD hold. Its gains come from effort
+    // limits, which some URDFs set as placeholders (1000 N·m on a 2 kg quadruped): soften them
+    // through its own option so the explicit loop stays stable on the joint's effective
+    // inertia (kp·dt²/I ≤ 0.2).
+    let dt = model.timestep_secs();
+    let mut stiffest: f64 = 0.0;
+    let mut servo_target = vec![None; model.nu()];
+    for (u, target) in servo_target.iter_mut().enumerate() {
+        let is_joint = model.actuator_trntype()[u] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT;
+        let bias = model.actuator_biasprm()[u];
+        if bias[1] != 0.0 || bias[2] != 0.0 {
+            // Position servo (bias −kp·length) or velocity servo (−kv·velocity).
+            *target = Some(if bias[1] != 0.0 && is_joint {
+                let j = model.actuator_trnid()[u][0] as usize;
+                data.qpos()[model.jnt_qposadr()[j] as usize] * model.actuator_gear()[u][0]
+            } else {
+                0.0
+            });
+        } else if is_joint {
+            let j = model.actuator_trnid()[u][0] as usize;
+            let dof = model.jnt_dofadr()[j] as usize;
+            let [lo, hi] = model.actuator_ctrlrange()[u];
+            let effort = (lo.abs().min(hi.abs()) * model.actuator_gear()[u][0].abs()).min(1e6);
+            stiffest = stiffest.max(effort / 0.25 * dt * dt * model.dof_invweight0()[dof]);
+        }
+    }
+    if model.nu() == 0 {
+        // No actuators: the hold pushes every hinge and slide directly (qfrc_applied), with its
+        // effort limit or the hold's default effort.
+        let default_effort = PdHoldOptions::default().default_effort;
+        for j in 0..model.njnt() {
+            if matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
+                let dof = model.jnt_dofadr()[j] as usize;
+                let effort = if model.jnt_actfrclimited()[j] {
+                    let [lo, hi] = model.jnt_actfrcrange()[j];
+                    lo.abs().min(hi.abs())
+                } else {
+                    default_effort
+                };
+                stiffest = stiffest.max(effort / 0.25 * dt * dt * model.dof_invweight0()[dof]);
+            }
+        }
+    }
+    let options = PdHoldOptions { saturation_error: 0.25 * (stiffest / 0.2).max(1.0), ..PdHoldOptions::default() };
+    let mut hold = PdHold::new(&model, options);
+    hold.reset(&model, &Observation::of(&data)).unwrap();
+    let actuation = Actuation::of(&model);
+    let mut command = vec![0.0; actuation.len(&model)];
+    let steps = (1.0 / dt).round() as usize;
+    let mut max_qvel: f64 = 0.0;
+    for _ in 0..steps {
+        hold.compute(&model, &Observation::of(&data), &mut command);
+        if actuation == Actuation::Ctrl {
+            for (c, t) in command.iter_mut().zip(&servo_target) {
+                if let Some(t) = t {
+                    *c = *t;
+                }
+            }
+        }
+        actuation.apply(&mut data, &command);
+        data.step().map_err(|e| format!("{robot}: step failed: {e}"))?;
+        max_qvel = data.qvel().iter().fold(max_qvel, |m, v| m.max(v.abs()));
+    }
+    let diverged = [Warning::BadQpos, Warning::BadQvel, Warning::BadQacc].iter().any(|w| data.warning_count(*w) > 0)
+        || data.qpos().iter().chain(data.qvel()).any(|x| !x.is_finite())
+        || max_qvel > 1e3;
+    if diverged {
+        return Err(format!("{robot}: diverged under PD hold (max |qvel| {max_qvel:.3e})"));
+    }
+    let movable = c.joints.iter().filter(|j| j.urdf_type != "fixed").count();
+    Ok(Row {
+        robot,
+        links: c.joints.len() + 1,
+        movable,
+        actuators: model.nu(),
+        sensors: model.nsensor(),
+        notes: c.notes.len(),
+        ms,
+        status: format!("ok: {mass:.3} kg, max q̇ {max_qvel:.2} in the 1 s hold"),
+    })
+}
+
+#[test]
+fn every_example_robot_data_urdf_converts_loads_weighs_and_holds() {
+    let robots = example_robot_data();
+    let mut files = Vec::new();
+    urdfs(&robots, &mut files);
+    assert!(files.len() >= 60, "found only {} URDFs under {}", files.len(), robots.display());
+    let queue = Mutex::new(files.clone());
+    let results = Mutex::new(Vec::new());
+    let threads = std::thread::available_parallelism().map_or(2, |n| n.get()).min(8);
+    std::thread::scope(|s| {
+        for _ in 0..threads {
+            s.spawn(|| {
+                loop {
+                    let Some(path) = queue.lock().unwrap().pop() else { break };
+                    let r = run_one(&path);
+                    results.lock().unwrap().push((path, r));
+                }
+            });
+        }
+    });
+    let mut results = results.into_inner().unwrap();
+    results.sort_by(|a, b| a.0.cmp(&b.0));
+    println!("| robot | links | movable joints | actuators | sensors | notes | ms | status |");
+    println!("| --- | ---: | ---: | ---: | ---: | ---: | ---: | --- |");
+    let mut failures = Vec::new();
+    let mut not_robots = 0;
+    for (path, r) in &results {
+        match r {
+            Ok(row) => {
+                not_robots += usize::from(row.links == 0);
+                println!(
+                    "| {} | {} | {} | {} | {} | {} | {:.0} | {} |",
+                    row.robot, row.links, row.movable, row.actuators, row.sensors, row.notes, row.ms, row.status
+                );
+            }
+            Err(e) => failures.push(format!("{}: {e}", path.display())),
+        }
+    }
+    let total_ms: f64 = results.iter().filter_map(|(_, r)| r.as_ref().ok()).map(|r| r.ms).sum();
+    println!(
+        "{} files, {} converted, {not_robots} not robots, conversion {total_ms:.0} ms in all",
+        results.len(),
+        results.len() - failures.len() - not_robots
+    );
+    assert!(failures.is_empty(), "{} of {} failed:\n{}", failures.len(), results.len(), failures.join("\n"));
+    assert!(not_robots <= 1, "only ur3.urdf (an empty xacro shell) has no <link>");
+}
+
+#[test]
+fn talos_and_g1_arrive_drivable() {
+    let robots = example_robot_data();
+    let talos = convert_urdf(&robots.join("talos_data/robots/talos_full_v2.urdf"), &ConvertOptions::default()).unwrap();
+    let m = Model::from_xml_str(&talos.mjcf).unwrap();
+    assert!(m.nu() >= 28, "talos actuators: {}", m.nu());
+    assert_eq!(m.neq(), 12, "talos mimic equalities");
+    assert!(talos.floating_base);
+    assert!(!talos.imus.is_empty());
+    m.require_id(ObjType::Sensor, &format!("{}_gyro", talos.imus[0].name)).unwrap();
+    // The torso and wrist differentials and the head's half differential: tendons and actuators.
+    assert_eq!(talos.differentials.len(), 4, "{:?}", talos.differentials);
+    for d in &talos.differentials {
+        for a in &d.actuators {
+            m.require_id(ObjType::Actuator, a).unwrap();
+        }
+    }
+    let g1 =
+        convert_urdf(&robots.join("g1_description/urdf/g1_29dof_rev_1_0.urdf"), &ConvertOptions::default()).unwrap();
+    let m = Model::from_xml_str(&g1.mjcf).unwrap();
+    assert_eq!(m.nu(), 29);
+}
