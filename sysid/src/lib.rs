@@ -116,13 +116,17 @@
 //! - Regressor samples after decimation are correlated (5× the cut-off), so σ is optimistic by
 //!   about √(5/2).
 
+pub mod allan;
 pub mod condition;
 pub mod error;
 pub mod estimate;
+pub mod friction;
 pub mod identify;
 pub mod log;
 pub mod mjcf;
 pub mod model;
+pub mod noise;
+pub mod plot;
 pub mod regressor;
 pub mod report;
 pub mod signal;
