@@ -16,16 +16,20 @@ pub enum BaseArg {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
+    /// Another identification than inertias (`twin sysid friction --log sweeps.mcap`).
+    #[command(subcommand)]
+    pub mode: Option<Mode>,
     /// The log: a ROS 2 bag (rosbag2 folder or `.mcap`) with `sensor_msgs/msg/JointState`
     /// (position, velocity, effort), or a CSV file with columns `time_sec`, then
     /// `<joint>/position`, `<joint>/velocity` (optional), `<joint>/effort` per joint.
-    #[arg(long, value_name = "LOG")]
-    pub log: PathBuf,
+    #[arg(long, value_name = "LOG", required = true)]
+    pub log: Option<PathBuf>,
     /// The robot's URDF: the model identified and the file updated (original kept as
     /// ROBOT.urdf.bak).
-    #[arg(long, value_name = "ROBOT.urdf")]
-    pub update: PathBuf,
+    #[arg(long, value_name = "ROBOT.urdf", required = true)]
+    pub update: Option<PathBuf>,
     /// Joint-state topic to read from an MCAP log (default: auto-detected).
     #[arg(long, value_name = "T")]
     pub topic: Option<String>,
@@ -66,6 +70,83 @@ pub struct Args {
     pub coulomb_smoothing: Option<f64>,
 }
 
+#[derive(Debug, clap::Subcommand)]
+pub enum Mode {
+    /// Joint friction curves (Coulomb + viscous + Stribeck) from constant-velocity sweeps:
+    /// each joint moved forth and back at a series of constant speeds.
+    Friction(FrictionArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct FrictionArgs {
+    /// The sweep log (ROS 2 bag with sensor_msgs/msg/JointState, or CSV as for `twin sysid`).
+    #[arg(long, value_name = "LOG")]
+    pub log: PathBuf,
+    /// Write the Coulomb (`friction`) and viscous (`damping`) parts into this URDF's
+    /// `<dynamics>` (original kept as ROBOT.urdf.bak).
+    #[arg(long, value_name = "ROBOT.urdf")]
+    pub update: Option<PathBuf>,
+    /// Joint-state topic to read from an MCAP log (default: auto-detected).
+    #[arg(long, value_name = "T")]
+    pub topic: Option<String>,
+    /// Only these joints (comma separated; default: every joint with a sweep).
+    #[arg(long, value_name = "J1,J2", value_delimiter = ',')]
+    pub joints: Vec<String>,
+    /// Shortest constant-velocity segment, s.
+    #[arg(long, value_name = "S", default_value_t = 0.5)]
+    pub min_segment: f64,
+    /// Write an SVG plot of each joint's curve over the data.
+    #[arg(long, value_name = "friction.svg")]
+    pub plot: Option<PathBuf>,
+    /// Write the full report as JSON.
+    #[arg(long, value_name = "friction.json")]
+    pub report: Option<PathBuf>,
+    /// Print the diff of the URDF instead of writing it.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+fn friction(args: FrictionArgs) -> anyhow::Result<()> {
+    if !(args.min_segment > 0.0 && args.min_segment.is_finite()) {
+        bail!("--min-segment must be a positive duration in seconds, got {}", args.min_segment);
+    }
+    let opts = sysid::friction::FrictionOptions {
+        min_segment_secs: args.min_segment,
+        joints: args.joints.clone(),
+        ..Default::default()
+    };
+    let log = read_log(&args.log, args.topic.as_deref(), None)?;
+    let report = sysid::friction::identify_friction(&log, &opts).with_context(|| match &args.update {
+        Some(u) => format!("friction identification failed; {} was not changed", u.display()),
+        None => "friction identification failed".into(),
+    })?;
+    print!("{}", report.table());
+    if let Some(path) = &args.report {
+        sysid::writeback::write_atomic(path, report.to_json().as_bytes())?;
+        eprintln!("report written to {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        sysid::writeback::write_atomic(path, report.svg().as_bytes())?;
+        eprintln!("friction curves plotted in {}", path.display());
+    }
+    if let Some(urdf) = &args.update {
+        let joints = report.joint_updates();
+        let outcome = sysid::writeback::update_urdf_file(urdf, &[], &joints, args.dry_run)
+            .with_context(|| format!("{} was not changed", urdf.display()))?;
+        if args.dry_run {
+            println!("\n--dry-run: {} would change as follows:\n{}", urdf.display(), outcome.diff);
+        } else if let Some(backup) = &outcome.backup {
+            eprintln!(
+                "updated <dynamics> of {} joint(s) in {} (Coulomb → friction, viscous → damping); original kept as {}",
+                joints.len(),
+                urdf.display(),
+                backup.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyhow::Result<JointLog> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
@@ -104,6 +185,13 @@ fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyho
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let args = match args.mode {
+        Some(Mode::Friction(f)) => return friction(f),
+        None => args,
+    };
+    let (Some(log_path), Some(update)) = (args.log.clone(), args.update.clone()) else {
+        bail!("twin sysid needs --log LOG and --update ROBOT.urdf");
+    };
     if let Some(eps) = args.coulomb_smoothing
         && !(eps > 0.0 && eps.is_finite())
     {
@@ -125,11 +213,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
     let robot = match opts.base {
-        Base::Fixed => RobotModel::from_urdf(&args.update),
-        Base::Floating => RobotModel::from_urdf_floating(&args.update),
+        Base::Fixed => RobotModel::from_urdf(&update),
+        Base::Floating => RobotModel::from_urdf_floating(&update),
     }
-    .with_context(|| format!("loading the robot {}", args.update.display()))?;
-    let log = read_log(&args.log, args.topic.as_deref(), odom)?;
+    .with_context(|| format!("loading the robot {}", update.display()))?;
+    let log = read_log(&log_path, args.topic.as_deref(), odom)?;
     let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref(), odom)).transpose()?;
     let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
     if let (Some(path), Some(other)) = (&args.validate, &held_out) {
@@ -155,20 +243,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("report written to {}", path.display());
     }
     let (links, joints) = sysid::urdf_updates(&robot, &ident);
-    let outcome = sysid::writeback::update_urdf_file(&args.update, &links, &joints, args.dry_run)?;
+    let outcome = sysid::writeback::update_urdf_file(&update, &links, &joints, args.dry_run)?;
     if args.dry_run {
-        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), outcome.diff);
+        println!("\n--dry-run: {} would change as follows:\n{}", update.display(), outcome.diff);
     } else if let Some(backup) = &outcome.backup {
         eprintln!(
             "updated {} ({} links, {} joints); original kept as {}",
-            args.update.display(),
+            update.display(),
             links.len(),
             joints.len(),
             backup.display()
         );
     }
     if let Some(out) = &args.mjcf {
-        sysid::mjcf::write_mjcf(&args.update, &robot, &ident, &links, &joints, out)
+        sysid::mjcf::write_mjcf(&update, &robot, &ident, &links, &joints, out)
             .with_context(|| format!("writing {}", out.display()))?;
         eprintln!("MuJoCo model with the identified values (armature included) written to {}", out.display());
     }
