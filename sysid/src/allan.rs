@@ -235,6 +235,7 @@ impl NoiseFit {
 /// Non-negative weighted least squares on σ²: every subset of the four terms is solved
 /// (4 unknowns: 15 subsets) and the best one with all coefficients ≥ 0 kept; weights are the
 /// points' degrees of freedom over the model's σ⁴ (iterated twice), i.e. relative errors.
+#[allow(clippy::needless_range_loop)] // small dense normal equations, indexed as written
 pub fn fit_noise(points: &mut [AllanPoint], n_samples: usize, level: f64) -> NoiseFit {
     let mut fit = NoiseFit {
         quantization: 0.0,
@@ -336,6 +337,7 @@ pub fn fit_noise(points: &mut [AllanPoint], n_samples: usize, level: f64) -> Noi
 
 /// Solves a small symmetric positive definite system by Cholesky; also returns the diagonal
 /// of the inverse. `None` when not positive definite.
+#[allow(clippy::needless_range_loop)] // textbook index form of a 4 × 4 factorisation
 fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
     let n = b.len();
     let mut l = vec![vec![0.0; n]; n];

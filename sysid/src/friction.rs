@@ -224,6 +224,7 @@ pub fn find_segments(t_nanos: &[i64], v: &[f64], opts: &FrictionOptions) -> Vec<
 /// efforts of both segments on a cubic in position (gravity and offsets, the same both ways)
 /// plus `±f` (the friction, odd in velocity): unlike the difference of plain means, this does
 /// not assume both directions sample the positions alike. Returns `(f, σ_f, samples)`.
+#[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
 fn paired_friction(
     log: &JointLog,
     j: usize,
@@ -308,6 +309,7 @@ pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &Fric
 ///
 /// # Errors
 /// [`Error::Numerical`] with fewer than 6 points (5 parameters).
+#[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
 pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> {
     if points.len() < 6 {
         return Err(Error::Numerical(format!(
@@ -436,6 +438,7 @@ pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> 
     Ok((fit, ci, (c / points.len() as f64).sqrt()))
 }
 
+#[allow(clippy::needless_range_loop)] // Gaussian elimination on a 5 × 5 system, indexed as written
 fn solve5(mut a: [[f64; 5]; 5], mut b: [f64; 5]) -> Option<[f64; 5]> {
     for c in 0..5 {
         let p = (c..5).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;

@@ -499,7 +499,7 @@ fn quantization_step(values: &[f64]) -> Option<f64> {
     }
     let gaps: Vec<f64> = values.windows(2).map(|w| w[1] - w[0]).collect();
     let min = gaps.iter().copied().fold(f64::INFINITY, f64::min);
-    if !(min > 0.0) {
+    if min.is_nan() || min <= 0.0 {
         return None;
     }
     // Refine as the mean of the gaps that are one step (the smallest gap alone carries the
