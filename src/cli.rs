@@ -32,4 +32,6 @@ pub enum Command {
     /// Turn a robot's ROS 2 log into a rerun recording: the robot animated from its joint
     /// states, joint and IMU time series.
     View(crate::commands::view::Args),
+    /// Calibrate the twin's sensors from real logs (`twin calibrate noise --log still.mcap`).
+    Calibrate(crate::commands::calibrate::Args),
 }

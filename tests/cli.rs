@@ -1,5 +1,7 @@
 //! End-to-end tests of the `twin` binary: one test binary, a module per area under `tests/cli/`.
 
+#[path = "cli/calibrate.rs"]
+mod calibrate;
 #[path = "cli/common.rs"]
 mod common;
 #[path = "cli/convert.rs"]

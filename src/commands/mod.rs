@@ -1,5 +1,6 @@
 //! One module per subcommand, each with `run(args) -> anyhow::Result<()>`.
 
+pub mod calibrate;
 pub mod check;
 pub mod convert;
 pub mod info;
@@ -26,6 +27,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sysid(args) => sysid::run(args),
         Command::Sim(args) => sim::run(*args),
         Command::View(args) => view::run(args),
+        Command::Calibrate(args) => calibrate::run(args),
     }
 }
 

@@ -17,16 +17,20 @@ pub enum BaseArg {
 }
 
 #[derive(Debug, clap::Args)]
+#[command(args_conflicts_with_subcommands = true, subcommand_negates_reqs = true)]
 pub struct Args {
+    /// Another identification than inertias (`twin sysid friction --log sweeps.mcap`).
+    #[command(subcommand)]
+    pub mode: Option<Mode>,
     /// The log: a ROS 2 bag (rosbag2 folder or `.mcap`) with `sensor_msgs/msg/JointState`
     /// (position, velocity, effort), or a CSV file with columns `time_sec`, then
     /// `<joint>/position`, `<joint>/velocity` (optional), `<joint>/effort` per joint.
-    #[arg(long, value_name = "LOG")]
-    pub log: PathBuf,
+    #[arg(long, value_name = "LOG", required = true)]
+    pub log: Option<PathBuf>,
     /// The robot's URDF: the model identified and the file updated (original kept as
     /// ROBOT.urdf.bak).
-    #[arg(long, value_name = "ROBOT.urdf")]
-    pub update: PathBuf,
+    #[arg(long, value_name = "ROBOT.urdf", required = true)]
+    pub update: Option<PathBuf>,
     /// Joint-state topic to read from an MCAP log (default: auto-detected).
     #[arg(long, value_name = "T")]
     pub topic: Option<String>,
@@ -67,6 +71,83 @@ pub struct Args {
     pub coulomb_smoothing: Option<f64>,
 }
 
+#[derive(Debug, clap::Subcommand)]
+pub enum Mode {
+    /// Joint friction curves (Coulomb + viscous + Stribeck) from constant-velocity sweeps:
+    /// each joint moved forth and back at a series of constant speeds.
+    Friction(FrictionArgs),
+}
+
+#[derive(Debug, clap::Args)]
+pub struct FrictionArgs {
+    /// The sweep log (ROS 2 bag with sensor_msgs/msg/JointState, or CSV as for `twin sysid`).
+    #[arg(long, value_name = "LOG")]
+    pub log: PathBuf,
+    /// Write the Coulomb (`friction`) and viscous (`damping`) parts into this URDF's
+    /// `<dynamics>` (original kept as ROBOT.urdf.bak).
+    #[arg(long, value_name = "ROBOT.urdf")]
+    pub update: Option<PathBuf>,
+    /// Joint-state topic to read from an MCAP log (default: auto-detected).
+    #[arg(long, value_name = "T")]
+    pub topic: Option<String>,
+    /// Only these joints (comma separated; default: every joint with a sweep).
+    #[arg(long, value_name = "J1,J2", value_delimiter = ',')]
+    pub joints: Vec<String>,
+    /// Shortest constant-velocity segment, s.
+    #[arg(long, value_name = "S", default_value_t = 0.5)]
+    pub min_segment: f64,
+    /// Write an SVG plot of each joint's curve over the data.
+    #[arg(long, value_name = "friction.svg")]
+    pub plot: Option<PathBuf>,
+    /// Write the full report as JSON.
+    #[arg(long, value_name = "friction.json")]
+    pub report: Option<PathBuf>,
+    /// Print the diff of the URDF instead of writing it.
+    #[arg(long)]
+    pub dry_run: bool,
+}
+
+fn friction(args: FrictionArgs) -> anyhow::Result<()> {
+    if !(args.min_segment > 0.0 && args.min_segment.is_finite()) {
+        bail!("--min-segment must be a positive duration in seconds, got {}", args.min_segment);
+    }
+    let opts = sysid::friction::FrictionOptions {
+        min_segment_secs: args.min_segment,
+        joints: args.joints.clone(),
+        ..Default::default()
+    };
+    let log = read_log(&args.log, args.topic.as_deref(), None)?;
+    let report = sysid::friction::identify_friction(&log, &opts).with_context(|| match &args.update {
+        Some(u) => format!("friction identification failed; {} was not changed", u.display()),
+        None => "friction identification failed".into(),
+    })?;
+    print!("{}", report.table());
+    if let Some(path) = &args.report {
+        twin_core::fsio::write_atomic(path, report.to_json().as_bytes(), twin_core::fsio::Backup::None)?;
+        eprintln!("report written to {}", path.display());
+    }
+    if let Some(path) = &args.plot {
+        twin_core::fsio::write_atomic(path, report.svg().as_bytes(), twin_core::fsio::Backup::None)?;
+        eprintln!("friction curves plotted in {}", path.display());
+    }
+    if let Some(urdf) = &args.update {
+        let joints = report.joint_updates();
+        let outcome = sysid::writeback::update_urdf_file(urdf, &[], &joints, args.dry_run)
+            .with_context(|| format!("{} was not changed", urdf.display()))?;
+        if args.dry_run {
+            println!("\n--dry-run: {} would change as follows:\n{}", urdf.display(), outcome.diff);
+        } else if let Some(backup) = &outcome.backup {
+            eprintln!(
+                "updated <dynamics> of {} joint(s) in {} (Coulomb → friction, viscous → damping); original kept as {}",
+                joints.len(),
+                urdf.display(),
+                backup.display()
+            );
+        }
+    }
+    Ok(())
+}
+
 fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyhow::Result<JointLog> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
@@ -105,6 +186,13 @@ fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyho
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    let args = match args.mode {
+        Some(Mode::Friction(f)) => return friction(f),
+        None => args,
+    };
+    let (Some(log_path), Some(update)) = (args.log.clone(), args.update.clone()) else {
+        bail!("twin sysid needs --log LOG and --update ROBOT.urdf");
+    };
     if let Some(eps) = args.coulomb_smoothing
         && !(eps > 0.0 && eps.is_finite())
     {
@@ -125,14 +213,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..Default::default()
     };
     // Every output is checked before any work: not a folder or device, not an input.
-    let mut inputs: Vec<&Path> = vec![args.log.as_path()];
+    let mut inputs: Vec<&Path> = vec![log_path.as_path()];
     inputs.extend(args.validate.as_deref());
-    fsio::check_input(&args.log, fsio::InputKind::FileOrDir)?;
+    fsio::check_input(&log_path, fsio::InputKind::FileOrDir)?;
     if let Some(v) = &args.validate {
         fsio::check_input(v, fsio::InputKind::FileOrDir)?;
     }
-    let urdf_target = fsio::check_output(&args.update, &inputs)?;
-    inputs.push(args.update.as_path());
+    let urdf_target = fsio::check_output(&update, &inputs)?;
+    inputs.push(update.as_path());
     let report_target = args.report.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
     let mjcf_target = args.mjcf.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
     if let (Some(r), Some(m)) = (&args.report, &args.mjcf)
@@ -142,11 +230,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
     let robot = match opts.base {
-        Base::Fixed => RobotModel::from_urdf(&args.update),
-        Base::Floating => RobotModel::from_urdf_floating(&args.update),
+        Base::Fixed => RobotModel::from_urdf(&update),
+        Base::Floating => RobotModel::from_urdf_floating(&update),
     }
-    .with_context(|| format!("loading the robot {}", args.update.display()))?;
-    let log = read_log(&args.log, args.topic.as_deref(), odom)?;
+    .with_context(|| format!("loading the robot {}", update.display()))?;
+    let log = read_log(&log_path, args.topic.as_deref(), odom)?;
     let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref(), odom)).transpose()?;
     let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
     if let (Some(path), Some(other)) = (&args.validate, &held_out) {
@@ -168,9 +256,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     print!("{}", ident.report.table());
     let (links, joints) = sysid::urdf_updates(&robot, &ident);
-    let plan = sysid::writeback::plan_urdf_update(&args.update, &links, &joints)?;
+    let plan = sysid::writeback::plan_urdf_update(&update, &links, &joints)?;
     if args.dry_run {
-        println!("\n--dry-run: {} would change as follows:\n{}", args.update.display(), plan.diff);
+        println!("\n--dry-run: {} would change as follows:\n{}", update.display(), plan.diff);
     }
     // All outputs are staged and renamed only when every one was written: a failing --mjcf
     // leaves the URDF and the report untouched.
@@ -179,7 +267,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tx.stage(target, ident.report.to_json().as_bytes(), fsio::Backup::None)?;
     }
     if let Some(target) = &mjcf_target {
-        let text = sysid::mjcf::mjcf_text(&args.update, &robot, &ident, &links, &joints)
+        let text = sysid::mjcf::mjcf_text(&update, &robot, &ident, &links, &joints)
             .with_context(|| format!("writing {}", target.requested.display()))?;
         tx.stage(target, text.as_bytes(), fsio::Backup::None)?;
     }
@@ -191,10 +279,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(path) = &args.report {
         eprintln!("report written to {}", path.display());
     }
-    if let Some(backup) = written.iter().find(|w| w.path == args.update).and_then(|w| w.backup.as_ref()) {
+    if let Some(backup) = written.iter().find(|w| w.path == update).and_then(|w| w.backup.as_ref()) {
         eprintln!(
             "updated {} ({} links, {} joints); original kept as {}",
-            args.update.display(),
+            update.display(),
             links.len(),
             joints.len(),
             backup.display()

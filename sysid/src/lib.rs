@@ -118,13 +118,17 @@
 
 #![forbid(unsafe_code)]
 
+pub mod allan;
 pub mod condition;
 pub mod error;
 pub mod estimate;
+pub mod friction;
 pub mod identify;
 pub mod log;
 pub mod mjcf;
 pub mod model;
+pub mod noise;
+pub mod plot;
 pub mod regressor;
 pub mod report;
 pub mod signal;

@@ -118,6 +118,52 @@ impl<'a> Editor<'a> {
         Ok(())
     }
 
+    /// Appends `xml` as the last child of `node`, indented like the others.
+    fn append_child(&mut self, node: Node<'_, '_>, xml: &str) -> Result<()> {
+        let indent = self.child_indent(node);
+        let r = node.range();
+        let tag = &self.text[r.clone()];
+        if tag.ends_with("/>") {
+            return self.insert_child(node, xml);
+        }
+        let last = node.children().rfind(|c| c.is_element());
+        let at = last.map_or_else(|| r.start + tag.find('>').map_or(0, |i| i + 1), |l| l.range().end);
+        self.edits.push((at..at, format!("{indent}{xml}")));
+        Ok(())
+    }
+
+    /// Sets the text of element `node` (`<stddev>0.002</stddev>`) to `value`, unless it
+    /// already holds it.
+    fn set_text(&mut self, node: Node<'_, '_>, value: f64) {
+        let text = format_number(value);
+        match node.children().find(|c| c.is_text()) {
+            Some(t) if node.children().count() == 1 => {
+                if !same_number(t.text().unwrap_or(""), value) {
+                    // Keep surrounding whitespace of the old text.
+                    let old = &self.text[t.range()];
+                    let lead = old.len() - old.trim_start().len();
+                    let trail = old.len() - old.trim_end().len();
+                    self.edits.push((t.range().start + lead..t.range().end - trail, text));
+                }
+            }
+            _ => {
+                let name = node.tag_name().name();
+                self.edits.push((node.range(), format!("<{name}>{text}</{name}>")));
+            }
+        }
+    }
+
+    /// Sets child element `<tag>` of `node` to `value`, appending it when missing.
+    fn set_child_text(&mut self, node: Node<'_, '_>, tag: &str, value: f64) -> Result<()> {
+        match child(node, tag) {
+            Some(c) => {
+                self.set_text(c, value);
+                Ok(())
+            }
+            None => self.append_child(node, &format!("<{tag}>{}</{tag}>", format_number(value))),
+        }
+    }
+
     fn apply(mut self) -> String {
         self.edits.sort_by_key(|(r, _)| std::cmp::Reverse((r.start, r.end)));
         let mut out = self.text.to_string();
@@ -252,21 +298,97 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
                     format_number(up.damping),
                     format_number(up.friction)
                 );
-                // Append as the last child, indented like the others.
-                let indent = ed.child_indent(joint);
-                let r = joint.range();
-                let tag = &text[r.clone()];
-                if tag.ends_with("/>") {
-                    ed.insert_child(joint, &xml)?;
-                } else {
-                    let last = joint.children().rfind(|c| c.is_element());
-                    let at = last.map_or_else(|| r.start + tag.find('>').map_or(0, |i| i + 1), |l| l.range().end);
-                    ed.edits.push((at..at, format!("{indent}{xml}")));
+                ed.append_child(joint, &xml)?;
+            }
+        }
+    }
+    Ok(ed.apply())
+}
+
+/// Returns `text` (the URDF at `path`) with the Gazebo IMU sensors' `<noise>` of each update
+/// rewritten: per axis of `<angular_velocity>` and `<linear_acceleration>`, `<stddev>` and,
+/// when resolved, `<dynamic_bias_stddev>` and `<dynamic_bias_correlation_time>`; a missing
+/// `<noise type="gaussian">`, axis, or `<angular_velocity>`/`<linear_acceleration>` is inserted.
+/// Everything else stays byte for byte.
+///
+/// # Errors
+/// [`Error::Urdf`] for malformed XML, a reference without an IMU sensor, or the old Gazebo
+/// classic form (`<imu><noise><rate>`), which has no per-axis noise.
+pub fn rewrite_imu_noise(path: &Path, text: &str, updates: &[crate::noise::ImuNoiseUpdate]) -> Result<String> {
+    let doc = Document::parse(text)
+        .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: format!("not well-formed XML: {e}") })?;
+    let mut ed = Editor { path, text, edits: Vec::new() };
+    for up in updates {
+        let sensor = doc
+            .root_element()
+            .children()
+            .filter(|g| g.has_tag_name("gazebo") && g.attribute("reference") == Some(up.reference.as_str()))
+            .flat_map(|g| g.children())
+            .find(|s| s.has_tag_name("sensor") && s.attribute("type") == Some("imu"))
+            .ok_or_else(|| {
+                ed.err(format!("no <gazebo reference=\"{}\"><sensor type=\"imu\"> to update", up.reference))
+            })?;
+        let Some(imu) = child(sensor, "imu") else {
+            let mut xml = String::from("<imu>");
+            for (tag, axes) in [("angular_velocity", &up.gyro), ("linear_acceleration", &up.accel)] {
+                xml.push_str(&format!("<{tag}>"));
+                for (a, n) in ["x", "y", "z"].iter().zip(axes.iter()) {
+                    xml.push_str(&format!("<{a}>{}</{a}>", noise_xml(n)));
+                }
+                xml.push_str(&format!("</{tag}>"));
+            }
+            xml.push_str("</imu>");
+            ed.append_child(sensor, &xml)?;
+            continue;
+        };
+        if child(imu, "noise").is_some() {
+            return Err(ed.err(format!(
+                "the IMU sensor on \"{}\" uses Gazebo classic's <imu><noise><rate>/<accel> form; rewrite it as \
+                 <imu><angular_velocity><x><noise>… (SDF 1.5+) to receive per-axis noise",
+                up.reference
+            )));
+        }
+        for (tag, axes) in [("angular_velocity", &up.gyro), ("linear_acceleration", &up.accel)] {
+            let Some(group) = child(imu, tag) else {
+                let mut xml = format!("<{tag}>");
+                for (a, n) in ["x", "y", "z"].iter().zip(axes.iter()) {
+                    xml.push_str(&format!("<{a}>{}</{a}>", noise_xml(n)));
+                }
+                xml.push_str(&format!("</{tag}>"));
+                ed.append_child(imu, &xml)?;
+                continue;
+            };
+            for (a, n) in ["x", "y", "z"].iter().zip(axes.iter()) {
+                let Some(axis) = child(group, a) else {
+                    ed.append_child(group, &format!("<{a}>{}</{a}>", noise_xml(n)))?;
+                    continue;
+                };
+                let Some(noise) = child(axis, "noise") else {
+                    ed.append_child(axis, &noise_xml(n))?;
+                    continue;
+                };
+                ed.set_child_text(noise, "stddev", n.stddev)?;
+                if let (Some(s), Some(t)) = (n.dynamic_bias_stddev, n.dynamic_bias_correlation_time) {
+                    ed.set_child_text(noise, "dynamic_bias_stddev", s)?;
+                    ed.set_child_text(noise, "dynamic_bias_correlation_time", t)?;
                 }
             }
         }
     }
     Ok(ed.apply())
+}
+
+fn noise_xml(n: &crate::noise::AxisNoiseUpdate) -> String {
+    let mut xml = format!("<noise type=\"gaussian\"><mean>0</mean><stddev>{}</stddev>", format_number(n.stddev));
+    if let (Some(s), Some(t)) = (n.dynamic_bias_stddev, n.dynamic_bias_correlation_time) {
+        xml.push_str(&format!(
+            "<dynamic_bias_stddev>{}</dynamic_bias_stddev><dynamic_bias_correlation_time>{}</dynamic_bias_correlation_time>",
+            format_number(s),
+            format_number(t)
+        ));
+    }
+    xml.push_str("</noise>");
+    xml
 }
 
 /// A unified diff of `old` → `new` for `path`.
@@ -321,16 +443,35 @@ pub fn update_urdf_file(
     joints: &[JointUpdate],
     dry_run: bool,
 ) -> Result<UpdateOutcome> {
+    update_file_with(path, dry_run, |text| rewrite_urdf(path, text, links, joints))
+}
+
+/// Rewrites the file at `path` with `rewrite` (text in, text out) through [`twin_core::fsio`]:
+/// the original is kept as a numbered backup, the new text written atomically (symlinks, mode
+/// and hard links kept), refused if another process changed the file meanwhile; with `dry_run`
+/// nothing is written. The one place URDF write-backs (inertias, friction, sensor noise) touch
+/// the disk.
+///
+/// # Errors
+/// [`Error::Io`]; twin-core's path errors; whatever `rewrite` returns (the file is then
+/// untouched).
+pub fn update_file_with(
+    path: &Path,
+    dry_run: bool,
+    rewrite: impl FnOnce(&str) -> Result<String>,
+) -> Result<UpdateOutcome> {
     let target = twin_core::fsio::check_output(path, &[])?;
-    let plan = plan_urdf_update(path, links, joints)?;
+    let original = twin_core::fsio::read_to_string(path)?;
+    let new = rewrite(&original)?;
+    let diff = unified_diff(path, &original, &new);
     if dry_run {
-        return Ok(UpdateOutcome { diff: plan.diff, backup: None });
+        return Ok(UpdateOutcome { diff, backup: None });
     }
     let mut tx = twin_core::fsio::Transaction::new();
-    tx.stage(&target, plan.new.as_bytes(), twin_core::fsio::Backup::Numbered)?;
-    tx.expect_unchanged(plan.original.as_bytes());
+    tx.stage(&target, new.as_bytes(), twin_core::fsio::Backup::Numbered)?;
+    tx.expect_unchanged(original.as_bytes());
     let backup = tx.commit()?.pop().and_then(|w| w.backup);
-    Ok(UpdateOutcome { diff: plan.diff, backup })
+    Ok(UpdateOutcome { diff, backup })
 }
 
 #[cfg(test)]

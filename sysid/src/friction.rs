@@ -1,0 +1,774 @@
+//! Joint friction curves from constant-velocity sweeps (`twin sysid friction`).
+//!
+//! Recipe (calibration notes; IHMC, Rhoban/bam): each joint is moved at a series of constant
+//! velocities, forth and back. For each joint:
+//! 1. **Segments**: runs where the joint's velocity (logged, else the central difference of
+//!    the positions, smoothed over [`FrictionOptions::smooth_secs`]) stays within
+//!    `max(rel_tol·|v|, abs_tol)` of the run's mean for at least `min_segment_secs`, above the
+//!    dead zone.
+//! 2. **±v pairing**: a `+v` segment and a `−v` segment of about the same speed (within
+//!    `pair_tol`), over the positions both cover: their efforts are fitted together as a cubic
+//!    in position (gravity and offsets, the same both ways) plus `±f`, so `f` is `(τ⁺ − τ⁻)/2`
+//!    with gravity cancelled even where the two directions sample the positions unevenly (the
+//!    difference of plain means was biased by up to 3 % at 1.3 rad/s on gravity-loaded joints);
+//!    inertia is absent at constant velocity.
+//! 3. **Fit**: `τ_f(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ) + Fv·v` for `v > 0` (odd in `v`) by
+//!    bounded Levenberg–Marquardt (`Fc, Fs, Fv ≥ 0`, `vs` in log space, `δ ∈ [0.5, 3]`), from a
+//!    line through the fast half (`Fc`, `Fv`) and several `vs` starts; covariance
+//!    `σ²(JᵀJ)⁻¹` gives 95 % confidence intervals.
+//!
+//! The Coulomb (`Fc` → `<dynamics friction>`) and viscous (`Fv` → `damping`) parts go into the
+//! URDF with [`crate::writeback::update_urdf_file`]; the Stribeck terms are reported.
+
+use crate::error::{Error, Result};
+use crate::log::JointLog;
+use serde::Serialize;
+use std::fmt::Write as _;
+
+/// Options of the friction fit.
+#[derive(Debug, Clone, PartialEq)]
+pub struct FrictionOptions {
+    /// Shortest constant-velocity segment, s (default: 0.5).
+    pub min_segment_secs: f64,
+    /// Velocity tolerance within a segment, fraction of its speed (default: 0.05).
+    pub rel_tol: f64,
+    /// Velocity tolerance floor, rad/s (default: 0.002).
+    pub abs_tol: f64,
+    /// Speeds below are the dead zone (stiction), rad/s (default: 0.001).
+    pub dead_zone: f64,
+    /// Largest relative speed difference of a ±v pair (default: 0.1).
+    pub pair_tol: f64,
+    /// Moving-average window of differentiated velocities, s (default: 0.05).
+    pub smooth_secs: f64,
+    /// Joints to fit (default: every joint with segments; empty = all).
+    pub joints: Vec<String>,
+}
+
+impl Default for FrictionOptions {
+    fn default() -> Self {
+        FrictionOptions {
+            min_segment_secs: 0.5,
+            rel_tol: 0.05,
+            abs_tol: 0.002,
+            dead_zone: 0.001,
+            pair_tol: 0.1,
+            smooth_secs: 0.05,
+            joints: Vec::new(),
+        }
+    }
+}
+
+/// A constant-velocity segment: sample range and mean velocity.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Segment {
+    /// First sample.
+    pub start: usize,
+    /// One past the last sample.
+    pub end: usize,
+    /// Mean velocity, rad/s.
+    pub velocity: f64,
+}
+
+/// One paired point of the friction curve.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct CurvePoint {
+    /// Speed, rad/s (mean of the pair's |v|).
+    pub speed: f64,
+    /// `(τ⁺ − τ⁻)/2`, N·m.
+    pub friction: f64,
+    /// Standard error of that mean, N·m.
+    pub std_err: f64,
+    /// Samples averaged (both directions).
+    pub samples: usize,
+}
+
+/// Stribeck parameters.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct Stribeck {
+    /// Coulomb friction `Fc`, N·m.
+    pub coulomb: f64,
+    /// Breakaway (static) friction `Fs`, N·m.
+    pub breakaway: f64,
+    /// Stribeck velocity `vs`, rad/s.
+    pub stribeck_velocity: f64,
+    /// Exponent `δ`.
+    pub exponent: f64,
+    /// Viscous `Fv`, N·m·s/rad.
+    pub viscous: f64,
+}
+
+impl Stribeck {
+    /// Friction torque at velocity `v` (odd in `v`).
+    pub fn torque(&self, v: f64) -> f64 {
+        if v == 0.0 {
+            return 0.0;
+        }
+        let s = v.abs();
+        v.signum()
+            * (self.coulomb
+                + (self.breakaway - self.coulomb) * (-(s / self.stribeck_velocity).powf(self.exponent)).exp())
+            + self.viscous * v
+    }
+    fn from_vec(x: [f64; 5]) -> Stribeck {
+        Stribeck { coulomb: x[0], breakaway: x[1], stribeck_velocity: x[2].exp(), exponent: x[3], viscous: x[4] }
+    }
+}
+
+/// The fit of one joint.
+#[derive(Debug, Clone, Serialize)]
+pub struct JointFriction {
+    /// Joint.
+    pub joint: String,
+    /// Fitted curve.
+    pub fit: Stribeck,
+    /// 95 % half-widths of `[Fc, Fs, vs, δ, Fv]` (vs: from the log-space interval, the larger
+    /// side).
+    pub ci95: [f64; 5],
+    /// RMS residual, N·m.
+    pub rms_residual: f64,
+    /// The data.
+    pub points: Vec<CurvePoint>,
+    /// Segments found (both directions).
+    pub segments: usize,
+}
+
+/// Friction fits of a sweep log.
+#[derive(Debug, Clone, Serialize)]
+pub struct FrictionReport {
+    /// The log.
+    pub log: String,
+    /// Per fitted joint.
+    pub joints: Vec<JointFriction>,
+}
+
+/// Velocity of joint `j`: the logged one where finite, else the smoothed central difference.
+fn joint_velocity(log: &JointLog, j: usize, smooth_secs: f64) -> Vec<f64> {
+    let n = log.len();
+    if log.velocity[j].iter().all(|v| v.is_finite()) && n > 0 {
+        return log.velocity[j].clone();
+    }
+    let q = &log.position[j];
+    let t = |k: usize| log.t_nanos[k] as f64 * 1e-9;
+    let raw: Vec<f64> = (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
+            if b > a { (q[b] - q[a]) / (t(b) - t(a)) } else { 0.0 }
+        })
+        .collect();
+    let dt = if n > 1 { (t(n - 1) - t(0)) / (n - 1) as f64 } else { 1.0 };
+    let half = ((smooth_secs / dt / 2.0).round() as usize).max(1);
+    let mut prefix = vec![0.0; n + 1];
+    for k in 0..n {
+        prefix[k + 1] = prefix[k] + raw[k];
+    }
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
+            (prefix[b] - prefix[a]) / (b - a) as f64
+        })
+        .collect()
+}
+
+/// Constant-velocity segments of velocity series `v` at times `t_nanos`.
+pub fn find_segments(t_nanos: &[i64], v: &[f64], opts: &FrictionOptions) -> Vec<Segment> {
+    let mut out = Vec::new();
+    let n = v.len();
+    let mut start = 0;
+    while start < n {
+        // Grow a run while every sample stays within tolerance of the run's running mean.
+        let mut sum = v[start];
+        let mut end = start + 1;
+        while end < n {
+            let mean = sum / (end - start) as f64;
+            let tol = (opts.rel_tol * mean.abs()).max(opts.abs_tol);
+            if !v[end].is_finite() || (v[end] - mean).abs() > tol {
+                break;
+            }
+            sum += v[end];
+            end += 1;
+        }
+        let mean = sum / (end - start) as f64;
+        let secs = (t_nanos[end - 1] - t_nanos[start]) as f64 * 1e-9;
+        if secs >= opts.min_segment_secs && mean.abs() > opts.dead_zone && mean.is_finite() {
+            // The run may have grown into the ramps (its mean drifts along): keep the core whose
+            // samples are within half the tolerance of the run's median, where the joint is not
+            // accelerating (inertia torques there would not cancel in the ±v pairing), then drop
+            // a 10 % margin at each end.
+            let mut sorted: Vec<f64> = v[start..end].to_vec();
+            sorted.sort_by(f64::total_cmp);
+            let median = sorted[sorted.len() / 2];
+            let core_tol = 0.5 * (opts.rel_tol * median.abs()).max(opts.abs_tol);
+            let (mut a, mut b) = (start, end);
+            while a < b && (v[a] - median).abs() > core_tol {
+                a += 1;
+            }
+            while b > a && (v[b - 1] - median).abs() > core_tol {
+                b -= 1;
+            }
+            let core_secs = if b > a { (t_nanos[b - 1] - t_nanos[a]) as f64 * 1e-9 } else { 0.0 };
+            if core_secs >= opts.min_segment_secs {
+                let margin = (b - a) / 10;
+                let (a, b) = (a + margin, b - margin);
+                let velocity = v[a..b].iter().sum::<f64>() / (b - a) as f64;
+                out.push(Segment { start: a, end: b, velocity });
+            }
+            start = end;
+        } else {
+            start += 1;
+        }
+    }
+    out
+}
+
+/// Friction of a ±v pair over the positions `[lo, hi]` both cover: least squares of the
+/// efforts of both segments on a cubic in position (gravity and offsets, the same both ways)
+/// plus `±f` (the friction, odd in velocity): unlike the difference of plain means, this does
+/// not assume both directions sample the positions alike. Returns `(f, σ_f, samples)`.
+#[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
+fn paired_friction(
+    log: &JointLog,
+    j: usize,
+    pos: &Segment,
+    neg: &Segment,
+    lo: f64,
+    hi: f64,
+) -> Option<(f64, f64, usize)> {
+    let (mid, half) = (0.5 * (lo + hi), (0.5 * (hi - lo)).max(1e-12));
+    let mut a = [[0.0; 5]; 5];
+    let mut b = [0.0; 5];
+    let mut rows = Vec::new();
+    for (seg, sign) in [(pos, 1.0), (neg, -1.0)] {
+        for k in seg.start..seg.end {
+            let (q, e) = (log.position[j][k], log.effort[j][k]);
+            if !(lo..=hi).contains(&q) || !e.is_finite() {
+                continue;
+            }
+            let x = (q - mid) / half;
+            rows.push(([1.0, x, x * x, x * x * x, sign], e));
+        }
+    }
+    let n_pos = rows.iter().filter(|r| r.0[4] > 0.0).count();
+    if n_pos < 5 || rows.len() - n_pos < 5 {
+        return None;
+    }
+    for (phi, e) in &rows {
+        for p in 0..5 {
+            b[p] += phi[p] * e;
+            for q in 0..5 {
+                a[p][q] += phi[p] * phi[q];
+            }
+        }
+    }
+    let coef = solve5(a, b)?;
+    let ss: f64 = rows.iter().map(|(phi, e)| (e - (0..5).map(|p| phi[p] * coef[p]).sum::<f64>()).powi(2)).sum();
+    let sigma2 = ss / (rows.len() - 5) as f64;
+    let mut unit = [0.0; 5];
+    unit[4] = 1.0;
+    let var = solve5(a, unit)?[4] * sigma2;
+    Some((coef[4], var.max(0.0).sqrt(), rows.len()))
+}
+
+/// Paired friction points of joint `j` from its segments.
+pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &FrictionOptions) -> Vec<CurvePoint> {
+    let range = |s: &Segment| {
+        let q = &log.position[j][s.start..s.end];
+        let lo = q.iter().copied().fold(f64::INFINITY, f64::min);
+        let hi = q.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+        (lo, hi)
+    };
+    let mut used = vec![false; segments.len()];
+    let mut out = Vec::new();
+    for (a, pos) in segments.iter().enumerate().filter(|(_, s)| s.velocity > 0.0) {
+        // The unused negative segment closest in speed.
+        let best = segments
+            .iter()
+            .enumerate()
+            .filter(|(b, s)| !used[*b] && s.velocity < 0.0)
+            .map(|(b, s)| (b, (s.velocity.abs() / pos.velocity - 1.0).abs()))
+            .filter(|(_, d)| *d <= opts.pair_tol)
+            .min_by(|x, y| x.1.total_cmp(&y.1));
+        let Some((b, _)) = best else { continue };
+        let neg = &segments[b];
+        let (lo_a, hi_a) = range(pos);
+        let (lo_b, hi_b) = range(neg);
+        let (lo, hi) = (lo_a.max(lo_b), hi_a.min(hi_b));
+        // A moving pair needs common ground; a pair at one position (a joint spinning in place
+        // is not possible here) falls back to whole segments.
+        let (lo, hi) = if hi > lo { (lo, hi) } else { continue };
+        let Some((friction, std_err, samples)) = paired_friction(log, j, pos, neg, lo, hi) else { continue };
+        used[b] = true;
+        let _ = a;
+        out.push(CurvePoint { speed: 0.5 * (pos.velocity - neg.velocity), friction, std_err, samples });
+    }
+    out.sort_by(|x, y| x.speed.total_cmp(&y.speed));
+    out
+}
+
+/// Fits the Stribeck curve to paired points by bounded Levenberg–Marquardt, with 95 %
+/// confidence half-widths.
+///
+/// # Errors
+/// [`Error::Numerical`] with fewer than 6 points (5 parameters).
+#[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
+pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> {
+    if points.len() < 6 {
+        return Err(Error::Numerical(format!(
+            "{} paired speeds; the Stribeck curve (5 parameters) needs at least 6",
+            points.len()
+        )));
+    }
+    let v: Vec<f64> = points.iter().map(|p| p.speed).collect();
+    let y: Vec<f64> = points.iter().map(|p| p.friction).collect();
+    let vmax = v.iter().copied().fold(0.0, f64::max);
+    let vmin = v.iter().copied().fold(f64::INFINITY, f64::min);
+    // Line through the fast half: Coulomb and viscous starts.
+    let fast: Vec<usize> = (points.len() / 2..points.len()).collect();
+    let (mx, my) = (
+        fast.iter().map(|&i| v[i]).sum::<f64>() / fast.len() as f64,
+        fast.iter().map(|&i| y[i]).sum::<f64>() / fast.len() as f64,
+    );
+    let sxy: f64 = fast.iter().map(|&i| (v[i] - mx) * (y[i] - my)).sum();
+    let sxx: f64 = fast.iter().map(|&i| (v[i] - mx).powi(2)).sum();
+    let fv0 = if sxx > 0.0 { (sxy / sxx).max(0.0) } else { 0.0 };
+    let fc0 = (my - fv0 * mx).max(0.0);
+    let fs0 = y[0].max(fc0);
+    let cost = |x: &[f64; 5]| -> f64 {
+        let s = Stribeck::from_vec(*x);
+        v.iter().zip(&y).map(|(&vi, &yi)| (s.torque(vi) - yi).powi(2)).sum()
+    };
+    let lower = [0.0, 0.0, (0.1 * vmin.max(1e-6)).ln(), 0.5, 0.0];
+    let upper = [f64::INFINITY, f64::INFINITY, (2.0 * vmax).ln(), 3.0, f64::INFINITY];
+    let clamp = |x: &mut [f64; 5]| {
+        for i in 0..5 {
+            x[i] = x[i].clamp(lower[i], upper[i]);
+        }
+    };
+    let jac = |x: &[f64; 5]| -> Vec<[f64; 5]> {
+        let s = Stribeck::from_vec(*x);
+        v.iter()
+            .map(|&vi| {
+                let u = (vi / s.stribeck_velocity).powf(s.exponent);
+                let e = (-u).exp();
+                let d = s.breakaway - s.coulomb;
+                [1.0 - e, e, d * e * u * s.exponent, -d * e * u * (vi / s.stribeck_velocity).ln(), vi]
+            })
+            .collect()
+    };
+    let mut best: Option<([f64; 5], f64)> = None;
+    for k in 0..8 {
+        // vs starts log-spaced over the measured speeds.
+        let vs0 = vmin * (vmax / vmin).powf(k as f64 / 7.0) * 0.5;
+        let mut x = [fc0, fs0, vs0.max(1e-6).ln(), 1.0, fv0];
+        clamp(&mut x);
+        let mut c = cost(&x);
+        let mut lambda = 1e-3;
+        for _ in 0..300 {
+            let jm = jac(&x);
+            let s = Stribeck::from_vec(x);
+            let r: Vec<f64> = v.iter().zip(&y).map(|(&vi, &yi)| yi - s.torque(vi)).collect();
+            let mut a = [[0.0; 5]; 5];
+            let mut g = [0.0; 5];
+            for (row, ri) in jm.iter().zip(&r) {
+                for p in 0..5 {
+                    g[p] += row[p] * ri;
+                    for q in 0..5 {
+                        a[p][q] += row[p] * row[q];
+                    }
+                }
+            }
+            let mut improved = false;
+            for _ in 0..20 {
+                let mut m = a;
+                for p in 0..5 {
+                    m[p][p] += lambda * (a[p][p] + 1e-12);
+                }
+                let Some(step) = solve5(m, g) else {
+                    lambda *= 10.0;
+                    continue;
+                };
+                let mut xn = x;
+                for p in 0..5 {
+                    xn[p] += step[p];
+                }
+                clamp(&mut xn);
+                let cn = cost(&xn);
+                if cn < c {
+                    let rel = (c - cn) / c.max(1e-300);
+                    x = xn;
+                    c = cn;
+                    lambda = (lambda * 0.3).max(1e-12);
+                    improved = rel > 1e-12;
+                    break;
+                }
+                lambda *= 10.0;
+            }
+            if !improved {
+                break;
+            }
+        }
+        if best.as_ref().is_none_or(|b| c < b.1) {
+            best = Some((x, c));
+        }
+    }
+    let (x, c) = best.expect("8 starts");
+    let dof = (points.len() - 5).max(1) as f64;
+    let sigma2 = c / dof;
+    let jm = jac(&x);
+    let mut a = [[0.0; 5]; 5];
+    for row in &jm {
+        for p in 0..5 {
+            for q in 0..5 {
+                a[p][q] += row[p] * row[q];
+            }
+        }
+    }
+    let mut ci = [f64::NAN; 5];
+    // Student t 97.5 % quantile, approximated for small dof.
+    let t = 1.96 + 2.4 / dof + 3.0 / (dof * dof);
+    for p in 0..5 {
+        let mut e = [0.0; 5];
+        e[p] = 1.0;
+        if let Some(col) = solve5(a, e) {
+            ci[p] = t * (sigma2 * col[p]).max(0.0).sqrt();
+        }
+    }
+    let fit = Stribeck::from_vec(x);
+    // vs: the log-space half-width converted to the larger side.
+    ci[2] = fit.stribeck_velocity * (ci[2].exp() - 1.0);
+    Ok((fit, ci, (c / points.len() as f64).sqrt()))
+}
+
+#[allow(clippy::needless_range_loop)] // Gaussian elimination on a 5 × 5 system, indexed as written
+fn solve5(mut a: [[f64; 5]; 5], mut b: [f64; 5]) -> Option<[f64; 5]> {
+    for c in 0..5 {
+        let p = (c..5).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+        if a[p][c].abs() < 1e-300 {
+            return None;
+        }
+        a.swap(c, p);
+        b.swap(c, p);
+        for r in c + 1..5 {
+            let f = a[r][c] / a[c][c];
+            for k in c..5 {
+                a[r][k] -= f * a[c][k];
+            }
+            b[r] -= f * b[c];
+        }
+    }
+    let mut x = [0.0; 5];
+    for r in (0..5).rev() {
+        let s: f64 = (r + 1..5).map(|k| a[r][k] * x[k]).sum();
+        x[r] = (b[r] - s) / a[r][r];
+    }
+    x.iter().all(|v| v.is_finite()).then_some(x)
+}
+
+/// Finds segments, pairs them and fits every joint of `log` (or [`FrictionOptions::joints`]).
+///
+/// # Errors
+/// [`Error::BadLog`] naming a joint without effort, without constant-velocity segments, or
+/// without ±v pairs; [`Error::Numerical`] when too few speeds remain.
+pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<FrictionReport> {
+    log.check_shape()?;
+    if log.len() < 10 {
+        return Err(log.bad(format!("{} samples: a sweep log needs constant-velocity segments", log.len())));
+    }
+    let joints: Vec<usize> = if opts.joints.is_empty() {
+        (0..log.joint_names.len()).collect()
+    } else {
+        opts.joints
+            .iter()
+            .map(|n| {
+                log.joint_index(n).ok_or_else(|| {
+                    log.bad(format!("no joint \"{n}\" in the log (joints: {})", log.joint_names.join(", ")))
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    let mut out = Vec::new();
+    let mut skipped = Vec::new();
+    for j in joints {
+        let name = &log.joint_names[j];
+        if log.effort[j].iter().all(|e| !e.is_finite()) {
+            return Err(log.bad(format!("joint \"{name}\" has no effort: friction needs the joint torque")));
+        }
+        let v = joint_velocity(log, j, opts.smooth_secs);
+        let segments = find_segments(&log.t_nanos, &v, opts);
+        if segments.is_empty() {
+            skipped.push(format!(
+                "joint \"{name}\": no constant-velocity segment (≥ {} s within ±{} %)",
+                opts.min_segment_secs,
+                100.0 * opts.rel_tol
+            ));
+            continue;
+        }
+        let points = pair_segments(log, j, &segments, opts);
+        if points.is_empty() {
+            skipped.push(format!(
+                "joint \"{name}\": {} constant-velocity segment(s) but no +v/−v pair of the same speed over common positions",
+                segments.len()
+            ));
+            continue;
+        }
+        let (fit, ci95, rms) = fit_stribeck(&points).map_err(|e| {
+            log.bad(format!("joint \"{name}\": {e}; sweep more speeds (log-spaced across the Stribeck region)"))
+        })?;
+        out.push(JointFriction { joint: name.clone(), fit, ci95, rms_residual: rms, points, segments: segments.len() });
+    }
+    if out.is_empty() {
+        return Err(log.bad(format!(
+            "no joint has a usable velocity sweep:\n  - {}\nmove each joint at constant velocities, forth and back over the same range, each for at least {} s",
+            skipped.join("\n  - "),
+            opts.min_segment_secs
+        )));
+    }
+    if !opts.joints.is_empty() && !skipped.is_empty() {
+        return Err(log.bad(format!("asked joints without a usable sweep:\n  - {}", skipped.join("\n  - "))));
+    }
+    Ok(FrictionReport { log: log.source.clone(), joints: out })
+}
+
+impl FrictionReport {
+    /// The terminal table.
+    pub fn table(&self) -> String {
+        let g = crate::writeback::format_number;
+        let mut out = String::from("Friction from constant-velocity sweeps (95 % intervals):\n");
+        let _ = writeln!(
+            out,
+            "  {:<20} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
+            "joint", "Fc (N·m)", "Fs (N·m)", "vs (rad/s)", "δ", "Fv (N·m·s/rad)", "speeds", "rms (N·m)"
+        );
+        for j in &self.joints {
+            let f = &j.fit;
+            let pm = |v: f64, c: f64| format!("{} ±{}", g(v), g(c));
+            let _ = writeln!(
+                out,
+                "  {:<20} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
+                j.joint,
+                pm(f.coulomb, j.ci95[0]),
+                pm(f.breakaway, j.ci95[1]),
+                pm(f.stribeck_velocity, j.ci95[2]),
+                pm(f.exponent, j.ci95[3]),
+                pm(f.viscous, j.ci95[4]),
+                j.points.len(),
+                g(j.rms_residual)
+            );
+        }
+        out
+    }
+
+    /// The report as JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("the report serializes")
+    }
+
+    /// URDF `<dynamics>` updates: `friction` = Coulomb, `damping` = viscous.
+    pub fn joint_updates(&self) -> Vec<crate::writeback::JointUpdate> {
+        self.joints
+            .iter()
+            .map(|j| crate::writeback::JointUpdate {
+                name: j.joint.clone(),
+                damping: j.fit.viscous,
+                friction: j.fit.coulomb,
+            })
+            .collect()
+    }
+
+    /// SVG: per joint, the paired points and the fitted curve (log speed axis).
+    pub fn svg(&self) -> String {
+        let panels: Vec<crate::plot::Plot> = self
+            .joints
+            .iter()
+            .map(|j| {
+                let mut p =
+                    crate::plot::Plot::new(&format!("Friction of {}", j.joint), "speed (rad/s)", "friction (N·m)");
+                p.log_x = true;
+                let (lo, hi) = (j.points[0].speed, j.points[j.points.len() - 1].speed);
+                let curve: Vec<(f64, f64)> = (0..=100)
+                    .map(|k| {
+                        let v = lo * 0.8 * (hi * 1.25 / (lo * 0.8)).powf(k as f64 / 100.0);
+                        (v, j.fit.torque(v))
+                    })
+                    .collect();
+                p.band(
+                    j.points
+                        .iter()
+                        .map(|c| (c.speed, c.friction - 1.96 * c.std_err, c.friction + 1.96 * c.std_err))
+                        .collect(),
+                    crate::plot::COLORS[0],
+                );
+                p.points(
+                    "(τ⁺ − τ⁻)/2",
+                    j.points.iter().map(|c| (c.speed, c.friction)).collect(),
+                    crate::plot::COLORS[0],
+                );
+                p.line("Stribeck fit", curve, crate::plot::COLORS[1]);
+                p
+            })
+            .collect();
+        crate::plot::stack_svg(&panels)
+    }
+}
+
+/// Options of a synthetic sweep ([`synth_sweep`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct SweepOptions {
+    /// Speeds swept, rad/s (default: 14 log-spaced from 0.005 to 2).
+    pub speeds: Vec<f64>,
+    /// Log rate, Hz (default: 500).
+    pub rate_hz: f64,
+    /// Effort noise, N·m (default: 0.05).
+    pub effort_noise: f64,
+    /// Velocity noise of the drive's reported velocity, rad/s (default: 0.0005).
+    pub velocity_noise: f64,
+    /// Encoder resolution in bits per turn (default: 17).
+    pub encoder_bits: u32,
+    /// Seed (default: 1).
+    pub seed: u64,
+    /// Longest time at one speed, s (default: 4): slow sweeps cover a shorter stroke.
+    pub max_segment_secs: f64,
+    /// Largest stroke, rad (default: 1.0, within the joint's range).
+    pub max_stroke: f64,
+}
+
+impl Default for SweepOptions {
+    fn default() -> Self {
+        let speeds = (0..14).map(|k| 0.005 * (400f64).powf(k as f64 / 13.0)).collect();
+        SweepOptions {
+            speeds,
+            rate_hz: 500.0,
+            effort_noise: 0.05,
+            velocity_noise: 0.0005,
+            encoder_bits: 17,
+            seed: 1,
+            max_segment_secs: 4.0,
+            max_stroke: 1.0,
+        }
+    }
+}
+
+/// A synthetic sweep log of the robot of `urdf`: each joint in turn moves forth and back at
+/// every speed (cosine ramps of 0.2 s in and out, the other joints held at mid-range, so
+/// gravity loads it), and its effort is MuJoCo's inverse dynamics (gravity, inertia) plus
+/// `truth[j]`'s Stribeck friction plus Gaussian noise; positions quantized.
+///
+/// # Errors
+/// Loading errors of the URDF; [`Error::Core`] if MuJoCo fails.
+pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptions) -> Result<JointLog> {
+    use crate::synth::Rng;
+    use std::f64::consts::PI;
+    let model = std::sync::Arc::new(crate::model::load_urdf_in_mujoco(urdf, "")?);
+    let robot = crate::model::RobotModel::from_model(urdf, model.clone())?;
+    let nj = robot.joints.len();
+    let mut data = twin_core::mj::Data::new(model.clone())?;
+    let ranges: Vec<(f64, f64)> = robot
+        .joints
+        .iter()
+        .map(|j| {
+            let jid = model.dof_jntid()[j.dof] as usize;
+            if model.jnt_limited()[jid] {
+                let r = model.jnt_range()[jid];
+                (r[0], r[1])
+            } else {
+                (-PI, PI)
+            }
+        })
+        .collect();
+    let home: Vec<f64> = ranges.iter().map(|(lo, hi)| 0.5 * (lo + hi)).collect();
+    let dt = 1.0 / opts.rate_hz;
+    let ramp = 0.2;
+    let mut rng = Rng::new(opts.seed);
+    let resolution = 2.0 * PI / (1u64 << opts.encoder_bits) as f64;
+    let mut log = JointLog::new(
+        robot.joints.iter().map(|j| j.name.clone()).collect(),
+        format!("synthetic sweep of {}", urdf.display()),
+    );
+    let mut t = 0.0;
+    let mut q = home.clone();
+    let nv = model.nv();
+    let mut emit = |data: &mut twin_core::mj::Data,
+                    q: &[f64],
+                    qd: &[f64],
+                    qdd: &[f64],
+                    t: f64,
+                    log: &mut JointLog|
+     -> Result<()> {
+        for (j, joint) in robot.joints.iter().enumerate() {
+            data.qpos_mut()[joint.qpos_adr] = q[j];
+            data.qvel_mut()[joint.dof] = qd[j];
+        }
+        let mut acc = vec![0.0; nv];
+        for (j, joint) in robot.joints.iter().enumerate() {
+            acc[joint.dof] = qdd[j];
+        }
+        data.qacc_mut().copy_from_slice(&acc);
+        data.kinematics_with_velocity()?;
+        let tau = data.rne(true)?;
+        let mut p = vec![0.0; nj];
+        let mut v = vec![0.0; nj];
+        let mut e = vec![0.0; nj];
+        for (j, joint) in robot.joints.iter().enumerate() {
+            p[j] = (q[j] / resolution).round() * resolution;
+            e[j] = tau[joint.dof] + truth[j].torque(qd[j]) + opts.effort_noise * rng.normal();
+            v[j] = qd[j] + opts.velocity_noise * rng.normal();
+        }
+        log.push((t * 1e9).round() as i64, &p, &v, &e);
+        Ok(())
+    };
+    for j in 0..nj {
+        let (lo, hi) = ranges[j];
+        let mut targets: Vec<(f64, f64)> = Vec::new();
+        for &speed in &opts.speeds {
+            let stroke = (speed * opts.max_segment_secs).min(opts.max_stroke).min(0.8 * (hi - lo));
+            targets.push((home[j] + 0.5 * stroke, speed));
+            targets.push((home[j] - 0.5 * stroke, speed));
+        }
+        targets.push((home[j], 0.5));
+        for (target, speed) in targets {
+            // Ramp up, cruise, ramp down: v(s) = speed·(1 − cos(π s/ramp))/2 in the ramps.
+            let start = q[j];
+            let dist = (target - start).abs();
+            let speed = speed.min(dist / ramp).max(1e-9);
+            let cruise = ((dist - speed * ramp) / speed).max(0.0);
+            let total = 2.0 * ramp + cruise;
+            let sign = if target >= start { 1.0 } else { -1.0 };
+            let steps = (total / dt).ceil() as usize;
+            let mut qj = q.clone();
+            let mut qd = vec![0.0; nj];
+            let mut qdd = vec![0.0; nj];
+            for k in 0..=steps {
+                let s = (k as f64 * dt).min(total);
+                let (vel, acc, travelled) = if s < ramp {
+                    let w = PI * s / ramp;
+                    (
+                        0.5 * speed * (1.0 - w.cos()),
+                        0.5 * speed * PI / ramp * w.sin(),
+                        0.5 * speed * (s - ramp / PI * w.sin()),
+                    )
+                } else if s < ramp + cruise {
+                    (speed, 0.0, 0.5 * speed * ramp + speed * (s - ramp))
+                } else {
+                    let r = s - ramp - cruise;
+                    let w = PI * r / ramp;
+                    (
+                        0.5 * speed * (1.0 + w.cos()),
+                        -0.5 * speed * PI / ramp * w.sin(),
+                        0.5 * speed * ramp + speed * cruise + 0.5 * speed * (r + ramp / PI * w.sin()),
+                    )
+                };
+                qj[j] = start + sign * travelled;
+                qd[j] = sign * vel;
+                qdd[j] = sign * acc;
+                emit(&mut data, &qj, &qd, &qdd, t, &mut log)?;
+                t += dt;
+            }
+            q[j] = qj[j];
+            // Rest 0.3 s.
+            for _ in 0..(0.3 / dt) as usize {
+                emit(&mut data, &q, &vec![0.0; nj], &vec![0.0; nj], t, &mut log)?;
+                t += dt;
+            }
+        }
+    }
+    Ok(log)
+}

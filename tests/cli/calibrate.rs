@@ -1,0 +1,196 @@
+//! `twin calibrate noise` and `twin sysid friction`: still and sweep logs through ROS 2 bags,
+//! URDF write-back with backup, plots, spec fragment, and refusals that leave the URDF alone.
+
+use std::path::Path;
+use std::process::{Command, Output};
+use sysid::noise::{AxisTruth, synth_imu};
+
+fn twin(dir: &Path, args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_twin")).current_dir(dir).args(args).output().expect("twin runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+fn root() -> &'static Path {
+    Path::new(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// A still humanoid IMU (frame `imu_link`, the URDF's) at 200 Hz: gyro N = 1.5e-4, accel
+/// N = 6e-3, nothing else.
+fn write_still_bag(path: &Path, seconds: f64, moved_at: Option<f64>) {
+    let t =
+        |off: f64, n: f64| AxisTruth { offset: off, white_density: n, bias_instability: 0.0, bias_random_walk: 0.0 };
+    let mut imu = synth_imu(
+        "/humanoid/imu/data",
+        "imu_link",
+        [t(0.0, 1.5e-4); 3],
+        [t(0.0, 6e-3), t(0.0, 6e-3), t(9.81, 6e-3)],
+        200.0,
+        seconds,
+        3,
+    );
+    if let Some(at) = moved_at {
+        for (k, &tn) in imu.t_nanos.clone().iter().enumerate() {
+            let s = (tn - imu.t_nanos[0]) as f64 * 1e-9;
+            if (at..at + 2.0).contains(&s) {
+                imu.accel[0][k] += 1.5;
+            }
+        }
+    }
+    let mut w = twin_core::log::LogWriter::create(path, &twin_core::log::WriterOptions::default()).unwrap();
+    imu.write_to(&mut w).unwrap();
+    w.finish().unwrap();
+}
+
+#[test]
+fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(root().join("models/humanoid.urdf"), d.join("humanoid.urdf")).unwrap();
+    let original = std::fs::read_to_string(d.join("humanoid.urdf")).unwrap();
+    write_still_bag(&d.join("still.mcap"), 300.0, None);
+    let out = twin(
+        d,
+        &[
+            "calibrate",
+            "noise",
+            "--log",
+            "still.mcap",
+            "--update",
+            "humanoid.urdf",
+            "--plot",
+            "allan.svg",
+            "--spec",
+            "noise.toml",
+            "--report",
+            "noise.json",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    let stdout = String::from_utf8_lossy(&out.stdout);
+    assert!(stdout.contains("IMU /humanoid/imu/data (frame imu_link)") && stdout.contains("gyro x"), "{stdout}");
+    assert_eq!(std::fs::read_to_string(d.join("humanoid.urdf.bak")).unwrap(), original);
+    let new = std::fs::read_to_string(d.join("humanoid.urdf")).unwrap();
+    let doc = roxmltree::Document::parse(&new).unwrap();
+    let stddevs: Vec<f64> =
+        doc.descendants().filter(|n| n.has_tag_name("stddev")).map(|n| n.text().unwrap().parse().unwrap()).collect();
+    assert_eq!(stddevs.len(), 6);
+    // Per-sample stddev = N·√200 within 10 % of the simulated one.
+    for (k, s) in stddevs.iter().enumerate() {
+        let want = if k < 3 { 1.5e-4 } else { 6e-3 } * 200f64.sqrt();
+        assert!((s / want - 1.0).abs() < 0.1, "axis {k}: {s} vs {want}");
+    }
+    // Only <noise> lines changed.
+    let changed: Vec<&str> = original.lines().zip(new.lines()).filter(|(a, b)| a != b).map(|(a, _)| a).collect();
+    assert!(changed.iter().all(|l| l.contains("<stddev>")), "{changed:?}");
+    // The spec fragment is a valid `twin randomize` spec.
+    let spec = std::fs::read_to_string(d.join("noise.toml")).unwrap();
+    let parsed = randomize::spec::Spec::from_toml_str(&spec).unwrap();
+    assert!(parsed.imu_noise_std.is_some(), "{spec}");
+    assert!(roxmltree::Document::parse(&std::fs::read_to_string(d.join("allan.svg")).unwrap()).is_ok());
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(d.join("noise.json")).unwrap()).unwrap();
+    assert_eq!(report["imus"][0]["axes"].as_array().unwrap().len(), 6);
+}
+
+#[test]
+fn calibrate_noise_refuses_a_moving_robot_and_a_short_log_leaving_the_urdf_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    std::fs::copy(root().join("models/humanoid.urdf"), d.join("humanoid.urdf")).unwrap();
+    let original = std::fs::read(d.join("humanoid.urdf")).unwrap();
+    write_still_bag(&d.join("moved.mcap"), 200.0, Some(50.0));
+    let out = twin(d, &["calibrate", "noise", "--log", "moved.mcap", "--update", "humanoid.urdf"]);
+    let err = stderr(&out);
+    assert!(!out.status.success());
+    assert!(err.contains("humanoid.urdf was not changed") && err.contains("the robot moved: accelerometer x"), "{err}");
+    assert!(err.contains("/humanoid/imu/data") && err.contains("t = 50.0–"), "{err}");
+    write_still_bag(&d.join("short.mcap"), 100.0, None);
+    let out = twin(d, &["calibrate", "noise", "--log", "short.mcap", "--update", "humanoid.urdf", "--tau-max", "100"]);
+    let err = stderr(&out);
+    assert!(!out.status.success() && err.contains("too short for τ up to 100 s"), "{err}");
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(std::fs::read(d.join("humanoid.urdf")).unwrap(), original);
+    assert!(!d.join("humanoid.urdf.bak").exists());
+}
+
+#[test]
+fn sysid_friction_fits_sweeps_and_writes_the_dynamics() {
+    use sysid::friction::{Stribeck, SweepOptions, synth_sweep};
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let arm = root().join("models/arm6.urdf");
+    std::fs::copy(&arm, d.join("arm6.urdf")).unwrap();
+    let original = std::fs::read_to_string(d.join("arm6.urdf")).unwrap();
+    let truth: Vec<Stribeck> = (0..6)
+        .map(|j| Stribeck {
+            coulomb: 2.0 / (1.0 + j as f64),
+            breakaway: 3.0 / (1.0 + j as f64),
+            stribeck_velocity: 0.05,
+            exponent: 1.0,
+            viscous: 0.5 / (1.0 + j as f64),
+        })
+        .collect();
+    let opts = SweepOptions { rate_hz: 200.0, ..Default::default() };
+    synth_sweep(&arm, &truth, &opts).unwrap().write_mcap(d.join("sweeps.mcap"), "/joint_states").unwrap();
+    let out = twin(
+        d,
+        &[
+            "sysid",
+            "friction",
+            "--log",
+            "sweeps.mcap",
+            "--update",
+            "arm6.urdf",
+            "--plot",
+            "f.svg",
+            "--report",
+            "f.json",
+        ],
+    );
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert_eq!(std::fs::read_to_string(d.join("arm6.urdf.bak")).unwrap(), original);
+    let new = std::fs::read_to_string(d.join("arm6.urdf")).unwrap();
+    let doc = roxmltree::Document::parse(&new).unwrap();
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
+    for (j, t) in truth.iter().enumerate() {
+        let joint = doc
+            .descendants()
+            .filter(|n| n.has_tag_name("joint") && n.attribute("type") != Some("fixed"))
+            .nth(j)
+            .unwrap();
+        let dynamics = joint.children().find(|c| c.has_tag_name("dynamics")).unwrap();
+        let friction: f64 = dynamics.attribute("friction").unwrap().parse().unwrap();
+        let damping: f64 = dynamics.attribute("damping").unwrap().parse().unwrap();
+        // Within 10 % here (200 Hz, light wrist friction against 0.05 N·m effort noise); the 5 %
+        // figures are sysid/tests/friction.rs's.
+        assert!((friction / t.coulomb - 1.0).abs() < 0.1, "joint {j}: friction {friction} vs {}", t.coulomb);
+        assert!((damping / t.viscous - 1.0).abs() < 0.1, "joint {j}: damping {damping} vs {}", t.viscous);
+        // What is written is what the report says.
+        let fit = &report["joints"][j]["fit"];
+        assert!((friction / fit["coulomb"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{fit}");
+        assert!((damping / fit["viscous"].as_f64().unwrap() - 1.0).abs() < 1e-6, "{fit}");
+    }
+    assert!(d.join("f.svg").is_file() && d.join("f.json").is_file());
+}
+
+#[test]
+fn sysid_friction_refuses_a_log_without_constant_velocity_and_leaves_the_urdf_untouched() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let arm = root().join("models/arm6.urdf");
+    std::fs::copy(&arm, d.join("arm6.urdf")).unwrap();
+    let original = std::fs::read(d.join("arm6.urdf")).unwrap();
+    let log =
+        sysid::synth::simulate(&arm, &sysid::synth::SynthOptions { duration_secs: 6.0, ..Default::default() }).unwrap();
+    log.write_mcap(d.join("sines.mcap"), "/joint_states").unwrap();
+    let out = twin(d, &["sysid", "friction", "--log", "sines.mcap", "--update", "arm6.urdf"]);
+    let err = stderr(&out);
+    assert!(!out.status.success(), "{err}");
+    assert!(err.contains("arm6.urdf was not changed") && err.contains("no constant-velocity segment"), "{err}");
+    assert!(err.contains("joint \"shoulder_pan_joint\""), "{err}");
+    assert_eq!(std::fs::read(d.join("arm6.urdf")).unwrap(), original);
+    assert!(!d.join("arm6.urdf.bak").exists());
+}
