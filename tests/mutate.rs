@@ -282,7 +282,7 @@ fn kinds() -> Vec<Kind> {
                     Ok(())
                 }),
             ),
-            ("sim::load_robot", Box::new(|p: &Path, _: &[u8]| twin_core::robot::Robot::load(p).map(|_| ()).map_err(err))),
+            ("Robot::load", Box::new(|p: &Path, _: &[u8]| twin_core::robot::Robot::load(p).map(|_| ()).map_err(err))),
         ],
     });
     kinds.push(Kind {
