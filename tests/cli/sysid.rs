@@ -204,8 +204,6 @@ fn sysid_floating_base_from_a_bag_and_refusal_without_odometry() {
 /// the model is built by twin's converter, as every command builds it, and the write-back only
 /// touches the identified numbers.
 #[test]
-#[ignore = "loads and simulates through the converter, but the UR5's estimation stops with \
-            \"barrier Hessian not positive definite\" (open: see the engine report)"]
 fn sysid_updates_a_urdf_with_package_meshes() {
     let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
         "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",
