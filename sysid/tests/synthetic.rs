@@ -215,3 +215,40 @@ fn arm_with_a_fixed_camera_identifies_the_lumped_body_and_writes_back_per_link()
     let o = run_benchmark_on(&truth, 20.0);
     eprintln!("arm with camera: worst held-out NRMSE {:.2} %", 100.0 * o.worst_nrmse);
 }
+
+/// Issue 15: one glitched encoder reading (0.125 rad for one sample, as a flipped bit would
+/// give) must not move an identifiable parameter: conditioning replaces the spike (Hampel
+/// filter) before it becomes a burst of accelerations, and the report names joint and time.
+#[test]
+fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
+    let truth = models_dir().join("arm6.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let start = dir.path().join("arm6.urdf");
+    perturbed_urdf(&truth, &start, 3).unwrap();
+    let clean = simulate(&truth, &SynthOptions { duration_secs: 20.0, seed: 1, ..Default::default() }).unwrap();
+    let mut glitched = clean.clone();
+    let j = glitched.joint_names.iter().position(|n| n == "elbow_joint").unwrap();
+    let k = glitched.t_nanos.len() / 2;
+    glitched.position[j][k] += 0.125;
+    let glitch_secs = (glitched.t_nanos[k] - glitched.t_nanos[0]) as f64 * 1e-9;
+
+    let robot = RobotModel::from_urdf(&start).unwrap();
+    let opts = SysidOptions::default();
+    let a = identify(&robot, &clean, &opts).unwrap();
+    let b = identify(&robot, &glitched, &opts).unwrap();
+    let mut worst: f64 = 0.0;
+    for i in 0..a.after.len() {
+        if a.identifiability[i] == sysid::estimate::Identifiability::Identifiable {
+            worst = worst.max((b.after[i] - a.after[i]).abs() / a.std[i].max(1e-300));
+        }
+    }
+    eprintln!("glitch: worst shift of an identifiable parameter {worst:.2}σ");
+    assert!(worst < 3.0, "one glitched sample moved a parameter by {worst:.1}σ");
+    let warning = b.report.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains("Hampel"));
+    let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", b.report.warnings));
+    // The glitched sample itself, by how much it was off its neighbours.
+    let at: f64 = warning.split("at t = ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!((at - glitch_secs).abs() < 1e-3, "{warning} (glitch at {glitch_secs:.3} s)");
+    assert!(warning.contains("+0.12"), "{warning}");
+    assert!(!a.report.warnings.iter().any(|w| w.contains("Hampel")), "{:?}", a.report.warnings);
+}
