@@ -237,6 +237,42 @@ pub(crate) fn quote_list(names: &[String]) -> String {
     if s.is_empty() { "none".into() } else { s.join(", ") }
 }
 
+/// Hampel filter of `x` (half-window 3): a sample farther from its window's median than
+/// 8 robust standard deviations of the window, 20 typical steps (median |Δx|) and 50
+/// quantisation steps (smallest non-zero |Δx|) is replaced by that median. Smooth motion and
+/// encoder dither stay as they are. Returns each replaced sample and how far it was off.
+pub fn despike(x: &mut [f64]) -> Vec<(usize, f64)> {
+    const HALF: usize = 3;
+    if x.len() < 2 * HALF + 1 {
+        return Vec::new();
+    }
+    let median = |v: &mut Vec<f64>| {
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    };
+    let mut steps: Vec<f64> = x.windows(2).map(|w| (w[1] - w[0]).abs()).collect();
+    let quantum = steps.iter().copied().filter(|d| *d > 0.0).fold(f64::INFINITY, f64::min);
+    let typical = median(&mut steps);
+    let floor = (20.0 * typical).max(if quantum.is_finite() { 50.0 * quantum } else { 0.0 });
+    let orig = x.to_vec();
+    let mut out = Vec::new();
+    let mut window = Vec::with_capacity(2 * HALF + 1);
+    for k in 0..orig.len() {
+        let (a, b) = (k.saturating_sub(HALF), (k + HALF + 1).min(orig.len()));
+        window.clear();
+        window.extend_from_slice(&orig[a..b]);
+        let med = median(&mut window);
+        let mut dev: Vec<f64> = orig[a..b].iter().map(|v| (v - med).abs()).collect();
+        let mad = 1.4826 * median(&mut dev);
+        let off = orig[k] - med;
+        if floor > 0.0 && off.abs() > (8.0 * mad).max(floor) {
+            x[k] = med;
+            out.push((k, off));
+        }
+    }
+    out
+}
+
 /// Conditions `log` for `robot`.
 ///
 /// # Errors
@@ -370,7 +406,20 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
         let keep: Vec<usize> = (trim..m - trim).step_by(decimate).collect();
         let mut seg = Segment { t_secs: keep.iter().map(|&i| grid[i]).collect(), ..Segment::default() };
         for &i in &map {
-            let raw_q: Vec<f64> = idx.iter().map(|&k| log.position[i][k]).collect();
+            let mut raw_q: Vec<f64> = idx.iter().map(|&k| log.position[i][k]).collect();
+            // A glitched encoder reading becomes, after filtering and differentiating twice, a
+            // burst of huge accelerations that pulls the fit: such samples are replaced first.
+            let spikes = despike(&mut raw_q);
+            if let Some(&(k, jump)) = spikes.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())) {
+                warnings.push(format!(
+                    "joint \"{}\": {} position sample(s) jump away from their neighbours and back (worst {jump:+.4} \
+                     at t = {:.3} s from the log's start): glitched encoder readings? Replaced by the median of \
+                     their neighbours (Hampel filter)",
+                    log.joint_names[i],
+                    spikes.len(),
+                    ts[k]
+                ));
+            }
             let raw_tau: Vec<f64> = idx.iter().map(|&k| log.effort[i][k]).collect();
             let q = filter.filtfilt(&resample(&ts, &raw_q, &grid), pad);
             let tau = filter.filtfilt(&resample(&ts, &raw_tau, &grid), pad);

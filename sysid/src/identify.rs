@@ -654,7 +654,12 @@ pub fn urdf_updates(
         .enumerate()
         .filter(|&(l, _)| seen(layout.link_col(l), LINK_PARAMS))
         .filter_map(|(l, link)| {
-            MassProperties::from_params(&ident.link_params(l)).map(|mp| {
+            // The URDF link's own share: fixed-joint links lumped into its body keep their values.
+            let own = link.own_params(&ident.link_params(l));
+            if link.welded != [0.0; LINK_PARAMS] && !physically_valid(&own) {
+                return None;
+            }
+            MassProperties::from_params(&own).map(|mp| {
                 // A link identified on the boundary of physical validity (a triangle inequality
                 // holding with equality) could cross it when the URDF's 7 significant digits
                 // round it: 2e-6 of the trace added isotropically keeps a margin (far below σ).

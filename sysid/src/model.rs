@@ -126,11 +126,24 @@ pub struct LinkInfo {
     pub body: usize,
     /// Identified joints (indices into [`RobotModel::joints`]) that move this link.
     pub ancestor_joints: Vec<usize>,
-    /// CAD parameters (from the URDF).
+    /// CAD parameters of the body as the twin runs it (from the URDF): the link's own inertial
+    /// plus those of the fixed-joint links the converter lumps into it.
     pub cad: LinkParams,
+    /// The part of [`LinkInfo::cad`] that belongs to fixed-joint links lumped into this body
+    /// (standard parameters in this body's frame; zero when none): the URDF keeps them on their
+    /// own links, so the write-back subtracts them (see [`LinkInfo::own_params`]).
+    pub welded: LinkParams,
     /// Moved by the floating base (in the free joint's subtree): its wrench shows in the base
     /// rows. Always `false` for a fixed base.
     pub floating: bool,
+}
+
+impl LinkInfo {
+    /// The URDF link's own share of body parameters `body` (identified or CAD): `body` less
+    /// the fixed-joint links lumped into it, which keep their URDF values.
+    pub fn own_params(&self, body: &LinkParams) -> LinkParams {
+        std::array::from_fn(|i| body[i] - self.welded[i])
+    }
 }
 
 /// The free joint of a floating-base robot (MuJoCo's convention: `qpos` = position (m, world)
@@ -209,6 +222,79 @@ fn cad_params_of_body(model: &Model, b: usize) -> LinkParams {
         .to_params()
 }
 
+/// Whether body `b` holds inertia of its own in the model the twin runs: it moves by a joint
+/// of its own, or carries mass. A massless body welded to its parent (a fixed-joint link whose
+/// URDF mass the converter lumped into the body that moves it, or a massless frame such as the
+/// UR5's `ee_link` and `tool0`) has no parameters: its regressor columns would copy its
+/// parent's, and its zero pseudo-inertia would sit on the boundary of physical validity.
+fn carries_inertia(model: &Model, b: usize) -> bool {
+    model.body_dofnum()[b] > 0 || model.body_mass()[b] > 0.0
+}
+
+/// Each URDF link's own `<inertial>` as standard parameters in its link frame (links without
+/// one, or with no mass, are absent). A model compiled from something else than a readable
+/// URDF (an MJCF given to [`RobotModel::from_model`]) has no URDF links to split its bodies
+/// into: empty.
+///
+/// # Errors
+/// [`Error::Urdf`] for a URDF that is not well-formed XML.
+fn urdf_own_params(path: &Path) -> Result<std::collections::HashMap<String, LinkParams>> {
+    let mut own = std::collections::HashMap::new();
+    let Ok(text) = twin_core::fsio::read_to_string(path) else { return Ok(own) };
+    if !twin_core::urdf::is_urdf(&text) {
+        return Ok(own);
+    }
+    let doc = roxmltree::Document::parse(&text)
+        .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
+    let triplet = |s: Option<&str>| -> [f64; 3] {
+        let mut out = [0.0; 3];
+        for (o, v) in out.iter_mut().zip(s.unwrap_or("").split_whitespace()) {
+            *o = v.parse().unwrap_or(0.0);
+        }
+        out
+    };
+    let num = |n: Option<roxmltree::Node<'_, '_>>, attr: &str| -> f64 {
+        n.and_then(|n| n.attribute(attr)).and_then(|v| v.trim().parse().ok()).unwrap_or(0.0)
+    };
+    for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
+        let (Some(name), Some(inertial)) =
+            (link.attribute("name"), link.children().find(|c| c.has_tag_name("inertial")))
+        else {
+            continue;
+        };
+        let child = |tag: &str| inertial.children().find(|c| c.has_tag_name(tag));
+        let mass_kg = num(child("mass"), "value");
+        if mass_kg.is_nan() || mass_kg <= 0.0 {
+            continue;
+        }
+        let origin = child("origin");
+        let xyz = triplet(origin.and_then(|o| o.attribute("xyz")));
+        let rpy = triplet(origin.and_then(|o| o.attribute("rpy")));
+        let i = child("inertia");
+        let (ixx, ixy, ixz, iyy, iyz, izz) =
+            (num(i, "ixx"), num(i, "ixy"), num(i, "ixz"), num(i, "iyy"), num(i, "iyz"), num(i, "izz"));
+        let inertial_axes = Matrix3::new(ixx, ixy, ixz, ixy, iyy, iyz, ixz, iyz, izz);
+        // URDF rpy: fixed-axis roll about x, pitch about y, yaw about z.
+        let link_from_inertial = nalgebra::Rotation3::from_euler_angles(rpy[0], rpy[1], rpy[2]);
+        let inertia_com = link_from_inertial.matrix() * inertial_axes * link_from_inertial.matrix().transpose();
+        let mp = MassProperties { mass_kg, com_link: Vector3::new(xyz[0], xyz[1], xyz[2]), inertia_com };
+        own.insert(name.to_string(), mp.to_params());
+    }
+    Ok(own)
+}
+
+/// The share of body `name`'s parameters `cad` that the converter lumped in from fixed-joint
+/// links: `cad` less the link's own URDF inertial. Zero when the masses agree (nothing was
+/// lumped; the difference is then the MJCF's rounding or a converter repair, which belongs to
+/// the link).
+fn welded_params(own: &std::collections::HashMap<String, LinkParams>, name: &str, cad: &LinkParams) -> LinkParams {
+    let own = own.get(name).copied().unwrap_or([0.0; LINK_PARAMS]);
+    if (cad[0] - own[0]).abs() <= 1e-9 * cad[0].abs().max(1e-12) {
+        return [0.0; LINK_PARAMS];
+    }
+    std::array::from_fn(|i| cad[i] - own[i])
+}
+
 /// As [`load_urdf_in_mujoco`], with a free joint between the world and the URDF's root link
 /// (the converter's `floating_base`), which then moves with the logged base motion.
 ///
@@ -222,7 +308,8 @@ pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<M
 
 /// Compiles a URDF the way the twin runs it: through twin's converter
 /// (`twin_core::robot::Robot::load_with`, which resolves `package://` meshes and converts
-/// Collada/ASCII STL), fixed base, no floor, no visuals, each URDF link its own body, with
+/// Collada/ASCII STL), fixed base, no floor, no visuals, fixed-joint links' inertia lumped
+/// into the body that moves them (as every command runs the robot), with
 /// `extra_mujoco` (MJCF elements such as `<option>`) added to the model.
 ///
 /// # Errors
@@ -285,6 +372,7 @@ impl RobotModel {
     /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
     pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
         let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
+        let own = urdf_own_params(urdf_path)?;
         let free = model.free_joint().ok_or_else(|| Error::Urdf {
             path: urdf_path.to_path_buf(),
             message: "the model has no free joint for a floating base".into(),
@@ -310,13 +398,12 @@ impl RobotModel {
                     l.floating = floating;
                     links.push(l);
                 }
-                None if floating => links.push(LinkInfo {
-                    name: model.name(ObjType::Body, b).to_string(),
-                    body: b,
-                    ancestor_joints: Vec::new(),
-                    cad: cad_params_of_body(&model, b),
-                    floating: true,
-                }),
+                None if floating && carries_inertia(&model, b) => {
+                    let name = model.name(ObjType::Body, b).to_string();
+                    let cad = cad_params_of_body(&model, b);
+                    let welded = welded_params(&own, &name, &cad);
+                    links.push(LinkInfo { name, body: b, ancestor_joints: Vec::new(), cad, welded, floating: true });
+                }
                 None => {}
             }
         }
@@ -335,6 +422,7 @@ impl RobotModel {
     /// # Errors
     /// [`Error::Urdf`] if the robot has no 1-DOF joint.
     pub fn from_model(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
+        let own = urdf_own_params(urdf_path)?;
         let mut joints = Vec::new();
         let mut joint_of_dof = vec![None; model.nv()];
         for j in 0..model.njnt() {
@@ -371,18 +459,14 @@ impl RobotModel {
                 }
                 k = parent[k] as usize;
             }
-            if ancestor_joints.is_empty() {
+            if ancestor_joints.is_empty() || !carries_inertia(&model, b) {
                 continue;
             }
             ancestor_joints.sort_unstable();
+            let name = model.name(ObjType::Body, b).to_string();
             let cad = cad_params_of_body(&model, b);
-            links.push(LinkInfo {
-                name: model.name(ObjType::Body, b).to_string(),
-                body: b,
-                ancestor_joints,
-                cad,
-                floating: false,
-            });
+            let welded = welded_params(&own, &name, &cad);
+            links.push(LinkInfo { name, body: b, ancestor_joints, cad, welded, floating: false });
         }
         Ok(RobotModel { urdf_path: urdf_path.to_path_buf(), model, joints, links, floating: None })
     }

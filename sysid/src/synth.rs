@@ -382,7 +382,7 @@ pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
         .links
         .iter()
         .filter_map(|link| {
-            let mp = crate::model::MassProperties::from_params(&link.cad)?;
+            let mp = crate::model::MassProperties::from_params(&link.own_params(&link.cad))?;
             Some(crate::writeback::LinkUpdate {
                 name: link.name.clone(),
                 mass_kg: mp.mass_kg * factor(&mut rng),

@@ -45,14 +45,18 @@ struct Outcome {
 }
 
 fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
-    let truth = models_dir().join(truth_name);
+    run_benchmark_on(&models_dir().join(truth_name), train_secs)
+}
+
+fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
+    let truth_name = truth.file_name().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let start = dir.path().join(truth_name);
-    perturbed_urdf(&truth, &start, 3).unwrap();
+    perturbed_urdf(truth, &start, 3).unwrap();
     let original = std::fs::read_to_string(&start).unwrap();
 
-    let train = simulate(&truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
-    let held_out = simulate(&truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
+    let train = simulate(truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
+    let held_out = simulate(truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
     // The logs go through ROS 2 bags (/joint_states), as a real robot's would.
     let bags = tempfile::tempdir().unwrap();
     let through_bag = |mut log: JointLog, name: &str| {
@@ -68,7 +72,7 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
     let held_out = through_bag(held_out, "held_out.mcap");
 
     let robot = RobotModel::from_urdf(&start).unwrap();
-    let true_robot = RobotModel::from_urdf(&truth).unwrap();
+    let true_robot = RobotModel::from_urdf(truth).unwrap();
     let opts = SysidOptions::default();
     let ident = identify(&robot, &train, &opts).unwrap();
     eprintln!("{}", ident.report.table());
@@ -131,6 +135,19 @@ fn run_benchmark(truth_name: &str, train_secs: f64) -> Outcome {
     let new_text = std::fs::read_to_string(&start).unwrap();
     assert_ne!(new_text, original);
     assert_eq!(mask_rewritable(&new_text), mask_rewritable(&original));
+    // Links that are no identified body (fixed-joint links lumped into one) keep their bytes.
+    let inertial_of = |text: &str, name: &str| -> Option<String> {
+        let doc = roxmltree::Document::parse(text).unwrap();
+        let link =
+            doc.root_element().children().find(|n| n.has_tag_name("link") && n.attribute("name") == Some(name))?;
+        link.children().find(|c| c.has_tag_name("inertial")).map(|i| text[i.range()].to_string())
+    };
+    let doc = roxmltree::Document::parse(&original).unwrap();
+    for name in doc.root_element().children().filter(|n| n.has_tag_name("link")).filter_map(|n| n.attribute("name")) {
+        if !robot.links.iter().any(|l| l.name == name) {
+            assert_eq!(inertial_of(&new_text, name), inertial_of(&original, name), "{name}");
+        }
+    }
     Outcome { worst_nrmse, worst_friction_error }
 }
 
@@ -152,4 +169,86 @@ fn humanoid_on_a_gantry_meets_the_benchmark() {
         100.0 * o.worst_nrmse,
         100.0 * o.worst_friction_error
     );
+}
+
+/// A fixed-joint link with mass (a camera on the flange) and a massless frame (a TCP): the
+/// twin's converter lumps the camera into the flange's body, which sysid identifies as the twin
+/// runs it; the write-back puts the flange's own share back on `tool_link` and leaves the
+/// camera's `<inertial>` as it was.
+#[test]
+fn arm_with_a_fixed_camera_identifies_the_lumped_body_and_writes_back_per_link() {
+    let text = std::fs::read_to_string(models_dir().join("arm6.urdf")).unwrap();
+    let camera = r#"  <joint name="camera_mount" type="fixed">
+    <origin xyz="0.03 0 0.04" rpy="0 0.3 0"/>
+    <parent link="tool_link"/>
+    <child link="camera_link"/>
+  </joint>
+  <link name="camera_link">
+    <inertial>
+      <origin xyz="0.01 0 0.02" rpy="0 0 0"/>
+      <mass value="0.35"/>
+      <inertia ixx="0.0004" ixy="0" ixz="0" iyy="0.0003" iyz="0" izz="0.0005"/>
+    </inertial>
+  </link>
+  <joint name="tcp_joint" type="fixed">
+    <origin xyz="0 0.1 0" rpy="0 0 0"/>
+    <parent link="tool_link"/>
+    <child link="tcp"/>
+  </joint>
+  <link name="tcp"/>
+
+"#;
+    let at = text.find("  <gazebo reference=\"tool_link\">").unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let truth = dir.path().join("arm_camera.urdf");
+    std::fs::write(&truth, format!("{}{camera}{}", &text[..at], &text[at..])).unwrap();
+
+    let robot = RobotModel::from_urdf(&truth).unwrap();
+    let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
+    assert!(!names.contains(&"camera_link") && !names.contains(&"tcp"), "{names:?}");
+    let tool = robot.links.iter().find(|l| l.name == "tool_link").unwrap();
+    // The body holds flange + camera (0.9 + 0.35 kg); the camera's share is 0.35 kg.
+    assert!((tool.cad[0] - 1.25).abs() < 1e-9, "{}", tool.cad[0]);
+    assert!((tool.welded[0] - 0.35).abs() < 1e-9, "{}", tool.welded[0]);
+    assert!((tool.own_params(&tool.cad)[0] - 0.9).abs() < 1e-9);
+
+    let o = run_benchmark_on(&truth, 20.0);
+    eprintln!("arm with camera: worst held-out NRMSE {:.2} %", 100.0 * o.worst_nrmse);
+}
+
+/// Issue 15: one glitched encoder reading (0.125 rad for one sample, as a flipped bit would
+/// give) must not move an identifiable parameter: conditioning replaces the spike (Hampel
+/// filter) before it becomes a burst of accelerations, and the report names joint and time.
+#[test]
+fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
+    let truth = models_dir().join("arm6.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let start = dir.path().join("arm6.urdf");
+    perturbed_urdf(&truth, &start, 3).unwrap();
+    let clean = simulate(&truth, &SynthOptions { duration_secs: 20.0, seed: 1, ..Default::default() }).unwrap();
+    let mut glitched = clean.clone();
+    let j = glitched.joint_names.iter().position(|n| n == "elbow_joint").unwrap();
+    let k = glitched.t_nanos.len() / 2;
+    glitched.position[j][k] += 0.125;
+    let glitch_secs = (glitched.t_nanos[k] - glitched.t_nanos[0]) as f64 * 1e-9;
+
+    let robot = RobotModel::from_urdf(&start).unwrap();
+    let opts = SysidOptions::default();
+    let a = identify(&robot, &clean, &opts).unwrap();
+    let b = identify(&robot, &glitched, &opts).unwrap();
+    let mut worst: f64 = 0.0;
+    for i in 0..a.after.len() {
+        if a.identifiability[i] == sysid::estimate::Identifiability::Identifiable {
+            worst = worst.max((b.after[i] - a.after[i]).abs() / a.std[i].max(1e-300));
+        }
+    }
+    eprintln!("glitch: worst shift of an identifiable parameter {worst:.2}σ");
+    assert!(worst < 3.0, "one glitched sample moved a parameter by {worst:.1}σ");
+    let warning = b.report.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains("Hampel"));
+    let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", b.report.warnings));
+    // The glitched sample itself, by how much it was off its neighbours.
+    let at: f64 = warning.split("at t = ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!((at - glitch_secs).abs() < 1e-3, "{warning} (glitch at {glitch_secs:.3} s)");
+    assert!(warning.contains("+0.12"), "{warning}");
+    assert!(!a.report.warnings.iter().any(|w| w.contains("Hampel")), "{:?}", a.report.warnings);
 }
