@@ -584,7 +584,7 @@ impl Controller for Replay {
 }
 
 /// Names accepted by [`by_name`].
-pub const CONTROLLERS: &[&str] = &["pd-hold", "passive"];
+pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "walk"];
 
 /// The controller called `name` (one of [`CONTROLLERS`]) with default options, for `model`.
 ///
@@ -594,7 +594,8 @@ pub fn by_name(name: &str, model: &Model) -> Result<Box<dyn Controller>> {
     match name {
         "pd-hold" => Ok(Box::new(PdHold::new(model, PdHoldOptions::default()))),
         "passive" => Ok(Box::new(Passive)),
-        _ => Err(Error::NotFound { kind: "controller (available: pd-hold, passive)", name: name.to_string() }),
+        "walk" => Ok(Box::new(crate::walk::Walker::new(model, crate::walk::WalkOptions::default())?)),
+        _ => Err(Error::NotFound { kind: "controller (available: pd-hold, passive, walk)", name: name.to_string() }),
     }
 }
 

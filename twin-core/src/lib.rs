@@ -1,6 +1,7 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
 //! URDF/Gazebo → MJCF converter ([`convert`]), the step-by-step model validation ([`check`]),
-//! controllers ([`control`]), ROS 2 logs ([`log`]), simulation runs with recording ([`sim`])
+//! controllers ([`control`]), model-based walking with gait metrics ([`walk`]), scenario files
+//! ([`scenario`]), ROS 2 logs ([`log`]), simulation runs with recording ([`sim`])
 //! and, with the cargo feature `rerun`, rerun recordings (`viz`).
 //!
 //! MuJoCo errors never end the process: every call that can raise `mju_user_error` is wrapped by
@@ -29,5 +30,6 @@ pub mod sim;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;
+pub mod walk;
 
 pub use error::{Error, Result};

@@ -205,8 +205,34 @@ pub fn simulate(
     robot: &Robot,
     controller: &mut dyn Controller,
     options: &SimOptions,
+    recording: Option<&mut Recording>,
+    progress: &mut dyn FnMut(f64),
+) -> Result<SimReport> {
+    simulate_with(robot, controller, options, recording, progress, &mut ())
+}
+
+/// Called by [`simulate_with`] at each step: disturbances before the physics, metrics after.
+pub trait StepHook {
+    /// After the controller wrote its command, before `mj_step2` (e.g. apply a push through
+    /// `xfrc_applied`).
+    fn before_step2(&mut self, _data: &mut Data) {}
+    /// After `mj_step2`: contacts, forces and body poses of the step are in `data`.
+    fn after_step(&mut self, _data: &Data) {}
+}
+
+impl StepHook for () {}
+
+/// [`simulate`] with a [`StepHook`] called at each step.
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_with(
+    robot: &Robot,
+    controller: &mut dyn Controller,
+    options: &SimOptions,
     mut recording: Option<&mut Recording>,
     progress: &mut dyn FnMut(f64),
+    hook: &mut dyn StepHook,
 ) -> Result<SimReport> {
     let model = robot.model.clone();
     let mut data = Data::new(model.clone())?;
@@ -226,6 +252,7 @@ pub fn simulate(
         data.step1()?;
         controller.compute(&model, &Observation::of(&data), &mut command);
         actuation.apply(&mut data, &command);
+        hook.before_step2(&mut data);
         let time_secs = data.time_secs();
         if let Some(rec) = recording.as_deref_mut() {
             qpos.copy_from_slice(data.qpos());
@@ -237,6 +264,7 @@ pub fn simulate(
         } else {
             data.step2()?;
         }
+        hook.after_step(&data);
         if data.diverged() {
             let (_, text) = crate::mj::thread_warnings();
             return Err(Error::MuJoCo {
