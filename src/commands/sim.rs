@@ -14,6 +14,9 @@ pub enum ControllerKind {
     Hold,
     /// Track a joint trajectory (`--trajectory`) with PD and velocity feed-forward.
     Replay,
+    /// Model-based walking (LIPM preview control + DCM feedback) at `--vx/--vy/--yaw-rate`;
+    /// stands and balances at zero velocity. Prints gait metrics at the end.
+    Walk,
 }
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -30,12 +33,25 @@ pub enum CompressionKind {
 pub struct Args {
     /// Robot model: URDF (converted by twin) or MJCF. Default: the shipped humanoid.
     pub model: Option<PathBuf>,
-    /// Simulated time, seconds.
-    #[arg(long, default_value_t = 5.0)]
-    pub duration: f64,
-    /// Built-in controller.
-    #[arg(long, value_enum, default_value_t = ControllerKind::Hold)]
-    pub controller: ControllerKind,
+    /// Simulated time, seconds [default: 5, or the scenario's].
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Built-in controller [default: hold, or the scenario's].
+    #[arg(long, value_enum)]
+    pub controller: Option<ControllerKind>,
+    /// Scenario file (TOML: model, physics options, controller and parameters, duration, pushes,
+    /// checks); prints each check as PASS/FAIL and fails when one fails.
+    #[arg(long, value_name = "SCENARIO.toml")]
+    pub scenario: Option<PathBuf>,
+    /// Forward velocity command of `--controller walk`, m/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub vx: Option<f64>,
+    /// Leftward velocity command of `--controller walk`, m/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub vy: Option<f64>,
+    /// Yaw-rate command of `--controller walk`, rad/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub yaw_rate: Option<f64>,
     /// Trajectory for `--controller replay`: a ROS 2 log (.mcap or rosbag2 folder) with a
     /// JointState topic, or a CSV `time_sec,<joint>,…`.
     #[arg(long, value_name = "LOG_OR_CSV")]
@@ -74,8 +90,25 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    if !(args.duration > 0.0 && args.duration.is_finite()) {
-        bail!("--duration must be a positive number of seconds (got {})", args.duration);
+    let scenario = match &args.scenario {
+        Some(file) => Some(twin_core::scenario::Scenario::load(file)?),
+        None => None,
+    };
+    let kind = match (args.controller, &scenario) {
+        (Some(k), _) => k,
+        (None, Some(s)) => match s.controller.as_str() {
+            "walk" => ControllerKind::Walk,
+            "pd-hold" => ControllerKind::Hold,
+            other => bail!("{}: controller \"{other}\" can't run under twin sim (walk or pd-hold)", s.path.display()),
+        },
+        (None, None) => ControllerKind::Hold,
+    };
+    let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
+    if !(duration > 0.0 && duration.is_finite()) {
+        bail!("--duration must be a positive number of seconds (got {duration})");
+    }
+    if kind != ControllerKind::Walk && (args.vx.is_some() || args.vy.is_some() || args.yaw_rate.is_some()) {
+        bail!("--vx, --vy and --yaw-rate are for --controller walk");
     }
     if !(args.rate > 0.0 && args.tf_rate > 0.0) {
         bail!("--rate and --tf-rate must be positive (Hz)");
@@ -83,9 +116,36 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
         return Err(twin_core::sim::record::rerun_unavailable().into());
     }
-    let path = args.model.clone().unwrap_or_else(super::default_model);
-    let robot = sim::load_robot(&path).with_context(|| format!("loading {}", path.display()))?;
-    let mut controller: Box<dyn Controller> = match args.controller {
+    // Walking runs a scenario: the given file, or the defaults with the command-line model and
+    // velocity.
+    let scenario = match (scenario, kind) {
+        (Some(s), _) => Some(s),
+        (None, ControllerKind::Walk) => Some(twin_core::scenario::Scenario::parse(
+            std::path::Path::new("<command line>"),
+            &format!("duration = {duration:?}\ncontroller = \"walk\"\n"),
+        )?),
+        (None, _) => None,
+    };
+    let mut scenario = scenario;
+    if let Some(s) = scenario.as_mut() {
+        s.walk.vx = args.vx.unwrap_or(s.walk.vx);
+        s.walk.vy = args.vy.unwrap_or(s.walk.vy);
+        s.walk.yaw_rate = args.yaw_rate.unwrap_or(s.walk.yaw_rate);
+        s.walk.validate().map_err(|(key, m)| anyhow::anyhow!("walking option `{key}` {m}"))?;
+        if args.model.is_some() {
+            s.model = args.model.clone();
+        }
+    }
+    let path = match &scenario {
+        Some(s) => s.model.clone().unwrap_or_else(super::default_model),
+        None => args.model.clone().unwrap_or_else(super::default_model),
+    };
+    let robot = match &scenario {
+        Some(s) => s.robot(&path),
+        None => sim::load_robot(&path),
+    }
+    .with_context(|| format!("loading {}", path.display()))?;
+    let mut controller: Box<dyn Controller> = match kind {
         ControllerKind::Hold => {
             if args.trajectory.is_some() {
                 bail!("--trajectory is for --controller replay");
@@ -99,6 +159,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let trajectory = JointTrajectory::load(file, &args.trajectory_topic)?;
             Box::new(Replay::new(&robot.model, trajectory, ReplayOptions::default())?)
         }
+        ControllerKind::Walk => {
+            let s = scenario.as_ref().context("walking runs a scenario")?;
+            Box::new(twin_core::walk::Walker::new(&robot.model, s.walk.clone())?)
+        }
+    };
+    let mut hook = match &scenario {
+        Some(s) => Some(s.hook(&robot.model)?),
+        None => None,
     };
     let options = RecordOptions {
         mcap: args.record.clone(),
@@ -106,7 +174,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         connect: args.connect.clone(),
         state_rate_hz: args.rate,
         tf_rate_hz: args.tf_rate,
-        seed: args.seed,
+        seed: scenario.as_ref().map_or(args.seed, |s| if args.seed != 0 { args.seed } else { s.seed }),
         writer: WriterOptions {
             compression: match args.compression {
                 CompressionKind::Zstd => Compression::Zstd(1),
@@ -137,13 +205,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             b.set_position((f * 1000.0) as u64);
         }
     };
-    let report = sim::simulate(
-        &robot,
-        controller.as_mut(),
-        &SimOptions { duration_secs: args.duration },
-        recording.as_mut(),
-        &mut progress,
-    )?;
+    let sim_options = SimOptions { duration_secs: duration };
+    let report = match hook.as_mut() {
+        Some(h) => sim::simulate_with(&robot, controller.as_mut(), &sim_options, recording.as_mut(), &mut progress, h)?,
+        None => sim::simulate(&robot, controller.as_mut(), &sim_options, recording.as_mut(), &mut progress)?,
+    };
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -196,6 +262,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if let Some((file, bytes)) = &s.rrd {
             writeln!(out, "{}: {bytes} bytes", file.display())?;
+        }
+    }
+    if let (Some(h), Some(s)) = (&hook, &scenario) {
+        let summary = h.metrics.summary();
+        writeln!(out, "{summary}")?;
+        let verdicts = s.evaluate(&summary);
+        if !verdicts.is_empty() {
+            writeln!(out, "checks of {}:", s.path.display())?;
+            for v in &verdicts {
+                writeln!(out, "  {v}")?;
+            }
+        }
+        let failed = verdicts.iter().filter(|v| !v.passed).count();
+        if failed > 0 {
+            bail!("{failed} of {} checks of {} failed", verdicts.len(), s.path.display());
         }
     }
     Ok(())

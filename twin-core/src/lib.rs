@@ -26,6 +26,7 @@ pub mod convert;
 pub mod error;
 pub mod log;
 pub mod mj;
+pub mod scenario;
 pub mod sim;
 pub mod urdf;
 #[cfg(feature = "rerun")]

@@ -2,50 +2,146 @@
 //! and the regressions its metrics and checks must catch.
 
 use std::path::PathBuf;
+use twin_core::scenario::{Push, Scenario, Verdict};
 use twin_core::sim::{self, SimOptions, StepHook};
-use twin_core::walk::{GaitMetrics, GaitSummary, GaitTargets, WalkOptions, Walker};
+use twin_core::walk::{GaitSummary, WalkOptions, Walker};
 
 fn humanoid() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/humanoid.urdf")
 }
 
-struct Metrics(GaitMetrics);
-impl StepHook for Metrics {
-    fn after_step(&mut self, data: &twin_core::mj::Data) {
-        self.0.update(data);
+fn scenarios() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+}
+
+/// Runs `scenario` (with `edit` applied) and returns the gait metrics and the final state.
+fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Verdict>, Vec<f64>) {
+    edit(&mut scenario);
+    let robot = scenario.robot(&humanoid()).unwrap();
+    let mut controller = scenario.controller(&robot.model).unwrap();
+    let mut hook = scenario.hook(&robot.model).unwrap();
+    let options = SimOptions { duration_secs: scenario.duration_secs };
+    let mut last = Vec::new();
+    struct Last<'a>(&'a mut twin_core::scenario::ScenarioHook, &'a mut Vec<f64>);
+    impl StepHook for Last<'_> {
+        fn before_step2(&mut self, data: &mut twin_core::mj::Data) {
+            self.0.before_step2(data);
+        }
+        fn after_step(&mut self, data: &twin_core::mj::Data) {
+            self.0.after_step(data);
+            self.1.clear();
+            self.1.extend_from_slice(data.qpos());
+        }
     }
-}
-
-fn robot(armature: f64) -> sim::Robot {
-    let opts = twin_core::convert::ConvertOptions { armature, ..Default::default() };
-    let model = std::sync::Arc::new(twin_core::mj::Model::from_urdf(humanoid(), &opts).unwrap());
-    sim::Robot::from_model(model, "humanoid", &humanoid())
-}
-
-fn run(options: WalkOptions, secs: f64) -> GaitSummary {
-    let robot = robot(0.01);
-    let targets = GaitTargets {
-        vx: options.vx,
-        vy: options.vy,
-        yaw_rate: options.yaw_rate,
-        step_length: options.vx * options.step_period,
-        step_width: options.step_width,
-    };
-    let mut walker = Walker::new(&robot.model, options.clone()).unwrap();
-    let mut metrics = Metrics(GaitMetrics::for_model(&robot.model, &options.bodies, targets).unwrap());
-    sim::simulate_with(&robot, &mut walker, &SimOptions { duration_secs: secs }, None, &mut |_| {}, &mut metrics)
+    sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut Last(&mut hook, &mut last))
         .unwrap();
-    metrics.0.summary()
+    let summary = hook.metrics.summary();
+    let verdicts = scenario.evaluate(&summary);
+    println!("{summary}");
+    for v in &verdicts {
+        println!("  {v}");
+    }
+    (summary, verdicts, last)
 }
 
+fn stand(duration: f64) -> Scenario {
+    Scenario::parse(
+        &scenarios().join("inline.toml"),
+        &format!("model = {:?}\nduration = {duration:?}\n[checks]\nfalls = 0\n", humanoid()),
+    )
+    .unwrap()
+}
+
+/// Priority 1: the shipped scenario walks ≥ 10 m straight at ≥ 0.3 m/s, drifting < 0.5 m.
 #[test]
-#[ignore]
-fn probe() {
-    let vx: f64 = std::env::var("VX").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-    let secs: f64 = std::env::var("SECS").ok().and_then(|v| v.parse().ok()).unwrap_or(5.0);
-    let opts: WalkOptions = toml::from_str(&std::env::var("WALK").unwrap_or_default()).unwrap();
-    let s = run(WalkOptions { vx, ..opts }, secs);
-    println!("{s}");
+fn walks_ten_metres_straight() {
+    let (s, verdicts, _) = run_scenario(Scenario::load(scenarios().join("walk.toml")).unwrap(), |_| {});
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 10.0, "{}", s.forward_m);
+    assert!(s.lateral_m.abs() < 0.5, "{}", s.lateral_m);
+    assert!(s.average_speed_mps >= 0.3, "{}", s.average_speed_mps);
+    assert!(s.steps >= 50, "{}", s.steps);
+    assert!(s.slip_mean_m < 0.01, "{}", s.slip_mean_m);
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+}
+
+/// Zero velocity: a balance controller that steps to recover a sideways push (0.4 m/s of the
+/// whole robot) and stays put otherwise.
+#[test]
+fn stands_and_recovers_a_push_by_stepping() {
+    let mut quiet = stand(4.0);
+    quiet.checks.max_distance = Some(0.05);
+    let (s, v, _) = run_scenario(quiet, |_| {});
+    assert!(!s.fell && s.steps == 0 && s.distance_m < 0.05, "{s:?}");
+    assert!(v.iter().all(|v| v.passed));
+    let (s, _, _) = run_scenario(stand(6.0), |sc| {
+        sc.pushes.push(Push { time: 2.0, duration: 0.1, force: [0.0, 140.0, 0.0], body: None });
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.steps >= 2, "recovered by stepping: {} steps", s.steps);
+    assert!(s.distance_m < 0.6, "{}", s.distance_m);
+}
+
+/// A push far beyond what a step can capture (2.8 m/s of the whole robot) is a fall, and the
+/// scenario's check fails.
+#[test]
+fn a_push_beyond_capture_is_a_fall() {
+    let (s, v, _) = run_scenario(stand(4.0), |sc| {
+        sc.pushes.push(Push { time: 2.0, duration: 0.1, force: [1000.0, 0.0, 0.0], body: None });
+    });
+    assert!(s.fell, "{s:?}");
+    assert!(s.fall_time_secs.unwrap() > 2.0);
+    assert!(v.iter().any(|v| v.name == "falls" && !v.passed), "{v:?}");
+}
+
+/// Turning in place: 0.3 rad/s for 6 s after the crouch turns ≈ 90° without walking off.
+#[test]
+fn turns_ninety_degrees_in_place() {
+    let (s, _, _) = run_scenario(stand(7.0), |sc| sc.walk.yaw_rate = 0.3);
+    assert!(!s.fell);
+    let deg = s.yaw_change_rad.to_degrees();
+    assert!((80.0..110.0).contains(&deg), "{deg}");
+    assert!(s.distance_m < 0.3, "{}", s.distance_m);
+}
+
+/// On a floor too slippery to walk on, the feet slide: slip is reported and its check fails.
+#[test]
+fn low_friction_slip_fails_its_check() {
+    let (s, v, _) = run_scenario(stand(6.0), |sc| {
+        sc.walk.vx = 0.3;
+        sc.friction = Some(0.05);
+        sc.checks.max_mean_slip = Some(0.01);
+        sc.checks.falls = None;
+    });
+    let slip = v.iter().find(|v| v.name == "max_mean_slip").unwrap();
+    assert!(!slip.passed && s.slip_mean_m > 0.01, "{s:?}");
+    // Nominal friction passes the same check.
+    let (s, v, _) = run_scenario(stand(6.0), |sc| {
+        sc.walk.vx = 0.3;
+        sc.checks.max_mean_slip = Some(0.01);
+    });
+    assert!(v.iter().all(|v| v.passed), "{s:?}");
+}
+
+/// A step the legs can't reach is refused before simulating, naming the option.
+#[test]
+fn unreachable_step_is_refused() {
+    let robot = sim::load_robot(humanoid()).unwrap();
+    let options = WalkOptions { vx: 0.9, max_step_length: 0.6, ..WalkOptions::default() };
+    let e = Walker::new(&robot.model, options).unwrap_err().to_string();
+    assert!(e.contains("can't reach a step of max_step_length 0.6 m"), "{e}");
+    let options = WalkOptions { vx: 0.9, ..WalkOptions::default() };
+    let e = Walker::new(&robot.model, options).unwrap_err().to_string();
+    assert!(e.contains("option `vx`") && e.contains("max_step_length"), "{e}");
+}
+
+/// Same scenario, same result, bit for bit.
+#[test]
+fn deterministic() {
+    let a = run_scenario(stand(2.5), |sc| sc.walk.vx = 0.3).2;
+    let b = run_scenario(stand(2.5), |sc| sc.walk.vx = 0.3).2;
+    assert!(!a.is_empty());
+    assert_eq!(a, b);
 }
 
 #[test]

@@ -49,7 +49,8 @@ pub struct GaitSummary {
     pub average_speed_mps: f64,
     /// RMS over 1-s windows of the velocity error (heading frame) against the command, m/s.
     pub velocity_rms_error_mps: f64,
-    /// Largest horizontal slide of a foot during one stance, m.
+    /// Largest horizontal slide of a foot during one stance (its material point at the
+    /// contacts, so rolling on an edge is not slip), m.
     pub slip_max_m: f64,
     /// Mean slide per stance, m.
     pub slip_mean_m: f64,
@@ -71,7 +72,11 @@ struct FootTrack {
     in_contact: bool,
     off_secs: f64,
     slip_m: f64,
-    prev_xy: Option<[f64; 2]>,
+    /// The foot's pose at the previous step (position, row-major rotation).
+    prev_pose: Option<([f64; 3], [f64; 9])>,
+    /// Mean contact point of the foot this step, world.
+    contact_sum: [f64; 3],
+    contact_n: u32,
     stances: u64,
 }
 
@@ -203,6 +208,11 @@ impl GaitMetrics {
                     foot_contact[k] = true;
                     if let Some(w) = data.contact_wrench_world(i) {
                         self.hull.push([w.position[0], w.position[1]]);
+                        let track = &mut self.foot[k];
+                        for a in 0..3 {
+                            track.contact_sum[a] += w.position[a];
+                        }
+                        track.contact_n += 1;
                     }
                 }
                 None => body_on_ground = true,
@@ -216,8 +226,26 @@ impl GaitMetrics {
         // Feet: touchdowns, slip, step geometry.
         for k in 0..2 {
             let p = data.xpos()[self.feet[k]];
-            let xy = [p[0], p[1]];
+            let rot = data.xmat()[self.feet[k]];
             let track = &mut self.foot[k];
+            // Slide of the foot's material point at its contacts since the previous step.
+            let slide = match (track.prev_pose, track.contact_n) {
+                (Some((pp, pr)), n) if n > 0 => {
+                    let c: Vec<f64> = track.contact_sum.iter().map(|v| v / f64::from(n)).collect();
+                    let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
+                    // Body-frame coordinates of the contact point, then where it was before.
+                    let local: Vec<f64> =
+                        (0..3).map(|j| rot[j] * d[0] + rot[3 + j] * d[1] + rot[6 + j] * d[2]).collect();
+                    let was: Vec<f64> = (0..3)
+                        .map(|i| pp[i] + pr[3 * i] * local[0] + pr[3 * i + 1] * local[1] + pr[3 * i + 2] * local[2])
+                        .collect();
+                    (c[0] - was[0]).hypot(c[1] - was[1])
+                }
+                _ => 0.0,
+            };
+            track.prev_pose = Some((p, rot));
+            track.contact_sum = [0.0; 3];
+            track.contact_n = 0;
             if foot_contact[k] {
                 if !track.in_contact {
                     if track.off_secs >= 0.05 {
@@ -234,12 +262,9 @@ impl GaitMetrics {
                     }
                     track.in_contact = true;
                     track.slip_m = 0.0;
-                    track.prev_xy = Some(xy);
+                } else {
+                    track.slip_m += slide;
                 }
-                if let Some(prev) = track.prev_xy {
-                    track.slip_m += ((xy[0] - prev[0]).powi(2) + (xy[1] - prev[1]).powi(2)).sqrt();
-                }
-                track.prev_xy = Some(xy);
                 track.off_secs = 0.0;
             } else {
                 track.off_secs += self.dt;
