@@ -391,8 +391,8 @@ impl StepHook for ScenarioHook {
                 t - data.model().timestep_secs() >= p.time && t - data.model().timestep_secs() < p.time + p.duration;
             if on || was {
                 let f = &mut data.xfrc_applied_mut()[*body];
-                for k in 0..3 {
-                    f[k] = if on { p.force[k] } else { 0.0 };
+                for (fk, pk) in f.iter_mut().zip(p.force) {
+                    *fk = if on { pk } else { 0.0 };
                 }
             }
         }

@@ -302,8 +302,7 @@ pub struct Body {
     pub base_dof: usize,
     /// Left, right.
     pub legs: [Leg; 2],
-    /// IMU: framequat address in `sensordata` (if any), gyro address, and the IMU site's
-    /// orientation in the world frame is `quat`; `site_rot` is the site's rotation in its body.
+    /// IMU (a gyro, with the framequat of the same site when there is one).
     pub imu: Option<Imu>,
 }
 

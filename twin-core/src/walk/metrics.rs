@@ -174,7 +174,7 @@ impl GaitMetrics {
         let t = data.time_secs();
         let base = data.xpos()[self.base];
         let yaw = Self::yaw_of(data, self.base);
-        let Some((origin, heading0, t0)) = self.start else {
+        let Some((origin, _, t0)) = self.start else {
             self.start = Some((base, yaw, t));
             self.last_yaw = yaw;
             self.last_base = base;
@@ -224,6 +224,7 @@ impl GaitMetrics {
         }
 
         // Feet: touchdowns, slip, step geometry.
+        #[allow(clippy::needless_range_loop)] // k indexes feet, tracks and contacts alike
         for k in 0..2 {
             let p = data.xpos()[self.feet[k]];
             let rot = data.xmat()[self.feet[k]];
@@ -301,7 +302,6 @@ impl GaitMetrics {
             self.vel_windows += 1;
             self.window = Some((t, [base[0], base[1]], yaw));
         }
-        let _ = heading0;
     }
 
     /// The metrics so far.

@@ -339,7 +339,7 @@ impl Walker {
         let body = Body::find(model, &tree, &home, &options.bodies)?;
         let ik = [LegIk::new(model, &body.legs[0]), LegIk::new(model, &body.legs[1])];
         let g = -model.gravity()[2];
-        if !(g > 0.0) {
+        if g.is_nan() || g <= 0.0 {
             return Err(Error::Walk {
                 message: format!("gravity must point down (−z); the model's is {:?}", model.gravity()),
             });
@@ -380,7 +380,7 @@ impl Walker {
             body,
             options,
         };
-        walker.check_reach(model)?;
+        walker.check_reach()?;
         walker.build_loops(model);
         Ok(walker)
     }
@@ -408,7 +408,7 @@ impl Walker {
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
     /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
     /// wide), both legs' IK must converge.
-    fn check_reach(&mut self, model: &Model) -> Result<()> {
+    fn check_reach(&self) -> Result<()> {
         let home = self.nominal.clone();
         let mut frames = self.tree.frames();
         self.tree.forward(&home, &mut frames);
@@ -451,7 +451,6 @@ impl Walker {
                 }
             }
         }
-        let _ = model;
         Ok(())
     }
 
@@ -607,34 +606,29 @@ impl Walker {
     /// The schedule from `step` on, covering the preview horizon.
     fn extend(&mut self, step: Step, t: f64, horizon: f64) {
         let gait = self.options.gait();
-        {
-            {
-                self.schedule.steps.push(step);
-                if !self.command.is_zero() {
-                    let mut prev = step;
-                    let mut center = gait.center_of(&step.swing_to);
-                    let mut yaw = step.swing_to.yaw;
-                    while prev.end() < t + horizon + gait.period {
-                        let (c, y) = gait.next_center(center, yaw, &self.command);
-                        let side = prev.stance.side;
-                        let next = Step {
-                            start: prev.end(),
-                            ds: gait.ds_secs(),
-                            ss: gait.period - gait.ds_secs(),
-                            zmp_from: prev.stance.pos,
-                            stance: prev.swing_to,
-                            swing_from: prev.stance,
-                            swing_to: gait.foothold(side, c, y),
-                        };
-                        (center, yaw) = (c, y);
-                        self.schedule.steps.push(next);
-                        prev = next;
-                    }
-                }
-                let last = self.schedule.steps.last().copied().unwrap_or(step);
-                self.schedule.rest = (last.stance.pos + last.swing_to.pos) / 2.0;
+        self.schedule.steps.push(step);
+        if !self.command.is_zero() {
+            let mut prev = step;
+            let mut center = gait.center_of(&step.swing_to);
+            let mut yaw = step.swing_to.yaw;
+            while prev.end() < t + horizon + gait.period {
+                let (c, y) = gait.next_center(center, yaw, &self.command);
+                let next = Step {
+                    start: prev.end(),
+                    ds: gait.ds_secs(),
+                    ss: gait.period - gait.ds_secs(),
+                    zmp_from: prev.stance.pos,
+                    stance: prev.swing_to,
+                    swing_from: prev.stance,
+                    swing_to: gait.foothold(prev.stance.side, c, y),
+                };
+                (center, yaw) = (c, y);
+                self.schedule.steps.push(next);
+                prev = next;
             }
         }
+        let last = self.schedule.steps.last().copied().unwrap_or(step);
+        self.schedule.rest = (last.stance.pos + last.swing_to.pos) / 2.0;
     }
 
     /// The first step from standing at `t` with `swing` swinging.
@@ -686,15 +680,10 @@ impl Controller for Walker {
     }
 
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
-        if model.nq() != self.nominal.len() || model.nbody() != self.tree.frames().xpos.len() {
-            *self = Walker::new(model, self.options.clone())?;
-        } else {
-            // Masses, inertias and gains may differ per episode (randomization).
-            let options = self.options.clone();
-            let command = self.command;
-            *self = Walker::new(model, options)?;
-            self.command = command;
-        }
+        // Masses, inertias and gains may differ per episode (randomization): rebuild for `model`.
+        let command = self.command;
+        *self = Walker::new(model, self.options.clone())?;
+        self.command = command;
         self.t0 = observation.time_secs;
         self.tree.forward(observation.qpos, &mut self.frames);
         let com = self.frames.com();
@@ -708,8 +697,7 @@ impl Controller for Walker {
         self.pelvis_z0 = pelvis.z;
         self.pelvis_z = self.options.com_height + (pelvis.z - com.z);
         self.sole_z = (self.sole_world(&self.frames, 0).z + self.sole_world(&self.frames, 1).z) / 2.0;
-        for (li, ik) in self.ik.iter().enumerate() {
-            let _ = li;
+        for ik in &self.ik {
             for k in 0..ik.len() {
                 let a = ik.qpos_adr(k);
                 self.q_des[a] = observation.qpos[a];
@@ -817,7 +805,7 @@ impl Controller for Walker {
         // 4. Preview control at its own rate; the CoM reference in between is extrapolated.
         let ratio = self.preview_ratio;
         let pdt = self.dt * ratio as f64;
-        if self.tick % ratio == 0 {
+        if self.tick.is_multiple_of(ratio) {
             let mut cursor = 0;
             for j in 0..self.zmp_buf[0].len() {
                 let z = self.schedule.zmp(t + j as f64 * pdt, &mut cursor);
@@ -876,9 +864,8 @@ impl Controller for Walker {
 
         // 6. Leg IK.
         let mut ik_error: f64 = 0.0;
-        for leg in 0..2 {
+        for (leg, &(f, lift)) in foot_targets.iter().enumerate() {
             let l = &self.body.legs[leg];
-            let (f, lift) = foot_targets[leg];
             let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
