@@ -14,3 +14,5 @@ mod randomize;
 mod sim;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[path = "cli/walk.rs"]
+mod walk;
