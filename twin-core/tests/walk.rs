@@ -239,3 +239,12 @@ fn trace() {
         }
     }
 }
+
+/// The shipped balance scenario passes its checks (a forward push held by the ankles, a
+/// sideways push recovered by stepping).
+#[test]
+fn shipped_stand_scenario_passes() {
+    let (s, verdicts, _) = run_scenario(Scenario::load(scenarios().join("stand.toml")).unwrap(), |_| {});
+    assert!(!s.fell && s.steps >= 2, "{s:?}");
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+}
