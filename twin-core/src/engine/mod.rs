@@ -379,12 +379,22 @@ impl Engine {
             }
             actuation.apply(data, &self.command);
             // 3.
+            self.qpos_t.copy_from_slice(data.qpos());
+            self.qvel_t.copy_from_slice(data.qvel());
             for d in disturbances.iter_mut() {
                 d.apply(data, rng);
             }
-            // 4.
-            self.qpos_t.copy_from_slice(data.qpos());
-            self.qvel_t.copy_from_slice(data.qvel());
+            // 4. A disturbance that moved the state (a kick of the base's velocity, a pinned base)
+            // makes the physics start from the moved state: its position and velocity stages
+            // run again, as `mj_step` would run them.
+            if data.qpos() != self.qpos_t.as_slice() || data.qvel() != self.qvel_t.as_slice() {
+                self.qpos_t.copy_from_slice(data.qpos());
+                self.qvel_t.copy_from_slice(data.qvel());
+                if split && let Err(e) = data.step1() {
+                    outcome.physics_error = Some(e);
+                    break;
+                }
+            }
             let stepped = if split { data.step2() } else { data.step() };
             if let Err(e) = stepped {
                 outcome.physics_error = Some(e);
