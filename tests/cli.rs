@@ -24,3 +24,5 @@ mod shards;
 mod sim;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[path = "cli/walk.rs"]
+mod walk;

@@ -1,4 +1,6 @@
 //! `twin randomize`: domain-randomized batch rollouts, and `twin randomize merge` for shards.
+//! `--scenario FILE` takes the model, duration, controller and checks from a scenario file
+//! (`twin_core::scenario`): its checks decide each episode's success.
 
 use anyhow::Context as _;
 use clap::{Args as ClapArgs, Subcommand};
@@ -7,6 +9,7 @@ use std::io::IsTerminal;
 use std::path::PathBuf;
 use std::time::Instant;
 use twin_core::robot::Robot;
+use twin_core::scenario::Scenario;
 
 /// Arguments of `twin randomize`.
 #[derive(Debug, ClapArgs)]
@@ -22,9 +25,15 @@ pub struct Args {
     #[arg(long, default_value_t = 100)]
     pub episodes: u64,
 
-    /// Simulated seconds per episode.
-    #[arg(long, default_value_t = 5.0)]
-    pub duration: f64,
+    /// Simulated seconds per episode [default: 5, or the scenario's].
+    #[arg(long)]
+    pub duration: Option<f64>,
+
+    /// Scenario file (TOML): model, physics options (armature, friction), duration, controller
+    /// and its parameters; its checks decide each episode's success. Its scripted pushes are
+    /// not applied: the randomization spec's pushes are.
+    #[arg(long, value_name = "SCENARIO.toml")]
+    pub scenario: Option<PathBuf>,
 
     /// Master seed: each episode's random stream derives from (seed, episode index).
     #[arg(long, default_value_t = 0)]
@@ -55,10 +64,11 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub record_worst: usize,
 
-    /// Controller driving the robot: pd-hold (alias hold: hold the home pose) or passive (no
-    /// torque).
-    #[arg(long, default_value = "pd-hold")]
-    pub controller: String,
+    /// Controller driving the robot: pd-hold (alias hold: hold the home pose), passive (no
+    /// torque) or walk (stand and balance; with a scenario, walk as it says) [default:
+    /// pd-hold, or the scenario's].
+    #[arg(long)]
+    pub controller: Option<String>,
 
     /// A fall: base below this fraction of its initial height.
     #[arg(long, default_value_t = 0.6)]
@@ -122,16 +132,28 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if args.episodes == 0 {
         anyhow::bail!("--episodes must be a whole number from 1 to {}, got 0", u64::MAX);
     }
-    super::check_range("--duration", args.duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
+    let scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
+    let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
+    super::check_range("--duration", duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     super::check_range("--fall-tilt", args.fall_tilt, 0.0, std::f64::consts::PI, "rad")?;
     super::check_range("--fall-height-fraction", args.fall_height_fraction, 0.0, 1.0, "")?;
-    let model_path = args.model.unwrap_or_else(super::default_model);
+    let model_path = args
+        .model
+        .clone()
+        .or_else(|| scenario.as_ref().and_then(|s| s.model.clone()))
+        .unwrap_or_else(super::default_model);
     if let Some(out) = &args.out {
         let mut inputs = vec![model_path.as_path()];
         inputs.extend(args.config.as_deref());
+        inputs.extend(args.scenario.as_deref());
         twin_core::fsio::check_output_dir(out, &inputs)?;
     }
-    let robot = Robot::load(&model_path)?;
+    // A scenario's physics options (armature, friction) are part of the nominal model: every
+    // episode's draw starts from it.
+    let robot = match &scenario {
+        Some(s) => s.robot(&model_path)?,
+        None => Robot::load(&model_path)?,
+    };
     let model = robot.model.clone();
     let spec = match &args.config {
         Some(path) => Spec::from_file(path)?,
@@ -169,13 +191,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             skipped.join(", ")
         );
     }
+    let controller =
+        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
     let options = EpisodeOptions {
-        duration_secs: args.duration,
+        duration_secs: duration,
         fall_height_fraction: args.fall_height_fraction,
         fall_tilt_rad: args.fall_tilt,
-        controller: args.controller.clone(),
+        controller: controller.clone(),
     };
-    let batch = Batch::from_robot(robot, layout, options, args.seed)?;
+    let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
+    if let Some(mut s) = scenario {
+        // The scenario's walker (its options) on each worker, and its checks.
+        s.controller = controller;
+        let s = std::sync::Arc::new(s);
+        let for_checks = s.clone();
+        batch = batch.with_controller(move |r| s.controller(&r.model))?.with_checks(move |r| {
+            let check: Box<dyn twin_core::engine::Check> = Box::new(for_checks.check(&r.model)?);
+            Ok(vec![check])
+        })?;
+    }
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {
         episodes: args.episodes,

@@ -1,13 +1,17 @@
-//! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay …`: runs the twin under a
-//! controller of twin's registry (`twin_core::control::by_name_with`) and records ROS 2 topics
-//! (MCAP) and a rerun recording, stamped in simulation time.
+//! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay|walk …`: runs the twin
+//! under a controller of twin's registry (`twin_core::control::by_name_with`) and records ROS 2
+//! topics (MCAP) and a rerun recording, stamped in simulation time. `--scenario FILE` runs a
+//! scenario (`twin_core::scenario`): its model, controller, pushes and checks, printing the gait
+//! metrics and each check as PASS/FAIL; `--controller walk` alone runs the default scenario.
 
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use twin_core::control::{ControllerOptions, JointTrajectory};
+use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
 use twin_core::robot::Robot;
+use twin_core::scenario::Scenario;
 use twin_core::sim::{self, RecordOptions, Recording, SimOptions};
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
@@ -24,13 +28,28 @@ pub enum CompressionKind {
 pub struct Args {
     /// Robot model: URDF (converted by twin) or MJCF. Default: the shipped humanoid.
     pub model: Option<PathBuf>,
-    /// Simulated time, seconds.
-    #[arg(long, default_value_t = 5.0)]
-    pub duration: f64,
-    /// Controller: pd-hold (alias hold: PD hold of the home pose), passive (no torque) or
-    /// replay (track --trajectory with PD and velocity feed-forward).
-    #[arg(long, default_value = "pd-hold")]
-    pub controller: String,
+    /// Simulated time, seconds [default: 5, or the scenario's].
+    #[arg(long)]
+    pub duration: Option<f64>,
+    /// Controller: pd-hold (alias hold: PD hold of the home pose), passive (no torque),
+    /// replay (track --trajectory with PD and velocity feed-forward) or walk (model-based
+    /// walking at --vx/--vy/--yaw-rate; stands and balances at zero velocity; prints gait
+    /// metrics) [default: pd-hold, or the scenario's].
+    #[arg(long)]
+    pub controller: Option<String>,
+    /// Scenario file (TOML: model, physics options, controller and parameters, duration, pushes,
+    /// checks); prints each check as PASS/FAIL and fails when one fails.
+    #[arg(long, value_name = "SCENARIO.toml")]
+    pub scenario: Option<PathBuf>,
+    /// Forward velocity command of `--controller walk`, m/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub vx: Option<f64>,
+    /// Leftward velocity command of `--controller walk`, m/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub vy: Option<f64>,
+    /// Yaw-rate command of `--controller walk`, rad/s.
+    #[arg(long, allow_negative_numbers = true)]
+    pub yaw_rate: Option<f64>,
     /// Trajectory for `--controller replay`: a ROS 2 log (.mcap or rosbag2 folder) with a
     /// JointState topic, or a CSV `time_sec,<joint>,…`.
     #[arg(long, value_name = "LOG_OR_CSV")]
@@ -69,13 +88,41 @@ pub struct Args {
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
-    super::check_range("--duration", args.duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
+    let mut scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
+    let controller_name =
+        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
+    super::check_range("--duration", duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     super::check_range("--rate", args.rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
     super::check_range("--tf-rate", args.tf_rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
+    let walking = controller_name == "walk";
+    if !walking && (args.vx.is_some() || args.vy.is_some() || args.yaw_rate.is_some()) {
+        bail!("--vx, --vy and --yaw-rate are for --controller walk");
+    }
+    // Walking runs a scenario: the given file, or the defaults with the command-line model and
+    // velocity.
+    if scenario.is_none() && walking {
+        let defaults = format!("duration = {duration:?}\ncontroller = \"walk\"\n");
+        scenario = Some(Scenario::parse(std::path::Path::new("<command line>"), &defaults)?);
+    }
+    if let Some(s) = scenario.as_mut() {
+        s.walk.vx = args.vx.unwrap_or(s.walk.vx);
+        s.walk.vy = args.vy.unwrap_or(s.walk.vy);
+        s.walk.yaw_rate = args.yaw_rate.unwrap_or(s.walk.yaw_rate);
+        s.walk.validate().map_err(|(key, m)| anyhow::anyhow!("walking option `{key}` {m}"))?;
+        if args.model.is_some() {
+            s.model = args.model.clone();
+        }
+    }
     // Outputs are checked before any work: not a folder or device, not an input.
-    let model_path = args.model.clone().unwrap_or_else(super::default_model);
+    let model_path = scenario
+        .as_ref()
+        .and_then(|s| s.model.clone())
+        .or_else(|| args.model.clone())
+        .unwrap_or_else(super::default_model);
     let mut inputs = vec![model_path.as_path()];
     inputs.extend(args.trajectory.as_deref());
+    inputs.extend(args.scenario.as_deref());
     for out in [&args.record, &args.rerun].into_iter().flatten() {
         twin_core::fsio::check_output(out, &inputs)?;
     }
@@ -87,9 +134,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
         return Err(twin_core::sim::record::rerun_unavailable().into());
     }
-    let path = args.model.clone().unwrap_or_else(super::default_model);
-    let robot = Robot::load(&path)?;
-    let trajectory = match (&args.trajectory, args.controller.as_str()) {
+    let path = model_path.clone();
+    let robot = match &scenario {
+        Some(s) => s.robot(&path)?,
+        None => Robot::load(&path)?,
+    };
+    let trajectory = match (&args.trajectory, controller_name.as_str()) {
         (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
         (Some(_), _) => bail!("--trajectory is for --controller replay"),
         (None, "replay") => {
@@ -97,15 +147,19 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         (None, _) => None,
     };
-    let controller_options = ControllerOptions { trajectory, ..ControllerOptions::default() };
-    let mut controller = twin_core::control::by_name_with(&args.controller, &robot.model, &controller_options)?;
+    let walk = scenario.as_ref().map(|s| s.walk.clone()).unwrap_or_default();
+    let controller_options = ControllerOptions { trajectory, walk, ..ControllerOptions::default() };
+    let mut controller = twin_core::control::by_name_with(&controller_name, &robot.model, &controller_options)?;
+    // A scenario's pushes and its gait metrics and checks.
+    let mut pushes = scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
+    let mut check = scenario.as_ref().map(|s| s.check(&robot.model)).transpose()?;
     let options = RecordOptions {
         mcap: args.record.clone(),
         rrd: args.rerun.clone(),
         connect: args.connect.clone(),
         state_rate_hz: args.rate,
         tf_rate_hz: args.tf_rate,
-        seed: args.seed,
+        seed: scenario.as_ref().map_or(args.seed, |s| if args.seed != 0 { args.seed } else { s.seed }),
         writer: WriterOptions {
             compression: match args.compression {
                 CompressionKind::Zstd => Compression::Zstd(1),
@@ -136,13 +190,18 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             b.set_position((f * 1000.0) as u64);
         }
     };
-    let report = sim::simulate(
+    let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
+    let report = sim::simulate_with(
         &robot,
         controller.as_mut(),
-        &SimOptions { duration_secs: args.duration },
+        &SimOptions { duration_secs: duration },
         recording.as_mut(),
         &mut progress,
+        &mut disturbances,
+        &mut observers,
     )?;
+    drop(observers);
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -195,6 +254,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if let Some((file, bytes)) = &s.rrd {
             writeln!(out, "{}: {bytes} bytes", file.display())?;
+        }
+    }
+    if let (Some(c), Some(s)) = (&check, &scenario) {
+        writeln!(out, "{}", c.metrics.summary())?;
+        let verdicts = c.verdicts();
+        if !verdicts.is_empty() {
+            writeln!(out, "checks of {}:", s.path.display())?;
+            for v in &verdicts {
+                writeln!(out, "  {v}")?;
+            }
+        }
+        let failed = verdicts.iter().filter(|v| !v.passed).count();
+        if failed > 0 {
+            bail!("{failed} of {} checks of {} failed", verdicts.len(), s.path.display());
         }
     }
     Ok(())

@@ -214,6 +214,27 @@ pub enum Error {
     /// Options that don't fit together (e.g. the replay controller without a trajectory).
     #[error("{0}")]
     Options(String),
+
+    /// The walking controller can't drive this model with these options (a leg or foot not
+    /// found, a step the legs can't reach, an option out of range).
+    #[error("walking controller: {message}")]
+    Walk {
+        /// What is wrong and what to do.
+        message: String,
+    },
+
+    /// A scenario file is invalid: the file, the line and key when known, what is wrong.
+    #[error("{}{}{}: {message}", path.display(), line.map_or_else(String::new, |l| format!(":{l}")), key.as_deref().map_or_else(String::new, |k| format!(": `{k}`")))]
+    Scenario {
+        /// The scenario file.
+        path: PathBuf,
+        /// 1-based line of the offending key or value, when known.
+        line: Option<usize>,
+        /// Dotted key (e.g. `controller.params.step_period`), when known.
+        key: Option<String>,
+        /// What is wrong.
+        message: String,
+    },
 }
 
 /// `Result` with [`Error`].

@@ -1,7 +1,8 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
 //! URDF/Gazebo → MJCF converter ([`convert`]), the robot loaded once ([`robot`]), the one
 //! rollout engine ([`engine`]), the step-by-step model validation ([`check`]), controllers
-//! ([`control`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
+//! ([`control`]), model-based walking with gait metrics ([`walk`]), scenario files
+//! ([`scenario`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
 //! simulation runs with recording ([`sim`]) and, with the cargo feature `rerun`, rerun
 //! recordings (`viz`).
 //!
@@ -35,10 +36,12 @@ pub mod log;
 #[allow(unsafe_code)]
 pub mod mj;
 pub mod robot;
+pub mod scenario;
 pub mod sim;
 pub mod topics;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;
+pub mod walk;
 
 pub use error::{Error, Result};

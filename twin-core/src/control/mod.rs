@@ -157,7 +157,7 @@ pub trait Controller: Send {
 
 /// Names accepted by [`by_name`]: the one controller registry of twin (`twin sim`,
 /// `twin randomize`).
-pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "replay"];
+pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "replay", "walk"];
 
 /// What [`by_name`] may need beyond the model.
 #[derive(Debug, Clone, Default)]
@@ -166,15 +166,18 @@ pub struct ControllerOptions {
     pub gains: PdHoldOptions,
     /// The trajectory `replay` tracks (required for it). (default: none)
     pub trajectory: Option<JointTrajectory>,
+    /// Parameters of `walk` (velocity command, gait, gains). (default: [`crate::walk::WalkOptions::default`])
+    pub walk: crate::walk::WalkOptions,
 }
 
 /// The controller called `name` for `model`: `pd-hold` (alias `hold`) holds the nominal pose,
-/// `passive` applies nothing, `replay` tracks `options.trajectory`.
+/// `passive` applies nothing, `replay` tracks `options.trajectory`, `walk` walks (or stands and
+/// balances) with `options.walk` ([`crate::walk::Walker`]).
 ///
 /// # Errors
 /// [`Error::NotFound`] (kind `controller`) for an unknown name; [`Error::Options`] for
 /// `replay` without a trajectory, or a trajectory given to another controller; as
-/// [`Replay::new`].
+/// [`Replay::new`] and [`crate::walk::Walker::new`].
 pub fn by_name_with(name: &str, model: &Model, options: &ControllerOptions) -> Result<Box<dyn Controller>> {
     let canonical = if name == "hold" { "pd-hold" } else { name };
     if canonical != "replay" && options.trajectory.is_some() {
@@ -192,7 +195,11 @@ pub fn by_name_with(name: &str, model: &Model, options: &ControllerOptions) -> R
             let replay_options = ReplayOptions { gains: options.gains.clone() };
             Ok(Box::new(Replay::new(model, trajectory, replay_options)?))
         }
-        _ => Err(Error::NotFound { kind: "controller (available: pd-hold, passive, replay)", name: name.to_string() }),
+        "walk" => Ok(Box::new(crate::walk::Walker::new(model, options.walk.clone())?)),
+        _ => Err(Error::NotFound {
+            kind: "controller (available: pd-hold, passive, replay, walk)",
+            name: name.to_string(),
+        }),
     }
 }
 

@@ -78,3 +78,45 @@ impl Disturbance for Push {
         }
     }
 }
+
+/// A constant force (world frame, N) on one body during a time window: a scripted push, as
+/// scenario files give them. The body's `xfrc_applied` force is written while the window is
+/// open and cleared on the step after it closes.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TimedForce {
+    /// Start, simulated seconds.
+    pub start_secs: f64,
+    /// Duration, seconds.
+    pub duration_secs: f64,
+    /// Force, world frame, N.
+    pub force: [f64; 3],
+    /// The body pushed.
+    pub body: usize,
+    active: bool,
+}
+
+impl TimedForce {
+    /// `force` on `body` from `start_secs` for `duration_secs`.
+    pub fn new(start_secs: f64, duration_secs: f64, force: [f64; 3], body: usize) -> TimedForce {
+        TimedForce { start_secs, duration_secs, force, body, active: false }
+    }
+}
+
+impl Disturbance for TimedForce {
+    fn start(&mut self, _model: &Model, _data: &Data) -> Result<()> {
+        self.active = false;
+        Ok(())
+    }
+
+    fn apply(&mut self, data: &mut Data, _rng: &mut ChaCha8Rng) {
+        let t = data.time_secs();
+        let on = t >= self.start_secs && t < self.start_secs + self.duration_secs;
+        if on || self.active {
+            let f = &mut data.xfrc_applied_mut()[self.body];
+            for (fk, pk) in f.iter_mut().zip(self.force) {
+                *fk = if on { pk } else { 0.0 };
+            }
+        }
+        self.active = on;
+    }
+}

@@ -3,13 +3,17 @@
 //!
 //! Each step runs the same fixed phases:
 //!
-//! 1. **sensors**: the observation the controller gets: the state and `sensordata` as the last
-//!    physics step left them, corrupted by the [`SensorModel`] (white noise, bias) and delayed
-//!    by its latency (a ring of past observations);
+//! 1. **sensors**: the observation the controller gets: the state and `sensordata` of this
+//!    instant (`mj_step1` computes positions, velocities and position/velocity sensors before
+//!    the controller runs, so an IMU's orientation and rate match `qpos`), corrupted by the
+//!    [`SensorModel`] (white noise, bias) and delayed by its latency (a ring of past
+//!    observations). Acceleration-stage sensors (accelerometers, force sensors) hold the
+//!    previous step's values. Models on the RK4 integrator, which can't be split, step with
+//!    `mj_step` and their controllers see all sensors one step old;
 //! 2. **controller**: [`Controller::compute`] writes the command, which is scaled
 //!    ([`Episode::command_scale`]), checked for saturation and applied ([`Actuation::apply`]);
 //! 3. **disturbances**: each [`Disturbance`] acts on the state (pushes, pinned bases);
-//! 4. **physics**: one `mj_step`;
+//! 4. **physics**: the rest of the step (`mj_step2`; `mj_step` on RK4);
 //! 5. **observers**: each [`Observer`] sees the step ([`StepView`]) in order and may end the
 //!    rollout ([`Flow`]). Fall and divergence detection, metrics ([`Metric`]), verdicts
 //!    ([`Check`]) and recorders are observers.
@@ -339,10 +343,25 @@ impl Engine {
         }
 
         let dt = model.timestep_secs();
+        // RK4 can't be split into mj_step1/mj_step2 (mj_step2 would integrate with Euler).
+        let split = model.raw().opt.integrator != mujoco_sys::mjtIntegrator_mjINT_RK4 as i32;
         let mut outcome = Outcome { steps: 0, sim_secs: 0.0, ended_by: None, physics_error: None };
         let mut oldest = 0usize;
         for step in 0..episode.steps {
-            // 1–2. The controller sees the observation captured `latency_steps` steps ago.
+            // 1. Positions, velocities and sensors of this instant (the initial state's are
+            // current already).
+            if split && step > 0 {
+                if let Err(e) = data.step1() {
+                    outcome.physics_error = Some(e);
+                    break;
+                }
+                if !exact {
+                    // The newest observation replaces the oldest; the next oldest is one further.
+                    capture(data, &mut self.history, oldest, rng);
+                    oldest = (oldest + 1) % depth;
+                }
+            }
+            // 2. The controller sees the observation captured `latency_steps` steps ago.
             let time_secs = data.time_secs();
             if exact {
                 controller.compute(model, &Observation::of(data), &mut self.command);
@@ -360,13 +379,24 @@ impl Engine {
             }
             actuation.apply(data, &self.command);
             // 3.
+            self.qpos_t.copy_from_slice(data.qpos());
+            self.qvel_t.copy_from_slice(data.qvel());
             for d in disturbances.iter_mut() {
                 d.apply(data, rng);
             }
-            // 4.
-            self.qpos_t.copy_from_slice(data.qpos());
-            self.qvel_t.copy_from_slice(data.qvel());
-            if let Err(e) = data.step() {
+            // 4. A disturbance that moved the state (a kick of the base's velocity, a pinned base)
+            // makes the physics start from the moved state: its position and velocity stages
+            // run again, as `mj_step` would run them.
+            if data.qpos() != self.qpos_t.as_slice() || data.qvel() != self.qvel_t.as_slice() {
+                self.qpos_t.copy_from_slice(data.qpos());
+                self.qvel_t.copy_from_slice(data.qvel());
+                if split && let Err(e) = data.step1() {
+                    outcome.physics_error = Some(e);
+                    break;
+                }
+            }
+            let stepped = if split { data.step2() } else { data.step() };
+            if let Err(e) = stepped {
                 outcome.physics_error = Some(e);
                 break;
             }
@@ -403,7 +433,7 @@ impl Engine {
             if end {
                 break;
             }
-            if !exact {
+            if !split && !exact {
                 // The newest observation replaces the oldest; the next oldest is one further.
                 capture(data, &mut self.history, oldest, rng);
                 oldest = (oldest + 1) % depth;

@@ -231,6 +231,12 @@ model_arrays! {
     body_ipos: f64 x 3 = nbody;
     /// Orientation of the inertial frame in the body frame, quaternion w x y z (len `nbody`).
     body_iquat: f64 x 4 = nbody;
+    /// Position of each body's frame in its parent's frame, metres (len `nbody`).
+    body_pos: f64 x 3 = nbody;
+    /// Orientation of each body's frame in its parent's frame, quaternion w x y z (len `nbody`).
+    body_quat: f64 x 4 = nbody;
+    /// Anchor of each joint in its body's frame, metres (len `njnt`).
+    jnt_pos: f64 x 3 = njnt;
     /// Mass of each body's subtree, kg (len `nbody`; derived, set by `mj_setConst`).
     body_subtreemass: f64 = nbody;
     /// First joint of each body, -1 if none (len `nbody`).

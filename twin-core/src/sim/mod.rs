@@ -22,7 +22,7 @@ pub use record::{RecordOptions, RecordSummary, Recording, StepSample};
 pub use crate::robot::Robot;
 
 use crate::control::Controller;
-use crate::engine::{Engine, Episode, Flow, Observer, StepView, observers::Divergence};
+use crate::engine::{Disturbance, Engine, Episode, Flow, Observer, StepView, observers::Divergence};
 use crate::error::{Error, Result};
 use crate::mj::Model;
 use rand::SeedableRng;
@@ -120,17 +120,36 @@ pub fn simulate(
     recording: Option<&mut Recording>,
     progress: &mut dyn FnMut(f64),
 ) -> Result<SimReport> {
+    simulate_with(robot, controller, options, recording, progress, &mut [], &mut [])
+}
+
+/// [`simulate`] with extra `disturbances` (e.g. a scenario's pushes) and `observers` (e.g.
+/// gait metrics, checks), which see every step after the divergence check and the recording.
+///
+/// # Errors
+/// As [`simulate`]; errors of the disturbances and observers.
+pub fn simulate_with(
+    robot: &Robot,
+    controller: &mut dyn Controller,
+    options: &SimOptions,
+    recording: Option<&mut Recording>,
+    progress: &mut dyn FnMut(f64),
+    disturbances: &mut [&mut dyn Disturbance],
+    observers: &mut [&mut dyn Observer],
+) -> Result<SimReport> {
     let model = &robot.model;
     let steps = steps_for(model, options.duration_secs);
     let episode = Episode { steps, ..Episode::default() };
     let mut divergence = Divergence::default();
     let mut timing = Timing { recording, record_secs: 0.0, report_every: (steps / 100).max(1), steps, progress };
-    // No sensor noise or disturbances here: the stream is never drawn from.
+    // No sensor noise or random disturbances here: the stream is not drawn from.
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
     let cpu_started = thread_cpu_secs();
     let started = std::time::Instant::now();
-    let outcome =
-        Engine::new().run(model, &episode, controller, &mut [], &mut [&mut divergence, &mut timing], &mut rng)?;
+    let mut all: Vec<&mut dyn Observer> = vec![&mut divergence, &mut timing];
+    all.extend(observers.iter_mut().map(|o| &mut **o as &mut dyn Observer));
+    let outcome = Engine::new().run(model, &episode, controller, disturbances, &mut all, &mut rng)?;
+    drop(all);
     let wall_secs = started.elapsed().as_secs_f64();
     let loop_cpu_secs = cpu_started.zip(thread_cpu_secs()).map(|(a, b)| b - a);
     if let Some(e) = outcome.physics_error {

@@ -1,0 +1,73 @@
+//! `twin sim --controller walk` and `twin sim --scenario FILE`: gait metrics, PASS/FAIL checks
+//! with numbers, and scenario errors that name the file, the line and the key.
+
+use super::common::{run, write};
+
+#[test]
+fn walk_prints_gait_metrics_and_failed_checks_fail_the_command() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = super::common::repo_root().join("models/humanoid.urdf");
+    let file = write(
+        dir.path(),
+        "short.toml",
+        &format!(
+            "model = {:?}\nduration = 3.0\n[walk]\nvx = 0.3\n[checks]\nfalls = 0\nmin_forward = 5.0\n",
+            model.display().to_string()
+        ),
+    );
+    let (ok, out, err) = run(&["sim", "--scenario", file.to_str().unwrap()]);
+    assert!(!ok, "min_forward 5 m in 3 s can't pass:\n{out}");
+    assert!(out.contains("gait metrics over 3.00 s") && out.contains("steps"), "{out}");
+    assert!(out.contains("PASS falls") && out.contains("FAIL min_forward"), "{out}");
+    assert!(err.contains("1 of 2 checks") && err.contains("short.toml"), "{err}");
+}
+
+#[test]
+fn scenario_errors_name_file_line_and_key() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(dir.path(), "bad.toml", "duration = 5.0\n[walk]\nvx = 0.3\nstep_lenght = 0.2\n");
+    let (ok, _, err) = run(&["sim", "--scenario", file.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(err.contains("bad.toml:4: `step_lenght`") && err.contains("unknown field"), "{err}");
+    let file = write(dir.path(), "far.toml", "duration = 5.0\n[walk]\nvx = 0.9\n");
+    let (ok, _, err) = run(&["sim", "--scenario", file.to_str().unwrap()]);
+    assert!(!ok);
+    assert!(err.contains("far.toml:3: `walk.vx`") && err.contains("max_step_length"), "{err}");
+}
+
+/// `twin randomize --scenario`: the scenario's model, duration and walker drive the batch, and
+/// its checks decide each episode's success.
+#[test]
+fn randomize_scenario_checks_decide_success() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = super::common::repo_root().join("models/humanoid.urdf");
+    let scenario = |name: &str, checks: &str| {
+        write(
+            dir.path(),
+            name,
+            &format!("model = {:?}\nduration = 1.5\n[walk]\nvx = 0.0\n[checks]\n{checks}", model.display().to_string()),
+        )
+    };
+    let stand = scenario("stand.toml", "falls = 0\nmax_distance = 0.5\n");
+    let out_dir = dir.path().join("out");
+    let (ok, out, err) = run(&[
+        "randomize",
+        "--scenario",
+        stand.to_str().unwrap(),
+        "--episodes",
+        "2",
+        "--out",
+        out_dir.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}\n{err}");
+    assert!(out.contains("success: 2/2"), "standing still for 1.5 s passes:\n{out}");
+    let csv = std::fs::read_to_string(out_dir.join("episodes.csv")).unwrap();
+    assert_eq!(csv.matches("scenario=PASS").count(), 2, "{csv}");
+    let summary = std::fs::read_to_string(out_dir.join("summary.json")).unwrap();
+    assert!(summary.contains("\"controller\": \"walk\"") && summary.contains("\"duration_secs\": 1.5"), "{summary}");
+    // Standing can't cover 5 m: every episode fails its check, though none falls.
+    let far = scenario("far.toml", "min_forward = 5.0\n");
+    let (ok, out, err) = run(&["randomize", "--scenario", far.to_str().unwrap(), "--episodes", "2"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("success: 0/2") && out.contains("fell 0"), "{out}");
+}

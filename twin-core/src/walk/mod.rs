@@ -1,0 +1,974 @@
+//! Model-based walking: a [`Walker`] controller and [`GaitMetrics`].
+//!
+//! The pipeline, each control tick:
+//! 1. **State**: forward kinematics of the observed `qpos` (the model's own tree, [`kin`]) gives
+//!    the centre of mass; its velocity is a filtered difference; the divergent component of
+//!    motion (DCM, capture point) is `ξ = c + ċ/ω`, `ω = √(g/h)`. Torso tilt and rate come from
+//!    the IMU (framequat + gyro), else from the floating base.
+//! 2. **Footsteps** ([`plan`]): from the velocity command `(vx, vy, yaw_rate)`, each step lands
+//!    the swing foot half a step width beside a centre path advanced by the command. During
+//!    single support the landing spot moves by the predicted DCM error at touchdown (stepping
+//!    to recover a push). With a zero command the walker stands, and starts stepping in place
+//!    when the DCM error exceeds `recovery_threshold`.
+//! 3. **CoM reference** ([`preview`]): LIPM ZMP preview control (Kajita) over `preview_horizon`.
+//! 4. **DCM feedback**: the commanded ZMP is `p_ref + (1 + k/ω)(ξ − ξ_ref)`, realised by the
+//!    contact forces of the feed-forward torque; the CoM command is offset by
+//!    `−dcm_com_gain·(ξ − ξ_ref)`.
+//! 5. **Leg IK**: the pelvis is placed to put the CoM at its command (offset from the previous
+//!    tick's commanded configuration), tilted against the IMU's tilt and rate; each foot's
+//!    target (planted or on its swing trajectory) goes through damped-least-squares IK.
+//! 6. **Torques**: joint PD (gains by the project's PD rule, `kp = effort / saturation error`,
+//!    softened on a swinging leg so that `√(kp/I)·dt` stays small) plus the static torque that
+//!    holds every subtree against gravity and the planned contact forces.
+//!
+//! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
+//! the model; [`kin::BodyNames`] overrides them.
+
+pub mod kin;
+pub mod metrics;
+pub mod plan;
+pub mod preview;
+
+pub use kin::{BodyNames, Side};
+pub use metrics::{GaitMetrics, GaitSummary, GaitTargets};
+pub use plan::Command;
+
+use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, nominal_pose};
+use crate::error::{Error, Result};
+use crate::mj::{JointType, Model};
+use kin::{Body, Frames, LegIk, Tree};
+use nalgebra::{Rotation2, UnitQuaternion, Vector2, Vector3};
+use plan::{Foothold, Gait, Schedule, Step, swing_profile, wrap};
+use preview::{PreviewAxis, PreviewGains};
+
+/// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
+/// ([`crate::convert::ConvertOptions::armature`]) unless a scenario sets another: without it the
+/// light distal links (feet) of a URDF make stiff explicit PD unstable (`kd·dt/I` too large),
+/// and the shipped humanoid falls within 2 s; real actuators of this class have 0.007–0.025.
+pub const WALK_ARMATURE: f64 = 0.01;
+
+/// Options of the [`Walker`]. Every field has a default; scenario files set them by name.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[serde(default, deny_unknown_fields)]
+pub struct WalkOptions {
+    /// Forward velocity command, m/s (default: 0.0: stand and balance).
+    pub vx: f64,
+    /// Leftward velocity command, m/s (default: 0.0).
+    pub vy: f64,
+    /// Yaw-rate command, rad/s (default: 0.0).
+    pub yaw_rate: f64,
+    /// Step duration (double + single support), s (default: 0.6).
+    pub step_period: f64,
+    /// Fraction of a step in double support (default: 0.2).
+    pub double_support: f64,
+    /// Lateral distance between the soles' centres, m (default: 0.18, the hip spacing).
+    pub step_width: f64,
+    /// Centre-of-mass height while walking, m (default: 0.62: knees bent, away from the
+    /// stretched-leg singularity of the shipped humanoid, whose standing CoM is at 0.68 m).
+    pub com_height: f64,
+    /// Swing-foot clearance at mid-swing, m (default: 0.05).
+    pub foot_clearance: f64,
+    /// Longest forward advance per step, m (default: 0.2); a command needing more is refused.
+    pub max_step_length: f64,
+    /// Longest sideways advance per step, m (default: 0.1).
+    pub max_step_lateral: f64,
+    /// Largest yaw change per step, rad (default: 0.3).
+    pub max_step_yaw: f64,
+    /// Time from the start to crouch to `com_height` before stepping, s (default: 1.0).
+    pub settle_secs: f64,
+    /// Double support of the first step from standing, s (default: 0.3).
+    pub start_double_support: f64,
+    /// Preview horizon of the ZMP preview control, s (default: 1.6).
+    pub preview_horizon: f64,
+    /// Preview control's ZMP-error weight (default: 1.0).
+    pub preview_qe: f64,
+    /// Preview control's jerk weight (default: 1e-6).
+    pub preview_r: f64,
+    /// DCM feedback gain `k` on the commanded ZMP, 1/s (default: 2.0).
+    pub dcm_zmp_gain: f64,
+    /// DCM feedback on the CoM command, m per m of DCM error (default: 0.3).
+    pub dcm_com_gain: f64,
+    /// Landing-spot correction per metre of predicted DCM error at touchdown (default: 1.0).
+    pub step_adjust_gain: f64,
+    /// Largest landing-spot correction, m (default: 0.15).
+    pub max_step_adjust: f64,
+    /// DCM error that makes a standing walker step, m (default: 0.03).
+    pub recovery_threshold: f64,
+    /// Torso tilt feedback: pelvis counter-rotation per radian of tilt (default: 0.5).
+    pub tilt_gain: f64,
+    /// Torso rate feedback: pelvis counter-rotation per rad/s of tilt rate, s (default: 0.05).
+    pub tilt_rate_gain: f64,
+    /// PD saturation error of the leg joints, rad (`kp = effort / this`) (default: 0.1).
+    pub leg_saturation_error: f64,
+    /// PD saturation error of the other joints, rad (default: 0.25, as `pd-hold`).
+    pub saturation_error: f64,
+    /// PD damping ratio (default: 1.0).
+    pub damping_ratio: f64,
+    /// Bound on `√(kp/I)·dt` of a swinging leg's joints, `I` the inertia they move (default:
+    /// 0.3).
+    pub swing_stiffness: f64,
+    /// Damped-least-squares iterations of the leg IK per tick (default: 3).
+    pub ik_iterations: usize,
+    /// Body and sensor names overriding what the walker finds.
+    pub bodies: BodyNames,
+}
+
+impl Default for WalkOptions {
+    fn default() -> Self {
+        WalkOptions {
+            vx: 0.0,
+            vy: 0.0,
+            yaw_rate: 0.0,
+            step_period: 0.6,
+            double_support: 0.2,
+            step_width: 0.18,
+            com_height: 0.62,
+            foot_clearance: 0.05,
+            max_step_length: 0.2,
+            max_step_lateral: 0.1,
+            max_step_yaw: 0.3,
+            settle_secs: 1.0,
+            start_double_support: 0.3,
+            preview_horizon: 1.6,
+            preview_qe: 1.0,
+            preview_r: 1e-6,
+            dcm_zmp_gain: 2.0,
+            dcm_com_gain: 0.3,
+            step_adjust_gain: 1.0,
+            max_step_adjust: 0.15,
+            recovery_threshold: 0.03,
+            tilt_gain: 0.5,
+            tilt_rate_gain: 0.05,
+            leg_saturation_error: 0.1,
+            saturation_error: 0.25,
+            damping_ratio: 1.0,
+            swing_stiffness: 0.3,
+            ik_iterations: 3,
+            bodies: BodyNames::default(),
+        }
+    }
+}
+
+impl WalkOptions {
+    /// The velocity command.
+    pub fn command(&self) -> Command {
+        Command { vx: self.vx, vy: self.vy, yaw_rate: self.yaw_rate }
+    }
+
+    fn gait(&self) -> Gait {
+        Gait {
+            period: self.step_period,
+            double_support: self.double_support,
+            width: self.step_width,
+            max_step_length: self.max_step_length,
+            max_step_lateral: self.max_step_lateral,
+            max_step_yaw: self.max_step_yaw,
+        }
+    }
+
+    /// Checks every option's range; the error names the option (the field name).
+    ///
+    /// # Errors
+    /// `(field, message)` for the first option out of range.
+    pub fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
+        let positive: [(&'static str, f64); 8] = [
+            ("step_period", self.step_period),
+            ("step_width", self.step_width),
+            ("com_height", self.com_height),
+            ("max_step_length", self.max_step_length),
+            ("preview_horizon", self.preview_horizon),
+            ("preview_qe", self.preview_qe),
+            ("preview_r", self.preview_r),
+            ("damping_ratio", self.damping_ratio),
+        ];
+        for (name, v) in positive {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err((name, format!("must be a positive number (got {v})")));
+            }
+        }
+        let non_negative: [(&'static str, f64); 14] = [
+            ("foot_clearance", self.foot_clearance),
+            ("max_step_lateral", self.max_step_lateral),
+            ("max_step_yaw", self.max_step_yaw),
+            ("settle_secs", self.settle_secs),
+            ("start_double_support", self.start_double_support),
+            ("dcm_zmp_gain", self.dcm_zmp_gain),
+            ("dcm_com_gain", self.dcm_com_gain),
+            ("step_adjust_gain", self.step_adjust_gain),
+            ("max_step_adjust", self.max_step_adjust),
+            ("recovery_threshold", self.recovery_threshold),
+            ("tilt_gain", self.tilt_gain),
+            ("tilt_rate_gain", self.tilt_rate_gain),
+            ("swing_stiffness", self.swing_stiffness),
+            ("leg_saturation_error", self.leg_saturation_error),
+        ];
+        for (name, v) in non_negative {
+            if !(v >= 0.0 && v.is_finite()) {
+                return Err((name, format!("must be a non-negative number (got {v})")));
+            }
+        }
+        if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
+            return Err(("saturation_error", "saturation errors must be positive".into()));
+        }
+        if !(0.0..0.9).contains(&self.double_support) {
+            return Err(("double_support", format!("must be in [0, 0.9) (got {})", self.double_support)));
+        }
+        for (name, v) in [("vx", self.vx), ("vy", self.vy), ("yaw_rate", self.yaw_rate)] {
+            if !v.is_finite() {
+                return Err((name, format!("must be a finite number (got {v})")));
+            }
+        }
+        let step = self.vx.abs() * self.step_period;
+        if step > self.max_step_length + 1e-12 {
+            return Err((
+                "vx",
+                format!(
+                    "{} m/s with step_period {} s needs {step:.3} m steps, longer than max_step_length {} m: \
+                     lower vx or lengthen max_step_length (if the legs reach it)",
+                    self.vx, self.step_period, self.max_step_length
+                ),
+            ));
+        }
+        if self.vy.abs() * self.step_period > self.max_step_lateral + 1e-12 {
+            return Err(("vy", format!("needs steps wider than max_step_lateral {} m", self.max_step_lateral)));
+        }
+        if self.yaw_rate.abs() * self.step_period > self.max_step_yaw + 1e-12 {
+            return Err(("yaw_rate", format!("needs turns per step beyond max_step_yaw {} rad", self.max_step_yaw)));
+        }
+        if self.ik_iterations == 0 {
+            return Err(("ik_iterations", "must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+/// One PD loop of the walker.
+#[derive(Debug, Clone)]
+struct JointLoop {
+    command: usize,
+    joint: usize,
+    qpos_adr: usize,
+    dof: usize,
+    gear: f64,
+    limits: [f64; 2],
+    kp: f64,
+    kd: f64,
+    /// Gains while its leg swings.
+    kp_swing: f64,
+    kd_swing: f64,
+    /// (leg index, index in the leg chain).
+    leg: Option<(usize, usize)>,
+}
+
+/// Standing or stepping.
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum Mode {
+    Standing,
+    Walking(Step),
+}
+
+/// What the walker planned and measured at its last tick (for recordings and tests).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct WalkerState {
+    /// Reference CoM (preview control), world, m.
+    pub com_ref: [f64; 3],
+    /// Measured CoM, world, m.
+    pub com: [f64; 3],
+    /// Reference ZMP, world x y, m.
+    pub zmp_ref: [f64; 2],
+    /// Commanded ZMP (with DCM feedback), world x y, m.
+    pub zmp_cmd: [f64; 2],
+    /// Reference DCM, world x y, m.
+    pub dcm_ref: [f64; 2],
+    /// Measured DCM, world x y, m.
+    pub dcm: [f64; 2],
+    /// Planned footholds ahead (side, x, y, yaw), the current landing first.
+    pub footholds: Vec<(Side, [f64; 2], f64)>,
+    /// Steps started so far.
+    pub steps: u64,
+    /// Whether it is stepping.
+    pub walking: bool,
+    /// Worst leg-IK position error this tick, m.
+    pub ik_error_m: f64,
+}
+
+/// The walking controller (`walk`): see the [module docs](self).
+#[derive(Debug, Clone)]
+pub struct Walker {
+    options: WalkOptions,
+    tree: Tree,
+    body: Body,
+    ik: [LegIk; 2],
+    loops: Vec<JointLoop>,
+    frames: Frames,
+    desired: Frames,
+    nominal: Vec<f64>,
+    q_des: Vec<f64>,
+    gravity: Vector3<f64>,
+    omega: f64,
+    dt: f64,
+    preview: PreviewGains,
+    preview_ratio: u64,
+    axes: [PreviewAxis; 2],
+    zmp_buf: [Vec<f64>; 2],
+    schedule: Schedule,
+    mode: Mode,
+    command: Command,
+    t0: f64,
+    tick: u64,
+    com_prev: Option<Vector3<f64>>,
+    com_vel: Vector3<f64>,
+    /// CoM minus pelvis in the pelvis's yaw frame, from the last commanded configuration.
+    pelvis_from_com: Vector3<f64>,
+    pelvis_z0: f64,
+    pelvis_z: f64,
+    sole_z: f64,
+    state: WalkerState,
+}
+
+impl Walker {
+    /// A walker for `model` with `options`.
+    ///
+    /// # Errors
+    /// [`Error::Walk`] when an option is out of range, the model has no legs the walker can
+    /// find, or the legs can't reach `max_step_length` at `com_height`.
+    pub fn new(model: &Model, options: WalkOptions) -> Result<Walker> {
+        options.validate().map_err(|(key, m)| Error::Walk { message: format!("option `{key}` {m}") })?;
+        let tree = Tree::new(model);
+        let home = nominal_pose(model);
+        let body = Body::find(model, &tree, &home, &options.bodies)?;
+        let ik = [LegIk::new(model, &body.legs[0]), LegIk::new(model, &body.legs[1])];
+        let g = -model.gravity()[2];
+        if g.is_nan() || g <= 0.0 {
+            return Err(Error::Walk {
+                message: format!("gravity must point down (−z); the model's is {:?}", model.gravity()),
+            });
+        }
+        let dt = model.timestep_secs();
+        let preview_ratio = ((0.005 / dt).round() as u64).max(1);
+        let preview_dt = dt * preview_ratio as f64;
+        let horizon = (options.preview_horizon / preview_dt).ceil() as usize;
+        let preview =
+            PreviewGains::new(preview_dt, options.com_height, g, options.preview_qe, options.preview_r, horizon);
+        let mut walker = Walker {
+            tree: tree.clone(),
+            frames: tree.frames(),
+            desired: tree.frames(),
+            ik,
+            loops: Vec::new(),
+            nominal: home.clone(),
+            q_des: home,
+            gravity: Vector3::new(0.0, 0.0, -g),
+            omega: (g / options.com_height).sqrt(),
+            dt,
+            preview,
+            preview_ratio,
+            axes: [PreviewAxis::default(); 2],
+            zmp_buf: [vec![0.0; horizon + 1], vec![0.0; horizon + 1]],
+            schedule: Schedule::default(),
+            mode: Mode::Standing,
+            command: options.command(),
+            t0: 0.0,
+            tick: 0,
+            com_prev: None,
+            com_vel: Vector3::zeros(),
+            pelvis_from_com: Vector3::zeros(),
+            pelvis_z0: 0.0,
+            pelvis_z: 0.0,
+            sole_z: 0.0,
+            state: WalkerState::default(),
+            body,
+            options,
+        };
+        walker.check_reach()?;
+        walker.build_loops(model);
+        Ok(walker)
+    }
+
+    /// The options.
+    pub fn options(&self) -> &WalkOptions {
+        &self.options
+    }
+
+    /// What it planned and measured at the last tick.
+    pub fn state(&self) -> &WalkerState {
+        &self.state
+    }
+
+    /// The foot bodies found (left, right) and the pelvis.
+    pub fn feet(&self) -> ([usize; 2], usize) {
+        ([self.body.legs[0].foot, self.body.legs[1].foot], self.body.pelvis)
+    }
+
+    /// Sets a new velocity command (takes effect at the next step).
+    pub fn set_command(&mut self, command: Command) {
+        self.command = command;
+    }
+
+    /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
+    /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
+    /// wide), both legs' IK must converge.
+    fn check_reach(&self) -> Result<()> {
+        let home = self.nominal.clone();
+        let mut frames = self.tree.frames();
+        self.tree.forward(&home, &mut frames);
+        let pelvis = self.body.pelvis;
+        let com = frames.com();
+        let pelvis_pos = frames.xpos[pelvis];
+        let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
+        let sole_z = self.sole_world(&frames, 0).z;
+        let o = &self.options;
+        let half_len = o.max_step_length / 2.0;
+        let half_width = (o.step_width + o.max_step_lateral) / 2.0;
+        let offset_x = pelvis_pos.x - com.x;
+        for front in 0..2 {
+            for leg in 0..2 {
+                let x = if leg == front { half_len } else { -half_len };
+                let y = self.body.legs[leg].side.sign() * half_width;
+                let sole = Vector3::new(com.x + x, com.y + y, sole_z);
+                let rot = self.body.legs[leg].foot_rot_home;
+                let foot = sole - rot * self.body.legs[leg].sole_in_foot;
+                let target = (foot - Vector3::new(com.x + offset_x, com.y, pelvis_z), rot);
+                let mut q: Vec<f64> = (0..self.ik[leg].len()).map(|k| home[self.ik[leg].qpos_adr(k)]).collect();
+                self.ik[leg].bend_knee(&mut q, 0.5);
+                let r = self.ik[leg].solve(target, &mut q, 200, 1e-3);
+                if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
+                    return Err(Error::Walk {
+                        message: format!(
+                            "the {} leg can't reach a step of max_step_length {} m (width {} m) with the CoM at \
+                             com_height {} m: its foot stays {:.3} m from the target; shorten max_step_length, \
+                             or lower com_height",
+                            match self.body.legs[leg].side {
+                                Side::Left => "left",
+                                Side::Right => "right",
+                            },
+                            o.max_step_length,
+                            o.step_width,
+                            o.com_height,
+                            r.position_error_m
+                        ),
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// World sole centre of leg `leg` at `frames`.
+    fn sole_world(&self, frames: &Frames, leg: usize) -> Vector3<f64> {
+        let l = &self.body.legs[leg];
+        frames.xpos[l.foot] + frames.xrot[l.foot] * l.sole_in_foot
+    }
+
+    /// Foothold (sole centre x y, heading) of leg `leg` at `frames`.
+    fn foothold_of(&self, frames: &Frames, leg: usize) -> Foothold {
+        let l = &self.body.legs[leg];
+        let p = self.sole_world(frames, leg);
+        let heading = frames.xrot[l.foot] * l.foot_rot_home.inverse();
+        Foothold { side: l.side, pos: Vector2::new(p.x, p.y), yaw: heading.euler_angles().2 }
+    }
+
+    fn build_loops(&mut self, model: &Model) {
+        let o = &self.options;
+        let pd_legs = PdHold::new(
+            model,
+            PdHoldOptions {
+                saturation_error: o.leg_saturation_error,
+                damping_ratio: o.damping_ratio,
+                ..Default::default()
+            },
+        )
+        .gains();
+        let pd_rest = PdHold::new(
+            model,
+            PdHoldOptions {
+                saturation_error: o.saturation_error,
+                damping_ratio: o.damping_ratio,
+                ..Default::default()
+            },
+        )
+        .gains();
+        let mut frames = self.tree.frames();
+        self.tree.forward(&self.nominal, &mut frames);
+        let actuation = Actuation::of(model);
+        let limits = actuation.limits(model);
+        self.loops.clear();
+        // The same loops, in the same order, as PdHold builds (joint transmissions on hinges).
+        let mut k = 0;
+        let mut push = |command: usize, joint: usize, gear: f64, limits: [f64; 2], loops: &mut Vec<JointLoop>| {
+            let leg = self
+                .ik
+                .iter()
+                .enumerate()
+                .find_map(|(li, _)| self.body.legs[li].joints.iter().position(|&j| j == joint).map(|ci| (li, ci)));
+            let (kp, kd) = if leg.is_some() { pd_legs[k] } else { pd_rest[k] };
+            k += 1;
+            // Joint-space gains (PdHold's are per unit of command).
+            let (kp, kd) = (kp * gear, kd * gear);
+            let inertia = self.tree.subtree_axis_inertia(model, &frames, joint)
+                + model.dof_armature()[model.jnt_dofadr()[joint] as usize];
+            let kp_cap = (o.swing_stiffness / self.dt).powi(2) * inertia;
+            let kp_swing = kp.min(kp_cap);
+            let kd_swing = (2.0 * o.damping_ratio * (kp_swing * inertia).sqrt())
+                .min(kd.max(0.0) + 2.0 * (kp_swing * inertia).sqrt());
+            loops.push(JointLoop {
+                command,
+                joint,
+                qpos_adr: model.jnt_qposadr()[joint] as usize,
+                dof: model.jnt_dofadr()[joint] as usize,
+                gear,
+                limits,
+                kp,
+                kd,
+                kp_swing,
+                kd_swing,
+                leg,
+            });
+        };
+        let mut loops = Vec::new();
+        match actuation {
+            Actuation::Ctrl => {
+                for (u, &lim) in limits.iter().enumerate() {
+                    if model.actuator_trntype()[u] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
+                        continue;
+                    }
+                    let joint = model.actuator_trnid()[u][0] as usize;
+                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
+                        continue;
+                    }
+                    let gear = model.actuator_gear()[u][0];
+                    if gear == 0.0 {
+                        continue;
+                    }
+                    push(u, joint, gear, lim, &mut loops);
+                }
+            }
+            Actuation::Qfrc => {
+                for joint in 0..model.njnt() {
+                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
+                        continue;
+                    }
+                    let dof = model.jnt_dofadr()[joint] as usize;
+                    push(dof, joint, 1.0, limits[dof], &mut loops);
+                }
+            }
+        }
+        self.loops = loops;
+    }
+
+    /// Torso roll, pitch (heading frame) and their rates, from the IMU or the base.
+    fn tilt(&self, observation: &Observation<'_>) -> ([f64; 2], [f64; 2]) {
+        let base = self.body.base_qpos;
+        let q = observation.qpos;
+        let (rot, gyro_world) = match &self.body.imu {
+            Some(imu) if imu.quat_adr.is_some() => {
+                let a = imu.quat_adr.unwrap_or(0);
+                let s = observation.sensordata;
+                let site = kin::quat([s[a], s[a + 1], s[a + 2], s[a + 3]]);
+                let g = &s[imu.gyro_adr..imu.gyro_adr + 3];
+                let gyro = site * Vector3::new(g[0], g[1], g[2]);
+                (site * imu.site_rot.inverse(), gyro)
+            }
+            _ => {
+                let r = kin::quat([q[base + 3], q[base + 4], q[base + 5], q[base + 6]]);
+                let d = self.body.base_dof;
+                let w = observation.qvel;
+                (r, r * Vector3::new(w[d + 3], w[d + 4], w[d + 5]))
+            }
+        };
+        let (roll, pitch, yaw) = rot.euler_angles();
+        let rate = Rotation2::new(-yaw) * Vector2::new(gyro_world.x, gyro_world.y);
+        ([roll, pitch], [rate.x, rate.y])
+    }
+
+    /// Replans the future steps from the current one (or the rest point when standing).
+    fn replan(&mut self, t: f64, feet: &[Foothold; 2]) {
+        let gait = self.options.gait();
+        let horizon = self.preview.horizon() as f64 * self.dt * self.preview_ratio as f64;
+        self.schedule.steps.clear();
+        self.schedule.settle_secs = gait.ds_secs().max(0.1);
+        match self.mode {
+            Mode::Standing => {
+                self.schedule.rest = (feet[0].pos + feet[1].pos) / 2.0;
+                if !self.command.is_zero() {
+                    // The first step, where `compute` will start it, so that the preview sees it.
+                    let start = t.max(self.options.settle_secs);
+                    let swing = self.first_swing(None, feet);
+                    let first =
+                        self.first_step(start, feet, swing, self.options.start_double_support, self.schedule.rest);
+                    self.extend(first, t, horizon);
+                }
+            }
+            Mode::Walking(step) => self.extend(step, t, horizon),
+        }
+    }
+
+    /// The schedule from `step` on, covering the preview horizon.
+    fn extend(&mut self, step: Step, t: f64, horizon: f64) {
+        let gait = self.options.gait();
+        self.schedule.steps.push(step);
+        if !self.command.is_zero() {
+            let mut prev = step;
+            let mut center = gait.center_of(&step.swing_to);
+            let mut yaw = step.swing_to.yaw;
+            while prev.end() < t + horizon + gait.period {
+                let (c, y) = gait.next_center(center, yaw, &self.command);
+                let next = Step {
+                    start: prev.end(),
+                    ds: gait.ds_secs(),
+                    ss: gait.period - gait.ds_secs(),
+                    zmp_from: prev.stance.pos,
+                    stance: prev.swing_to,
+                    swing_from: prev.stance,
+                    swing_to: gait.foothold(prev.stance.side, c, y),
+                };
+                (center, yaw) = (c, y);
+                self.schedule.steps.push(next);
+                prev = next;
+            }
+        }
+        let last = self.schedule.steps.last().copied().unwrap_or(step);
+        self.schedule.rest = (last.stance.pos + last.swing_to.pos) / 2.0;
+    }
+
+    /// The first step from standing at `t` with `swing` swinging.
+    fn first_step(&self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) -> Step {
+        let gait = self.options.gait();
+        let stance = feet[swing.other().index()];
+        let (c, y) = gait.next_center(gait.center_of(&stance), stance.yaw, &self.command);
+        Step {
+            start: t,
+            ds,
+            ss: gait.period - gait.ds_secs(),
+            zmp_from,
+            stance,
+            swing_from: feet[swing.index()],
+            swing_to: gait.foothold(swing, c, y),
+        }
+    }
+
+    /// Which foot swings first: toward a push (`push`: the DCM's offset from the rest point),
+    /// else toward the commanded side or turn.
+    fn first_swing(&self, push: Option<Vector2<f64>>, feet: &[Foothold; 2]) -> Side {
+        match push {
+            Some(offset) => {
+                let lateral = Rotation2::new(-(feet[0].yaw + feet[1].yaw) / 2.0) * offset;
+                if lateral.y >= 0.0 { Side::Left } else { Side::Right }
+            }
+            None if self.command.vy < 0.0 || self.command.yaw_rate < 0.0 => Side::Right,
+            None => Side::Left,
+        }
+    }
+
+    /// Starts a step with `swing` swinging from the feet `feet` at `t`.
+    fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
+        let step = self.first_step(t, feet, swing, ds, zmp_from);
+        self.mode = Mode::Walking(step);
+        self.state.steps += 1;
+    }
+}
+
+/// Smoothstep on [0, 1].
+fn smooth(a: f64) -> f64 {
+    let a = a.clamp(0.0, 1.0);
+    a * a * (3.0 - 2.0 * a)
+}
+
+impl Controller for Walker {
+    fn name(&self) -> &'static str {
+        "walk"
+    }
+
+    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
+        // Masses, inertias and gains may differ per episode (randomization): rebuild for `model`.
+        let command = self.command;
+        *self = Walker::new(model, self.options.clone())?;
+        self.command = command;
+        self.t0 = observation.time_secs;
+        self.tree.forward(observation.qpos, &mut self.frames);
+        let com = self.frames.com();
+        self.axes = [PreviewAxis::at(com.x), PreviewAxis::at(com.y)];
+        self.com_prev = None;
+        self.com_vel = Vector3::zeros();
+        let pelvis = self.frames.xpos[self.body.pelvis];
+        let yaw = self.frames.xrot[self.body.pelvis].euler_angles().2;
+        let d = Rotation2::new(-yaw) * Vector2::new(pelvis.x - com.x, pelvis.y - com.y);
+        self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis.z - com.z);
+        self.pelvis_z0 = pelvis.z;
+        self.pelvis_z = self.options.com_height + (pelvis.z - com.z);
+        self.sole_z = (self.sole_world(&self.frames, 0).z + self.sole_world(&self.frames, 1).z) / 2.0;
+        for ik in &self.ik {
+            for k in 0..ik.len() {
+                let a = ik.qpos_adr(k);
+                self.q_des[a] = observation.qpos[a];
+            }
+        }
+        self.mode = Mode::Standing;
+        let feet = [self.foothold_of(&self.frames, 0), self.foothold_of(&self.frames, 1)];
+        self.schedule = Schedule::default();
+        self.replan(0.0, &feet);
+        self.schedule.rest_from = self.schedule.rest;
+        self.tick = 0;
+        self.state = WalkerState::default();
+        Ok(())
+    }
+
+    fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        let t = observation.time_secs - self.t0;
+        let o = self.options.clone();
+        let gait = o.gait();
+        // 1. State.
+        self.tree.forward(observation.qpos, &mut self.frames);
+        let com = self.frames.com();
+        if let Some(prev) = self.com_prev {
+            let raw = (com - prev) / self.dt;
+            let alpha = self.dt / (self.dt + 0.01);
+            self.com_vel += (raw - self.com_vel) * alpha;
+        }
+        self.com_prev = Some(com);
+        let dcm = Vector2::new(com.x + self.com_vel.x / self.omega, com.y + self.com_vel.y / self.omega);
+        let feet = [self.foothold_of(&self.frames, 0), self.foothold_of(&self.frames, 1)];
+
+        // 2. Reference DCM of the current preview state; the error drives stepping.
+        let (ax, ay) = (self.axes[0], self.axes[1]);
+        let dcm_ref = Vector2::new(ax.x[0] + ax.x[1] / self.omega, ay.x[0] + ay.x[1] / self.omega);
+        let dcm_err = dcm - dcm_ref;
+
+        // 3. Step timing: touchdown, start, stop.
+        let mut replan = self.tick == 0;
+        match self.mode {
+            Mode::Standing => {
+                let ready = t >= o.settle_secs;
+                let push = dcm_err.norm() > o.recovery_threshold;
+                if ready && (!self.command.is_zero() || push) {
+                    // Step toward where the body is falling, or as planned.
+                    let swing = self.first_swing(push.then_some(dcm - self.schedule.rest), &feet);
+                    let ds = if push { 0.05 } else { o.start_double_support };
+                    let zmp_from = self.schedule.zmp(t, &mut 0);
+                    self.start_step(t, &feet, swing, ds, zmp_from);
+                    replan = true;
+                }
+            }
+            Mode::Walking(step) => {
+                if t >= step.end() {
+                    // Touchdown: the landed foot is planted where it actually is.
+                    let mut now = feet;
+                    now[step.stance.side.index()] = step.stance;
+                    if self.command.is_zero() && dcm_err.norm() < o.recovery_threshold {
+                        // Stop: the ZMP moves from the stance foot to between the feet.
+                        self.mode = Mode::Standing;
+                        self.schedule.steps.clear();
+                        self.schedule.rest_from = step.stance.pos;
+                        self.schedule.rest_start = t;
+                    } else {
+                        self.start_step(t, &now, step.stance.side, gait.ds_secs(), step.stance.pos);
+                    }
+                    replan = true;
+                } else if step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
+                    // Landing-spot correction by the DCM error predicted at touchdown.
+                    let remaining = step.end() - t;
+                    let predicted = dcm_err * (self.omega * remaining).exp() * o.step_adjust_gain;
+                    let nominal = gait.foothold(
+                        step.swing_to.side,
+                        {
+                            let (c, _) = gait.next_center(gait.center_of(&step.stance), step.stance.yaw, &self.command);
+                            c
+                        },
+                        step.swing_to.yaw,
+                    );
+                    let mut adjust = predicted;
+                    if adjust.norm() > o.max_step_adjust {
+                        adjust *= o.max_step_adjust / adjust.norm();
+                    }
+                    let mut target = nominal.pos + adjust;
+                    // Keep the feet from crossing: at least 2/3 of the step width apart sideways.
+                    let rel = Rotation2::new(-step.stance.yaw) * (target - step.stance.pos);
+                    let side = step.swing_to.side.sign();
+                    let lateral =
+                        if side * rel.y < o.step_width * 2.0 / 3.0 { side * o.step_width * 2.0 / 3.0 } else { rel.y };
+                    target = step.stance.pos + Rotation2::new(step.stance.yaw) * Vector2::new(rel.x, lateral);
+                    let mut adjusted = step;
+                    adjusted.swing_to.pos = target;
+                    self.mode = Mode::Walking(adjusted);
+                    replan = true;
+                }
+            }
+        }
+        if replan {
+            let rest_from = self.schedule.rest_from;
+            let rest_start = self.schedule.rest_start;
+            self.replan(t, &feet);
+            self.schedule.rest_from = rest_from;
+            self.schedule.rest_start = rest_start;
+        }
+
+        // 4. Preview control at its own rate; the CoM reference in between is extrapolated.
+        let ratio = self.preview_ratio;
+        let pdt = self.dt * ratio as f64;
+        if self.tick.is_multiple_of(ratio) {
+            let mut cursor = 0;
+            for j in 0..self.zmp_buf[0].len() {
+                let z = self.schedule.zmp(t + j as f64 * pdt, &mut cursor);
+                self.zmp_buf[0][j] = z.x;
+                self.zmp_buf[1][j] = z.y;
+            }
+            for a in 0..2 {
+                self.axes[a].step(&self.preview, &self.zmp_buf[a]);
+            }
+        }
+        let tau = (self.tick % ratio) as f64 * self.dt;
+        let extrapolate = |a: &PreviewAxis| (a.x[0] + a.x[1] * tau + a.x[2] * tau * tau / 2.0, a.x[1] + a.x[2] * tau);
+        let (cx, vx) = extrapolate(&self.axes[0]);
+        let (cy, vy) = extrapolate(&self.axes[1]);
+        let com_ref = Vector2::new(cx, cy);
+        let dcm_ref = com_ref + Vector2::new(vx, vy) / self.omega;
+        let dcm_err = dcm - dcm_ref;
+        let zmp_ref = self.schedule.zmp(t, &mut 0);
+        let zmp_cmd = zmp_ref + dcm_err * (1.0 + o.dcm_zmp_gain / self.omega);
+        let com_cmd = com_ref - dcm_err * o.dcm_com_gain;
+
+        // 5. Targets: feet, pelvis.
+        let (stance_side, swing) = match self.mode {
+            Mode::Walking(step) => (Some(step.stance.side), Some(step)),
+            Mode::Standing => (None, None),
+        };
+        let mut foot_targets = [(feet[0], 0.0), (feet[1], 0.0)];
+        let mut swinging: Option<usize> = None;
+        if let Some(step) = swing {
+            foot_targets[step.stance.side.index()] = (step.stance, 0.0);
+            let s = step.swing_phase(t);
+            let (blend, lift) = swing_profile(s);
+            let from = step.swing_from;
+            let to = step.swing_to;
+            let pos = from.pos + (to.pos - from.pos) * blend;
+            let yaw = from.yaw + wrap(to.yaw - from.yaw) * blend;
+            foot_targets[to.side.index()] = (Foothold { side: to.side, pos, yaw }, lift * o.foot_clearance);
+            if s > 0.0 && s < 1.0 {
+                swinging = Some(to.side.index());
+            }
+        }
+        let yaw_l = foot_targets[0].0.yaw;
+        let yaw_r = foot_targets[1].0.yaw;
+        let heading = yaw_r + wrap(yaw_l - yaw_r) / 2.0;
+        let (tilt, rate) = self.tilt(observation);
+        let correction = [
+            -(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0]),
+            -(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1]),
+        ];
+        let pelvis_rot = UnitQuaternion::from_euler_angles(0.0, 0.0, heading)
+            * UnitQuaternion::from_euler_angles(correction[0].clamp(-0.2, 0.2), correction[1].clamp(-0.2, 0.2), 0.0);
+        let off = Rotation2::new(heading) * self.pelvis_from_com.xy();
+        let crouch = smooth(t / o.settle_secs.max(1e-9));
+        let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
+        let pelvis_pos = Vector3::new(com_cmd.x + off.x, com_cmd.y + off.y, pelvis_z);
+
+        // 6. Leg IK.
+        let mut ik_error: f64 = 0.0;
+        for (leg, &(f, lift)) in foot_targets.iter().enumerate() {
+            let l = &self.body.legs[leg];
+            let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, f.yaw) * l.foot_rot_home;
+            let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
+            let foot = sole - rot * l.sole_in_foot;
+            let inv = pelvis_rot.inverse();
+            let target = (inv * (foot - pelvis_pos), inv * rot);
+            let ik = &self.ik[leg];
+            let mut q = [0.0; 12];
+            let n = ik.len().min(12);
+            for (k, qk) in q.iter_mut().enumerate().take(n) {
+                *qk = self.q_des[ik.qpos_adr(k)];
+            }
+            ik.bend_knee(&mut q[..n], 0.05);
+            let r = ik.solve(target, &mut q[..n], o.ik_iterations, 1e-3);
+            ik_error = ik_error.max(r.position_error_m);
+            for (k, qk) in q.iter().enumerate().take(n) {
+                self.q_des[ik.qpos_adr(k)] = *qk;
+            }
+        }
+        // The commanded configuration's CoM offset, for the next tick.
+        {
+            let b = self.body.base_qpos;
+            self.q_des[b..b + 3].copy_from_slice(pelvis_pos.as_slice());
+            let qq = pelvis_rot.into_inner();
+            self.q_des[b + 3..b + 7].copy_from_slice(&[qq.w, qq.i, qq.j, qq.k]);
+            self.tree.forward(&self.q_des, &mut self.desired);
+            let c = self.desired.com();
+            let d = Rotation2::new(-heading) * Vector2::new(pelvis_pos.x - c.x, pelvis_pos.y - c.y);
+            self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis_pos.z - c.z);
+        }
+
+        // 7. Feed-forward: gravity and the planned contact forces at the commanded ZMP.
+        let weight = -self.gravity * self.tree.total_mass_kg;
+        let mut forces: [(usize, Vector3<f64>, Vector3<f64>); 2] = [(0, Vector3::zeros(), Vector3::zeros()); 2];
+        let nforces;
+        let clamp_to_sole = |leg: usize, p: Vector2<f64>| -> Vector2<f64> {
+            let f = feet[leg];
+            let half = self.body.legs[leg].sole_half;
+            let rel = Rotation2::new(-f.yaw) * (p - f.pos);
+            let rel =
+                Vector2::new(rel.x.clamp(-half[0] * 0.8, half[0] * 0.8), rel.y.clamp(-half[1] * 0.8, half[1] * 0.8));
+            f.pos + Rotation2::new(f.yaw) * rel
+        };
+        match (swinging, stance_side) {
+            (Some(_), Some(stance)) => {
+                let i = stance.index();
+                let p = clamp_to_sole(i, zmp_cmd);
+                forces[0] = (self.body.legs[i].foot, Vector3::new(p.x, p.y, self.sole_z), weight);
+                nforces = 1;
+            }
+            _ => {
+                let (a, b) = (feet[0].pos, feet[1].pos);
+                let ab = b - a;
+                let alpha = ((zmp_cmd - a).dot(&ab) / ab.norm_squared().max(1e-9)).clamp(0.0, 1.0);
+                for (k, (leg, w)) in [(0usize, 1.0 - alpha), (1usize, alpha)].into_iter().enumerate() {
+                    let p = feet[leg].pos;
+                    forces[k] = (self.body.legs[leg].foot, Vector3::new(p.x, p.y, self.sole_z), weight * w);
+                }
+                nforces = 2;
+            }
+        }
+
+        // 8. PD + feed-forward.
+        command.fill(0.0);
+        for l in &self.loops {
+            let (kp, kd) = match (l.leg, swinging) {
+                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
+                _ => (l.kp, l.kd),
+            };
+            let ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, &forces[..nforces]);
+            let q_target = self.q_des[l.qpos_adr];
+            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
+            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+        }
+
+        // Telemetry.
+        self.state.com_ref = [com_ref.x, com_ref.y, self.options.com_height];
+        self.state.com = [com.x, com.y, com.z];
+        self.state.zmp_ref = [zmp_ref.x, zmp_ref.y];
+        self.state.zmp_cmd = [zmp_cmd.x, zmp_cmd.y];
+        self.state.dcm_ref = [dcm_ref.x, dcm_ref.y];
+        self.state.dcm = [dcm.x, dcm.y];
+        self.state.walking = matches!(self.mode, Mode::Walking(_));
+        self.state.ik_error_m = ik_error;
+        self.state.footholds.clear();
+        for s in self.schedule.steps.iter().take(6) {
+            self.state.footholds.push((s.swing_to.side, [s.swing_to.pos.x, s.swing_to.pos.y], s.swing_to.yaw));
+        }
+        self.tick += 1;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn options_out_of_range_name_the_option() {
+        let mut o = WalkOptions { step_period: -1.0, ..WalkOptions::default() };
+        assert_eq!(o.validate().unwrap_err().0, "step_period");
+        o = WalkOptions { vx: 1.0, ..WalkOptions::default() };
+        let (key, message) = o.validate().unwrap_err();
+        assert_eq!(key, "vx");
+        assert!(message.contains("0.600 m steps"), "{message}");
+        assert!(WalkOptions { vx: 0.3, ..WalkOptions::default() }.validate().is_ok());
+    }
+}

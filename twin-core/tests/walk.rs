@@ -1,0 +1,264 @@
+//! The walking controller on the shipped humanoid: walking, standing under pushes, turning,
+//! and the regressions its metrics and checks must catch.
+
+use std::path::PathBuf;
+use twin_core::engine::{Check, Disturbance, Flow, Observer, StepView};
+use twin_core::scenario::{Push, Scenario, Verdict};
+use twin_core::sim::{self, SimOptions};
+use twin_core::walk::{GaitSummary, WalkOptions, Walker};
+
+fn humanoid() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../models/humanoid.urdf")
+}
+
+fn scenarios() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
+}
+
+/// Keeps the last state's joint positions.
+struct Last(Vec<f64>);
+
+impl Observer for Last {
+    fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
+        self.0.clear();
+        self.0.extend_from_slice(step.data.qpos());
+        Ok(Flow::Continue)
+    }
+}
+
+/// Runs `scenario` (with `edit` applied) on the rollout engine and returns the gait metrics,
+/// the verdicts and the final state.
+fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Verdict>, Vec<f64>) {
+    edit(&mut scenario);
+    let robot = scenario.robot(&humanoid()).unwrap();
+    let mut controller = scenario.controller(&robot.model).unwrap();
+    let mut pushes = scenario.disturbances(&robot.model);
+    let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    let mut check = scenario.check(&robot.model).unwrap();
+    let mut last = Last(Vec::new());
+    let options = SimOptions { duration_secs: scenario.duration_secs };
+    sim::simulate_with(
+        &robot,
+        controller.as_mut(),
+        &options,
+        None,
+        &mut |_| {},
+        &mut disturbances,
+        &mut [&mut check, &mut last],
+    )
+    .unwrap();
+    let summary = check.metrics.summary();
+    let verdicts = check.verdicts();
+    // The engine verdict agrees with the per-threshold ones.
+    assert_eq!(check.verdict().passed, verdicts.iter().all(|v| v.passed));
+    println!("{summary}");
+    for v in &verdicts {
+        println!("  {v}");
+    }
+    (summary, verdicts, last.0)
+}
+
+fn stand(duration: f64) -> Scenario {
+    Scenario::parse(
+        &scenarios().join("inline.toml"),
+        &format!("model = {:?}\nduration = {duration:?}\n[checks]\nfalls = 0\n", humanoid()),
+    )
+    .unwrap()
+}
+
+/// Priority 1: the shipped scenario walks ≥ 10 m straight at ≥ 0.3 m/s, drifting < 0.5 m.
+#[test]
+fn walks_ten_metres_straight() {
+    let (s, verdicts, _) = run_scenario(Scenario::load(scenarios().join("walk.toml")).unwrap(), |_| {});
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 10.0, "{}", s.forward_m);
+    assert!(s.lateral_m.abs() < 0.5, "{}", s.lateral_m);
+    assert!(s.average_speed_mps >= 0.3, "{}", s.average_speed_mps);
+    assert!(s.steps >= 50, "{}", s.steps);
+    assert!(s.slip_mean_m < 0.01, "{}", s.slip_mean_m);
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+}
+
+/// Zero velocity: a balance controller that steps to recover a sideways push (0.4 m/s of the
+/// whole robot) and stays put otherwise.
+#[test]
+fn stands_and_recovers_a_push_by_stepping() {
+    let mut quiet = stand(4.0);
+    quiet.checks.max_distance = Some(0.05);
+    let (s, v, _) = run_scenario(quiet, |_| {});
+    assert!(!s.fell && s.steps == 0 && s.distance_m < 0.05, "{s:?}");
+    assert!(v.iter().all(|v| v.passed));
+    let (s, _, _) = run_scenario(stand(6.0), |sc| {
+        sc.pushes.push(Push { time: 2.0, duration: 0.1, force: [0.0, 140.0, 0.0], body: None });
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.steps >= 2, "recovered by stepping: {} steps", s.steps);
+    assert!(s.distance_m < 0.6, "{}", s.distance_m);
+}
+
+/// A push far beyond what a step can capture (2.8 m/s of the whole robot) is a fall, and the
+/// scenario's check fails.
+#[test]
+fn a_push_beyond_capture_is_a_fall() {
+    let (s, v, _) = run_scenario(stand(4.0), |sc| {
+        sc.pushes.push(Push { time: 2.0, duration: 0.1, force: [1000.0, 0.0, 0.0], body: None });
+    });
+    assert!(s.fell, "{s:?}");
+    assert!(s.fall_time_secs.unwrap() > 2.0);
+    assert!(v.iter().any(|v| v.name == "falls" && !v.passed), "{v:?}");
+}
+
+/// Turning in place: 0.3 rad/s for 6 s after the crouch turns ≈ 90° without walking off.
+#[test]
+fn turns_ninety_degrees_in_place() {
+    let (s, _, _) = run_scenario(stand(7.0), |sc| sc.walk.yaw_rate = 0.3);
+    assert!(!s.fell);
+    let deg = s.yaw_change_rad.to_degrees();
+    assert!((80.0..110.0).contains(&deg), "{deg}");
+    assert!(s.distance_m < 0.3, "{}", s.distance_m);
+}
+
+/// On a floor too slippery to walk on, the feet slide: slip is reported and its check fails.
+#[test]
+fn low_friction_slip_fails_its_check() {
+    let (s, v, _) = run_scenario(stand(6.0), |sc| {
+        sc.walk.vx = 0.3;
+        sc.friction = Some(0.05);
+        sc.checks.max_mean_slip = Some(0.01);
+        sc.checks.falls = None;
+    });
+    let slip = v.iter().find(|v| v.name == "max_mean_slip").unwrap();
+    assert!(!slip.passed && s.slip_mean_m > 0.01, "{s:?}");
+    // Nominal friction passes the same check.
+    let (s, v, _) = run_scenario(stand(6.0), |sc| {
+        sc.walk.vx = 0.3;
+        sc.checks.max_mean_slip = Some(0.01);
+    });
+    assert!(v.iter().all(|v| v.passed), "{s:?}");
+}
+
+/// A step the legs can't reach is refused before simulating, naming the option.
+#[test]
+fn unreachable_step_is_refused() {
+    let robot = twin_core::robot::Robot::load(humanoid()).unwrap();
+    let options = WalkOptions { vx: 0.9, max_step_length: 0.6, ..WalkOptions::default() };
+    let e = Walker::new(&robot.model, options).unwrap_err().to_string();
+    assert!(e.contains("can't reach a step of max_step_length 0.6 m"), "{e}");
+    let options = WalkOptions { vx: 0.9, ..WalkOptions::default() };
+    let e = Walker::new(&robot.model, options).unwrap_err().to_string();
+    assert!(e.contains("option `vx`") && e.contains("max_step_length"), "{e}");
+}
+
+/// Same scenario, same result, bit for bit.
+#[test]
+fn deterministic() {
+    let a = run_scenario(stand(2.5), |sc| sc.walk.vx = 0.3).2;
+    let b = run_scenario(stand(2.5), |sc| sc.walk.vx = 0.3).2;
+    assert!(!a.is_empty());
+    assert_eq!(a, b);
+}
+
+#[test]
+fn kinematics_match_mujoco() {
+    use std::sync::Arc;
+    use twin_core::walk::kin::{Body, BodyNames, LegIk, Tree};
+    let model = Arc::new(twin_core::mj::Model::from_file(humanoid()).unwrap());
+    let mut data = twin_core::mj::Data::new(model.clone()).unwrap();
+    twin_core::control::reset_to_home(&mut data).unwrap();
+    // A bent configuration.
+    for (i, q) in data.qpos_mut().iter_mut().enumerate().skip(7) {
+        *q += 0.05 * ((i as f64) * 1.7).sin();
+    }
+    data.forward().unwrap();
+    let tree = Tree::new(&model);
+    let mut frames = tree.frames();
+    tree.forward(data.qpos(), &mut frames);
+    for b in 0..model.nbody() {
+        let p = data.xpos()[b];
+        assert!((frames.xpos[b] - nalgebra::Vector3::from(p)).norm() < 1e-9, "body {b}");
+        let c = data.subtree_com()[b];
+        assert!((frames.subtree_com[b] - nalgebra::Vector3::from(c)).norm() < 1e-9, "com {b}");
+    }
+    let body = Body::find(&model, &tree, data.qpos(), &BodyNames::default()).unwrap();
+    for leg in &body.legs {
+        let ik = LegIk::new(&model, leg);
+        let q: Vec<f64> = (0..ik.len()).map(|k| data.qpos()[ik.qpos_adr(k)]).collect();
+        let (p, r) = ik.foot_pose(&q);
+        let pel = frames.xrot[body.pelvis].inverse();
+        let want = pel * (frames.xpos[leg.foot] - frames.xpos[body.pelvis]);
+        assert!((p - want).norm() < 1e-9, "{p} {want}");
+        assert!((r.inverse() * pel * frames.xrot[leg.foot]).angle() < 1e-9);
+        // IK from the home pose back to this one.
+        let mut q0: Vec<f64> = (0..ik.len()).map(|k| model.qpos0()[ik.qpos_adr(k)]).collect();
+        let res = ik.solve((p, r), &mut q0, 50, 1e-4);
+        assert!(res.position_error_m < 1e-6, "{res:?}");
+    }
+}
+
+#[test]
+#[ignore]
+fn trace() {
+    use std::sync::Arc;
+    use twin_core::control::{Actuation, Controller, Observation};
+    let vx: f64 = std::env::var("VX").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    let secs: f64 = std::env::var("SECS").ok().and_then(|v| v.parse().ok()).unwrap_or(2.0);
+    let armature: f64 = std::env::var("ARM").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
+    let model = Arc::new(
+        twin_core::mj::Model::from_urdf(
+            humanoid(),
+            &twin_core::convert::ConvertOptions { armature, ..Default::default() },
+        )
+        .unwrap(),
+    );
+    let mut data = twin_core::mj::Data::new(model.clone()).unwrap();
+    twin_core::control::reset_to_home(&mut data).unwrap();
+    let opts: WalkOptions = toml::from_str(&std::env::var("WALK").unwrap_or_default()).unwrap();
+    let every: usize = std::env::var("EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(25);
+    let mut w = Walker::new(&model, WalkOptions { vx, ..opts }).unwrap();
+    w.reset(&model, &Observation::of(&data)).unwrap();
+    let act = Actuation::of(&model);
+    let mut cmd = vec![0.0; act.len(&model)];
+    let n = (secs / model.timestep_secs()) as usize;
+    for i in 0..n {
+        data.step1().unwrap();
+        w.compute(&model, &Observation::of(&data), &mut cmd);
+        act.apply(&mut data, &cmd);
+        data.step2().unwrap();
+        if i % every == 0 {
+            let s = w.state();
+            let q = data.qpos();
+            println!(
+                "t {:.3} com {:.3} {:.3} {:.3} ref {:.3} {:.3} zmp {:.3} {:.3} dcm {:.3} {:.3} dref {:.3} {:.3} base z {:.3} quat {:.3} {:.3} {:.3} ik {:.4} walk {} steps {} cmd {:?}",
+                data.time_secs(),
+                s.com[0],
+                s.com[1],
+                s.com[2],
+                s.com_ref[0],
+                s.com_ref[1],
+                s.zmp_ref[0],
+                s.zmp_ref[1],
+                s.dcm[0],
+                s.dcm[1],
+                s.dcm_ref[0],
+                s.dcm_ref[1],
+                q[2],
+                q[4],
+                q[5],
+                q[6],
+                s.ik_error_m,
+                s.walking,
+                s.steps,
+                cmd.iter().map(|c| (c * 10.0).round() / 10.0).collect::<Vec<_>>()
+            );
+        }
+    }
+}
+
+/// The shipped balance scenario passes its checks (a forward push held by the ankles, a
+/// sideways push recovered by stepping).
+#[test]
+fn shipped_stand_scenario_passes() {
+    let (s, verdicts, _) = run_scenario(Scenario::load(scenarios().join("stand.toml")).unwrap(), |_| {});
+    assert!(!s.fell && s.steps >= 2, "{s:?}");
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+}
