@@ -6,6 +6,9 @@ mod common;
 mod convert;
 #[path = "cli/info.rs"]
 mod info;
+#[cfg(feature = "ros")]
+#[path = "cli/live.rs"]
+mod live;
 #[path = "cli/log.rs"]
 mod log;
 #[path = "cli/randomize.rs"]

@@ -144,6 +144,16 @@ pub trait Controller: Send {
     /// Adjusts the initial joint positions `qpos` (len `nq`, the home pose) before an episode,
     /// e.g. to start a replay where its trajectory starts. Default: leaves them.
     fn initial_qpos(&self, _model: &Model, _qpos: &mut [f64]) {}
+
+    /// Called after each step's command is applied: `Ok(false)` ends the run early (a live
+    /// bridge asked to stop), an error aborts it (a lockstep controller that stopped
+    /// answering). Default: go on.
+    ///
+    /// # Errors
+    /// Whatever made the controller unable to go on.
+    fn proceed(&mut self) -> Result<bool> {
+        Ok(true)
+    }
 }
 
 /// Options of [`PdHold`].
@@ -169,15 +179,28 @@ impl Default for PdHoldOptions {
 
 /// One PD loop: a command entry driving one 1-DOF joint.
 #[derive(Debug, Clone)]
-struct Loop {
-    command: usize,
-    qpos_adr: usize,
-    dof: usize,
-    kp: f64,
-    kd: f64,
-    target: f64,
-    limits: [f64; 2],
+pub struct PdLoop {
+    /// Index in the command (`ctrl` or `qfrc_applied`).
+    pub command: usize,
+    /// The joint.
+    pub joint: usize,
+    /// Its `qpos` address.
+    pub qpos_adr: usize,
+    /// Its DOF.
+    pub dof: usize,
+    /// Stiffness, command units per rad (m).
+    pub kp: f64,
+    /// Damping, command units per rad/s (m/s).
+    pub kd: f64,
+    /// Joint torque (force) per command unit: the actuator gear, 1 for `qfrc_applied`.
+    pub gear: f64,
+    /// Target position, rad (m).
+    pub target: f64,
+    /// Command limits.
+    pub limits: [f64; 2],
 }
+
+type Loop = PdLoop;
 
 /// Holds the nominal pose ([`nominal_pose`]) with PD control on every actuated hinge/slide joint:
 /// `τ = kp·(q_target − q) − kd·q̇`, clamped to the actuator's range / the joint's effort.
@@ -195,6 +218,11 @@ impl PdHold {
         let mut hold = PdHold { options, loops: Vec::new() };
         hold.build(model);
         hold
+    }
+
+    /// The loops, in command order (targets are set by [`Controller::reset`]).
+    pub fn loops(&self) -> &[PdLoop] {
+        &self.loops
     }
 
     /// The gains `(kp, kd)` of each loop, in command order.
@@ -243,10 +271,12 @@ impl PdHold {
                     let (kp, kd) = gains(effort, dof, gear);
                     self.loops.push(Loop {
                         command: u,
+                        joint,
                         qpos_adr: model.jnt_qposadr()[joint] as usize,
                         dof,
                         kp,
                         kd,
+                        gear,
                         target: 0.0,
                         limits: [lo, hi],
                     });
@@ -262,10 +292,12 @@ impl PdHold {
                     let (kp, kd) = gains(hi.abs().min(lo.abs()), dof, 1.0);
                     self.loops.push(Loop {
                         command: dof,
+                        joint,
                         qpos_adr: model.jnt_qposadr()[joint] as usize,
                         dof,
                         kp,
                         kd,
+                        gear: 1.0,
                         target: 0.0,
                         limits: [lo, hi],
                     });

@@ -23,6 +23,8 @@ pub mod check;
 pub mod control;
 pub mod convert;
 pub mod error;
+#[cfg(feature = "ros")]
+pub mod live;
 pub mod log;
 pub mod mj;
 pub mod sim;

@@ -222,6 +222,7 @@ pub fn simulate(
     let mut record_secs = 0.0;
     let cpu_started = thread_cpu_secs();
     let started = std::time::Instant::now();
+    let mut done = 0;
     for step in 0..steps {
         data.step1()?;
         controller.compute(&model, &Observation::of(&data), &mut command);
@@ -247,9 +248,13 @@ pub fn simulate(
         if step % report_every == 0 {
             progress(step as f64 / steps as f64);
         }
+        done = step + 1;
+        if !controller.proceed()? {
+            break;
+        }
     }
     let wall_secs = started.elapsed().as_secs_f64();
     let loop_cpu_secs = cpu_started.zip(thread_cpu_secs()).map(|(a, b)| b - a);
     progress(1.0);
-    Ok(SimReport { steps, sim_secs: steps as f64 * model.timestep_secs(), wall_secs, record_secs, loop_cpu_secs })
+    Ok(SimReport { steps: done, sim_secs: done as f64 * model.timestep_secs(), wall_secs, record_secs, loop_cpu_secs })
 }
