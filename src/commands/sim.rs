@@ -166,7 +166,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
     #[cfg(not(feature = "ros"))]
     if args.ros {
-        return Err(twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }.into());
+        return Err(
+            twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }.into()
+        );
     }
     #[cfg(feature = "ros")]
     let (mut recording, mut live_controller) = match live {
@@ -181,7 +183,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(feature = "ros")]
     if let Some(c) = &live_controller {
         live::announce(&args, &robot, c)?;
-        if args.wait_for_subscriber > 0.0 && !c.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber)) {
+        if args.wait_for_subscriber > 0.0
+            && !c.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber))
+        {
             bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
         }
     }
@@ -392,7 +396,9 @@ mod live {
             s.safe_holds,
             s.real_time_factor()
         )?;
-        if let (Some(p50), Some(p99)) = (bridge::percentile(&s.jitter_micros, 50.0), bridge::percentile(&s.jitter_micros, 99.0)) {
+        if let (Some(p50), Some(p99)) =
+            (bridge::percentile(&s.jitter_micros, 50.0), bridge::percentile(&s.jitter_micros, 99.0))
+        {
             writeln!(out, "period start lateness (jitter): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
         }
         if let (Some(p50), Some(p99)) =

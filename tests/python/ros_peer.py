@@ -4,12 +4,12 @@
 It joins the domain given by --domain on loopback only (the caller sets CYCLONEDDS_URI to a
 loopback-only, multicast-free configuration), subscribes to twin's topics with the ROS 2 DDS
 names and types, and answers every /clock with one command on --command-topic. At the end it
-prints one JSON object: every message it received, decoded, per topic.
+writes one JSON object to --out: every message it received, decoded, per topic.
 
 Modes (--mode):
   lockstep   one Float64MultiArray (--command, a JSON list) per /clock received
   bad        a wrong-length, a NaN and an undecodable-length command, then good ones per /clock
-  flood      good commands at --flood-hz for --flood-secs, no matter the clock
+  flood      --flood-count good commands at up to --flood-hz, no matter the clock
   quit       answer --quit-after clocks, then leave (a peer that disconnects mid-run)
 
 Exit status 3 when cyclonedds is missing is NOT used: the Rust test must fail without it.
@@ -25,6 +25,7 @@ from dataclasses import dataclass
 from cyclonedds.core import InstanceState, Policy, Qos, ReadCondition, SampleState, ViewState, WaitSet
 from cyclonedds.domain import DomainParticipant
 from cyclonedds.idl import IdlStruct
+from cyclonedds.internal import InvalidSample
 from cyclonedds.idl.types import array, float64, int32, sequence, uint32
 from cyclonedds.pub import DataWriter
 from cyclonedds.sub import DataReader
@@ -233,8 +234,9 @@ def main():
     p.add_argument("--until-clock", type=float, required=True, help="stop after /clock reaches this, s")
     p.add_argument("--timeout", type=float, default=60.0, help="wall-clock limit, s")
     p.add_argument("--flood-hz", type=float, default=10000.0)
-    p.add_argument("--flood-secs", type=float, default=2.0)
+    p.add_argument("--flood-count", type=int, default=10000)
     p.add_argument("--quit-after", type=int, default=20)
+    p.add_argument("--out", required=True, help="JSON output file")
     a = p.parse_args()
     command = json.loads(a.command)
 
@@ -269,6 +271,7 @@ def main():
     last_clock = -1.0
     bad_sent = False
     finished = False
+    flood_rate = None
 
     def drain(skip_clock):
         nonlocal last_clock
@@ -277,6 +280,8 @@ def main():
             if skip_clock and r is clock_reader:
                 continue
             for m in r.take(N=1000):
+                if isinstance(m, InvalidSample):  # a writer went away (twin exited)
+                    continue
                 received[name].append(to_json(name, m))
                 if isinstance(m, Clock):
                     clocks.append(nanos(m.clock) * 1e-9)
@@ -292,7 +297,7 @@ def main():
         burst = 10
         t0 = time.monotonic()
         k = 0
-        while time.monotonic() - t0 < a.flood_secs:
+        while sent < a.flood_count:
             for _ in range(burst):
                 send(command)
                 sent += 1
@@ -303,6 +308,7 @@ def main():
                 time.sleep(pause)
             if k % 100 == 0:
                 drain(False)
+        flood_rate = sent / (time.monotonic() - t0)
         while time.monotonic() - started < a.timeout and last_clock < a.until_clock:
             drain(False)
             time.sleep(0.01)
@@ -311,6 +317,8 @@ def main():
         while time.monotonic() - started < a.timeout:
             clocks = []
             for m in clock_reader.take(N=1000):
+                if isinstance(m, InvalidSample):
+                    continue
                 received["/clock"].append(to_json("/clock", m))
                 clocks.append(nanos(m.clock) * 1e-9)
             for c in clocks:
@@ -341,8 +349,9 @@ def main():
         while time.monotonic() < end:
             drain(False)
             time.sleep(0.02)
-    json.dump({"finished": finished, "sent": sent, "last_clock": last_clock, "received": received}, sys.stdout)
-    sys.stdout.write("\n")
+    with open(a.out, "w") as f:
+        json.dump({"finished": finished, "sent": sent, "flood_rate_hz": flood_rate, "last_clock": last_clock, "received": received}, f)
+    print(f"peer: sent {sent} commands, last /clock {last_clock} s, finished {finished}")
     return 0 if finished else 1
 
 

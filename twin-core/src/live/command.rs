@@ -3,7 +3,9 @@
 //! The commanded joints are the actuated 1-DOF joints in `/joint_states` order (model order).
 //! Each joint is driven through the loop [`PdHold`] builds for it, so the gains follow the one
 //! PD rule of [`crate::control`]:
-//! - position (rad, m): `u = kp·(q* − q) − kd·q̇`;
+//! - position (rad, m): `u = kp·(q* − q) − kd·q̇ + i`, with the integral
+//!   `i += kp·INTEGRAL_RATE·(q* − q)·dt` (clamped to the control range) so that a joint loaded
+//!   by gravity still reaches its target, as a real position-controlled servo does;
 //! - velocity (rad/s, m/s): `u = kd·(q̇* − q̇)`;
 //! - effort (N·m, N): `u = τ* / gear`;
 //!
@@ -12,6 +14,11 @@
 use crate::control::{PdHold, PdHoldOptions, PdLoop, nominal_pose};
 use crate::log::{Float64MultiArray, JointTrajectory};
 use crate::mj::{Model, ObjType};
+
+/// Integral rate of the position servo, 1/s: `ki = kp · INTEGRAL_RATE`. Slow next to the
+/// joints' PD bandwidth (tens of rad/s), fast enough to remove a gravity offset well within a
+/// second.
+pub const INTEGRAL_RATE: f64 = 5.0;
 
 /// What the numbers of a `Float64MultiArray` command are.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -53,6 +60,9 @@ pub struct Commander {
     names: Vec<String>,
     interface: CommandInterface,
     mode: Mode,
+    /// Integral term of each position loop, command units.
+    integral: Vec<f64>,
+    dt_secs: f64,
 }
 
 impl Commander {
@@ -65,7 +75,8 @@ impl Commander {
         let names = loops.iter().map(|l| model.name(ObjType::Joint, l.joint).to_string()).collect();
         let home = nominal_pose(model);
         let targets = loops.iter().map(|l| home[l.qpos_adr]).collect();
-        Commander { loops, names, interface, mode: Mode::Hold(targets) }
+        let integral = vec![0.0; loops.len()];
+        Commander { loops, names, interface, mode: Mode::Hold(targets), integral, dt_secs: model.timestep_secs() }
     }
 
     /// The commanded joints, in command order.
@@ -160,15 +171,22 @@ impl Commander {
         self.mode = Mode::Hold(self.loops.iter().map(|l| qpos[l.qpos_adr]).collect());
     }
 
-    /// The actuator command for the state `qpos`, `qvel` at `now_secs` into `command`.
-    pub fn compute(&self, now_secs: f64, qpos: &[f64], qvel: &[f64], command: &mut [f64]) {
+    /// The actuator command for the state `qpos`, `qvel` at `now_secs` into `command`; called
+    /// once per simulation step (it advances the integral terms).
+    pub fn compute(&mut self, now_secs: f64, qpos: &[f64], qvel: &[f64], command: &mut [f64]) {
         command.fill(0.0);
-        let servo = |l: &PdLoop, target: f64| l.kp * (target - qpos[l.qpos_adr]) - l.kd * qvel[l.dof];
+        let dt = self.dt_secs;
+        let integral = &mut self.integral;
+        let mut servo = |i: usize, l: &PdLoop, target: f64| {
+            let error = target - qpos[l.qpos_adr];
+            integral[i] = (integral[i] + l.kp * INTEGRAL_RATE * error * dt).clamp(l.limits[0], l.limits[1]);
+            l.kp * error - l.kd * qvel[l.dof] + integral[i]
+        };
         for (i, l) in self.loops.iter().enumerate() {
             let u = match &self.mode {
-                Mode::Hold(targets) => servo(l, targets[i]),
+                Mode::Hold(targets) => servo(i, l, targets[i]),
                 Mode::Direct(values) => match self.interface {
-                    CommandInterface::Position => servo(l, values[i]),
+                    CommandInterface::Position => servo(i, l, values[i]),
                     CommandInterface::Velocity => l.kd * (values[i] - qvel[l.dof]),
                     CommandInterface::Effort => values[i] / l.gear,
                 },
@@ -184,7 +202,7 @@ impl Commander {
                         let a = (t - t0) / (t1 - t0);
                         positions[k - 1][i] + a * (positions[k][i] - positions[k - 1][i])
                     };
-                    servo(l, target)
+                    servo(i, l, target)
                 }
             };
             command[l.command] = u.clamp(l.limits[0], l.limits[1]);

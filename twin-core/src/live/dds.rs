@@ -57,7 +57,11 @@ pub struct RawDecoder;
 
 impl<'de> Decode<'de, RawCdr> for RawDecoder {
     type Error = RawCdrError;
-    fn decode_bytes(self, input: &'de [u8], encoding: RepresentationIdentifier) -> std::result::Result<RawCdr, RawCdrError> {
+    fn decode_bytes(
+        self,
+        input: &'de [u8],
+        encoding: RepresentationIdentifier,
+    ) -> std::result::Result<RawCdr, RawCdrError> {
         let header: [u8; 4] = if encoding == RepresentationIdentifier::CDR_LE {
             [0, 1, 0, 0]
         } else if encoding == RepresentationIdentifier::CDR_BE {
@@ -100,8 +104,8 @@ impl TopicQos {
     fn policies(self) -> QosPolicies {
         // A reliable writer never blocks the simulation: with keep-last history a full queue
         // drops the oldest sample instead of waiting for a slow reader.
-        let b = QosPolicyBuilder::new()
-            .reliability(Reliability::Reliable { max_blocking_time: rustdds::Duration::ZERO });
+        let b =
+            QosPolicyBuilder::new().reliability(Reliability::Reliable { max_blocking_time: rustdds::Duration::ZERO });
         match self {
             TopicQos::Stream { depth } => {
                 b.durability(Durability::Volatile).history(History::KeepLast { depth }).build()

@@ -36,8 +36,8 @@ use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
 use crate::log::{Clock, Float64MultiArray, JointTrajectory, RosMessage, RosString};
 use crate::mj::Model;
-use crate::sim::record::{ExchangedMessage, TopicSink};
 use crate::sim::Robot;
+use crate::sim::record::{ExchangedMessage, TopicSink};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
 use std::collections::HashMap;
 use std::net::IpAddr;
@@ -223,12 +223,16 @@ pub fn start(
     log: Box<dyn FnMut(&str) + Send>,
 ) -> Result<(LiveSink, LiveController)> {
     if !(options.control_rate_hz > 0.0 && options.control_rate_hz.is_finite()) {
-        return Err(Error::Live { message: format!("control rate must be positive (got {} Hz)", options.control_rate_hz) });
+        return Err(Error::Live {
+            message: format!("control rate must be positive (got {} Hz)", options.control_rate_hz),
+        });
     }
     if let Pacing::RealTime(f) = options.pacing
         && !(f > 0.0 && f.is_finite())
     {
-        return Err(Error::Live { message: format!("real-time factor must be positive (got {f}); use max for no pacing") });
+        return Err(Error::Live {
+            message: format!("real-time factor must be positive (got {f}); use max for no pacing"),
+        });
     }
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
     let exchanged: Exchanged = Arc::default();

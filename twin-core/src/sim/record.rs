@@ -220,7 +220,12 @@ struct McapOut {
 
 impl McapOut {
     /// Encodes one message once and hands it to the file and the sink.
-    fn emit<T: RosMessage>(&mut self, s: Stream<T>, log_time_nanos: u64, encode: impl FnOnce(&mut CdrWriter)) -> Result<()> {
+    fn emit<T: RosMessage>(
+        &mut self,
+        s: Stream<T>,
+        log_time_nanos: u64,
+        encode: impl FnOnce(&mut CdrWriter),
+    ) -> Result<()> {
         self.counts[s.index].1 += 1;
         match self.live.as_mut() {
             None => {
