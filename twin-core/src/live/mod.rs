@@ -390,7 +390,7 @@ impl LiveController {
         self.stats.commands_rejected += 1;
         let n = self.stats.commands_rejected;
         // A flood of bad commands must not flood the terminal: the first ten, then every 1000th.
-        if n <= 10 || n % 1000 == 0 {
+        if n <= 10 || n.is_multiple_of(1000) {
             self.warn(format!(
                 "rejected command #{n} on {topic} at t = {:.3} s: {why}; holding the last good command",
                 t_nanos as f64 * 1e-9
