@@ -322,7 +322,9 @@ def main():
                 received["/clock"].append(to_json("/clock", m))
                 clocks.append(nanos(m.clock) * 1e-9)
             for c in clocks:
-                last_clock = max(last_clock, c)
+                if c <= last_clock:  # the same time said again (twin waiting for us): answered
+                    continue
+                last_clock = c
                 if a.mode == "quit" and sent >= a.quit_after:
                     break
                 if a.mode == "bad" and not bad_sent:

@@ -92,6 +92,9 @@ impl Default for LiveOptions {
     }
 }
 
+/// In lockstep, how often `/clock` is said again while twin waits for a command.
+const CLOCK_RESEND: Duration = Duration::from_millis(200);
+
 /// Messages exchanged by the controller half, waiting for the recording.
 type Exchanged = Arc<Mutex<Vec<ExchangedMessage>>>;
 
@@ -412,6 +415,7 @@ impl LiveController {
     fn wait_one(&mut self, t_nanos: u64) -> Result<()> {
         let published = Instant::now();
         let deadline = published + Duration::from_secs_f64(self.options.lockstep_timeout_secs);
+        let mut resend = published + CLOCK_RESEND;
         loop {
             if let Ok(Some(s)) = self.trajectories.take_next_sample() {
                 self.take_trajectory(s.into_value(), t_nanos);
@@ -437,9 +441,16 @@ impl LiveController {
             if self.stop.load(std::sync::atomic::Ordering::Relaxed) {
                 return Ok(());
             }
+            // A reader that matched while the first /clock was on its way may have missed it
+            // (volatile): say the time again now and then. A use_sim_time node sees the same
+            // time twice, which fires nothing.
+            if now >= resend {
+                let _ = self.clock.write(RawCdr(self.clock_cdr.bytes().to_vec()), None);
+                resend = now + CLOCK_RESEND;
+            }
             // Readiness is edge-triggered and samples may already be queued: poll briefly, then
             // look again either way.
-            let wait = (deadline - now).min(Duration::from_millis(50));
+            let wait = (deadline - now).min(Duration::from_millis(20));
             let _ = self.poll.poll(&mut self.events, Some(wait));
         }
         self.stats.round_trip_micros.push(published.elapsed().as_secs_f64() * 1e6);
