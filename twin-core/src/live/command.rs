@@ -209,3 +209,59 @@ impl Commander {
         }
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::log::{Header, JointTrajectoryPoint};
+
+    fn humanoid() -> crate::sim::Robot {
+        crate::sim::load_robot(concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf")).unwrap()
+    }
+
+    #[test]
+    fn commands_of_the_wrong_length_or_with_nan_are_refused() {
+        let robot = humanoid();
+        let c = Commander::new(&robot.model, CommandInterface::Position);
+        assert_eq!(c.joint_names().len(), 23);
+        let good = Float64MultiArray { data: vec![0.0; 23], ..Default::default() };
+        assert!(c.check(&good).is_ok());
+        let short = Float64MultiArray { data: vec![0.0; 22], ..Default::default() };
+        assert!(c.check(&short).unwrap_err().contains("22 values, expected 23"));
+        let mut nan = good.clone();
+        nan.data[6] = f64::NAN;
+        assert!(c.check(&nan).unwrap_err().contains("left_elbow_joint"));
+    }
+
+    #[test]
+    fn trajectories_interpolate_and_name_bad_joints() {
+        let robot = humanoid();
+        let mut c = Commander::new(&robot.model, CommandInterface::Position);
+        let qpos = vec![0.0; robot.model.nq()];
+        let point = |q: f64, secs: i64| JointTrajectoryPoint {
+            positions: vec![q],
+            time_from_start_nanos: secs * 1_000_000_000,
+            ..Default::default()
+        };
+        let bad = JointTrajectory {
+            header: Header::default(),
+            joint_names: vec!["no_such_joint".into()],
+            points: vec![point(0.1, 1)],
+        };
+        assert!(c.set_trajectory(&bad, 0.0, &qpos).unwrap_err().contains("no_such_joint"));
+        let t = JointTrajectory {
+            header: Header::default(),
+            joint_names: vec!["left_elbow_joint".into()],
+            points: vec![point(-0.4, 2)],
+        };
+        c.set_trajectory(&t, 1.0, &qpos).unwrap();
+        // Halfway (t = 2 s, one second after the start at 1 s): target -0.2; at rest the PD
+        // output is kp times that error (the integral starts from zero, one step's worth).
+        let mut command = vec![0.0; robot.model.nu()];
+        c.compute(2.0, &qpos, &vec![0.0; robot.model.nv()], &mut command);
+        let i = c.names.iter().position(|n| n == "left_elbow_joint").unwrap();
+        let elbow = &c.loops[i];
+        let expected = elbow.kp * -0.2 * (1.0 + INTEGRAL_RATE * robot.model.timestep_secs());
+        assert!((command[elbow.command] - expected.clamp(elbow.limits[0], elbow.limits[1])).abs() < 1e-9);
+    }
+}
