@@ -282,7 +282,10 @@ fn kinds() -> Vec<Kind> {
                     Ok(())
                 }),
             ),
-            ("sim::load_robot", Box::new(|p: &Path, _: &[u8]| twin_core::robot::Robot::load(p).map(|_| ()).map_err(err))),
+            (
+                "sim::load_robot",
+                Box::new(|p: &Path, _: &[u8]| twin_core::robot::Robot::load(p).map(|_| ()).map_err(err)),
+            ),
         ],
     });
     kinds.push(Kind {
