@@ -12,6 +12,9 @@ mod deploy;
 mod engine;
 #[path = "cli/info.rs"]
 mod info;
+#[cfg(feature = "ros")]
+#[path = "cli/live.rs"]
+mod live;
 #[path = "cli/log.rs"]
 mod log;
 #[path = "cli/randomize.rs"]

@@ -7,7 +7,7 @@
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use twin_core::control::{ControllerOptions, JointTrajectory};
+use twin_core::control::{Controller, ControllerOptions, JointTrajectory};
 use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
 use twin_core::robot::Robot;
@@ -85,6 +85,48 @@ pub struct Args {
     /// Record only these topics (comma-separated; `/contacts/*` for every contact topic).
     #[arg(long, value_delimiter = ',', value_name = "TOPIC,...")]
     pub topics: Option<Vec<String>>,
+    /// Join the ROS 2 graph (domain `ROS_DOMAIN_ID`): publish /clock, /joint_states, the IMUs,
+    /// /odom, /tf, /tf_static, contacts and /robot_description, and take commands on
+    /// /<robot>/joint_commands (Float64MultiArray) and /<robot>/joint_trajectory.
+    #[arg(long)]
+    pub ros: bool,
+    /// With --ros: simulated seconds per wall second (1.0 = real time), or `max`.
+    #[arg(long, default_value = "1.0", value_name = "FACTOR|max")]
+    pub rtf: String,
+    /// With --ros: wait for exactly one command per control period (deterministic, however
+    /// slow the controller).
+    #[arg(long)]
+    pub lockstep: bool,
+    /// With --lockstep: longest wait for a command, seconds.
+    #[arg(long, default_value_t = 10.0, value_name = "SECS")]
+    pub lockstep_timeout: f64,
+    /// With --ros: control rate (/clock and command periods), Hz.
+    #[arg(long, default_value_t = 100.0, value_name = "HZ")]
+    pub control_rate: f64,
+    /// With --ros: what the numbers of /<robot>/joint_commands are.
+    #[arg(long, value_enum, default_value_t = InterfaceKind::Position)]
+    pub command_interface: InterfaceKind,
+    /// With --ros: the only network interface DDS uses: `lo` (loopback only, unicast discovery
+    /// to 127.0.0.1, no multicast) or an IPv4/IPv6 address of this machine.
+    #[arg(long, default_value = "lo", value_name = "lo|IP")]
+    pub ros_interface: String,
+    /// With --ros (real-time modes): seconds without a good command before the joints hold
+    /// their current pose.
+    #[arg(long, default_value_t = 0.5, value_name = "SECS")]
+    pub silence_timeout: f64,
+    /// With --ros: wait up to this long for a subscriber on /clock before starting, seconds.
+    #[arg(long, default_value_t = 0.0, value_name = "SECS")]
+    pub wait_for_subscriber: f64,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum InterfaceKind {
+    /// Joint positions, rad (m): PD servo with the hold gains.
+    Position,
+    /// Joint velocities, rad/s (m/s).
+    Velocity,
+    /// Joint efforts, N·m (N).
+    Effort,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -173,7 +215,40 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         ..RecordOptions::default()
     };
     let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
+    #[cfg(feature = "ros")]
+    let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
+    #[cfg(not(feature = "ros"))]
+    if args.ros {
+        return Err(
+            twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }.into()
+        );
+    }
+    #[cfg(feature = "ros")]
+    let (mut recording, mut live_controller) = match live {
+        Some((sink, controller)) => {
+            let options = RecordOptions { command_topic: Some(twin_core::live::actuator_topic(&robot)), ..options };
+            (Some(Recording::with_sink(&robot, &options, Some(Box::new(sink)))?), Some(controller))
+        }
+        None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
+    };
+    #[cfg(not(feature = "ros"))]
     let mut recording = if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None };
+    #[cfg(feature = "ros")]
+    if let Some(c) = &live_controller {
+        live::announce(&args, &robot, c)?;
+        if args.wait_for_subscriber > 0.0
+            && !c.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber))
+        {
+            bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
+        }
+    }
+    #[cfg(feature = "ros")]
+    let controller: &mut dyn Controller = match live_controller.as_mut() {
+        Some(c) => c,
+        None => controller.as_mut(),
+    };
+    #[cfg(not(feature = "ros"))]
+    let controller: &mut dyn Controller = controller.as_mut();
 
     let bar = if std::io::stderr().is_terminal() {
         let bar = indicatif::ProgressBar::new(1000);
@@ -194,7 +269,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
     let report = sim::simulate_with(
         &robot,
-        controller.as_mut(),
+        controller,
         &SimOptions { duration_secs: duration },
         recording.as_mut(),
         &mut progress,
@@ -202,9 +277,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &mut observers,
     )?;
     drop(observers);
+    let controller_name = controller.name();
     if let Some(b) = bar {
         b.finish_and_clear();
     }
+    #[cfg(feature = "ros")]
+    let live_stats = live_controller.as_ref().map(|c| c.stats().clone());
     let finishing = std::time::Instant::now();
     let summary = match recording {
         Some(r) => Some(r.finish()?),
@@ -220,7 +298,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         path.display(),
         report.steps,
         robot.model.timestep_secs() * 1e3,
-        controller.name(),
+        controller_name,
         report.wall_secs,
         report.real_time_factor()
     )?;
@@ -256,6 +334,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             writeln!(out, "{}: {bytes} bytes", file.display())?;
         }
     }
+    #[cfg(feature = "ros")]
+    if let Some(stats) = live_stats {
+        live::report(&mut out, &stats)?;
+    }
     if let (Some(c), Some(s)) = (&check, &scenario) {
         writeln!(out, "{}", c.metrics.summary())?;
         let verdicts = c.verdicts();
@@ -271,4 +353,125 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// The `--ros` side of `twin sim`.
+#[cfg(feature = "ros")]
+mod live {
+    use super::{Args, InterfaceKind};
+    use anyhow::{Context, bail};
+    use std::io::Write;
+    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, LiveSink, LiveStats, Pacing};
+    use twin_core::robot::Robot;
+
+    /// `ROS_DOMAIN_ID` (0 when unset), checked.
+    fn domain_id() -> anyhow::Result<u16> {
+        match std::env::var("ROS_DOMAIN_ID") {
+            Err(_) => Ok(0),
+            Ok(v) if v.trim().is_empty() => Ok(0),
+            Ok(v) => match v.trim().parse::<u16>() {
+                Ok(d) if d <= 232 => Ok(d),
+                _ => bail!("ROS_DOMAIN_ID={v:?} is not a DDS domain id (an integer 0..=232)"),
+            },
+        }
+    }
+
+    pub fn start(args: &Args, robot: &Robot) -> anyhow::Result<(LiveSink, LiveController)> {
+        let pacing = if args.lockstep {
+            Pacing::Lockstep
+        } else if args.rtf.eq_ignore_ascii_case("max") {
+            Pacing::Max
+        } else {
+            match args.rtf.parse::<f64>() {
+                Ok(f) if f > 0.0 && f.is_finite() => Pacing::RealTime(f),
+                _ => bail!("--rtf must be a positive real-time factor (1.0 = real time) or `max` (got {:?})", args.rtf),
+            }
+        };
+        if !(args.lockstep_timeout > 0.0 && args.lockstep_timeout.is_finite()) {
+            bail!("--lockstep-timeout must be a positive number of seconds (got {})", args.lockstep_timeout);
+        }
+        if !(args.silence_timeout > 0.0 && args.silence_timeout.is_finite()) {
+            bail!("--silence-timeout must be a positive number of seconds (got {})", args.silence_timeout);
+        }
+        let interface = if args.ros_interface == "lo" {
+            std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST)
+        } else {
+            args.ros_interface.parse().with_context(|| {
+                format!(
+                    "--ros-interface {:?}: give `lo` (loopback only) or an IP address of this machine's interface",
+                    args.ros_interface
+                )
+            })?
+        };
+        let options = LiveOptions {
+            domain_id: domain_id()?,
+            interface,
+            control_rate_hz: args.control_rate,
+            command_interface: match args.command_interface {
+                InterfaceKind::Position => CommandInterface::Position,
+                InterfaceKind::Velocity => CommandInterface::Velocity,
+                InterfaceKind::Effort => CommandInterface::Effort,
+            },
+            pacing,
+            silence_timeout_secs: args.silence_timeout,
+            lockstep_timeout_secs: args.lockstep_timeout,
+        };
+        // Ctrl-C ends the run cleanly (recordings closed); a second one aborts (twin's one
+        // signal handler, installed by main).
+        twin_core::fsio::cooperate();
+        let stop = twin_core::fsio::interrupt_flag();
+        let log = Box::new(|m: &str| eprintln!("warning: {m}"));
+        Ok(bridge::start(robot, &options, stop, log)?)
+    }
+
+    pub fn announce(args: &Args, robot: &Robot, c: &LiveController) -> anyhow::Result<()> {
+        let mut out = std::io::stdout().lock();
+        writeln!(
+            out,
+            "ROS 2 live: domain {}, interface {}, {} at {} Hz ({} steps per period), {}",
+            domain_id()?,
+            args.ros_interface,
+            if args.lockstep { "lockstep".to_string() } else { format!("rtf {}", args.rtf) },
+            args.control_rate,
+            c.steps_per_period(),
+            robot.name
+        )?;
+        writeln!(
+            out,
+            "commands: std_msgs/Float64MultiArray on {} ({}), trajectory_msgs/JointTrajectory on /{}/joint_trajectory",
+            bridge::command_topic(robot),
+            match args.command_interface {
+                InterfaceKind::Position => "positions, rad",
+                InterfaceKind::Velocity => "velocities, rad/s",
+                InterfaceKind::Effort => "efforts, N·m",
+            },
+            robot.name
+        )?;
+        writeln!(out, "command order ({} joints): {}", c.joint_names().len(), c.joint_names().join(", "))?;
+        out.flush()?;
+        Ok(())
+    }
+
+    pub fn report(out: &mut impl Write, s: &LiveStats) -> anyhow::Result<()> {
+        writeln!(
+            out,
+            "live: {} control periods, {} commands applied, {} rejected, {} safe holds; measured real-time factor {:.4}",
+            s.periods,
+            s.commands_applied,
+            s.commands_rejected,
+            s.safe_holds,
+            s.real_time_factor()
+        )?;
+        if let (Some(p50), Some(p99)) =
+            (bridge::percentile(&s.jitter_micros, 50.0), bridge::percentile(&s.jitter_micros, 99.0))
+        {
+            writeln!(out, "period start lateness (jitter): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+        }
+        if let (Some(p50), Some(p99)) =
+            (bridge::percentile(&s.round_trip_micros, 50.0), bridge::percentile(&s.round_trip_micros, 99.0))
+        {
+            writeln!(out, "lockstep round trip (/clock out to command in): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+        }
+        Ok(())
+    }
 }

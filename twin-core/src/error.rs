@@ -127,6 +127,13 @@ pub enum Error {
         what: String,
     },
 
+    /// The live ROS 2 bridge failed (DDS setup, a lockstep controller that stopped answering).
+    #[error("live ROS 2 bridge: {message}")]
+    Live {
+        /// What went wrong and what to do.
+        message: String,
+    },
+
     /// Writing a rerun recording failed.
     #[cfg(feature = "rerun")]
     #[error("{}: rerun recording failed: {message}", path.as_deref().map_or_else(|| "<viewer>".into(), |p| p.display().to_string()))]

@@ -32,6 +32,8 @@ pub mod convert;
 pub mod engine;
 pub mod error;
 pub mod fsio;
+#[cfg(feature = "ros")]
+pub mod live;
 pub mod log;
 #[allow(unsafe_code)]
 pub mod mj;

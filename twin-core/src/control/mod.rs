@@ -39,7 +39,7 @@ mod pd_hold;
 mod replay;
 
 pub use passive::Passive;
-pub use pd_hold::{PdHold, PdHoldOptions, pd_gains};
+pub use pd_hold::{PdHold, PdHoldOptions, PdLoop, pd_gains};
 pub use replay::{JointTrajectory, Replay, ReplayOptions, TrajectoryJoint};
 
 use crate::error::{Error, Result};
@@ -153,6 +153,16 @@ pub trait Controller: Send {
     /// Adjusts the initial joint positions `qpos` (len `nq`, the home pose) before an episode,
     /// e.g. to start a replay where its trajectory starts. Default: leaves them.
     fn initial_qpos(&self, _model: &Model, _qpos: &mut [f64]) {}
+
+    /// Called after each step's command is applied: `Ok(false)` ends the run early (a live
+    /// bridge asked to stop), an error aborts it (a lockstep controller that stopped
+    /// answering). Default: go on.
+    ///
+    /// # Errors
+    /// Whatever made the controller unable to go on.
+    fn proceed(&mut self) -> Result<bool> {
+        Ok(true)
+    }
 }
 
 /// Names accepted by [`by_name`]: the one controller registry of twin (`twin sim`,

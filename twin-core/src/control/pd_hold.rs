@@ -40,14 +40,25 @@ impl Default for PdHoldOptions {
 
 /// One PD loop: a command entry driving one 1-DOF joint.
 #[derive(Debug, Clone)]
-pub(super) struct Loop {
-    pub(super) command: usize,
-    pub(super) qpos_adr: usize,
-    pub(super) dof: usize,
-    pub(super) kp: f64,
-    pub(super) kd: f64,
-    pub(super) target: f64,
-    pub(super) limits: [f64; 2],
+pub struct PdLoop {
+    /// Index in the command (`ctrl` or `qfrc_applied`).
+    pub command: usize,
+    /// The joint.
+    pub joint: usize,
+    /// Its `qpos` address.
+    pub qpos_adr: usize,
+    /// Its DOF.
+    pub dof: usize,
+    /// Stiffness, command units per rad (m).
+    pub kp: f64,
+    /// Damping, command units per rad/s (m/s).
+    pub kd: f64,
+    /// Joint torque (force) per command unit: the actuator gear, 1 for `qfrc_applied`.
+    pub gear: f64,
+    /// Target position, rad (m).
+    pub target: f64,
+    /// Command limits.
+    pub limits: [f64; 2],
 }
 
 /// Holds the nominal pose ([`nominal_pose`]) with PD control on every actuated hinge/slide joint:
@@ -57,7 +68,7 @@ pub(super) struct Loop {
 #[derive(Debug, Clone)]
 pub struct PdHold {
     options: PdHoldOptions,
-    pub(super) loops: Vec<Loop>,
+    pub(super) loops: Vec<PdLoop>,
 }
 
 impl PdHold {
@@ -66,6 +77,11 @@ impl PdHold {
         let mut hold = PdHold { options, loops: Vec::new() };
         hold.build(model);
         hold
+    }
+
+    /// The loops, in command order (targets are set by [`Controller::reset`]).
+    pub fn loops(&self) -> &[PdLoop] {
+        &self.loops
     }
 
     /// The gains `(kp, kd)` of each loop, in command order.
@@ -110,12 +126,14 @@ impl PdHold {
                         effort = effort.min(jlo.abs().min(jhi.abs()));
                     }
                     let (kp, kd) = gains(effort, dof, gear);
-                    self.loops.push(Loop {
+                    self.loops.push(PdLoop {
                         command: u,
+                        joint,
                         qpos_adr: model.jnt_qposadr()[joint] as usize,
                         dof,
                         kp,
                         kd,
+                        gear,
                         target: 0.0,
                         limits: [lo, hi],
                     });
@@ -129,12 +147,14 @@ impl PdHold {
                     let dof = model.jnt_dofadr()[joint] as usize;
                     let [lo, hi] = limits[dof];
                     let (kp, kd) = gains(hi.abs().min(lo.abs()), dof, 1.0);
-                    self.loops.push(Loop {
+                    self.loops.push(PdLoop {
                         command: dof,
+                        joint,
                         qpos_adr: model.jnt_qposadr()[joint] as usize,
                         dof,
                         kp,
                         kd,
+                        gear: 1.0,
                         target: 0.0,
                         limits: [lo, hi],
                     });

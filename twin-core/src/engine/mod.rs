@@ -16,7 +16,9 @@
 //! 4. **physics**: the rest of the step (`mj_step2`; `mj_step` on RK4);
 //! 5. **observers**: each [`Observer`] sees the step ([`StepView`]) in order and may end the
 //!    rollout ([`Flow`]). Fall and divergence detection, metrics ([`Metric`]), verdicts
-//!    ([`Check`]) and recorders are observers.
+//!    ([`Check`]) and recorders are observers;
+//! 6. **controller's say**: [`Controller::proceed`] may end the rollout (a live bridge told to
+//!    stop) or abort it with an error (a lockstep peer that stopped answering).
 //!
 //! Random numbers (sensor noise, disturbances) come from one stream given to [`Engine::run`],
 //! drawn in this fixed order, so a rollout is a pure function of its inputs and seed.
@@ -430,7 +432,8 @@ impl Engine {
                     }
                 }
             }
-            if end {
+            // 6. A controller may end the run (a live bridge told to stop) or abort it.
+            if end || !controller.proceed()? {
                 break;
             }
             if !split && !exact {

@@ -35,8 +35,8 @@ pub use info::{LogInfo, TopicInfo};
 pub use reader::{Channel, Damage, DamageKind, RawMessage, ScanReport, Schema};
 pub use series::{JointSeries, JointStateReport, JointStateSeries};
 pub use typed::{
-    Float64MultiArray, Header, Imu, JointState, MultiArrayDimension, Odometry, RosMessage, TfMessage, TransformStamped,
-    WrenchStamped,
+    Clock, Float64MultiArray, Header, Imu, JointState, JointTrajectory, JointTrajectoryPoint, MultiArrayDimension,
+    Odometry, RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
 };
 pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 

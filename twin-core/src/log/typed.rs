@@ -142,6 +142,46 @@ pub struct TfMessage {
     pub transforms: Vec<TransformStamped>,
 }
 
+/// `rosgraph_msgs/msg/Clock`: simulation time.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Clock {
+    /// `clock.sec * 1e9 + clock.nanosec`.
+    pub clock_nanos: i64,
+}
+
+/// `std_msgs/msg/String` (e.g. `/robot_description`).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct RosString {
+    /// The text.
+    pub data: String,
+}
+
+/// `trajectory_msgs/msg/JointTrajectoryPoint`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JointTrajectoryPoint {
+    /// Positions, rad (m), one per joint name (or empty).
+    pub positions: Vec<f64>,
+    /// Velocities (or empty).
+    pub velocities: Vec<f64>,
+    /// Accelerations (or empty).
+    pub accelerations: Vec<f64>,
+    /// Efforts (or empty).
+    pub effort: Vec<f64>,
+    /// `time_from_start`, ns.
+    pub time_from_start_nanos: i64,
+}
+
+/// `trajectory_msgs/msg/JointTrajectory`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct JointTrajectory {
+    /// Header (stamp 0: start now).
+    pub header: Header,
+    /// Joints the points refer to.
+    pub joint_names: Vec<String>,
+    /// Waypoints, in time order.
+    pub points: Vec<JointTrajectoryPoint>,
+}
+
 /// A message type with a typed CDR encoding.
 pub trait RosMessage: Sized {
     /// Full type name, `pkg/msg/Type`.
@@ -390,6 +430,69 @@ impl RosMessage for TfMessage {
     }
 }
 
+impl RosMessage for Clock {
+    const TYPE_NAME: &'static str = "rosgraph_msgs/msg/Clock";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.time(self.clock_nanos);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let sec = r.i32()?;
+        let nanosec = r.u32()?;
+        Ok(Self { clock_nanos: i64::from(sec) * 1_000_000_000 + i64::from(nanosec) })
+    }
+}
+
+impl RosMessage for RosString {
+    const TYPE_NAME: &'static str = "std_msgs/msg/String";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.string(&self.data);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Self { data: r.string()?.to_string() })
+    }
+}
+
+impl RosMessage for JointTrajectory {
+    const TYPE_NAME: &'static str = "trajectory_msgs/msg/JointTrajectory";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.seq_len(self.joint_names.len());
+        for n in &self.joint_names {
+            w.string(n);
+        }
+        w.seq_len(self.points.len());
+        for p in &self.points {
+            w.f64_seq(&p.positions);
+            w.f64_seq(&p.velocities);
+            w.f64_seq(&p.accelerations);
+            w.f64_seq(&p.effort);
+            w.time(p.time_from_start_nanos);
+        }
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let header = header(r)?;
+        let n = r.seq_len(5)?;
+        let mut joint_names = Vec::with_capacity(n);
+        for _ in 0..n {
+            joint_names.push(r.string()?.to_string());
+        }
+        let n = r.seq_len(24)?;
+        let mut points = Vec::with_capacity(n);
+        for _ in 0..n {
+            let mut p = JointTrajectoryPoint::default();
+            r.f64_seq(&mut p.positions)?;
+            r.f64_seq(&mut p.velocities)?;
+            r.f64_seq(&mut p.accelerations)?;
+            r.f64_seq(&mut p.effort)?;
+            let sec = r.i32()?;
+            let nanosec = r.u32()?;
+            p.time_from_start_nanos = i64::from(sec) * 1_000_000_000 + i64::from(nanosec);
+            points.push(p);
+        }
+        Ok(Self { header, joint_names, points })
+    }
+}
+
 /// `.msg` bodies of the types above and their dependencies (`pkg/Type`, body).
 const DEFINITIONS: &[(&str, &str)] = &[
     ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"),
@@ -426,6 +529,18 @@ const DEFINITIONS: &[(&str, &str)] = &[
     ("geometry_msgs/Transform", "Vector3 translation\nQuaternion rotation\n"),
     ("geometry_msgs/TransformStamped", "std_msgs/Header header\nstring child_frame_id\nTransform transform\n"),
     ("tf2_msgs/TFMessage", "geometry_msgs/TransformStamped[] transforms\n"),
+    ("rosgraph_msgs/Clock", "builtin_interfaces/Time clock\n"),
+    ("std_msgs/String", "string data\n"),
+    ("builtin_interfaces/Duration", "int32 sec\nuint32 nanosec\n"),
+    (
+        "trajectory_msgs/JointTrajectoryPoint",
+        "float64[] positions\nfloat64[] velocities\nfloat64[] accelerations\nfloat64[] effort\n\
+         builtin_interfaces/Duration time_from_start\n",
+    ),
+    (
+        "trajectory_msgs/JointTrajectory",
+        "std_msgs/Header header\nstring[] joint_names\nJointTrajectoryPoint[] points\n",
+    ),
 ];
 
 fn body_of(short: &str) -> Option<&'static str> {
@@ -516,6 +631,17 @@ mod tests {
             dim: vec![MultiArrayDimension { label: "joints".into(), size: 2, stride: 2 }],
             data_offset: 0,
             data: vec![0.5, -0.5],
+        });
+        roundtrip(&Clock { clock_nanos: 3_000_000_001 });
+        roundtrip(&RosString { data: "<robot name=\"r\"/>".into() });
+        roundtrip(&JointTrajectory {
+            header: h.clone(),
+            joint_names: vec!["a".into(), "b".into()],
+            points: vec![JointTrajectoryPoint {
+                positions: vec![0.1, 0.2],
+                time_from_start_nanos: 500_000_000,
+                ..Default::default()
+            }],
         });
         roundtrip(&TfMessage {
             transforms: vec![TransformStamped {

@@ -388,7 +388,23 @@ impl LogWriter {
     /// # Errors
     /// [`Error::McapWrite`] when the file cannot be written.
     pub fn add_topic<T: RosMessage>(&mut self, topic: &str) -> Result<Topic<T>> {
-        let schema = schema_text(T::TYPE_NAME).expect("every RosMessage has a schema text");
+        let channel_id = self.add_topic_of_type(topic, T::TYPE_NAME)?;
+        Ok(Topic { channel_id, _type: PhantomData })
+    }
+
+    /// Registers a topic of one of the typed message types (see [`RosMessage::TYPE_NAME`]) by
+    /// name and returns its channel id, for messages that arrive already encoded (the live
+    /// bridge's received commands).
+    ///
+    /// # Errors
+    /// [`Error::McapWrite`] when the file cannot be written or `type_name` has no schema text.
+    pub fn add_topic_of_type(&mut self, topic: &str, type_name: &'static str) -> Result<u16> {
+        let Some(schema) = schema_text(type_name) else {
+            return Err(Error::McapWrite {
+                path: self.path.clone(),
+                source: mcap::McapError::UnknownSchema(topic.to_string(), 0),
+            });
+        };
         let mut metadata = BTreeMap::new();
         let qos = if topic == "/tf_static" {
             // Latched: durability transient-local, history keep-last 1.
@@ -402,12 +418,11 @@ impl LogWriter {
         // Messages already batched keep their place before the new channel's.
         self.send_batch()?;
         let (reply, answer) = mpsc::channel();
-        self.send(Job::AddTopic { type_name: T::TYPE_NAME, schema, topic: topic.to_string(), metadata, reply })?;
-        let channel_id = match answer.recv() {
-            Ok(id) => id?,
-            Err(_) => return Err(self.thread_error()),
-        };
-        Ok(Topic { channel_id, _type: PhantomData })
+        self.send(Job::AddTopic { type_name, schema, topic: topic.to_string(), metadata, reply })?;
+        match answer.recv() {
+            Ok(id) => id,
+            Err(_) => Err(self.thread_error()),
+        }
     }
 
     /// Writes one message, stamped `log_time_nanos` (also its publish time).
@@ -433,19 +448,31 @@ impl LogWriter {
     ) -> Result<()> {
         self.cdr.reset();
         encode(&mut self.cdr);
-        let id = usize::from(topic.channel_id);
+        let cdr = std::mem::take(&mut self.cdr);
+        let r = self.write_encoded(topic.channel_id, log_time_nanos, cdr.bytes());
+        self.cdr = cdr;
+        r
+    }
+
+    /// Writes one already encoded message (CDR bytes, encapsulation header included) on the
+    /// channel `channel_id` (from [`LogWriter::add_topic_of_type`] or [`Topic::channel_id`]).
+    ///
+    /// # Errors
+    /// As [`LogWriter::write`].
+    pub fn write_encoded(&mut self, channel_id: u16, log_time_nanos: u64, cdr: &[u8]) -> Result<()> {
+        let id = usize::from(channel_id);
         if self.sequences.len() <= id {
             self.sequences.resize(id + 1, 0);
         }
         let seq = &mut self.sequences[id];
         *seq = seq.wrapping_add(1);
         let header = mcap::records::MessageHeader {
-            channel_id: topic.channel_id,
+            channel_id,
             sequence: *seq,
             log_time: log_time_nanos,
             publish_time: log_time_nanos,
         };
-        self.batch.bytes.extend_from_slice(self.cdr.bytes());
+        self.batch.bytes.extend_from_slice(cdr);
         self.batch.headers.push((header, self.batch.bytes.len()));
         self.messages += 1;
         if self.batch.bytes.len() >= BATCH_BYTES {

@@ -23,11 +23,13 @@
 
 use super::Robot;
 use crate::error::{Error, Result};
+use crate::log::cdr::CdrWriter;
 use crate::log::{
-    Float64MultiArray, Imu, JointState, LogWriter, Odometry, TfMessage, Topic, WrenchStamped, WriteSummary,
+    Float64MultiArray, Imu, JointState, LogWriter, Odometry, RosMessage, TfMessage, Topic, WrenchStamped, WriteSummary,
     WriterOptions,
 };
 use crate::mj::{Data, ObjType};
+use crate::topics::{TopicInfo, TopicKind, TopicRates, TopicTable};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use std::path::PathBuf;
@@ -55,6 +57,9 @@ pub struct RecordOptions {
     /// Only these MCAP topics, by exact name (`/contacts/*` stands for every contact topic)
     /// (default: none given = all).
     pub topics: Option<Vec<String>>,
+    /// Topic of the command the controller sent each step (default: none given =
+    /// `/<robot>/joint_commands`; the live bridge moves it aside, as that name is its input).
+    pub command_topic: Option<String>,
 }
 
 impl Default for RecordOptions {
@@ -69,8 +74,42 @@ impl Default for RecordOptions {
             seed: 0,
             writer: WriterOptions::default(),
             topics: None,
+            command_topic: None,
         }
     }
+}
+
+/// A second destination of the recorded topics besides the MCAP file (the live ROS 2 bridge):
+/// it gets every message the file gets, encoded once, plus it hands back the messages it
+/// exchanged itself (commands received, `/clock` sent) for the file to hold.
+pub trait TopicSink {
+    /// A topic of the robot's topic table appears (name, type, QoS); called before its first
+    /// message.
+    ///
+    /// # Errors
+    /// When the sink can't offer the topic.
+    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()>;
+    /// One message: CDR bytes (encapsulation header included), stamped `log_time_nanos`
+    /// (simulation time).
+    ///
+    /// # Errors
+    /// When the sink fails (a slow reader is not an error: messages are dropped for it).
+    fn write(&mut self, topic: &str, log_time_nanos: u64, cdr: &[u8]) -> Result<()>;
+    /// Moves the messages the sink exchanged since the last call into `out`, to be recorded.
+    fn take_exchanged(&mut self, out: &mut Vec<ExchangedMessage>);
+}
+
+/// A message a [`TopicSink`] exchanged on its own (see [`TopicSink::take_exchanged`]).
+#[derive(Debug, Clone)]
+pub struct ExchangedMessage {
+    /// ROS topic.
+    pub topic: String,
+    /// `pkg/msg/Type` (one of the typed messages of [`crate::log`]).
+    pub type_name: &'static str,
+    /// Simulation time it belongs to, ns.
+    pub log_time_nanos: u64,
+    /// CDR bytes, encapsulation header included.
+    pub cdr: Vec<u8>,
 }
 
 /// The state of one instant, handed to [`Recording::record`] together with a `Data` whose
@@ -140,32 +179,99 @@ struct TfLink {
     child_frame: String,
 }
 
+/// A recorded topic: its index in the counts, and its MCAP channel when there is a file.
+struct Stream<T> {
+    index: usize,
+    mcap: Option<Topic<T>>,
+}
+
+impl<T> Clone for Stream<T> {
+    fn clone(&self) -> Self {
+        *self
+    }
+}
+
+impl<T> Copy for Stream<T> {}
+
 struct ImuStream {
-    topic: Option<Topic<Imu>>,
+    topic: Option<Stream<Imu>>,
     schedule: Schedule,
 }
 
-/// The MCAP side.
+/// The topic side: the MCAP file and/or a live [`TopicSink`].
 struct McapOut {
-    writer: LogWriter,
+    writer: Option<LogWriter>,
+    live: Option<Box<dyn TopicSink>>,
+    /// Encoding buffer when a message goes to both the file and the sink.
+    cdr: CdrWriter,
     /// `None`: all topics; else the topics asked for.
     wanted: Option<Vec<String>>,
-    joint_states: Option<Topic<JointState>>,
-    commands: Option<Topic<Float64MultiArray>>,
-    odom: Option<Topic<Odometry>>,
-    tf: Option<Topic<TfMessage>>,
+    joint_states: Option<Stream<JointState>>,
+    commands: Option<Stream<Float64MultiArray>>,
+    odom: Option<Stream<Odometry>>,
+    tf: Option<Stream<TfMessage>>,
     imus: Vec<ImuStream>,
     /// Per body: its `/contacts/<body>` topic once it has touched something.
-    contacts: Vec<Option<Topic<WrenchStamped>>>,
-    /// Messages per channel id.
+    contacts: Vec<Option<Stream<WrenchStamped>>>,
+    /// Messages per stream index.
     counts: Vec<(String, u64)>,
+    /// The robot's topic table (names, types, QoS of what is added).
+    table: TopicTable,
+    /// Topics the sink exchanged: name, stream index, MCAP channel.
+    exchanged_topics: Vec<(String, usize, Option<u16>)>,
+    exchanged: Vec<ExchangedMessage>,
 }
 
 impl McapOut {
-    fn count(&mut self, channel: u16) {
-        if let Some(c) = self.counts.get_mut(usize::from(channel)) {
-            c.1 += 1;
+    /// Encodes one message once and hands it to the file and the sink.
+    fn emit<T: RosMessage>(
+        &mut self,
+        s: Stream<T>,
+        log_time_nanos: u64,
+        encode: impl FnOnce(&mut CdrWriter),
+    ) -> Result<()> {
+        self.counts[s.index].1 += 1;
+        match self.live.as_mut() {
+            None => {
+                if let (Some(w), Some(topic)) = (self.writer.as_mut(), s.mcap) {
+                    w.write_with(topic, log_time_nanos, encode)?;
+                }
+            }
+            Some(live) => {
+                self.cdr.reset();
+                encode(&mut self.cdr);
+                if let (Some(w), Some(topic)) = (self.writer.as_mut(), s.mcap) {
+                    w.write_encoded(topic.channel_id(), log_time_nanos, self.cdr.bytes())?;
+                }
+                live.write(&self.counts[s.index].0, log_time_nanos, self.cdr.bytes())?;
+            }
         }
+        Ok(())
+    }
+
+    /// Records what the sink exchanged on its own since the last call.
+    fn record_exchanged(&mut self) -> Result<()> {
+        let Some(live) = self.live.as_mut() else { return Ok(()) };
+        live.take_exchanged(&mut self.exchanged);
+        for m in std::mem::take(&mut self.exchanged) {
+            let (index, channel) = match self.exchanged_topics.iter().find(|(t, _, _)| *t == m.topic) {
+                Some(&(_, index, channel)) => (index, channel),
+                None => {
+                    let channel = match self.writer.as_mut() {
+                        Some(w) => Some(w.add_topic_of_type(&m.topic, m.type_name)?),
+                        None => None,
+                    };
+                    self.counts.push((m.topic.clone(), 0));
+                    self.exchanged_topics.push((m.topic.clone(), self.counts.len() - 1, channel));
+                    (self.counts.len() - 1, channel)
+                }
+            };
+            self.counts[index].1 += 1;
+            if let (Some(w), Some(channel)) = (self.writer.as_mut(), channel) {
+                w.write_encoded(channel, m.log_time_nanos, &m.cdr)?;
+            }
+        }
+        Ok(())
     }
 
     fn wants(&self, topic: &str) -> bool {
@@ -175,18 +281,27 @@ impl McapOut {
     }
 
     /// Adds `topic` if it is wanted.
-    fn add_wanted<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Option<Topic<T>>> {
+    fn add_wanted<T: RosMessage>(&mut self, topic: &str) -> Result<Option<Stream<T>>> {
         if self.wants(topic) { self.add(topic).map(Some) } else { Ok(None) }
     }
 
-    fn add<T: crate::log::RosMessage>(&mut self, topic: &str) -> Result<Topic<T>> {
-        let t = self.writer.add_topic::<T>(topic)?;
-        let id = usize::from(t.channel_id());
-        if self.counts.len() <= id {
-            self.counts.resize(id + 1, (String::new(), 0));
+    fn add<T: RosMessage>(&mut self, topic: &str) -> Result<Stream<T>> {
+        let mcap = match self.writer.as_mut() {
+            Some(w) => Some(w.add_topic::<T>(topic)?),
+            None => None,
+        };
+        if let Some(live) = self.live.as_mut() {
+            match self.table.find(topic) {
+                Some(info) => live.add_topic(info)?,
+                None => {
+                    return Err(Error::Options(format!(
+                        "{topic} is not in the robot's topic table (twin bug: recorded topics come from it)"
+                    )));
+                }
+            }
         }
-        self.counts[id] = (topic.to_string(), 0);
-        Ok(t)
+        self.counts.push((topic.to_string(), 0));
+        Ok(Stream { index: self.counts.len() - 1, mcap })
     }
 }
 
@@ -245,6 +360,15 @@ impl Recording {
     /// [`Error::Rerun`] when the `.rrd` can't be created, the viewer can't be reached, or the
     /// `rerun` feature is off.
     pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {
+        Self::with_sink(robot, options, None)
+    }
+
+    /// As [`Recording::new`], and every topic also goes to `sink` (the live ROS 2 bridge), which
+    /// gets the topics even when no MCAP file is asked for.
+    ///
+    /// # Errors
+    /// As [`Recording::new`]; errors of the sink's `add_topic`.
+    pub fn with_sink(robot: &Robot, options: &RecordOptions, sink: Option<Box<dyn TopicSink>>) -> Result<Recording> {
         let model = &robot.model;
         let dt_nanos = ((model.timestep_secs() * 1e9).round() as u64).max(1);
         let joints: Vec<usize> = robot.joints.iter().map(|j| j.id).collect();
@@ -291,7 +415,7 @@ impl Recording {
             if base.is_some() {
                 known.push("/odom".into());
             }
-            known.push(format!("/{}/joint_commands", robot.name));
+            known.push(options.command_topic.clone().unwrap_or_else(|| format!("/{}/joint_commands", robot.name)));
             known.push("/contacts/*".into());
             for t in wanted {
                 if !known.contains(t) && !t.starts_with("/contacts/") {
@@ -307,9 +431,26 @@ impl Recording {
                 }
             }
         }
-        if let Some(path) = &options.mcap {
-            let writer = LogWriter::create(path, &options.writer)?;
+        if options.mcap.is_some() || sink.is_some() {
+            let writer = match &options.mcap {
+                Some(path) => Some(LogWriter::create(path, &options.writer)?),
+                None => None,
+            };
+            // Topic names, types and QoS come from the robot's one topic table.
+            let mut table = TopicTable::new(
+                robot,
+                &TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
+            );
+            if let Some(name) = &options.command_topic
+                && let Some(t) = table.topics.iter_mut().find(|t| t.kind == TopicKind::Commands)
+            {
+                t.name.clone_from(name);
+            }
             let mut out = McapOut {
+                live: sink,
+                cdr: CdrWriter::new(),
+                exchanged_topics: Vec::new(),
+                exchanged: Vec::new(),
                 wanted: options.topics.clone(),
                 joint_states: None,
                 commands: None,
@@ -319,14 +460,9 @@ impl Recording {
                 contacts: vec![None; model.nbody()],
                 counts: Vec::new(),
                 writer,
+                table,
             };
-            // Topic names come from the robot's one topic table.
-            let table = crate::topics::TopicTable::new(
-                robot,
-                &crate::topics::TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
-            );
-            let name = |kind| table.of_kind(kind).map(|t| t.name.clone());
-            use crate::topics::TopicKind;
+            let name = |kind| out.table.of_kind(kind).map(|t| t.name.clone());
             let (js, odom, tf, commands, tf_static) = (
                 name(TopicKind::JointStates).unwrap_or_default(),
                 name(TopicKind::Odometry),
@@ -350,9 +486,9 @@ impl Recording {
             let statics: Vec<&crate::robot::Imu> =
                 robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
             if let Some(tf_static) = tf_static.filter(|t| out.wants(t)) {
-                let topic: Topic<TfMessage> = out.add(&tf_static)?;
+                let topic: Stream<TfMessage> = out.add(&tf_static)?;
                 let body_frames = &rec.body_frames;
-                out.writer.write_with(topic, 0, |w| {
+                out.emit(topic, 0, |w| {
                     w.seq_len(statics.len());
                     for imu in &statics {
                         w.header(0, &body_frames[imu.body]);
@@ -361,7 +497,6 @@ impl Recording {
                         w.f64_fixed(&xyzw(imu.body_from_imu.1));
                     }
                 })?;
-                out.count(topic.channel_id());
             }
             rec.mcap = Some(out);
         }
@@ -410,6 +545,7 @@ impl Recording {
         imu_due.clear();
         imu_due.resize(self.imus.len(), false);
         if let Some(out) = self.mcap.as_mut() {
+            out.record_exchanged()?;
             for (k, s) in out.imus.iter_mut().enumerate() {
                 imu_due[k] = s.schedule.due(t_nanos);
             }
@@ -433,7 +569,7 @@ impl Recording {
                 let (qpos, qvel) = (sample.qpos, sample.qvel);
                 let (actuator, applied) = (data.qfrc_actuator(), data.qfrc_applied());
                 if let Some(topic) = out.joint_states {
-                    out.writer.write_with(topic, t_nanos, |w| {
+                    out.emit(topic, t_nanos, |w| {
                         w.header(stamp, "");
                         w.seq_len(names.len());
                         for n in names {
@@ -444,7 +580,6 @@ impl Recording {
                         w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| qvel[dof]));
                         w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
                     })?;
-                    out.count(topic.channel_id());
                 }
 
                 if let (Some(topic), Some((body, dof))) = (out.odom, self.base) {
@@ -454,7 +589,7 @@ impl Recording {
                     let linear_body = rotate_t(&m, v_world);
                     let angular_body = [qvel[dof + 3], qvel[dof + 4], qvel[dof + 5]];
                     let (p, q) = (data.xpos()[body], data.xquat()[body]);
-                    out.writer.write_with(topic, t_nanos, |w| {
+                    out.emit(topic, t_nanos, |w| {
                         w.header(stamp, "odom");
                         w.string(child);
                         w.f64_fixed(&p);
@@ -464,7 +599,6 @@ impl Recording {
                         w.f64_fixed(&angular_body);
                         w.f64_fixed(&[0.0; 36]);
                     })?;
-                    out.count(topic.channel_id());
                 }
 
                 for b in 1..self.touching.len() {
@@ -477,22 +611,20 @@ impl Recording {
                     let force = rotate_t(&m, [wr[0], wr[1], wr[2]]);
                     let torque = rotate_t(&m, [wr[3], wr[4], wr[5]]);
                     let frame = &self.body_frames[b];
-                    out.writer.write_with(topic, t_nanos, |w| {
+                    out.emit(topic, t_nanos, |w| {
                         w.header(stamp, frame);
                         w.f64_fixed(&force);
                         w.f64_fixed(&torque);
                     })?;
-                    out.count(topic.channel_id());
                 }
 
                 let command = sample.command;
                 if let Some(topic) = out.commands {
-                    out.writer.write_with(topic, t_nanos, |w| {
+                    out.emit(topic, t_nanos, |w| {
                         w.seq_len(0);
                         w.u32(0);
                         w.f64_seq(command);
                     })?;
-                    out.count(topic.channel_id());
                 }
             }
 
@@ -508,7 +640,7 @@ impl Recording {
                 let v = self.imu_values[k];
                 let (g2, a2) = (imu.meta.gyro_noise_std.powi(2), imu.meta.accel_noise_std.powi(2));
                 let Some(topic) = out.imus[k].topic else { continue };
-                out.writer.write_with(topic, t_nanos, |w| {
+                out.emit(topic, t_nanos, |w| {
                     w.header(stamp, &imu.meta.frame_id);
                     w.f64_fixed(&xyzw(q));
                     w.f64_fixed(&[0.0; 9]);
@@ -517,13 +649,12 @@ impl Recording {
                     w.f64_fixed(&v[3..]);
                     w.f64_fixed(&[a2, 0.0, 0.0, 0.0, a2, 0.0, 0.0, 0.0, a2]);
                 })?;
-                out.count(topic.channel_id());
             }
 
             if let (true, Some(tf)) = (tf_due, out.tf) {
                 let (xpos, xquat) = (data.xpos(), data.xquat());
                 let links = &self.tf_links;
-                out.writer.write_with(tf, t_nanos, |w| {
+                out.emit(tf, t_nanos, |w| {
                     w.seq_len(links.len());
                     for l in links {
                         let (p, q) = match l.parent {
@@ -536,7 +667,6 @@ impl Recording {
                         w.f64_fixed(&xyzw(q));
                     }
                 })?;
-                out.count(tf.channel_id());
             }
         }
 
@@ -609,11 +739,14 @@ impl Recording {
     /// Write errors of the MCAP or rerun outputs.
     pub fn finish(self) -> Result<RecordSummary> {
         let mut summary = RecordSummary::default();
-        if let Some(out) = self.mcap {
-            let path = out.writer.path().to_path_buf();
-            summary.topics = out.counts.into_iter().filter(|(t, _)| !t.is_empty()).collect();
-            let written = out.writer.finish()?;
-            summary.mcap = Some((path, written));
+        if let Some(mut out) = self.mcap {
+            out.record_exchanged()?;
+            summary.topics = out.counts;
+            if let Some(writer) = out.writer {
+                let path = writer.path().to_path_buf();
+                let written = writer.finish()?;
+                summary.mcap = Some((path, written));
+            }
         }
         #[cfg(feature = "rerun")]
         if let Some(r) = self.rerun {

@@ -1,0 +1,226 @@
+//! The DDS side: a rustdds participant restricted to one interface, and writers/readers of
+//! already-encoded CDR (twin's own encoder, [`crate::log::CdrWriter`], makes the bytes; rustdds
+//! only carries them).
+
+use crate::error::{Error, Result};
+use rustdds::bytes::Bytes;
+use rustdds::no_key::{DataReader, DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter};
+use rustdds::policy::{Durability, History, Reliability};
+use rustdds::{
+    DomainParticipant, DomainParticipantBuilder, Publisher, QosPolicies, QosPolicyBuilder, RepresentationIdentifier,
+    Subscriber, TopicKind,
+};
+use std::net::IpAddr;
+
+/// One message as CDR bytes, encapsulation header included (as MCAP stores it).
+#[derive(Debug, Clone)]
+pub struct RawCdr(pub Vec<u8>);
+
+/// Error of the raw adapters (a payload that is not plain CDR).
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+pub struct RawCdrError(String);
+
+/// Passes [`RawCdr`] through: rustdds writes the encapsulation header itself from
+/// `output_encoding`, so the payload is the bytes after twin's 4-byte header.
+pub struct RawAdapter;
+
+impl SerializerAdapter<RawCdr> for RawAdapter {
+    type Error = RawCdrError;
+    fn output_encoding() -> RepresentationIdentifier {
+        RepresentationIdentifier::CDR_LE
+    }
+    fn to_bytes(value: &RawCdr) -> std::result::Result<Bytes, RawCdrError> {
+        match value.0.get(..4) {
+            Some([0, 1, _, _]) => Ok(Bytes::copy_from_slice(&value.0[4..])),
+            _ => Err(RawCdrError("twin encodes little-endian CDR only".into())),
+        }
+    }
+}
+
+const ENCODINGS: [RepresentationIdentifier; 2] = [RepresentationIdentifier::CDR_LE, RepresentationIdentifier::CDR_BE];
+
+impl DeserializerAdapter<RawCdr> for RawAdapter {
+    type Error = RawCdrError;
+    type Decoded = RawCdr;
+    fn supported_encodings() -> &'static [RepresentationIdentifier] {
+        &ENCODINGS
+    }
+    fn transform_decoded(decoded: RawCdr) -> RawCdr {
+        decoded
+    }
+}
+
+/// Rebuilds the encapsulation header so [`crate::log::CdrReader`] reads the sample.
+#[derive(Clone, Copy)]
+pub struct RawDecoder;
+
+impl<'de> Decode<'de, RawCdr> for RawDecoder {
+    type Error = RawCdrError;
+    fn decode_bytes(
+        self,
+        input: &'de [u8],
+        encoding: RepresentationIdentifier,
+    ) -> std::result::Result<RawCdr, RawCdrError> {
+        let header: [u8; 4] = if encoding == RepresentationIdentifier::CDR_LE {
+            [0, 1, 0, 0]
+        } else if encoding == RepresentationIdentifier::CDR_BE {
+            [0, 0, 0, 0]
+        } else {
+            return Err(RawCdrError(format!("unsupported encoding {encoding:?}")));
+        };
+        let mut v = Vec::with_capacity(input.len() + 4);
+        v.extend_from_slice(&header);
+        v.extend_from_slice(input);
+        Ok(RawCdr(v))
+    }
+}
+
+impl DefaultDecoder<RawCdr> for RawAdapter {
+    type Decoder = RawDecoder;
+    const DECODER: RawDecoder = RawDecoder;
+}
+
+/// A writer of one topic.
+pub type RawWriter = DataWriter<RawCdr, RawAdapter>;
+/// A reader of one topic.
+pub type RawReader = DataReader<RawCdr, RawAdapter>;
+
+/// QoS of a published topic.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum TopicQos {
+    /// Reliable, volatile, keep last `depth`: matches rclpy/rclcpp default and sensor-data
+    /// (best-effort) subscriptions alike.
+    Stream {
+        /// History depth.
+        depth: i32,
+    },
+    /// Reliable, transient-local, keep last 1 (`/tf_static`, `/robot_description`): late
+    /// subscribers still get the message.
+    Latched,
+}
+
+impl TopicQos {
+    /// The DDS QoS for a topic of the table: transient-local topics are latched (keep last
+    /// 1); the others stream with keep last `depth` (100 where the table says
+    /// keep all, so a slow reader can't make the twin's memory grow). Always reliable: a
+    /// reliable writer matches reliable and best-effort readers alike.
+    pub fn of(qos: crate::topics::Qos) -> TopicQos {
+        match qos.durability {
+            crate::topics::Durability::TransientLocal => TopicQos::Latched,
+            crate::topics::Durability::Volatile => TopicQos::Stream {
+                depth: if qos.depth == 0 { 100 } else { i32::try_from(qos.depth).unwrap_or(i32::MAX) },
+            },
+        }
+    }
+
+    fn policies(self) -> QosPolicies {
+        // A reliable writer never blocks the simulation: with keep-last history a full queue
+        // drops the oldest sample instead of waiting for a slow reader.
+        let b =
+            QosPolicyBuilder::new().reliability(Reliability::Reliable { max_blocking_time: rustdds::Duration::ZERO });
+        match self {
+            TopicQos::Stream { depth } => {
+                b.durability(Durability::Volatile).history(History::KeepLast { depth }).build()
+            }
+            TopicQos::Latched => {
+                b.durability(Durability::TransientLocal).history(History::KeepLast { depth: 1 }).build()
+            }
+        }
+    }
+}
+
+/// ROS 2 topic name → DDS topic name (`/joint_states` → `rt/joint_states`).
+pub fn dds_topic(ros_topic: &str) -> String {
+    format!("rt/{}", ros_topic.trim_start_matches('/'))
+}
+
+/// ROS 2 type name → DDS type name (`sensor_msgs/msg/JointState` →
+/// `sensor_msgs::msg::dds_::JointState_`).
+pub fn dds_type(ros_type: &str) -> String {
+    let mut parts: Vec<&str> = ros_type.split('/').collect();
+    let name = parts.pop().unwrap_or_default();
+    let mut out = parts.join("::");
+    out.push_str("::dds_::");
+    out.push_str(name);
+    out.push('_');
+    out
+}
+
+/// A DDS participant with one publisher and one subscriber.
+pub struct Node {
+    participant: DomainParticipant,
+    publisher: Publisher,
+    subscriber: Subscriber,
+}
+
+fn dds_err(what: impl std::fmt::Display, e: impl std::fmt::Display) -> Error {
+    Error::Live { message: format!("{what}: {e}") }
+}
+
+impl Node {
+    /// Joins domain `domain_id` on the interface with address `interface` only: discovery is
+    /// announced and multicast joined/sent only there (loopback has no multicast, so on `lo`
+    /// discovery is unicast to 127.0.0.1's well-known ports).
+    ///
+    /// # Errors
+    /// [`Error::Live`] when the participant can't be created (no free port, bad domain id).
+    pub fn new(domain_id: u16, interface: IpAddr) -> Result<Node> {
+        let participant = DomainParticipantBuilder::new(domain_id)
+            .with_only_networks([interface])
+            .build()
+            .map_err(|e| dds_err(format!("creating a DDS participant on domain {domain_id}"), e))?;
+        let qos = QosPolicies::qos_none();
+        let publisher = participant.create_publisher(&qos).map_err(|e| dds_err("creating a DDS publisher", e))?;
+        let subscriber = participant.create_subscriber(&qos).map_err(|e| dds_err("creating a DDS subscriber", e))?;
+        Ok(Node { participant, publisher, subscriber })
+    }
+
+    /// A writer of `ros_topic` (type `ros_type`, e.g. `sensor_msgs/msg/JointState`).
+    ///
+    /// # Errors
+    /// [`Error::Live`] from rustdds.
+    pub fn writer(&self, ros_topic: &str, ros_type: &str, qos: TopicQos) -> Result<RawWriter> {
+        let policies = qos.policies();
+        let topic = self
+            .participant
+            .create_topic(dds_topic(ros_topic), dds_type(ros_type), &policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic for {ros_topic}"), e))?;
+        self.publisher
+            .create_datawriter_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
+            .map_err(|e| dds_err(format!("creating a writer of {ros_topic}"), e))
+    }
+
+    /// A reader of `ros_topic`: reliable (matches rclpy/rclcpp default publishers), volatile,
+    /// keep last `depth`.
+    ///
+    /// # Errors
+    /// [`Error::Live`] from rustdds.
+    pub fn reader(&self, ros_topic: &str, ros_type: &str, depth: i32) -> Result<RawReader> {
+        let policies = QosPolicyBuilder::new()
+            .reliability(Reliability::Reliable { max_blocking_time: rustdds::Duration::ZERO })
+            .durability(Durability::Volatile)
+            .history(History::KeepLast { depth })
+            .build();
+        let topic = self
+            .participant
+            .create_topic(dds_topic(ros_topic), dds_type(ros_type), &policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic for {ros_topic}"), e))?;
+        self.subscriber
+            .create_datareader_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
+            .map_err(|e| dds_err(format!("creating a reader of {ros_topic}"), e))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn ros_names_map_to_dds_names() {
+        assert_eq!(dds_topic("/joint_states"), "rt/joint_states");
+        assert_eq!(dds_topic("/humanoid/imu/data"), "rt/humanoid/imu/data");
+        assert_eq!(dds_type("sensor_msgs/msg/JointState"), "sensor_msgs::msg::dds_::JointState_");
+        assert_eq!(dds_type("rosgraph_msgs/msg/Clock"), "rosgraph_msgs::msg::dds_::Clock_");
+    }
+}

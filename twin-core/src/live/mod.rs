@@ -1,0 +1,531 @@
+//! The twin on a live ROS 2 graph (`twin sim --ros`): a DDS bridge in pure Rust (rustdds), no
+//! ROS install.
+//!
+//! [`start`] gives two halves that plug into the one simulation loop ([`crate::sim::simulate`]):
+//! - a [`LiveSink`], the recording's second destination ([`crate::sim::Recording::with_sink`]):
+//!   every topic the recorder writes (`/joint_states`, the IMUs, `/odom`, `/tf`, `/tf_static`,
+//!   `/contacts/<body>`) is published with the same CDR bytes, encoded once;
+//! - a [`LiveController`], the [`Controller`](crate::control::Controller) of the run: it
+//!   publishes `/clock` at each control period, takes `Float64MultiArray` commands on
+//!   `/<robot>/joint_commands` and `JointTrajectory` on `/<robot>/joint_trajectory`, paces the
+//!   run (real time × factor, as fast as possible, or lockstep) and hands the commands it
+//!   received to the recording.
+//!
+//! ROS naming: topic `/x` is DDS topic `rt/x`, type `pkg/msg/T` is `pkg::msg::dds_::T_`. QoS:
+//! reliable + volatile (keep last 100; matches rclpy/rclcpp defaults and best-effort sensor
+//! subscriptions); `/tf_static` and `/robot_description` reliable + transient-local. A writer
+//! never blocks the simulation.
+//!
+//! Lockstep ([`Pacing::Lockstep`]): at each control period boundary t the twin publishes
+//! `/clock` = t (all state messages stamped before t are out), then takes exactly one command
+//! (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it from t for one
+//! control period. A rejected command counts as the period's command (the last good one is
+//! held), so the run stays deterministic.
+//!
+//! Silent controller (real-time modes): the last command is held; after
+//! [`LiveOptions::silence_timeout_secs`] of wall time without a good command, the joints hold
+//! the pose they are in (PD, the hold gains) until commands come back.
+
+pub mod command;
+pub mod dds;
+
+pub use command::{CommandInterface, Commander};
+
+use crate::control::{Controller, Observation};
+use crate::error::{Error, Result};
+use crate::log::cdr::{CdrReader, CdrWriter};
+use crate::log::{Clock, Float64MultiArray, JointTrajectory, RosMessage, RosString};
+use crate::mj::Model;
+use crate::robot::Robot;
+use crate::sim::record::{ExchangedMessage, TopicSink};
+use crate::topics::{TopicInfo, TopicKind};
+use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
+use std::collections::HashMap;
+use std::net::IpAddr;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+/// How simulated time relates to wall time.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Pacing {
+    /// Simulated seconds per wall second (1.0: real time).
+    RealTime(f64),
+    /// As fast as possible.
+    Max,
+    /// One command per control period, however long it takes (bounded by
+    /// [`LiveOptions::lockstep_timeout_secs`]).
+    Lockstep,
+}
+
+/// Options of the live bridge.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LiveOptions {
+    /// DDS domain (the CLI reads `ROS_DOMAIN_ID`) (default: 0).
+    pub domain_id: u16,
+    /// Address of the only interface DDS uses: discovery, multicast and advertised locators
+    /// (default: 127.0.0.1, loopback only: unicast discovery to 127.0.0.1, no multicast).
+    pub interface: IpAddr,
+    /// Control rate: `/clock` and command periods, Hz (default: 100, the workflow's gait
+    /// controller).
+    pub control_rate_hz: f64,
+    /// Meaning of `Float64MultiArray` commands (default: position).
+    pub command_interface: CommandInterface,
+    /// Pacing (default: real time).
+    pub pacing: Pacing,
+    /// Wall time without a good command after which the joints hold their current pose, s
+    /// (default: 0.5).
+    pub silence_timeout_secs: f64,
+    /// Longest wait for a command in lockstep, wall s (default: 10).
+    pub lockstep_timeout_secs: f64,
+}
+
+impl Default for LiveOptions {
+    fn default() -> Self {
+        LiveOptions {
+            domain_id: 0,
+            interface: IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),
+            control_rate_hz: 100.0,
+            command_interface: CommandInterface::Position,
+            pacing: Pacing::RealTime(1.0),
+            silence_timeout_secs: 0.5,
+            lockstep_timeout_secs: 10.0,
+        }
+    }
+}
+
+/// In lockstep, how often `/clock` is said again while twin waits for a command.
+const CLOCK_RESEND: Duration = Duration::from_millis(200);
+
+/// Messages exchanged by the controller half, waiting for the recording.
+type Exchanged = Arc<Mutex<Vec<ExchangedMessage>>>;
+
+/// Publishes the recorder's topics ([`TopicSink`]).
+pub struct LiveSink {
+    node: Arc<Node>,
+    writers: HashMap<String, RawWriter>,
+    exchanged: Exchanged,
+    /// Failed writes (a reader that vanished mid-write), counted, not fatal.
+    write_failures: u64,
+}
+
+impl TopicSink for LiveSink {
+    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()> {
+        // The recorder's own per-step command stream is not published: the bridge's
+        // `/<robot>/joint_commands` is the controller's input.
+        if topic.kind == TopicKind::Commands || self.writers.contains_key(&topic.name) {
+            return Ok(());
+        }
+        let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
+        self.writers.insert(topic.name.clone(), w);
+        Ok(())
+    }
+
+    fn write(&mut self, topic: &str, log_time_nanos: u64, cdr: &[u8]) -> Result<()> {
+        let _ = log_time_nanos;
+        if let Some(w) = self.writers.get(topic)
+            && w.write(RawCdr(cdr.to_vec()), None).is_err()
+        {
+            self.write_failures += 1;
+        }
+        Ok(())
+    }
+
+    fn take_exchanged(&mut self, out: &mut Vec<ExchangedMessage>) {
+        if let Ok(mut q) = self.exchanged.lock() {
+            out.append(&mut q);
+        }
+    }
+}
+
+/// Statistics of a live run.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LiveStats {
+    /// Control periods run.
+    pub periods: u64,
+    /// Commands applied (`Float64MultiArray` and trajectories).
+    pub commands_applied: u64,
+    /// Commands rejected (wrong length, NaN, undecodable, bad trajectory).
+    pub commands_rejected: u64,
+    /// Times the joints switched to the safe hold after a silent controller.
+    pub safe_holds: u64,
+    /// Wall seconds from the first to the last control period.
+    pub wall_secs: f64,
+    /// Simulated seconds over the same span.
+    pub sim_secs: f64,
+    /// Lateness of each period's start against its real-time target, µs (real-time pacing).
+    pub jitter_micros: Vec<f64>,
+    /// Lockstep: wall time from publishing `/clock` to having the command, µs.
+    pub round_trip_micros: Vec<f64>,
+}
+
+impl LiveStats {
+    /// Measured real-time factor: simulated seconds per wall second.
+    pub fn real_time_factor(&self) -> f64 {
+        if self.wall_secs > 0.0 { self.sim_secs / self.wall_secs } else { f64::INFINITY }
+    }
+}
+
+/// The p-th percentile (0–100) of `values` (nearest rank), `None` if empty.
+pub fn percentile(values: &[f64], p: f64) -> Option<f64> {
+    if values.is_empty() {
+        return None;
+    }
+    let mut v = values.to_vec();
+    v.sort_by(f64::total_cmp);
+    let rank = ((p / 100.0) * v.len() as f64).ceil().max(1.0) as usize;
+    Some(v[rank.min(v.len()) - 1])
+}
+
+/// The run's controller: commands in, `/clock` out, pacing (see the module docs).
+pub struct LiveController {
+    options: LiveOptions,
+    commander: Commander,
+    clock: RawWriter,
+    commands: RawReader,
+    trajectories: RawReader,
+    poll: rustdds::mio1::Poll,
+    events: rustdds::mio1::Events,
+    exchanged: Exchanged,
+    command_topic: String,
+    trajectory_topic: String,
+    steps_per_period: u64,
+    step: u64,
+    started: Option<(Instant, f64)>,
+    last_good: Instant,
+    stop: &'static std::sync::atomic::AtomicBool,
+    failure: Option<Error>,
+    log: Box<dyn FnMut(&str) + Send>,
+    stats: LiveStats,
+    /// Scratch buffers for the last observation (trajectory start, safe hold).
+    qpos: Vec<f64>,
+    qvel: Vec<f64>,
+    clock_cdr: CdrWriter,
+}
+
+/// Topic of the commands (`/<robot>/joint_commands`).
+pub fn command_topic(robot: &Robot) -> String {
+    format!("/{}/joint_commands", robot.name)
+}
+
+/// Topic the recorder writes its per-step actuator command to in a live run (the usual
+/// `/<robot>/joint_commands` is the bridge's input).
+pub fn actuator_topic(robot: &Robot) -> String {
+    format!("/{}/actuator_commands", robot.name)
+}
+
+/// Joins the ROS 2 graph for `robot`: publishes `/robot_description` (the robot's file, when
+/// it is a URDF) and returns the two halves. `log` gets warnings (rejected commands, safe
+/// holds); `stop` ends the run when set (Ctrl-C).
+///
+/// # Errors
+/// [`Error::Live`] when DDS can't start or an option is out of range.
+pub fn start(
+    robot: &Robot,
+    options: &LiveOptions,
+    stop: &'static std::sync::atomic::AtomicBool,
+    log: Box<dyn FnMut(&str) + Send>,
+) -> Result<(LiveSink, LiveController)> {
+    if !(options.control_rate_hz > 0.0 && options.control_rate_hz.is_finite()) {
+        return Err(Error::Live {
+            message: format!("control rate must be positive (got {} Hz)", options.control_rate_hz),
+        });
+    }
+    if let Pacing::RealTime(f) = options.pacing
+        && !(f > 0.0 && f.is_finite())
+    {
+        return Err(Error::Live {
+            message: format!("real-time factor must be positive (got {f}); use max for no pacing"),
+        });
+    }
+    let node = Arc::new(Node::new(options.domain_id, options.interface)?);
+    let exchanged: Exchanged = Arc::default();
+    let command_topic = command_topic(robot);
+    let trajectory_topic = format!("/{}/joint_trajectory", robot.name);
+
+    let text = std::fs::read_to_string(&robot.path).unwrap_or_default();
+    let mut sink =
+        LiveSink { node: node.clone(), writers: HashMap::new(), exchanged: exchanged.clone(), write_failures: 0 };
+    if crate::urdf::is_urdf(&text) {
+        let w = node.writer("/robot_description", RosString::TYPE_NAME, TopicQos::Latched)?;
+        let mut cdr = CdrWriter::new();
+        RosString { data: text }.encode(&mut cdr);
+        w.write(RawCdr(cdr.bytes().to_vec()), None)
+            .map_err(|e| Error::Live { message: format!("publishing /robot_description: {e}") })?;
+        sink.writers.insert("/robot_description".into(), w);
+    }
+
+    let clock = node.writer("/clock", Clock::TYPE_NAME, TopicQos::Stream { depth: 100 })?;
+    let mut commands = node.reader(&command_topic, Float64MultiArray::TYPE_NAME, 1000)?;
+    let mut trajectories = node.reader(&trajectory_topic, JointTrajectory::TYPE_NAME, 10)?;
+    let poll = rustdds::mio1::Poll::new().map_err(|e| Error::Live { message: format!("creating a poller: {e}") })?;
+    {
+        use rustdds::mio1::{Interest, Token};
+        poll.registry()
+            .register(&mut commands, Token(0), Interest::READABLE)
+            .and_then(|()| poll.registry().register(&mut trajectories, Token(1), Interest::READABLE))
+            .map_err(|e| Error::Live { message: format!("watching the command readers: {e}") })?;
+    }
+    let model: &Model = &robot.model;
+    let dt = model.timestep_secs();
+    let steps_per_period = ((1.0 / options.control_rate_hz) / dt).round().max(1.0) as u64;
+    let controller = LiveController {
+        options: options.clone(),
+        commander: Commander::new(model, options.command_interface),
+        clock,
+        commands,
+        trajectories,
+        poll,
+        events: rustdds::mio1::Events::with_capacity(16),
+        exchanged,
+        command_topic,
+        trajectory_topic,
+        steps_per_period,
+        step: 0,
+        started: None,
+        last_good: Instant::now(),
+        stop,
+        failure: None,
+        log,
+        stats: LiveStats::default(),
+        qpos: vec![0.0; model.nq()],
+        qvel: vec![0.0; model.nv()],
+        clock_cdr: CdrWriter::new(),
+    };
+    Ok((sink, controller))
+}
+
+impl LiveSink {
+    /// Writes that failed (counted, not fatal).
+    pub fn write_failures(&self) -> u64 {
+        self.write_failures
+    }
+}
+
+impl LiveController {
+    /// The commanded joints, in `Float64MultiArray` order.
+    pub fn joint_names(&self) -> &[String] {
+        self.commander.joint_names()
+    }
+
+    /// Simulation steps per control period.
+    pub fn steps_per_period(&self) -> u64 {
+        self.steps_per_period
+    }
+
+    /// The statistics so far.
+    pub fn stats(&self) -> &LiveStats {
+        &self.stats
+    }
+
+    /// Waits up to `timeout` for a subscriber on `/clock` (a peer that joined the graph).
+    pub fn wait_for_subscriber(&self, timeout: Duration) -> bool {
+        use rustdds::StatusEvented;
+        let deadline = Instant::now() + timeout;
+        while Instant::now() < deadline {
+            while let Some(status) = self.clock.try_recv_status() {
+                if let rustdds::DataWriterStatus::PublicationMatched { current, .. } = status
+                    && current.count() > 0
+                {
+                    return true;
+                }
+            }
+            std::thread::sleep(Duration::from_millis(20));
+        }
+        false
+    }
+
+    fn warn(&mut self, message: String) {
+        (self.log)(&message);
+    }
+
+    fn record(&self, topic: &str, type_name: &'static str, t_nanos: u64, cdr: Vec<u8>) {
+        if let Ok(mut q) = self.exchanged.lock() {
+            q.push(ExchangedMessage { topic: topic.to_string(), type_name, log_time_nanos: t_nanos, cdr });
+        }
+    }
+
+    /// Applies one received `Float64MultiArray` (or rejects it). Returns whether it was good.
+    fn take_command(&mut self, raw: RawCdr, t_nanos: u64) -> bool {
+        let decoded = CdrReader::new(&raw.0).and_then(|mut r| Float64MultiArray::decode(&mut r));
+        let verdict = match &decoded {
+            Ok(m) => self.commander.check(m),
+            Err(e) => Err(format!("not a Float64MultiArray: {}", e.message)),
+        };
+        self.record(&self.command_topic.clone(), Float64MultiArray::TYPE_NAME, t_nanos, raw.0);
+        match (verdict, decoded) {
+            (Ok(()), Ok(m)) => {
+                self.commander.set_direct(&m);
+                self.stats.commands_applied += 1;
+                self.last_good = Instant::now();
+                true
+            }
+            (Err(why), _) => {
+                self.reject(&self.command_topic.clone(), t_nanos, &why);
+                false
+            }
+            (Ok(()), Err(_)) => false,
+        }
+    }
+
+    fn take_trajectory(&mut self, raw: RawCdr, t_nanos: u64) {
+        let decoded = CdrReader::new(&raw.0).and_then(|mut r| JointTrajectory::decode(&mut r));
+        self.record(&self.trajectory_topic.clone(), JointTrajectory::TYPE_NAME, t_nanos, raw.0);
+        let now = t_nanos as f64 * 1e-9;
+        let verdict = match decoded {
+            Ok(t) => self.commander.set_trajectory(&t, now, &self.qpos),
+            Err(e) => Err(format!("not a JointTrajectory: {}", e.message)),
+        };
+        match verdict {
+            Ok(()) => {
+                self.stats.commands_applied += 1;
+                self.last_good = Instant::now();
+            }
+            Err(why) => self.reject(&self.trajectory_topic.clone(), t_nanos, &why),
+        }
+    }
+
+    fn reject(&mut self, topic: &str, t_nanos: u64, why: &str) {
+        self.stats.commands_rejected += 1;
+        let n = self.stats.commands_rejected;
+        // A flood of bad commands must not flood the terminal: the first ten, then every 1000th.
+        if n <= 10 || n.is_multiple_of(1000) {
+            self.warn(format!(
+                "rejected command #{n} on {topic} at t = {:.3} s: {why}; holding the last good command",
+                t_nanos as f64 * 1e-9
+            ));
+        }
+    }
+
+    /// Takes every queued trajectory and command (real-time modes; the last good one wins).
+    fn drain(&mut self, t_nanos: u64) {
+        while let Ok(Some(s)) = self.trajectories.take_next_sample() {
+            self.take_trajectory(s.into_value(), t_nanos);
+        }
+        while let Ok(Some(s)) = self.commands.take_next_sample() {
+            self.take_command(s.into_value(), t_nanos);
+        }
+    }
+
+    /// Lockstep: exactly one command (a trajectory also counts), waiting at most the timeout.
+    fn wait_one(&mut self, t_nanos: u64) -> Result<()> {
+        let published = Instant::now();
+        let deadline = published + Duration::from_secs_f64(self.options.lockstep_timeout_secs);
+        let mut resend = published + CLOCK_RESEND;
+        loop {
+            if let Ok(Some(s)) = self.trajectories.take_next_sample() {
+                self.take_trajectory(s.into_value(), t_nanos);
+                break;
+            }
+            if let Ok(Some(s)) = self.commands.take_next_sample() {
+                self.take_command(s.into_value(), t_nanos);
+                break;
+            }
+            let now = Instant::now();
+            if now >= deadline {
+                return Err(Error::Live {
+                    message: format!(
+                        "lockstep: no command on {} within {} s after /clock = {:.3} s; is the controller running \
+                         in domain {} (ROS_DOMAIN_ID) with use_sim_time? (--lockstep-timeout sets the wait)",
+                        self.command_topic,
+                        self.options.lockstep_timeout_secs,
+                        t_nanos as f64 * 1e-9,
+                        self.options.domain_id
+                    ),
+                });
+            }
+            if self.stop.load(std::sync::atomic::Ordering::Relaxed) {
+                return Ok(());
+            }
+            // A reader that matched while the first /clock was on its way may have missed it
+            // (volatile): say the time again now and then. A use_sim_time node sees the same
+            // time twice, which fires nothing.
+            if now >= resend {
+                let _ = self.clock.write(RawCdr(self.clock_cdr.bytes().to_vec()), None);
+                resend = now + CLOCK_RESEND;
+            }
+            // Readiness is edge-triggered and samples may already be queued: poll briefly, then
+            // look again either way.
+            let wait = (deadline - now).min(Duration::from_millis(20));
+            let _ = self.poll.poll(&mut self.events, Some(wait));
+        }
+        self.stats.round_trip_micros.push(published.elapsed().as_secs_f64() * 1e6);
+        Ok(())
+    }
+
+    fn period_start(&mut self, observation: &Observation<'_>) -> Result<()> {
+        let t_secs = observation.time_secs;
+        let t_nanos = (t_secs * 1e9).round().max(0.0) as u64;
+        self.qpos.copy_from_slice(observation.qpos);
+        self.qvel.copy_from_slice(observation.qvel);
+        let now = Instant::now();
+        let (wall0, sim0) = *self.started.get_or_insert((now, t_secs));
+        if let Pacing::RealTime(factor) = self.options.pacing {
+            let target = wall0 + Duration::from_secs_f64((t_secs - sim0) / factor);
+            if target > now {
+                std::thread::sleep(target - now);
+            }
+            let late = Instant::now().saturating_duration_since(target);
+            if self.stats.periods > 0 {
+                self.stats.jitter_micros.push(late.as_secs_f64() * 1e6);
+            }
+        }
+        // /clock first: the state stamped before t is already out.
+        Clock { clock_nanos: t_nanos as i64 }.encode({
+            self.clock_cdr.reset();
+            &mut self.clock_cdr
+        });
+        let bytes = self.clock_cdr.bytes().to_vec();
+        let _ = self.clock.write(RawCdr(bytes.clone()), None);
+        self.record("/clock", Clock::TYPE_NAME, t_nanos, bytes);
+        match self.options.pacing {
+            Pacing::Lockstep => self.wait_one(t_nanos)?,
+            _ => {
+                self.drain(t_nanos);
+                let silent = self.last_good.elapsed().as_secs_f64() > self.options.silence_timeout_secs;
+                if silent && !self.commander.holding() {
+                    self.commander.hold_current(&self.qpos);
+                    self.stats.safe_holds += 1;
+                    let msg = format!(
+                        "no good command for {} s at t = {t_secs:.3} s: holding the current pose",
+                        self.options.silence_timeout_secs
+                    );
+                    self.warn(msg);
+                }
+            }
+        }
+        self.stats.periods += 1;
+        self.stats.wall_secs = Instant::now().duration_since(wall0).as_secs_f64();
+        self.stats.sim_secs = t_secs - sim0;
+        Ok(())
+    }
+}
+
+impl Controller for LiveController {
+    fn name(&self) -> &'static str {
+        "ros"
+    }
+
+    fn reset(&mut self, model: &Model, _observation: &Observation<'_>) -> Result<()> {
+        self.commander = Commander::new(model, self.options.command_interface);
+        self.step = 0;
+        Ok(())
+    }
+
+    fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        if self.step.is_multiple_of(self.steps_per_period)
+            && self.failure.is_none()
+            && let Err(e) = self.period_start(observation)
+        {
+            self.failure = Some(e);
+        }
+        self.step += 1;
+        self.commander.compute(observation.time_secs, observation.qpos, observation.qvel, command);
+    }
+
+    fn proceed(&mut self) -> Result<bool> {
+        if let Some(e) = self.failure.take() {
+            return Err(e);
+        }
+        Ok(!self.stop.load(std::sync::atomic::Ordering::Relaxed))
+    }
+}
