@@ -124,7 +124,12 @@ fn urdf_with_bad_inertia_names_file_link_and_line() {
         "{URDF_HEAD}  <link name=\"arm\">\n    <inertial>\n      <mass value=\"1\"/>\n      <inertia ixx=\"0.01\" iyy=\"0.01\" izz=\"0.05\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/>\n    </inertial>\n  </link>\n  <joint name=\"j\" type=\"revolute\"><parent link=\"base\"/><child link=\"arm\"/><axis xyz=\"0 0 1\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/></joint>\n</robot>\n"
     );
     let path = write(dir.path(), "bad_inertia.urdf", &urdf);
-    let err = Model::from_file(&path).expect_err("triangle inequality");
+    // As ROS/Gazebo, the default repairs it (smallest change, listed in the notes); strict
+    // conversion refuses it with the file, line and link.
+    let repaired = Model::from_file(&path).expect("repaired by default");
+    assert_eq!(repaired.nbody(), 3);
+    let strict = twin_core::convert::ConvertOptions { strict_inertia: true, ..Default::default() };
+    let err = twin_core::convert::convert_urdf(&path, &strict).expect_err("triangle inequality");
     let Error::Urdf { line, element, name, message, .. } = &err else { panic!("{err:?}") };
     assert_eq!((*line, element.as_str(), name.as_deref()), (9, "inertia", Some("arm")));
     assert!(message.contains("triangle"), "{message}");
@@ -134,9 +139,10 @@ fn urdf_with_bad_inertia_names_file_link_and_line() {
 
 #[test]
 fn urdf_with_missing_mesh_names_file_link_and_line() {
+    // A missing collision mesh changes the physics: an error (a missing visual mesh is a note).
     let dir = tempfile::tempdir().unwrap();
     let urdf = format!(
-        "{URDF_HEAD}  <link name=\"shell\">\n    <visual>\n      <geometry>\n        <mesh filename=\"meshes/shell.stl\"/>\n      </geometry>\n    </visual>\n  </link>\n  <joint name=\"j\" type=\"fixed\"><parent link=\"base\"/><child link=\"shell\"/></joint>\n</robot>\n"
+        "{URDF_HEAD}  <link name=\"shell\">\n    <collision>\n      <geometry>\n        <mesh filename=\"meshes/shell.stl\"/>\n      </geometry>\n    </collision>\n  </link>\n  <joint name=\"j\" type=\"fixed\"><parent link=\"base\"/><child link=\"shell\"/></joint>\n</robot>\n"
     );
     let path = write(dir.path(), "missing_mesh.urdf", &urdf);
     let err = Model::from_file(&path).expect_err("missing mesh");
