@@ -195,65 +195,6 @@ fn kinematics_match_mujoco() {
     }
 }
 
-#[test]
-#[ignore]
-fn trace() {
-    use std::sync::Arc;
-    use twin_core::control::{Actuation, Controller, Observation};
-    let vx: f64 = std::env::var("VX").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-    let secs: f64 = std::env::var("SECS").ok().and_then(|v| v.parse().ok()).unwrap_or(2.0);
-    let armature: f64 = std::env::var("ARM").ok().and_then(|v| v.parse().ok()).unwrap_or(0.0);
-    let model = Arc::new(
-        twin_core::mj::Model::from_urdf(
-            humanoid(),
-            &twin_core::convert::ConvertOptions { armature, ..Default::default() },
-        )
-        .unwrap(),
-    );
-    let mut data = twin_core::mj::Data::new(model.clone()).unwrap();
-    twin_core::control::reset_to_home(&mut data).unwrap();
-    let opts: WalkOptions = toml::from_str(&std::env::var("WALK").unwrap_or_default()).unwrap();
-    let every: usize = std::env::var("EVERY").ok().and_then(|v| v.parse().ok()).unwrap_or(25);
-    let mut w = Walker::new(&model, WalkOptions { vx, ..opts }).unwrap();
-    w.reset(&model, &Observation::of(&data)).unwrap();
-    let act = Actuation::of(&model);
-    let mut cmd = vec![0.0; act.len(&model)];
-    let n = (secs / model.timestep_secs()) as usize;
-    for i in 0..n {
-        data.step1().unwrap();
-        w.compute(&model, &Observation::of(&data), &mut cmd);
-        act.apply(&mut data, &cmd);
-        data.step2().unwrap();
-        if i % every == 0 {
-            let s = w.state();
-            let q = data.qpos();
-            println!(
-                "t {:.3} com {:.3} {:.3} {:.3} ref {:.3} {:.3} zmp {:.3} {:.3} dcm {:.3} {:.3} dref {:.3} {:.3} base z {:.3} quat {:.3} {:.3} {:.3} ik {:.4} walk {} steps {} cmd {:?}",
-                data.time_secs(),
-                s.com[0],
-                s.com[1],
-                s.com[2],
-                s.com_ref[0],
-                s.com_ref[1],
-                s.zmp_ref[0],
-                s.zmp_ref[1],
-                s.dcm[0],
-                s.dcm[1],
-                s.dcm_ref[0],
-                s.dcm_ref[1],
-                q[2],
-                q[4],
-                q[5],
-                q[6],
-                s.ik_error_m,
-                s.walking,
-                s.steps,
-                cmd.iter().map(|c| (c * 10.0).round() / 10.0).collect::<Vec<_>>()
-            );
-        }
-    }
-}
-
 /// The shipped balance scenario passes its checks (a forward push held by the ankles, a
 /// sideways push recovered by stepping).
 #[test]
