@@ -199,6 +199,8 @@ def main():
     p.add_argument("--flood-count", type=int, default=10000)
     p.add_argument("--quit-after", type=int, default=20)
     p.add_argument("--out", required=True, help="JSON output file")
+    p.add_argument("--clock-only", action="store_true",
+                   help="subscribe to /clock alone (round-trip figures without decoding the state in Python)")
     a = p.parse_args()
     command = json.loads(a.command)
 
@@ -215,6 +217,8 @@ def main():
             (a.imu_topic, Imu, reader_qos), ("/odom", Odometry, reader_qos), ("/tf", TFMessage, reader_qos),
             ("/tf_static", TFMessage, latched_qos), ("/robot_description", String, latched_qos)]
     subs += [(t, WrenchStamped, reader_qos) for t in a.contact_topics.split(",") if t]
+    if a.clock_only:
+        subs = subs[:1]
     readers = []
     for name, ty, qos in subs:
         topic = Topic(dp, "rt/" + name.lstrip("/"), ty, qos=qos)
