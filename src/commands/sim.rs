@@ -243,6 +243,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     #[cfg(feature = "ros")]
+    let mut live_reset = live_controller.as_ref().map(|c| c.reset_disturbance());
+    #[cfg(feature = "ros")]
     let controller: &mut dyn Controller = match live_controller.as_mut() {
         Some(c) => c,
         None => controller.as_mut(),
@@ -266,6 +268,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    #[cfg(feature = "ros")]
+    disturbances.extend(live_reset.iter_mut().map(|r| r as &mut dyn Disturbance));
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
     let report = sim::simulate_with(
         &robot,
@@ -448,6 +452,9 @@ mod live {
             robot.name
         )?;
         writeln!(out, "command order ({} joints): {}", c.joint_names().len(), c.joint_names().join(", "))?;
+        let services: Vec<String> =
+            bridge::simulation::SERVICES.iter().map(|(name, ty)| format!("{name} ({ty})")).collect();
+        writeln!(out, "services: {}", services.join(", "))?;
         out.flush()?;
         Ok(())
     }
@@ -455,11 +462,14 @@ mod live {
     pub fn report(out: &mut impl Write, s: &LiveStats) -> anyhow::Result<()> {
         writeln!(
             out,
-            "live: {} control periods, {} commands applied, {} rejected, {} safe holds; measured real-time factor {:.4}",
+            "live: {} control periods, {} commands applied, {} rejected, {} safe holds, {} service calls, {} resets; \
+             measured real-time factor {:.4}",
             s.periods,
             s.commands_applied,
             s.commands_rejected,
             s.safe_holds,
+            s.service_calls,
+            s.resets,
             s.real_time_factor()
         )?;
         if let (Some(p50), Some(p99)) =
