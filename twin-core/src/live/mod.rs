@@ -386,7 +386,7 @@ impl LiveController {
 
     /// Answers every waiting service call (see [`simulation`]).
     fn serve(&mut self, model: &Model, t_secs: f64) {
-        while let Some(next) = self.services.next() {
+        while let Some(next) = self.services.next_call() {
             let (k, id, call) = match next {
                 Ok(c) => c,
                 Err(why) => {
