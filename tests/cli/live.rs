@@ -235,26 +235,26 @@ fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_rec
     clocks.dedup();
     let expected: Vec<u64> = (0..100).map(|k| k * PERIOD_NANOS).collect();
     assert_eq!(clocks, expected, "the peer's /clock");
-    let commands = read::<Float64MultiArray>(&mcap, "/humanoid/joint_commands");
+    let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
     let times: Vec<u64> = commands.iter().map(|(t, _)| *t).collect();
     assert_eq!(times, expected, "commands recorded at each period");
     assert_eq!(peer["sent"].as_u64(), Some(100));
     assert!(commands.iter().all(|(_, c)| c.data == elbow_command()));
-    let recorded_clock: Vec<u64> = read::<twin_core::log::Clock>(&mcap, "/clock").iter().map(|(t, _)| *t).collect();
+    let recorded_clock: Vec<u64> = read::<twin_core::log::Clock>(mcap, "/clock").iter().map(|(t, _)| *t).collect();
     assert_eq!(recorded_clock, expected);
 
     // The elbow reaches its target (0.3 rad of flexion) within 0.02 rad in 1 s of simulated time.
-    let (t, q) = elbow_at_end(&mcap);
+    let (t, q) = elbow_at_end(mcap);
     assert!(t <= 1_000_000_000, "{t}");
     assert!((q - ELBOW_TARGET).abs() < 0.02, "left elbow at {q} rad after {t} ns");
 
     // The peer decodes every topic to the values of the recording.
-    let n_js = compare(&mcap, &peer, "/joint_states", js_json);
-    let n_imu = compare(&mcap, &peer, "/humanoid/imu/data", imu_json);
-    let n_odom = compare(&mcap, &peer, "/odom", odom_json);
-    let n_tf = compare(&mcap, &peer, "/tf", tf_json);
-    let n_contacts = compare(&mcap, &peer, "/contacts/left_foot_link", wrench_json)
-        + compare(&mcap, &peer, "/contacts/right_foot_link", wrench_json);
+    let n_js = compare(mcap, peer, "/joint_states", js_json);
+    let n_imu = compare(mcap, peer, "/humanoid/imu/data", imu_json);
+    let n_odom = compare(mcap, peer, "/odom", odom_json);
+    let n_tf = compare(mcap, peer, "/tf", tf_json);
+    let n_contacts = compare(mcap, peer, "/contacts/left_foot_link", wrench_json)
+        + compare(mcap, peer, "/contacts/right_foot_link", wrench_json);
     // The peer joined before the first period, so (reliable) it got nearly everything.
     assert!(
         n_js >= 450 && n_imu >= 180 && n_odom >= 450 && n_tf >= 90 && n_contacts >= 900,
@@ -279,13 +279,13 @@ fn ros_rejects_bad_commands_and_holds_the_last_good_one() {
     assert!(stdout.contains("3 rejected"), "{stdout}");
     // All 100 taken commands are recorded, bad ones included; the good ones still bring the
     // elbow to its target within the second.
-    let commands = read::<Float64MultiArray>(&mcap, "/humanoid/joint_commands");
+    let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
     assert_eq!(commands.len(), 100);
     assert!(commands[1].1.data[0].is_nan());
-    let (_, q) = elbow_at_end(&mcap);
+    let (_, q) = elbow_at_end(mcap);
     assert!((q - ELBOW_TARGET).abs() < 0.02, "elbow at {q}");
     // Before the first good command (three periods) the home pose was held.
-    assert_eq!(read::<JointState>(&mcap, "/joint_states").len(), 500);
+    assert_eq!(read::<JointState>(mcap, "/joint_states").len(), 500);
 }
 
 #[test]

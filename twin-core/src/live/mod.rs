@@ -28,7 +28,9 @@
 //! period's start (after its `/clock`), and at every step while paused. While paused the
 //! simulation waits (no steps, no `/clock`); after a resume, real-time pacing starts again
 //! from the current simulated time (no catching up). A reset acts through [`LiveReset`], the
-//! run's disturbance: the state at the start comes back at the next step.
+//! run's disturbance: the state at the start comes back at the next step. In lockstep, a
+//! `StepSimulation` that crosses a control period's start waits for that period's command, as
+//! any step does.
 //!
 //! Silent controller (real-time modes): the last command is held; after
 //! [`LiveOptions::silence_timeout_secs`] of wall time without a good command, the joints hold
@@ -402,14 +404,16 @@ impl LiveController {
         &self.stats
     }
 
-    /// The run's reset disturbance (give it to the simulation loop with the others).
+    /// The run's reset disturbance: give it to the simulation loop with the others
+    /// ([`crate::sim::simulate_with`]); without it a reset only brings the command back to
+    /// holding the home pose.
     pub fn reset_disturbance(&self) -> LiveReset {
         LiveReset { requested: self.reset_requested.clone(), initial: Vec::new() }
     }
 
     /// Answers every waiting service call (see [`simulation`]).
     fn serve(&mut self, model: &Model, t_secs: f64) {
-        while let Some(next) = self.services.next() {
+        while let Some(next) = self.services.next_call() {
             let (k, id, call) = match next {
                 Ok(c) => c,
                 Err(why) => {

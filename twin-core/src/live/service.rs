@@ -180,4 +180,17 @@ mod tests {
         };
         assert!(split_request(short, None).unwrap_err().contains("16-byte rmw header"));
     }
+
+    #[test]
+    fn a_request_with_a_sample_identity_has_no_payload_header() {
+        let mut w = CdrWriter::new();
+        w.u64(7);
+        let identity = SampleIdentity {
+            writer_guid: rustdds::GUID::GUID_UNKNOWN,
+            sequence_number: rustdds::SequenceNumber::from(3),
+        };
+        let req = split_request(w.bytes().to_vec(), Some(identity)).unwrap();
+        assert_eq!(req.id, RequestId::Sample(identity));
+        assert_eq!(req.reader().unwrap().u64().unwrap(), 7);
+    }
 }

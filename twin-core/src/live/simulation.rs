@@ -128,7 +128,7 @@ impl SimulationServices {
     /// The next call waiting on any service: `Ok((service index, id, call))`, or `Err` with a
     /// sentence for a request that can't be decoded (answered already with
     /// `RESULT_OPERATION_FAILED` when it had an id).
-    pub fn next(&mut self) -> Option<std::result::Result<(usize, RequestId, Call), String>> {
+    pub fn next_call(&mut self) -> Option<std::result::Result<(usize, RequestId, Call), String>> {
         for k in 0..self.servers.len() {
             let Some(taken) = self.servers[k].take() else { continue };
             let request = match taken {
