@@ -22,7 +22,9 @@
 
 use crate::control::{Controller, Observation, PdHoldOptions, pd_gains};
 use crate::convert::actuated_joints;
-use crate::engine::{Disturbance, Engine, Episode, Flow, Measurement, Observer, StepView, Verdict, observers::Divergence};
+use crate::engine::{
+    Disturbance, Engine, Episode, Flow, Measurement, Observer, StepView, Verdict, observers::Divergence,
+};
 use crate::error::Result;
 use crate::mj::{Data, FreeJoint, Model, ObjType};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -122,8 +124,6 @@ fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)
             damping_ratio: 1.0,
             min_natural_freq_hz: Some(opts.fallback_freq_hz),
             stability_dt_secs: Some(dt),
-            // The servos' damping runs in MuJoCo's implicit integrator.
-            max_omega_dt: 1.0,
             ..PdHoldOptions::default()
         };
         let (kp_joint, kv_joint) = pd_gains(effort, inertia, &rule);
@@ -313,8 +313,7 @@ impl Observer for HoldWatch {
             let adr = model.jnt_qposadr()[j] as usize;
             self.joint_drift = self.joint_drift.max((data.qpos()[adr] - self.home[adr]).abs());
         }
-        let v2: f64 =
-            self.servos.iter().map(|&(_, j, _)| data.qvel()[model.jnt_dofadr()[j] as usize].powi(2)).sum();
+        let v2: f64 = self.servos.iter().map(|&(_, j, _)| data.qvel()[model.jnt_dofadr()[j] as usize].powi(2)).sum();
         if i < self.window {
             self.vel_first += v2;
         }
