@@ -274,9 +274,9 @@ fn synthetic_ur5_torques_are_the_inverse_dynamics_of_its_logged_motion() {
         let qd: Vec<f64> = (0..nj).map(|j| log.velocity[j][k]).collect();
         let qdd: Vec<f64> = (0..nj).map(|j| (log.velocity[j][k + 1] - log.velocity[j][k]) / dt).collect();
         let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
-        for j in 0..nj {
-            worst = worst.max((tau[j] - log.effort[j][k]).abs());
-            largest = largest.max(log.effort[j][k].abs());
+        for (t, effort) in tau.iter().zip(&log.effort) {
+            worst = worst.max((t - effort[k]).abs());
+            largest = largest.max(effort[k].abs());
         }
     }
     assert!(largest > 1.0, "the UR5 needs torque to move: largest {largest} N·m");

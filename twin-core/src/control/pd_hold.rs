@@ -30,12 +30,13 @@ pub struct PdHoldOptions {
     /// [`PdHold`]'s cap on its loops together: the largest stability margin
     /// `a_K²/4 + a_D` of the coupled loops under the explicit step, with
     /// `a_K = √λmax(M⁻¹K)·dt` and `a_D = λmax(M⁻¹D)·dt / 2` (K, D the loops' joint-space
-    /// stiffness and damping, M the joint-space inertia at the home pose, `M⁻¹` restricted to the
-    /// loops' joints). A torque held over a step from the state at its start is stable below 1
+    /// stiffness and damping, M the inertia of the loops' joints at the home pose with every
+    /// other DOF held, as a floating base standing on the ground). A torque held over a step
+    /// from the state at its start is stable below 1
     /// (the Jury bound of semi-implicit Euler, mode by mode). Above it, every kp is scaled down
     /// by one factor (kd by its square root): light robots whose URDFs give placeholder effort
     /// limits (1000 N·m on a 2 kg quadruped) stay stable. `f64::INFINITY`: no cap. (default:
-    /// 0.98; the shipped humanoid's loops, at 0.975, keep their gains)
+    /// 0.98; the shipped humanoid keeps its gains, down to 0.7 times its masses)
     pub max_loop_margin: f64,
 }
 
@@ -208,14 +209,15 @@ impl PdHold {
         data.qpos_mut().copy_from_slice(&nominal_pose(model));
         data.forward().ok()?;
         let nv = model.nv();
-        let m_inv = DMatrix::from_row_slice(nv, nv, &data.full_mass_matrix()).cholesky()?.inverse();
+        let m = DMatrix::from_row_slice(nv, nv, &data.full_mass_matrix());
         let n = torque.len();
+        // The loops' joints with every other DOF held (a floating base standing on the ground,
+        // not in free fall): the inverse of M's block of those joints.
+        let m_inv = DMatrix::from_fn(n, n, |i, j| m[(torque[i].dof, torque[j].dof)]).cholesky()?.inverse();
         // λmax(M⁻¹K) = λmax(K^½ M⁻¹ K^½), symmetric; the same for D.
         let largest = |gain: &dyn Fn(&PdLoop) -> f64| {
             let r: Vec<f64> = torque.iter().map(|l| (gain(l) * l.gear).max(0.0).sqrt()).collect();
-            DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(torque[i].dof, torque[j].dof)] * r[j])
-                .symmetric_eigenvalues()
-                .max()
+            DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigenvalues().max()
         };
         let dt = model.timestep_secs();
         let a_k = largest(&|l| l.kp).sqrt() * dt;
