@@ -54,7 +54,8 @@ pub struct Args {
     /// JointState topic, or a CSV `time_sec,<joint>,…`.
     #[arg(long, value_name = "LOG_OR_CSV")]
     pub trajectory: Option<PathBuf>,
-    /// JointState topic of the trajectory log.
+    /// Topic of the trajectory log: sensor_msgs/JointState, or trajectory_msgs/JointTrajectory
+    /// (as `twin excite` writes on /joint_trajectory).
     #[arg(long, default_value = "/joint_states")]
     pub trajectory_topic: String,
     /// Write the ROS 2 topics to this MCAP file.

@@ -122,6 +122,7 @@ pub mod allan;
 pub mod condition;
 pub mod error;
 pub mod estimate;
+pub mod excite;
 pub mod friction;
 pub mod identify;
 pub mod log;

@@ -134,7 +134,21 @@ impl Default for FloatingSynthOptions {
 /// # Errors
 /// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
 pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
-    simulate_impl(urdf, opts, None)
+    simulate_impl(urdf, opts, None, None)
+}
+
+/// A joint-space reference: `(q, q̇, q̈)` of joint `j` ([`RobotModel::joints`] order) at time
+/// `t` seconds.
+pub type Reference<'a> = &'a dyn Fn(usize, f64) -> (f64, f64, f64);
+
+/// As [`simulate`], the robot tracking `reference` instead of the built-in sum of sines (e.g.
+/// an excitation trajectory of [`crate::excite`]); the options' trajectory fields
+/// (`max_amplitude`, `base_frequency_hz`) are then unused.
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_tracking(urdf: &Path, opts: &SynthOptions, reference: Reference<'_>) -> Result<JointLog> {
+    simulate_impl(urdf, opts, None, Some(reference))
 }
 
 /// Simulates the robot of `urdf` with a floating base (contacts off) and returns its log with
@@ -144,10 +158,15 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
 /// # Errors
 /// As [`simulate`]; [`crate::Error::Urdf`] for a wrench link the robot lacks.
 pub fn simulate_floating(urdf: &Path, opts: &SynthOptions, floating: &FloatingSynthOptions) -> Result<JointLog> {
-    simulate_impl(urdf, opts, Some(floating))
+    simulate_impl(urdf, opts, Some(floating), None)
 }
 
-fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSynthOptions>) -> Result<JointLog> {
+fn simulate_impl(
+    urdf: &Path,
+    opts: &SynthOptions,
+    floating: Option<&FloatingSynthOptions>,
+    custom: Option<Reference<'_>>,
+) -> Result<JointLog> {
     let dt = 1.0 / opts.rate_hz;
     let gravity = if floating.is_some_and(|f| !f.gravity) { r#" gravity="0 0 0""# } else { "" };
     let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable"/></option>"#);
@@ -234,7 +253,7 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
             freq[j][k] = f0 * HARMONICS[k];
         }
     }
-    let reference = |j: usize, t: f64| -> (f64, f64, f64) {
+    let sines = |j: usize, t: f64| -> (f64, f64, f64) {
         let (mut q, mut qd, mut qdd) = (centre[j], 0.0, 0.0);
         for k in 0..5 {
             let w = 2.0 * PI * freq[j][k];
@@ -245,6 +264,7 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
         }
         (q, qd, qdd)
     };
+    let reference: Reference<'_> = custom.unwrap_or(&sines);
 
     let mut data = Data::new(model.clone())?;
     for (j, joint) in robot.joints.iter().enumerate() {
