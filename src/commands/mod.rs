@@ -3,6 +3,7 @@
 pub mod calibrate;
 pub mod check;
 pub mod convert;
+pub mod excite;
 pub mod info;
 pub mod log;
 pub mod randomize;
@@ -28,6 +29,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sim(args) => sim::run(*args),
         Command::View(args) => view::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Excite(args) => excite::run(args),
     }
 }
 

@@ -28,8 +28,9 @@
 //! Position (URDF range less a margin), velocity (a fraction of URDF `<limit velocity>`),
 //! acceleration (an option: URDF has none), torque (a fraction of URDF `<limit effort>`; the
 //! torque is the model's inverse dynamics `Y·π_URDF`, friction included) and self-collision
-//! (MuJoCo contacts between the robot's own links, pairs already touching at the rest pose
-//! excepted). Limits enter the optimization as a penalty; the result is then scaled per
+//! (MuJoCo contacts between the robot's own links; pairs already touching at the rest pose,
+//! and each link with its grandparent, whose shapes overlap around the joint between them in
+//! most URDFs, excepted). Limits enter the optimization as a penalty; the result is then scaled per
 //! joint to use its position, velocity and acceleration room and shrunk until every limit
 //! holds on a 4× finer grid.
 //!
@@ -97,8 +98,9 @@ pub struct ExciteOptions {
     pub samples: usize,
     /// Seed of the random trajectories (default: 1).
     pub seed: u64,
-    /// Joints slower than this have no rows (as `twin sysid`'s dead zone), rad/s (default:
-    /// 0.05).
+    /// The Coulomb column is `tanh(q̇/ε)` with this `ε` in the design (rad/s): `twin sysid`'s
+    /// `sign(q̇)` with its dead zone made smooth, so that the criterion has a gradient
+    /// (default: 0.05, `twin sysid`'s dead zone).
     pub velocity_deadzone: f64,
 }
 
@@ -502,9 +504,7 @@ impl<'a> Problem<'a> {
             }
             let ncols = self.ncols;
             for (s, &j) in self.selected.iter().enumerate() {
-                if qd[j].abs() >= self.opts.velocity_deadzone {
-                    acc.push(s, &rows[j * ncols..(j + 1) * ncols], tau[j]);
-                }
+                acc.push(s, &rows[j * ncols..(j + 1) * ncols], tau[j]);
             }
             if collisions && let Some((data, allowed)) = &mut self.collide {
                 for (j, joint) in self.robot.joints.iter().enumerate() {
@@ -561,7 +561,7 @@ impl<'a> Problem<'a> {
         &mut self,
         joints: &[FourierJoint],
         per_joint: bool,
-    ) -> Result<std::result::Result<Vec<FourierJoint>, Violation>> {
+    ) -> Result<std::result::Result<(Vec<FourierJoint>, Option<Violation>), Violation>> {
         let n = 4 * self.opts.samples;
         let omega = self.omega();
         let period = 1.0 / self.opts.base_frequency_hz;
@@ -604,7 +604,7 @@ impl<'a> Problem<'a> {
         };
         let (_, pen, worst) = self.assess(&scaled, n, self.opts.self_collision)?;
         if pen == 0.0 {
-            return Ok(Ok(scaled));
+            return Ok(Ok((scaled, None)));
         }
         let (_, pen0, worst0) = self.assess(&shrink(&scaled, 0.0), n, self.opts.self_collision)?;
         if pen0 > 0.0 {
@@ -623,7 +623,7 @@ impl<'a> Problem<'a> {
         if lo < 1e-3 {
             return Ok(Err(worst.expect("a penalty has a violation")));
         }
-        Ok(Ok(shrink(&scaled, lo)))
+        Ok(Ok((shrink(&scaled, lo), worst)))
     }
 
     fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {
@@ -875,7 +875,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             torque,
         });
     }
-    let friction = FrictionModel::default();
+    let friction = FrictionModel { coulomb_smoothing: Some(opts.velocity_deadzone.max(1e-3)), offset: false };
     let reg = Regressor::new(&robot, friction)?;
     let layout = reg.layout();
     let cad = crate::identify::cad_params(&robot, &layout);
@@ -891,9 +891,20 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             .iter()
             .map(|(_, g)| sorted([model.geom_bodyid()[g[0] as usize] as usize, model.geom_bodyid()[g[1] as usize] as usize]))
             .collect();
+        // Links two joints apart (a link and its grandparent) overlap around the joint between
+        // them in most URDFs' collision shapes; MuJoCo already skips parent and child.
+        let parent = model.body_parentid();
+        for b in 1..model.nbody() {
+            let p = parent[b] as usize;
+            if p > 0 {
+                allowed.push(sorted([b, parent[p] as usize]));
+            }
+        }
         allowed.sort_unstable();
         allowed.dedup();
-        for p in &allowed {
+        let grandparents: Vec<[usize; 2]> =
+            (1..model.nbody()).filter(|&b| parent[b] > 0).map(|b| sorted([b, parent[parent[b] as usize] as usize])).collect();
+        for p in allowed.iter().filter(|p| !grandparents.contains(p)) {
             notes.push(format!(
                 "links \"{}\" and \"{}\" already touch at the rest pose: their contacts are not counted as collisions",
                 model.name(ObjType::Body, p[0]),
@@ -930,7 +941,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     for _ in 0..opts.random_candidates {
         let raw = random_joints(&template, &problem.limits, h, &mut rng);
         match problem.fit_to_limits(&raw, false)? {
-            Ok(js) => candidates.push(js),
+            Ok((js, _)) => candidates.push(js),
             Err(v) => last_violation = Some(v),
         }
     }
@@ -940,6 +951,14 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             "the limits leave no feasible excitation trajectory: even holding still at rest, {v}; raise that \
              limit (the URDF's <limit>, or the effort/velocity fraction) or choose another rest pose"
         )));
+    }
+    if let (Some(v), true) = (&last_violation, candidates.len() < opts.random_candidates) {
+        notes.push(format!(
+            "{} of {} random trajectories were infeasible even at their rest pose (e.g. {})",
+            opts.random_candidates - candidates.len(),
+            opts.random_candidates,
+            v.what
+        ));
     }
     {
         let (rz, _, _) = problem.assess(&candidates[0], 4 * opts.samples, false)?;
@@ -960,7 +979,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
 
     // Quasi-Newton search from the best random trajectory, each joint scaled to its room.
     let start = match problem.fit_to_limits(&best_random, true)? {
-        Ok(js) => js,
+        Ok((js, _)) => js,
         Err(_) => best_random.clone(),
     };
     let x0 = vars_from_joints(&start, h);
@@ -985,7 +1004,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let designed = joints_from_vars(&x, h, &template);
     let (mut joints, mut condition, mut scaled_condition) =
         (best_random.clone(), best_random_condition, best_eval.scaled_condition);
-    if let Ok(fitted) = problem.fit_to_limits(&designed, true)? {
+    if let Ok((fitted, binding)) = problem.fit_to_limits(&designed, true)? {
+        if let Some(b) = binding {
+            notes.push(format!("the designed trajectory was shrunk to fit the limits; the binding one: {}", b.what));
+        }
         let e = problem.evaluate(&fitted)?;
         if e.penalty == 0.0 && e.cost < best_eval.cost {
             (joints, condition, scaled_condition) = (fitted, e.condition, e.scaled_condition);
