@@ -123,6 +123,7 @@ pub mod condition;
 pub mod error;
 pub mod estimate;
 pub mod excite;
+pub mod gap;
 pub mod friction;
 pub mod identify;
 pub mod log;

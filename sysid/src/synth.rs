@@ -175,15 +175,7 @@ fn simulate_impl(
         None => load_urdf_in_mujoco(urdf, &extra)?,
     };
     let free_dofs = if floating.is_some() { 6 } else { 0 };
-    let mut edit = base.edit()?;
-    for dof in free_dofs..base.nv() {
-        edit.set_dof_armature(dof, opts.armature)?;
-        // MuJoCo's friction loss is a soft constraint; with its defaults the friction of a
-        // light joint ramps up over ~0.1 rad/s. A stiff constraint (time constant of two steps)
-        // makes it the Coulomb friction the URDF's `friction` stands for.
-        edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
-    }
-    let model = Arc::new(edit.finish()?);
+    let model = stiff_friction(&base, free_dofs, dt, opts.armature)?;
     let robot = match floating {
         Some(_) => RobotModel::from_model_floating(urdf, model.clone())?,
         None => RobotModel::from_model(urdf, model.clone())?,
@@ -382,6 +374,30 @@ fn simulate_impl(
         }
     }
     Ok(log)
+}
+
+/// `base` with armature `armature` on every DOF from `first_dof` on and a stiff friction-loss
+/// constraint: MuJoCo's friction loss is a soft constraint; with its defaults the friction of
+/// a light joint ramps up over ~0.1 rad/s. A time constant of two steps makes it the Coulomb
+/// friction the URDF's `friction` stands for.
+fn stiff_friction(base: &twin_core::mj::Model, first_dof: usize, dt: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
+    let mut edit = base.edit()?;
+    for dof in first_dof..base.nv() {
+        edit.set_dof_armature(dof, armature)?;
+        edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
+    }
+    Ok(Arc::new(edit.finish()?))
+}
+
+/// The fixed-base model [`simulate`] runs `urdf` with (timestep `dt_secs`, contacts off,
+/// `armature` on every joint, friction loss as Coulomb friction): also the twin `twin gap`
+/// replays a log on.
+///
+/// # Errors
+/// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
+pub fn simulation_model(urdf: &Path, dt_secs: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
+    let extra = format!(r#"<option timestep="{dt_secs}"><flag contact="disable"/></option>"#);
+    stiff_friction(&load_urdf_in_mujoco(urdf, &extra)?, 0, dt_secs, armature)
 }
 
 /// Writes to `dst` a copy of the URDF `src` whose link inertials and joint friction are off by
