@@ -12,6 +12,8 @@ mod deploy;
 mod engine;
 #[path = "cli/excite.rs"]
 mod excite;
+#[path = "cli/gap.rs"]
+mod gap;
 #[path = "cli/info.rs"]
 mod info;
 #[cfg(feature = "ros")]

@@ -4,6 +4,7 @@ pub mod calibrate;
 pub mod check;
 pub mod convert;
 pub mod excite;
+pub mod gap;
 pub mod info;
 pub mod log;
 pub mod randomize;
@@ -30,6 +31,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::View(args) => view::run(args),
         Command::Calibrate(args) => calibrate::run(args),
         Command::Excite(args) => excite::run(args),
+        Command::Gap(args) => gap::run(args),
     }
 }
 
