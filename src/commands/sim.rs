@@ -58,6 +58,10 @@ pub struct Args {
     /// (as `twin excite` writes on /joint_trajectory).
     #[arg(long, default_value = "/joint_states")]
     pub trajectory_topic: String,
+    /// Simulate the full Stribeck friction curves of this `twin sysid friction --report` JSON
+    /// on their joints, per step (replacing those joints' URDF friction and damping).
+    #[arg(long, value_name = "friction.json")]
+    pub friction_fit: Option<PathBuf>,
     /// Write the ROS 2 topics to this MCAP file.
     #[arg(long, value_name = "RUN.mcap")]
     pub record: Option<PathBuf>,
@@ -182,6 +186,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => s.robot(&path)?,
         None => Robot::load(&path)?,
     };
+    let mut stribeck = args.friction_fit.as_deref().map(|file| stribeck_curves(file, &robot)).transpose()?;
+    let robot = match &stribeck {
+        Some(f) => robot.with_model(std::sync::Arc::new(f.model_without_joint_friction(&robot.model)?))?,
+        None => robot,
+    };
     let trajectory = match (&args.trajectory, controller_name.as_str()) {
         (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
         (Some(_), _) => bail!("--trajectory is for --controller replay"),
@@ -267,6 +276,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    if let Some(f) = stribeck.as_mut() {
+        disturbances.push(f);
+    }
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
     let report = sim::simulate_with(
         &robot,
@@ -475,4 +487,45 @@ mod live {
         }
         Ok(())
     }
+}
+
+/// The friction curves of a `twin sysid friction --report` JSON on `robot`'s joints.
+fn stribeck_curves(
+    file: &std::path::Path,
+    robot: &Robot,
+) -> anyhow::Result<twin_core::engine::disturb::StribeckFriction> {
+    use twin_core::engine::disturb::{StribeckCurve, StribeckFriction};
+    let text = twin_core::fsio::read_to_string(file)?;
+    let json: serde_json::Value = serde_json::from_str(&text)
+        .with_context(|| format!("{}: not JSON (expected `twin sysid friction --report` output)", file.display()))?;
+    let Some(joints) = json["joints"].as_array().filter(|j| !j.is_empty()) else {
+        bail!("{}: no \"joints\" with fits (expected `twin sysid friction --report` output)", file.display());
+    };
+    let mut curves = Vec::new();
+    for entry in joints {
+        let name = entry["joint"].as_str().unwrap_or("");
+        let fit = &entry["fit"];
+        let get = |k: &str| -> anyhow::Result<f64> {
+            fit[k].as_f64().filter(|v| v.is_finite()).with_context(|| {
+                format!("{}: joint \"{name}\" has no finite fit.{k}", file.display())
+            })
+        };
+        let curve = StribeckCurve {
+            coulomb: get("coulomb")?,
+            breakaway: get("breakaway")?,
+            stribeck_velocity: get("stribeck_velocity")?,
+            exponent: get("exponent")?,
+            viscous: get("viscous")?,
+        };
+        let Some(joint) = robot.joints.iter().find(|j| j.name == name) else {
+            bail!(
+                "{}: joint \"{name}\" is not a joint of {}; its joints: {}",
+                file.display(),
+                robot.path.display(),
+                robot.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>().join(", ")
+            );
+        };
+        curves.push((joint.dof, curve));
+    }
+    Ok(StribeckFriction::new(curves))
 }
