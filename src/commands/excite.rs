@@ -89,7 +89,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         seed: args.seed,
         ..ExciteOptions::default()
     };
-    let report = design(&args.urdf, &opts).with_context(|| format!("no excitation trajectory for {}", args.urdf.display()))?;
+    let report =
+        design(&args.urdf, &opts).with_context(|| format!("no excitation trajectory for {}", args.urdf.display()))?;
     print!("{}", report.table());
     let traj = &report.trajectory;
     twin_core::fsio::write_atomic(&args.csv, traj.to_csv(args.rate).as_bytes(), twin_core::fsio::Backup::None)?;

@@ -506,9 +506,10 @@ fn stribeck_curves(
         let name = entry["joint"].as_str().unwrap_or("");
         let fit = &entry["fit"];
         let get = |k: &str| -> anyhow::Result<f64> {
-            fit[k].as_f64().filter(|v| v.is_finite()).with_context(|| {
-                format!("{}: joint \"{name}\" has no finite fit.{k}", file.display())
-            })
+            fit[k]
+                .as_f64()
+                .filter(|v| v.is_finite())
+                .with_context(|| format!("{}: joint \"{name}\" has no finite fit.{k}", file.display()))
         };
         let curve = StribeckCurve {
             coulomb: get("coulomb")?,

@@ -387,6 +387,10 @@ struct Problem<'a> {
     opts: ExciteOptions,
     hold: Vec<f64>,
     evaluations: usize,
+    /// Per body, the excited joints (indices into `selected`) that move it.
+    body_joints: Vec<Vec<usize>>,
+    /// Per excited joint: involved in a violation of the last [`Problem::assess`].
+    involved: Vec<bool>,
 }
 
 /// Free variables per joint: `c`, `a₂…a_H`, `b₂…b_H`.
@@ -457,7 +461,12 @@ impl<'a> Problem<'a> {
 
     /// The compressed regressor along `joints` on an `n`-point grid, the squared penalty
     /// and the worst violation.
-    fn assess(&mut self, joints: &[FourierJoint], n: usize, collisions: bool) -> Result<(Mat<f64>, f64, Option<Violation>)> {
+    fn assess(
+        &mut self,
+        joints: &[FourierJoint],
+        n: usize,
+        collisions: bool,
+    ) -> Result<(Mat<f64>, f64, Option<Violation>)> {
         let nj = self.robot.joints.len();
         let omega = self.omega();
         let period = 1.0 / self.opts.base_frequency_hz;
@@ -466,6 +475,7 @@ impl<'a> Problem<'a> {
         let mut rows = Vec::new();
         let mut penalty = 0.0;
         let mut worst: Option<Violation> = None;
+        let mut involved = vec![false; self.selected.len()];
         let mut note = |what: String, excess: f64, penalty: &mut f64| {
             *penalty += excess * excess;
             if worst.as_ref().is_none_or(|w| excess > w.excess) {
@@ -484,22 +494,58 @@ impl<'a> Problem<'a> {
             for (s, &j) in self.selected.iter().enumerate() {
                 let lim = &self.limits[s];
                 let name = &lim.name;
-                if q[j] > lim.upper {
-                    note(format!("joint \"{name}\" position {:.3} above {:.3} at t = {t:.2} s", q[j], lim.upper), (q[j] - lim.upper) / (lim.upper - lim.lower).max(1e-6), &mut penalty);
-                }
-                if q[j] < lim.lower {
-                    note(format!("joint \"{name}\" position {:.3} below {:.3} at t = {t:.2} s", q[j], lim.lower), (lim.lower - q[j]) / (lim.upper - lim.lower).max(1e-6), &mut penalty);
-                }
-                if qd[j].abs() > lim.velocity {
-                    note(format!("joint \"{name}\" velocity {:.3} beyond its limit {:.3} at t = {t:.2} s", qd[j], lim.velocity), qd[j].abs() / lim.velocity - 1.0, &mut penalty);
-                }
-                if qdd[j].abs() > lim.acceleration {
-                    note(format!("joint \"{name}\" acceleration {:.3} beyond its limit {:.3} at t = {t:.2} s", qdd[j], lim.acceleration), qdd[j].abs() / lim.acceleration - 1.0, &mut penalty);
+                if q[j] > lim.upper || q[j] < lim.lower || qd[j].abs() > lim.velocity || qdd[j].abs() > lim.acceleration
+                {
+                    involved[s] = true;
                 }
                 if let Some(tmax) = lim.torque
                     && tau[j].abs() > tmax
                 {
-                    note(format!("joint \"{name}\" torque {:.2} beyond its limit {tmax:.2} at t = {t:.2} s", tau[j]), tau[j].abs() / tmax - 1.0, &mut penalty);
+                    // A joint's torque comes from the motion of every joint: all are shrunk.
+                    involved.iter_mut().for_each(|x| *x = true);
+                }
+                if q[j] > lim.upper {
+                    note(
+                        format!("joint \"{name}\" position {:.3} above {:.3} at t = {t:.2} s", q[j], lim.upper),
+                        (q[j] - lim.upper) / (lim.upper - lim.lower).max(1e-6),
+                        &mut penalty,
+                    );
+                }
+                if q[j] < lim.lower {
+                    note(
+                        format!("joint \"{name}\" position {:.3} below {:.3} at t = {t:.2} s", q[j], lim.lower),
+                        (lim.lower - q[j]) / (lim.upper - lim.lower).max(1e-6),
+                        &mut penalty,
+                    );
+                }
+                if qd[j].abs() > lim.velocity {
+                    note(
+                        format!(
+                            "joint \"{name}\" velocity {:.3} beyond its limit {:.3} at t = {t:.2} s",
+                            qd[j], lim.velocity
+                        ),
+                        qd[j].abs() / lim.velocity - 1.0,
+                        &mut penalty,
+                    );
+                }
+                if qdd[j].abs() > lim.acceleration {
+                    note(
+                        format!(
+                            "joint \"{name}\" acceleration {:.3} beyond its limit {:.3} at t = {t:.2} s",
+                            qdd[j], lim.acceleration
+                        ),
+                        qdd[j].abs() / lim.acceleration - 1.0,
+                        &mut penalty,
+                    );
+                }
+                if let Some(tmax) = lim.torque
+                    && tau[j].abs() > tmax
+                {
+                    note(
+                        format!("joint \"{name}\" torque {:.2} beyond its limit {tmax:.2} at t = {t:.2} s", tau[j]),
+                        tau[j].abs() / tmax - 1.0,
+                        &mut penalty,
+                    );
                 }
             }
             let ncols = self.ncols;
@@ -513,8 +559,16 @@ impl<'a> Problem<'a> {
                 data.forward()?;
                 let model = data.model().clone();
                 for (dist, geoms) in data.contacts() {
-                    let bodies = [model.geom_bodyid()[geoms[0] as usize] as usize, model.geom_bodyid()[geoms[1] as usize] as usize];
+                    let bodies = [
+                        model.geom_bodyid()[geoms[0] as usize] as usize,
+                        model.geom_bodyid()[geoms[1] as usize] as usize,
+                    ];
                     if dist < 0.0 && !allowed.contains(&sorted(bodies)) {
+                        // The joints that move one link and not the other.
+                        let (a, b) = (&self.body_joints[bodies[0]], &self.body_joints[bodies[1]]);
+                        for &x in a.iter().filter(|x| !b.contains(x)).chain(b.iter().filter(|x| !a.contains(x))) {
+                            involved[x] = true;
+                        }
                         note(
                             format!(
                                 "links \"{}\" and \"{}\" collide ({:.1} mm deep) at t = {t:.2} s",
@@ -530,6 +584,7 @@ impl<'a> Problem<'a> {
             }
         }
         acc.finish();
+        self.involved = involved;
         let weights = vec![1.0; self.selected.len()];
         Ok((acc.compressed(&weights), penalty, worst))
     }
@@ -578,7 +633,9 @@ impl<'a> Problem<'a> {
                 a = a.max(qdd.abs());
             }
             let mut s = f64::INFINITY;
-            for (room, need) in [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)] {
+            for (room, need) in
+                [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
+            {
                 if need > 1e-12 {
                     s = s.min(room / need);
                 }
@@ -610,6 +667,25 @@ impl<'a> Problem<'a> {
         if pen0 > 0.0 {
             return Ok(Err(worst0.or(worst).expect("a penalty has a violation")));
         }
+        // Alternatively shrink only the joints involved in a violation (a collision involves
+        // the joints that move one link and not the other), so that one tight pair does not
+        // stop the whole robot; the better of the two by the criterion is kept.
+        let mut selective = None;
+        if per_joint {
+            let mut current = scaled.clone();
+            for _ in 0..60 {
+                let (_, p, _) = self.assess(&current, n, self.opts.self_collision)?;
+                if p == 0.0 {
+                    selective = Some(current);
+                    break;
+                }
+                for (f, &inv) in current.iter_mut().zip(&self.involved.clone()) {
+                    if inv {
+                        f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= 0.85);
+                    }
+                }
+            }
+        }
         let (mut lo, mut hi) = (0.0, 1.0);
         for _ in 0..12 {
             let mid = 0.5 * (lo + hi);
@@ -620,10 +696,20 @@ impl<'a> Problem<'a> {
                 hi = mid;
             }
         }
-        if lo < 1e-3 {
-            return Ok(Err(worst.expect("a penalty has a violation")));
-        }
-        Ok(Ok((shrink(&scaled, lo), worst)))
+        let global = (lo >= 1e-3).then(|| shrink(&scaled, lo));
+        let chosen = match (global, selective) {
+            (Some(g), Some(sel)) => {
+                if self.evaluate(&sel)?.cost < self.evaluate(&g)?.cost {
+                    sel
+                } else {
+                    g
+                }
+            }
+            (Some(g), None) => g,
+            (None, Some(sel)) => sel,
+            (None, None) => return Ok(Err(worst.expect("a penalty has a violation"))),
+        };
+        Ok(Ok((chosen, worst)))
     }
 
     fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {
@@ -709,7 +795,8 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
     };
     let mut g = grad(&mut f, &x, fx)?;
     // Inverse Hessian, started as the step scales squared (variables of different units).
-    let mut hinv: Vec<Vec<f64>> = (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect();
+    let mut hinv: Vec<Vec<f64>> =
+        (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect();
     let mut restarted = false;
     for _ in 0..max_iter {
         let d: Vec<f64> = (0..n).map(|i| -(0..n).map(|j| hinv[i][j] * g[j]).sum::<f64>()).collect();
@@ -742,7 +829,9 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
             // singular values cross): start again from the scaled steepest descent once.
             restarted = true;
             for (i, row) in hinv.iter_mut().enumerate() {
-                row.iter_mut().enumerate().for_each(|(j, v)| *v = if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 });
+                row.iter_mut()
+                    .enumerate()
+                    .for_each(|(j, v)| *v = if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 });
             }
             continue;
         };
@@ -786,7 +875,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         return Err(option_error("harmonics", format!("{h}: must be 1 to 20")));
     }
     if !(opts.base_frequency_hz > 0.0 && opts.base_frequency_hz <= 10.0) {
-        return Err(option_error("base_frequency_hz", format!("{}: must be above 0 and at most 10 Hz", opts.base_frequency_hz)));
+        return Err(option_error(
+            "base_frequency_hz",
+            format!("{}: must be above 0 and at most 10 Hz", opts.base_frequency_hz),
+        ));
     }
     for (name, v) in [
         ("velocity_fraction", opts.velocity_fraction),
@@ -819,7 +911,9 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
                         format!(
                             "\"{name}\" is not a revolute or prismatic joint of {}; its joints: {}",
                             urdf.display(),
-                            crate::condition::quote_list(&robot.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>())
+                            crate::condition::quote_list(
+                                &robot.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>()
+                            )
                         ),
                     )
                 })
@@ -889,7 +983,9 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         let mut allowed: Vec<[usize; 2]> = data
             .contacts()
             .iter()
-            .map(|(_, g)| sorted([model.geom_bodyid()[g[0] as usize] as usize, model.geom_bodyid()[g[1] as usize] as usize]))
+            .map(|(_, g)| {
+                sorted([model.geom_bodyid()[g[0] as usize] as usize, model.geom_bodyid()[g[1] as usize] as usize])
+            })
             .collect();
         // Links two joints apart (a link and its grandparent) overlap around the joint between
         // them in most URDFs' collision shapes; MuJoCo already skips parent and child.
@@ -902,8 +998,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         }
         allowed.sort_unstable();
         allowed.dedup();
-        let grandparents: Vec<[usize; 2]> =
-            (1..model.nbody()).filter(|&b| parent[b] > 0).map(|b| sorted([b, parent[parent[b] as usize] as usize])).collect();
+        let grandparents: Vec<[usize; 2]> = (1..model.nbody())
+            .filter(|&b| parent[b] > 0)
+            .map(|b| sorted([b, parent[parent[b] as usize] as usize]))
+            .collect();
         for p in allowed.iter().filter(|p| !grandparents.contains(p)) {
             notes.push(format!(
                 "links \"{}\" and \"{}\" already touch at the rest pose: their contacts are not counted as collisions",
@@ -915,6 +1013,23 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     } else {
         None
     };
+    let body_joints: Vec<Vec<usize>> = (0..model.nbody())
+        .map(|b| {
+            let mut out = Vec::new();
+            let mut k = b;
+            while k != 0 {
+                let (adr, num) = (model.body_dofadr()[k], model.body_dofnum()[k]);
+                for d in 0..num.max(0) {
+                    let dof = (adr + d) as usize;
+                    if let Some(s) = selected.iter().position(|&j| robot.joints[j].dof == dof) {
+                        out.push(s);
+                    }
+                }
+                k = model.body_parentid()[k] as usize;
+            }
+            out
+        })
+        .collect();
     let mut problem = Problem {
         robot: &robot,
         reg,
@@ -928,10 +1043,18 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         opts: opts.clone(),
         hold,
         evaluations: 0,
+        body_joints,
+        involved: Vec::new(),
     };
     let template: Vec<FourierJoint> = selected
         .iter()
-        .map(|&j| FourierJoint { name: robot.joints[j].name.clone(), index: j, rest: 0.0, a: vec![0.0; h], b: vec![0.0; h] })
+        .map(|&j| FourierJoint {
+            name: robot.joints[j].name.clone(),
+            index: j,
+            rest: 0.0,
+            a: vec![0.0; h],
+            b: vec![0.0; h],
+        })
         .collect();
 
     // Random candidates, each scaled to the limits; the first feasible one fixes the base columns.
@@ -977,12 +1100,9 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let (_, best_eval, best_random) = best.expect("at least one candidate");
     let best_random_condition = best_eval.condition;
 
-    // Quasi-Newton search from the best random trajectory, each joint scaled to its room.
-    let start = match problem.fit_to_limits(&best_random, true)? {
-        Ok((js, _)) => js,
-        Err(_) => best_random.clone(),
-    };
-    let x0 = vars_from_joints(&start, h);
+    // Quasi-Newton searches from the best random trajectory as drawn and with each joint
+    // scaled to its room (better where nothing collides; on a collision boundary the
+    // penalty's kinks can stall the search there): the better result is kept.
     let steps: Vec<f64> = problem
         .limits
         .iter()
@@ -992,27 +1112,35 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             s
         })
         .collect();
-    let x = bfgs(
-        |x| {
-            let js = joints_from_vars(x, h, &template);
-            Ok(problem.evaluate(&js)?.cost)
-        },
-        &x0,
-        &steps,
-        opts.max_iterations,
-    )?;
-    let designed = joints_from_vars(&x, h, &template);
-    let (mut joints, mut condition, mut scaled_condition) =
-        (best_random.clone(), best_random_condition, best_eval.scaled_condition);
-    if let Ok((fitted, binding)) = problem.fit_to_limits(&designed, true)? {
-        if let Some(b) = binding {
-            notes.push(format!("the designed trajectory was shrunk to fit the limits; the binding one: {}", b.what));
-        }
-        let e = problem.evaluate(&fitted)?;
-        if e.penalty == 0.0 && e.cost < best_eval.cost {
-            (joints, condition, scaled_condition) = (fitted, e.condition, e.scaled_condition);
+    let mut starts = vec![best_random.clone()];
+    if let Ok((js, _)) = problem.fit_to_limits(&best_random, true)? {
+        starts.push(js);
+    }
+    let (mut joints, mut condition, mut scaled_condition, mut cost) =
+        (best_random.clone(), best_random_condition, best_eval.scaled_condition, best_eval.cost);
+    let mut binding_note = None;
+    for start in starts {
+        let x = bfgs(
+            |x| {
+                let js = joints_from_vars(x, h, &template);
+                Ok(problem.evaluate(&js)?.cost)
+            },
+            &vars_from_joints(&start, h),
+            &steps,
+            opts.max_iterations,
+        )?;
+        let designed = joints_from_vars(&x, h, &template);
+        if let Ok((fitted, binding)) = problem.fit_to_limits(&designed, true)? {
+            let e = problem.evaluate(&fitted)?;
+            if e.penalty == 0.0 && e.cost < cost {
+                (joints, condition, scaled_condition, cost) = (fitted, e.condition, e.scaled_condition, e.cost);
+                binding_note = binding.map(|b| {
+                    format!("the designed trajectory was shrunk to fit the limits; the binding one: {}", b.what)
+                });
+            }
         }
     }
+    notes.extend(binding_note);
     if condition >= best_random_condition {
         notes.push("the search found nothing better than the best random trajectory".into());
     }

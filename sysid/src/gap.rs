@@ -79,7 +79,15 @@ impl GapReport {
         let w = self.joints.iter().map(|j| j.name.len()).max().unwrap_or(5).max(5);
         let mut s = format!(
             "reality gap of {} on {} ({:.1} s, open loop, re-synchronized every {} s)\n{:<w$}  {:>12}  {:>12}  {:>12}  {:>12}\n",
-            self.urdf, self.log, self.duration_secs, self.resync_secs, "joint", "pos rmse", "pos max", "vel rmse", "torque nrmse"
+            self.urdf,
+            self.log,
+            self.duration_secs,
+            self.resync_secs,
+            "joint",
+            "pos rmse",
+            "pos max",
+            "vel rmse",
+            "torque nrmse"
         );
         for j in &self.joints {
             s.push_str(&format!(
@@ -114,7 +122,8 @@ impl GapReport {
             .iter()
             .zip(&self.traces)
             .map(|(j, tr)| {
-                let mut p = Plot::new(&format!("{} (rmse {:.2e})", j.name, j.position_rmse), "time (s)", "position (rad)");
+                let mut p =
+                    Plot::new(&format!("{} (rmse {:.2e})", j.name, j.position_rmse), "time (s)", "position (rad)");
                 p.line("log", tr.iter().map(|&(t, _, l)| (t, l)).collect(), COLORS[0]);
                 p.line("twin", tr.iter().map(|&(t, s, _)| (t, s)).collect(), COLORS[1]);
                 p

@@ -380,7 +380,12 @@ fn simulate_impl(
 /// constraint: MuJoCo's friction loss is a soft constraint; with its defaults the friction of
 /// a light joint ramps up over ~0.1 rad/s. A time constant of two steps makes it the Coulomb
 /// friction the URDF's `friction` stands for.
-fn stiff_friction(base: &twin_core::mj::Model, first_dof: usize, dt: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
+fn stiff_friction(
+    base: &twin_core::mj::Model,
+    first_dof: usize,
+    dt: f64,
+    armature: f64,
+) -> Result<Arc<twin_core::mj::Model>> {
     let mut edit = base.edit()?;
     for dof in first_dof..base.nv() {
         edit.set_dof_armature(dof, armature)?;

@@ -27,7 +27,13 @@ fn check_limits(report: &ExciteReport) {
         }
         for k in 0..=2000 {
             let (q, qd, qdd) = f.sample(omega, k as f64 * period / 2000.0);
-            assert!(q >= lim.lower - 1e-6 && q <= lim.upper + 1e-6, "{}: q = {q} outside [{}, {}]", f.name, lim.lower, lim.upper);
+            assert!(
+                q >= lim.lower - 1e-6 && q <= lim.upper + 1e-6,
+                "{}: q = {q} outside [{}, {}]",
+                f.name,
+                lim.lower,
+                lim.upper
+            );
             assert!(qd.abs() <= lim.velocity * 1.001, "{}: q̇ = {qd} > {}", f.name, lim.velocity);
             assert!(qdd.abs() <= lim.acceleration * 1.001, "{}: q̈ = {qdd} > {}", f.name, lim.acceleration);
         }
@@ -42,7 +48,8 @@ fn held_out_nrmse(truth: &Path, start: &Path, traj: &Excitation, held_out: &sysi
     let reference = |j: usize, t: f64| traj.reference(j, t);
     // One period with 5 % effort noise: short and noisy enough that the excitation shows in
     // the estimate (with 20 s at 1 % both fits reach the noise floor).
-    let opts = SynthOptions { duration_secs: traj.period_secs(), seed: 5, effort_noise_rel: 0.05, ..Default::default() };
+    let opts =
+        SynthOptions { duration_secs: traj.period_secs(), seed: 5, effort_noise_rel: 0.05, ..Default::default() };
     let log = simulate_tracking(truth, &opts, &reference).unwrap();
     let robot = RobotModel::from_urdf(start).unwrap();
     let sysid_opts = SysidOptions::default();
@@ -77,7 +84,10 @@ fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions) {
     let designed = held_out_nrmse(&truth, &start, &report.trajectory, &held_out, &names);
     let random = held_out_nrmse(&truth, &start, &report.best_random, &held_out, &names);
     eprintln!("held-out NRMSE: designed {designed:.6}, best random {random:.6}");
-    assert!(designed < random, "designed trajectory's held-out NRMSE {designed:.4} is not below the random one's {random:.4}");
+    assert!(
+        designed < random,
+        "designed trajectory's held-out NRMSE {designed:.4} is not below the random one's {random:.4}"
+    );
 }
 
 #[test]

@@ -24,8 +24,7 @@ fn excite_writes_a_trajectory_that_replay_plays_on_the_twin() {
     assert!(stdout.contains("condition number of the base regressor"), "{stdout}");
     let report: serde_json::Value =
         serde_json::from_str(&std::fs::read_to_string(dir.path().join("excite.json")).unwrap()).unwrap();
-    let (designed, random) =
-        (report["condition"].as_f64().unwrap(), report["best_random_condition"].as_f64().unwrap());
+    let (designed, random) = (report["condition"].as_f64().unwrap(), report["best_random_condition"].as_f64().unwrap());
     assert!(designed < random, "designed {designed} vs best random {random}");
 
     // The CSV: one period at 100 Hz, starting and ending at rest at the same pose.

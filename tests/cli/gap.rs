@@ -15,11 +15,13 @@ fn twin(dir: &Path, args: &[&str]) -> Output {
 }
 
 fn mean_gap(dir: &Path, urdf: &Path) -> f64 {
-    let out = twin(dir, &["gap", urdf.to_str().unwrap(), "--log", "real.mcap", "--report", "gap.json", "--plot", "gap.svg"]);
+    let out =
+        twin(dir, &["gap", urdf.to_str().unwrap(), "--log", "real.mcap", "--report", "gap.json", "--plot", "gap.svg"]);
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
     assert!(String::from_utf8_lossy(&out.stdout).contains("pos rmse"));
     assert!(std::fs::read_to_string(dir.join("gap.svg")).unwrap().starts_with("<svg"));
-    let json: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(dir.join("gap.json")).unwrap()).unwrap();
+    let json: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.join("gap.json")).unwrap()).unwrap();
     json["mean_position_rmse"].as_f64().unwrap()
 }
 
@@ -28,7 +30,8 @@ fn gap_reports_the_cad_twin_far_off_a_perturbed_robot() {
     let dir = tempfile::tempdir().unwrap();
     let real = dir.path().join("real.urdf");
     perturbed_urdf(&arm_urdf(), &real, 11).unwrap();
-    let log = simulate(&real, &SynthOptions { duration_secs: 5.0, armature: 0.0, seed: 2, ..Default::default() }).unwrap();
+    let log =
+        simulate(&real, &SynthOptions { duration_secs: 5.0, armature: 0.0, seed: 2, ..Default::default() }).unwrap();
     log.write_mcap(dir.path().join("real.mcap"), "/joint_states").unwrap();
     let cad = mean_gap(dir.path(), &arm_urdf());
     let truth = mean_gap(dir.path(), &real);

@@ -141,7 +141,8 @@ impl StribeckCurve {
     /// Friction torque at velocity `v` with `sgn(v)` smoothed as `tanh(v/ε)`.
     pub fn torque(&self, v: f64, eps: f64) -> f64 {
         let s = v.abs();
-        let hump = (self.breakaway - self.coulomb) * (-(s / self.stribeck_velocity.max(1e-12)).powf(self.exponent)).exp();
+        let hump =
+            (self.breakaway - self.coulomb) * (-(s / self.stribeck_velocity.max(1e-12)).powf(self.exponent)).exp();
         (v / eps).tanh() * (self.coulomb + hump) + self.viscous * v
     }
 }
@@ -272,9 +273,7 @@ mod tests {
             let mut drive = VelocityDrive { target, gain: 200.0, torque: Vec::new() };
             let episode = Episode { steps: 2000, ..Episode::default() };
             let mut rng = ChaCha8Rng::seed_from_u64(0);
-            Engine::new()
-                .run(&model, &episode, &mut drive, &mut [&mut friction], &mut [], &mut rng)
-                .unwrap();
+            Engine::new().run(&model, &episode, &mut drive, &mut [&mut friction], &mut [], &mut rng).unwrap();
             assert!(friction.smoothing()[0] < 0.01, "ε = {}", friction.smoothing()[0]);
             // Steady state (last 0.5 s): the drive's torque is the friction at that velocity.
             let tail = &drive.torque[1500..];
@@ -282,7 +281,8 @@ mod tests {
             let tau = tail.iter().map(|x| x.1).sum::<f64>() / tail.len() as f64;
             let exact = v.signum()
                 * (curve.coulomb
-                    + (curve.breakaway - curve.coulomb) * (-(v.abs() / curve.stribeck_velocity).powf(curve.exponent)).exp())
+                    + (curve.breakaway - curve.coulomb)
+                        * (-(v.abs() / curve.stribeck_velocity).powf(curve.exponent)).exp())
                 + curve.viscous * v;
             assert!((v - target).abs() < 0.01 * target.abs() + 0.01, "v = {v}, target {target}");
             assert!((tau - exact).abs() < 0.01 * exact.abs() + 1e-3, "at {v:.3} rad/s: {tau:.4} N·m, curve {exact:.4}");
