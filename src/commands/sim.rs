@@ -495,28 +495,14 @@ fn stribeck_curves(
     robot: &Robot,
 ) -> anyhow::Result<twin_core::engine::disturb::StribeckFriction> {
     use twin_core::engine::disturb::{StribeckCurve, StribeckFriction};
-    let text = twin_core::fsio::read_to_string(file)?;
-    let json: serde_json::Value = serde_json::from_str(&text)
-        .with_context(|| format!("{}: not JSON (expected `twin sysid friction --report` output)", file.display()))?;
-    let Some(joints) = json["joints"].as_array().filter(|j| !j.is_empty()) else {
-        bail!("{}: no \"joints\" with fits (expected `twin sysid friction --report` output)", file.display());
-    };
     let mut curves = Vec::new();
-    for entry in joints {
-        let name = entry["joint"].as_str().unwrap_or("");
-        let fit = &entry["fit"];
-        let get = |k: &str| -> anyhow::Result<f64> {
-            fit[k]
-                .as_f64()
-                .filter(|v| v.is_finite())
-                .with_context(|| format!("{}: joint \"{name}\" has no finite fit.{k}", file.display()))
-        };
+    for (name, fit) in sysid::friction::read_fits(file)? {
         let curve = StribeckCurve {
-            coulomb: get("coulomb")?,
-            breakaway: get("breakaway")?,
-            stribeck_velocity: get("stribeck_velocity")?,
-            exponent: get("exponent")?,
-            viscous: get("viscous")?,
+            coulomb: fit.coulomb,
+            breakaway: fit.breakaway,
+            stribeck_velocity: fit.stribeck_velocity,
+            exponent: fit.exponent,
+            viscous: fit.viscous,
         };
         let Some(joint) = robot.joints.iter().find(|j| j.name == name) else {
             bail!(

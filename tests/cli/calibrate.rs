@@ -194,3 +194,27 @@ fn sysid_friction_refuses_a_log_without_constant_velocity_and_leaves_the_urdf_un
     assert_eq!(std::fs::read(d.join("arm6.urdf")).unwrap(), original);
     assert!(!d.join("arm6.urdf.bak").exists());
 }
+
+/// `twin sim --friction-fit`: the fitted Stribeck curves of `twin sysid friction --report`
+/// run on their joints; a fit naming a joint the robot lacks is refused naming it.
+#[test]
+fn sim_runs_the_fitted_stribeck_curves_and_refuses_unknown_joints() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let arm = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/arm6.urdf");
+    let fit = |joint: &str| {
+        format!(
+            r#"{{"log": "sweeps.mcap", "joints": [{{"joint": "{joint}", "fit": {{"coulomb": 2.0, "breakaway": 3.5,
+            "stribeck_velocity": 0.1, "exponent": 1.5, "viscous": 1.0}}, "ci95": [0,0,0,0,0], "rms_residual": 0.01,
+            "points": [], "segments": 10}}]}}"#
+        )
+    };
+    std::fs::write(d.join("friction.json"), fit("elbow_joint")).unwrap();
+    let out = twin(d, &["sim", arm.to_str().unwrap(), "--friction-fit", "friction.json", "--duration", "0.5"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    std::fs::write(d.join("bad.json"), fit("no_such_joint")).unwrap();
+    let out = twin(d, &["sim", arm.to_str().unwrap(), "--friction-fit", "bad.json", "--duration", "0.5"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.json") && err.contains("\"no_such_joint\" is not a joint"), "{err}");
+}
