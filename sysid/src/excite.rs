@@ -373,6 +373,10 @@ struct Eval {
     penalty: f64,
 }
 
+/// A trajectory fitted to the limits (with the violation that bound it, if any), or the
+/// violation that remains even at rest.
+type Fitted = std::result::Result<(Vec<FourierJoint>, Option<Violation>), Violation>;
+
 /// The design problem: model, limits, grid and the fixed base columns.
 struct Problem<'a> {
     robot: &'a RobotModel,
@@ -612,11 +616,7 @@ impl<'a> Problem<'a> {
     /// within limits. Returns the feasible trajectory, or the violation at rest.
     /// With `per_joint` false, the trajectory is only shrunk as a whole (a random trajectory
     /// as drawn, made feasible).
-    fn fit_to_limits(
-        &mut self,
-        joints: &[FourierJoint],
-        per_joint: bool,
-    ) -> Result<std::result::Result<(Vec<FourierJoint>, Option<Violation>), Violation>> {
+    fn fit_to_limits(&mut self, joints: &[FourierJoint], per_joint: bool) -> Result<Fitted> {
         let n = 4 * self.opts.samples;
         let omega = self.omega();
         let period = 1.0 / self.opts.base_frequency_hz;
@@ -776,8 +776,16 @@ fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rn
     joints_from_vars(&x, h, template)
 }
 
+/// The starting inverse Hessian of [`bfgs`]: the step scales squared (variables of different
+/// units).
+fn initial_hinv(steps: &[f64]) -> Vec<Vec<f64>> {
+    let n = steps.len();
+    (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect()
+}
+
 /// Minimizes `f` from `x0` by BFGS with forward-difference gradients and a backtracking line
-/// search; returns the best point found.
+/// search; returns the best point found. (Small dense updates keep index loops.)
+#[allow(clippy::needless_range_loop)]
 fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max_iter: usize) -> Result<Vec<f64>> {
     let n = x0.len();
     let mut x = x0.to_vec();
@@ -794,20 +802,14 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
         Ok(g)
     };
     let mut g = grad(&mut f, &x, fx)?;
-    // Inverse Hessian, started as the step scales squared (variables of different units).
-    let mut hinv: Vec<Vec<f64>> =
-        (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect();
+    let mut hinv = initial_hinv(steps);
     let mut restarted = false;
     for _ in 0..max_iter {
         let d: Vec<f64> = (0..n).map(|i| -(0..n).map(|j| hinv[i][j] * g[j]).sum::<f64>()).collect();
         let slope: f64 = d.iter().zip(&g).map(|(a, b)| a * b).sum();
         if slope >= 0.0 {
             // Not a descent direction: restart from the scaled steepest descent.
-            for i in 0..n {
-                for j in 0..n {
-                    hinv[i][j] = if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 };
-                }
-            }
+            hinv = initial_hinv(steps);
             continue;
         }
         let mut alpha = 1.0;
@@ -828,11 +830,7 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
             // The quasi-Newton model went stale (the criterion is not smooth where two
             // singular values cross): start again from the scaled steepest descent once.
             restarted = true;
-            for (i, row) in hinv.iter_mut().enumerate() {
-                row.iter_mut()
-                    .enumerate()
-                    .for_each(|(j, v)| *v = if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 });
-            }
+            hinv = initial_hinv(steps);
             continue;
         };
         restarted = false;
