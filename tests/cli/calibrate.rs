@@ -66,9 +66,13 @@ fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
             "noise.toml",
             "--report",
             "noise.json",
+            "--rerun",
+            "allan.rrd",
         ],
     );
     assert!(out.status.success(), "{}", stderr(&out));
+    // The Allan plot in the rerun recording is a valid .rrd.
+    assert!(super::sim::rerun_verify(&d.join("allan.rrd")));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("IMU /humanoid/imu/data (frame imu_link)") && stdout.contains("gyro x"), "{stdout}");
     assert_eq!(std::fs::read_to_string(d.join("humanoid.urdf.bak")).unwrap(), original);
