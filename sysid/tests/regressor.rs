@@ -155,15 +155,8 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
     let mut reg = Regressor::new(&robot, FrictionModel::default()).unwrap();
     assert_eq!(reg.nrows(), model.nv());
     let layout = reg.layout();
-    let mut params = vec![0.0; layout.ncols()];
-    for (l, link) in robot.links.iter().enumerate() {
-        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
-    }
-    for (j, joint) in robot.joints.iter().enumerate() {
-        let c = layout.joint_col(j);
-        params[c] = joint.damping;
-        params[c + 2] = joint.armature;
-    }
+    // Friction loss is zeroed above: the Coulomb columns are 0.
+    let params = model_params(&robot, &layout, None);
     let wrench_bodies: Vec<usize> = ["left_foot_link", "right_foot_link", "left_forearm_link", "pelvis"]
         .iter()
         .filter_map(|n| model.id(twin_core::mj::ObjType::Body, n))

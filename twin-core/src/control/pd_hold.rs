@@ -31,8 +31,9 @@ pub struct PdHoldOptions {
     /// `a_K²/4 + a_D` of the coupled loops under the explicit step, with
     /// `a_K = √λmax(M⁻¹K)·dt` and `a_D = λmax(M⁻¹D)·dt / 2` (K, D the loops' joint-space
     /// stiffness and damping, M the inertia of the loops' joints at the home pose with every
-    /// other DOF held, as a floating base standing on the ground). A torque held over a step
-    /// from the state at its start is stable below 1
+    /// other DOF held, as a floating base standing on the ground; with them free, as in free
+    /// fall, the margin may be 22 % higher). A torque held over a step from the state at its
+    /// start is stable below 1
     /// (the Jury bound of semi-implicit Euler, mode by mode). Above it, every kp is scaled down
     /// by one factor (kd by its square root): light robots whose URDFs give placeholder effort
     /// limits (1000 N·m on a 2 kg quadruped) stay stable. `f64::INFINITY`: no cap. (default:
@@ -78,6 +79,12 @@ pub struct PdLoop {
     /// for a servo actuator, which closes its own loop.
     pub interface: Interface,
 }
+
+/// How far the free-fall estimate of the loops' stability margin may exceed
+/// [`PdHoldOptions::max_loop_margin`] (see [`PdHold`]'s stability cap): the shipped humanoid at
+/// 0.7 times its masses (about 1.18) keeps its gains; a light pendulum in free fall (1.25)
+/// diverges.
+const FREE_FALL_ALLOWANCE: f64 = 1.22;
 
 /// Rate at which a velocity servo is sent back to its target, 1/s: `q̇_cmd = rate · (q_target − q)`.
 const VELOCITY_SERVO_RATE: f64 = 10.0;
@@ -211,23 +218,35 @@ impl PdHold {
         let nv = model.nv();
         let m = DMatrix::from_row_slice(nv, nv, &data.full_mass_matrix());
         let n = torque.len();
-        // The loops' joints with every other DOF held (a floating base standing on the ground,
-        // not in free fall): the inverse of M's block of those joints.
-        let m_inv = DMatrix::from_fn(n, n, |i, j| m[(torque[i].dof, torque[j].dof)]).cholesky()?.inverse();
-        // λmax(M⁻¹K) = λmax(K^½ M⁻¹ K^½), symmetric; the same for D.
-        let largest = |gain: &dyn Fn(&PdLoop) -> f64| {
-            let r: Vec<f64> = torque.iter().map(|l| (gain(l) * l.gear).max(0.0).sqrt()).collect();
-            DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigenvalues().max()
-        };
+        let dofs: Vec<usize> = torque.iter().map(|l| l.dof).collect();
+        // The loops' joints' inertia lies between two bounds: every other DOF held (a floating
+        // base standing on the ground; the inverse of M's block of those joints) and every other
+        // DOF free (a base in free fall: the block of M⁻¹). The held one must meet the margin;
+        // the free one may exceed it by FREE_FALL_ALLOWANCE, as a robot on the ground is held
+        // by it.
+        let held = DMatrix::from_fn(n, n, |i, j| m[(dofs[i], dofs[j])]).cholesky()?.inverse();
+        let full_inv = m.cholesky()?.inverse();
+        let free = DMatrix::from_fn(n, n, |i, j| full_inv[(dofs[i], dofs[j])]);
         let dt = model.timestep_secs();
-        let a_k = largest(&|l| l.kp).sqrt() * dt;
-        let a_d = largest(&|l| l.kd) * dt / 2.0;
-        if !(a_k.is_finite() && a_d.is_finite()) || a_k * a_k / 4.0 + a_d <= cap {
-            return None;
+        let scale = |m_inv: &DMatrix<f64>, cap: f64| -> Option<f64> {
+            // λmax(M⁻¹K) = λmax(K^½ M⁻¹ K^½), symmetric; the same for D.
+            let largest = |gain: &dyn Fn(&PdLoop) -> f64| {
+                let r: Vec<f64> = torque.iter().map(|l| (gain(l) * l.gear).max(0.0).sqrt()).collect();
+                DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigenvalues().max()
+            };
+            let a_k = largest(&|l| l.kp).sqrt() * dt;
+            let a_d = largest(&|l| l.kd) * dt / 2.0;
+            if !(a_k.is_finite() && a_d.is_finite()) || a_k * a_k / 4.0 + a_d <= cap {
+                return None;
+            }
+            // With kp·s and kd·√s the margin is s·a_K²/4 + √s·a_D: solve for √s.
+            let r = (-a_d + (a_d * a_d + a_k * a_k * cap).sqrt()) / (a_k * a_k / 2.0);
+            Some(r * r)
+        };
+        match (scale(&held, cap), scale(&free, cap * FREE_FALL_ALLOWANCE)) {
+            (Some(a), Some(b)) => Some(a.min(b)),
+            (a, b) => a.or(b),
         }
-        // With kp·s and kd·√s the margin is s·a_K²/4 + √s·a_D: solve for √s.
-        let r = (-a_d + (a_d * a_d + a_k * a_k * cap).sqrt()) / (a_k * a_k / 2.0);
-        Some(r * r)
     }
 }
 
