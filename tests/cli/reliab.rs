@@ -455,3 +455,101 @@ fn time_jumps_in_a_log_are_reported_not_rendered() {
     }
     assert!(!d.join("jump.rrd").exists() || std::fs::metadata(d.join("jump.rrd")).unwrap().len() < 1 << 20);
 }
+
+/// Starts `twin args` in `dir` with stdout and stderr piped.
+fn spawn_in(dir: &Path, args: &[&str]) -> std::process::Child {
+    twin()
+        .current_dir(dir)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("twin starts")
+}
+
+/// Waits (bounded) until `ready` holds, then sends SIGINT to `child` and waits (bounded) for
+/// it: (exit code, stdout, stderr).
+fn interrupt_when(
+    mut child: std::process::Child,
+    what: &str,
+    ready: impl Fn() -> bool,
+) -> (Option<i32>, String, String) {
+    let started = Instant::now();
+    while !ready() {
+        if started.elapsed() > Duration::from_secs(240) || child.try_wait().unwrap().is_some() {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!("{what}: not ready to interrupt in time or ended early:\n{}", String::from_utf8_lossy(&out.stderr));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let kill = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(kill.success());
+    let stopping = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if stopping.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("{what}: did not stop within 60 s of Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    let code = out.status.code();
+    let (_, stdout, stderr) = output_of(out);
+    (code, stdout, stderr)
+}
+
+fn file_len(path: &Path) -> u64 {
+    std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+}
+
+/// Ctrl-C during `twin sim --record --rerun` and `twin view`: the run stops after the current
+/// step (frame), the MCAP is complete (summary, footer: `log info --strict` accepts it) and holds
+/// exactly the steps the printed summary counts, the `.rrd` files verify, the summary is printed
+/// and the exit status is 130.
+#[test]
+fn ctrl_c_in_sim_and_view_closes_the_files_and_prints_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (mcap, rrd) = (d.join("run.mcap"), d.join("run.rrd"));
+    let child = spawn_in(d, &["sim", "--duration", "3600", "--record", "run.mcap", "--rerun", "run.rrd"]);
+    // A few seconds of simulated time are in the file (8 MB ≈ 17 s at 500 Hz).
+    let (code, out, err) = interrupt_when(child, "twin sim", || file_len(&mcap) > 8 << 20);
+    assert_eq!(code, Some(130), "{out}\n{err}");
+    assert!(err.contains("interrupted: simulated"), "{err}");
+    let stopped_secs: f64 = out
+        .split("stopped by Ctrl-C at ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no summary line:\n{out}"));
+    assert!(stopped_secs > 1.0 && stopped_secs < 3600.0, "{out}");
+    let printed: u64 = out
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("/joint_states").map(|n| n.trim().parse().unwrap()))
+        .unwrap_or_else(|| panic!("no topic counts:\n{out}"));
+    // One /joint_states per 2 ms step, stamped from 0 to the last step's start.
+    assert_eq!(printed, (stopped_secs / 0.002).round() as u64, "{out}");
+    let (ok, info, err) = run_in(d, &["log", "info", "--strict", "run.mcap"], QUICK);
+    assert!(ok, "{err}");
+    assert!(
+        info.contains(&format!("messages: {}", out.split("run.mcap: ").nth(1).unwrap().split(' ').next().unwrap()))
+    );
+    let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions { strict: true }).unwrap();
+    let (states, report) = log.read_typed::<twin_core::log::JointState>("/joint_states").unwrap();
+    assert!(report.warnings().is_empty(), "{:?}", report.warnings());
+    assert_eq!(states.len() as u64, printed);
+    let last_secs = states.last().unwrap().1.header.stamp_nanos as f64 * 1e-9;
+    assert!((last_secs - (stopped_secs - 0.002)).abs() < 1e-6, "last stamp {last_secs} s, stopped at {stopped_secs} s");
+    assert!(super::sim::rerun_verify(&rrd));
+
+    // `twin view` of that log at 1000 frames/s runs for minutes: stop it once it writes.
+    let view = d.join("view.rrd");
+    let child = spawn_in(d, &["view", "run.mcap", "-o", "view.rrd", "--fps", "1000"]);
+    let (code, out, err) = interrupt_when(child, "twin view", || file_len(&view) > 0);
+    assert_eq!(code, Some(130), "{out}\n{err}");
+    assert!(err.contains("interrupted:") && err.contains("frames recorded"), "{err}");
+    assert!(out.contains("run.mcap: ") && out.contains("view.rrd: "), "{out}");
+    assert!(super::sim::rerun_verify(&view));
+}

@@ -281,11 +281,20 @@ pub struct ViewOptions {
     pub odom_topic: String,
     /// Rate of the posed frames, Hz; joint and IMU scalars keep every sample (default: 50).
     pub pose_rate_hz: f64,
+    /// Polled between frames and topics: once raised (e.g. Ctrl-C through
+    /// [`crate::fsio::interrupt_flag`]), [`record_log`] stops and returns what it logged so far
+    /// with [`ViewSummary::interrupted`] set (default: none).
+    pub stop: Option<&'static std::sync::atomic::AtomicBool>,
 }
 
 impl Default for ViewOptions {
     fn default() -> Self {
-        ViewOptions { joint_states_topic: "/joint_states".into(), odom_topic: "/odom".into(), pose_rate_hz: 50.0 }
+        ViewOptions {
+            joint_states_topic: "/joint_states".into(),
+            odom_topic: "/odom".into(),
+            pose_rate_hz: 50.0,
+            stop: None,
+        }
     }
 }
 
@@ -308,6 +317,9 @@ pub struct ViewSummary {
     pub duration_secs: f64,
     /// Warnings about the log (damage, odd stamps).
     pub warnings: Vec<String>,
+    /// Whether [`ViewOptions::stop`] ended the recording early (its frames cover the start of
+    /// the log only).
+    pub interrupted: bool,
 }
 
 /// Turns a robot's ROS 2 log into a recording: the model posed from the log's joint states
@@ -328,6 +340,7 @@ pub fn record_log(
     use crate::log::{Imu, Odometry};
     let model = &robot.model;
     let mut summary = ViewSummary::default();
+    let stopped = || options.stop.is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed));
     let series = log.joint_states(&options.joint_states_topic)?;
     summary.warnings = series.report.warnings();
     let trajectory = JointTrajectory::from_log(log.path(), &options.joint_states_topic)?;
@@ -336,8 +349,13 @@ pub fn record_log(
         let t = if stamp_nanos != 0 { stamp_nanos } else { log_nanos as i64 };
         (t - t0) as f64 * 1e-9
     };
+    summary.duration_secs = trajectory.duration_secs();
     let mut animated = Vec::new();
     for j in &trajectory.joints {
+        if stopped() {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
         match model.id(ObjType::Joint, &j.name) {
             Some(id) if model.jnt_type()[id] as u32 != sys::mjtJoint_mjJNT_FREE => {
                 summary.joints_matched.push(j.name.clone());
@@ -351,7 +369,6 @@ pub fn record_log(
             summary.scalars += 1;
         }
     }
-    summary.duration_secs = trajectory.duration_secs();
 
     let topics = log.info()?.topics;
     let free_adr = robot.base.map(|b| b.qpos_adr);
@@ -369,6 +386,10 @@ pub fn record_log(
         summary.odom_messages = odom.len() as u64;
     }
     for t in topics.iter().filter(|t| t.type_name == "sensor_msgs/msg/Imu") {
+        if stopped() {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
         let (msgs, _) = log.read_typed::<Imu>(&t.topic)?;
         let name = entity_name(t.topic.trim_start_matches('/'), "imu", 0);
         for (log_nanos, m) in &msgs {
@@ -387,6 +408,10 @@ pub fn record_log(
     let frames = ((summary.duration_secs * options.pose_rate_hz.max(1e-3)).floor() as u64) + 1;
     let mut next_odom = 0usize;
     for k in 0..frames {
+        if stopped() {
+            summary.interrupted = true;
+            break;
+        }
         let t = k as f64 / options.pose_rate_hz;
         for (adr, j) in &animated {
             data.qpos_mut()[*adr] = j.sample(t).0;
