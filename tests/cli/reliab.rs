@@ -553,3 +553,24 @@ fn ctrl_c_in_sim_and_view_closes_the_files_and_prints_a_summary() {
     assert!(out.contains("run.mcap: ") && out.contains("view.rrd: "), "{out}");
     assert!(super::sim::rerun_verify(&view));
 }
+
+/// `twin log info --strict` refuses a shipped log cut inside its summary, its footer or its end
+/// magic (each cut keeps every message; the lenient reading says the file was not closed).
+/// Every byte position of the tail is covered by twin-core's
+/// `cuts_anywhere_in_the_summary_footer_or_magic_are_not_complete`.
+#[test]
+fn log_info_strict_refuses_files_cut_in_the_summary_footer_or_magic() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(repo_root().join("data/humanoid_joint_states.mcap")).unwrap();
+    let n = bytes.len();
+    // 1 000 bytes from the end: inside the summary; 20: inside the footer; 3: inside the magic.
+    for cut in [n - 1000, n - 20, n - 3] {
+        std::fs::write(dir.path().join("cut.mcap"), &bytes[..cut]).unwrap();
+        let (ok, out, err) = run_in(dir.path(), &["log", "info", "--strict", "cut.mcap"], QUICK);
+        assert!(!ok, "cut at {cut} of {n} accepted:\n{out}");
+        assert!(err.contains("not closed cleanly") && err.contains("--strict"), "cut at {cut}: {err}");
+        let (ok, out, err) = run_in(dir.path(), &["log", "info", "cut.mcap"], QUICK);
+        assert!(ok, "{err}");
+        assert!(format!("{out}{err}").contains("not closed cleanly"), "cut at {cut}: {out}{err}");
+    }
+}
