@@ -18,10 +18,21 @@ fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) 
         .stderr(Stdio::piped())
         .spawn()
         .expect("twin starts");
+    // Drained while it runs: a child blocked on a full pipe would look like a hang.
+    let drain = |mut r: Box<dyn std::io::Read + Send>| {
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let _ = r.read_to_end(&mut buf);
+            buf
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().unwrap()));
+    let stderr = drain(Box::new(child.stderr.take().unwrap()));
     let started = Instant::now();
     loop {
-        if child.try_wait().expect("wait").is_some() {
-            return output_of(child.wait_with_output().expect("output"));
+        if let Some(status) = child.try_wait().expect("wait") {
+            let out = std::process::Output { status, stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() };
+            return output_of(out);
         }
         if started.elapsed() > limit {
             let _ = child.kill();
@@ -573,4 +584,50 @@ fn log_info_strict_refuses_files_cut_in_the_summary_footer_or_magic() {
         assert!(ok, "{err}");
         assert!(format!("{out}{err}").contains("not closed cleanly"), "cut at {cut}: {out}{err}");
     }
+}
+
+/// A URDF chain of `n` revolute joints.
+fn chain_urdf(n: usize) -> String {
+    let mut out = String::from("<?xml version=\"1.0\"?>\n<robot name=\"chain\">\n");
+    for i in 0..=n {
+        out.push_str(&format!(
+            "  <link name=\"l{i}\"><inertial><mass value=\"0.1\"/><inertia ixx=\"1e-4\" iyy=\"1e-4\" izz=\"1e-4\" \
+             ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial><visual><geometry><box size=\"0.01 0.01 0.01\"/></geometry>\
+             </visual></link>\n"
+        ));
+    }
+    for i in 0..n {
+        out.push_str(&format!(
+            "  <joint name=\"j{i}\" type=\"revolute\"><parent link=\"l{i}\"/><child link=\"l{}\"/><origin \
+             xyz=\"0 0 0.01\"/><axis xyz=\"0 1 0\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/>\
+             </joint>\n",
+            i + 1
+        ));
+    }
+    out + "</robot>\n"
+}
+
+/// A valid 600-link chain is deeper than MuJoCo's XML parser nests (tinyxml2's element depth
+/// limit): refused before MuJoCo sees it, naming the URDF, the deepest link and its line, the
+/// depth and the limit, instead of "Element nesting is too deep" at a line of a generated file.
+/// The deepest chain MuJoCo accepts (496 bodies) still loads, with every joint.
+#[test]
+fn a_600_link_chain_is_refused_with_the_depth_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "chain600.urdf", &chain_urdf(600));
+    for args in [vec!["info", "chain600.urdf"], vec!["convert", "chain600.urdf", "-o", "chain600.xml"]] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?}");
+        // The deepest link, l600, is on line 603 of the URDF.
+        assert!(err.contains("chain600.urdf:603") && err.contains("l600"), "{err}");
+        assert!(err.contains("601 bodies deep") && err.contains("at most 496 nested bodies"), "{err}");
+        assert!(!err.contains("Line number="), "{err}");
+    }
+    assert!(!d.join("chain600.xml").exists());
+    write(d, "chain495.urdf", &chain_urdf(495));
+    let (ok, out, err) = run_in(d, &["info", "chain495.urdf"], QUICK);
+    assert!(ok, "{err}");
+    // A floating base (7 + 495 positions) and one actuator per joint.
+    assert!(out.contains("nq 502") && out.contains("nu 495"), "{out}");
 }
