@@ -631,3 +631,40 @@ fn a_600_link_chain_is_refused_with_the_depth_and_the_limit() {
     // A floating base (7 + 495 positions) and one actuator per joint.
     assert!(out.contains("nq 502") && out.contains("nu 495"), "{out}");
 }
+
+/// `twin randomize --record-worst` run twice (1 and 2 threads) writes the same worst episodes:
+/// byte-identical CSV and MCAP, and `.rrd` recordings with the same data (`rerun rrd compare`;
+/// their bytes differ only by rerun's own wall-clock row ids, as the README says).
+#[test]
+fn randomize_worst_recordings_are_the_same_run_to_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model = repo_root().join("randomize/tests/fixtures/humanoid.xml");
+    let model = model.to_str().unwrap();
+    for (out, threads) in [("a", "1"), ("b", "2")] {
+        let args = ["randomize", model, "--episodes", "4", "--duration", "0.3", "--seed", "5", "--record-worst", "2"];
+        let (ok, _, err) = run_in(d, &[&args[..], &["--threads", threads, "--out", out]].concat(), QUICK);
+        assert!(ok, "{err}");
+    }
+    let mut names: Vec<String> =
+        std::fs::read_dir(d.join("a/worst")).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    for ext in ["csv", "mcap", "rrd"] {
+        assert_eq!(names.iter().filter(|n| n.ends_with(ext)).count(), 2, "{names:?}");
+    }
+    let exe = super::sim::python_exe();
+    let rerun = Path::new(&exe).parent().map(|p| p.join("rerun")).filter(|p| p.is_file());
+    for name in &names {
+        let (a, b) = (d.join("a/worst").join(name), d.join("b/worst").join(name));
+        if !name.ends_with(".rrd") {
+            assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "{name} differs");
+            continue;
+        }
+        let Some(rerun) = &rerun else {
+            super::sim::missing_python::<()>(&format!("no `rerun` next to {exe} (pip install rerun-sdk==0.36.3)"));
+            continue;
+        };
+        let out = std::process::Command::new(rerun).args(["rrd", "compare"]).arg(&a).arg(&b).output().unwrap();
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}

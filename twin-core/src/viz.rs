@@ -6,8 +6,10 @@
 //! - `world/<body>/<geom>`: the geom's shape, posed statically in its body frame;
 //! - `series/...`: scalars logged with [`Recorder::scalar`].
 //!
-//! Time is the simulation (or log) time on the `sim_time` timeline, so recordings of the same
-//! run are identical byte for byte apart from rerun's own file header.
+//! Time is the simulation (or log) time on the `sim_time` timeline and wall-clock log time is
+//! off, so recordings of the same run hold the same data (`rerun rrd compare` finds them equal);
+//! their bytes differ, since rerun stamps every row and chunk with a unique id made from the wall
+//! clock and a random number (its SDK has no way to set them).
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
