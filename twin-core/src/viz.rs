@@ -16,6 +16,15 @@ use crate::mj::{Data, Model, ObjType};
 use mujoco_sys as sys;
 use std::path::{Path, PathBuf};
 
+/// The rerun names twin uses, as the `rerun` umbrella crate re-exports them (twin depends on the
+/// SDK crates alone, see the workspace manifest).
+mod rerun {
+    pub use re_sdk::{AsComponents, RecordingStream, RecordingStreamBuilder};
+    pub use re_sdk_types::archetypes::*;
+    pub use re_sdk_types::components::{Color, FillMode};
+    pub use re_sdk_types::datatypes::Quaternion;
+}
+
 /// How long [`Recorder::finish`] waits for a viewer to take the recording.
 const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
 
