@@ -668,3 +668,73 @@ fn randomize_worst_recordings_are_the_same_run_to_run() {
         assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
     }
 }
+
+/// `twin sysid` refuses what every other command refuses (one URDF loader): duplicate joint
+/// names, two root links and a NaN inertial origin, with the same message as `twin info`, and
+/// leaves the URDF untouched.
+#[test]
+fn sysid_refuses_urdfs_that_the_other_commands_refuse() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = std::fs::read_to_string(repo_root().join("models/arm6.urdf")).unwrap();
+    let inertial = text.find("<inertial>").unwrap();
+    let origin = inertial + text[inertial..].find("<origin").unwrap();
+    let end = origin + text[origin..].find("/>").unwrap();
+    let cases = [
+        (
+            "dup.urdf",
+            text.replacen("<joint name=\"shoulder_lift_joint\"", "<joint name=\"shoulder_pan_joint\"", 1),
+            "duplicate joint name",
+        ),
+        (
+            "roots.urdf",
+            text.replacen("<link name=\"base_link\">", "<link name=\"extra_root\"/>\n  <link name=\"base_link\">", 1),
+            "2 root links",
+        ),
+        ("nan.urdf", format!("{}<origin xyz=\"nan 0 0\" rpy=\"0 0 0\"{}", &text[..origin], &text[end..]), "finite"),
+    ];
+    let bag = repo_root().join("data/arm6_identification.mcap");
+    for (name, urdf, expect) in cases {
+        write(d, name, &urdf);
+        let (ok, _, info_err) = run_in(d, &["info", name], QUICK);
+        assert!(!ok && info_err.contains(expect), "{name}: {info_err}");
+        let (ok, _, err) = run_in(d, &["sysid", "--log", bag.to_str().unwrap(), "--update", name], QUICK);
+        assert!(!ok, "sysid accepted {name}");
+        let line = |e: &str| e.lines().find(|l| l.contains(expect)).map(|l| l[l.find(name).unwrap()..].to_string());
+        assert_eq!(line(&err), line(&info_err), "{name}: the same message");
+        assert_eq!(std::fs::read_to_string(d.join(name)).unwrap(), urdf);
+        assert!(!d.join(format!("{name}.bak")).exists());
+    }
+}
+
+/// A replay trajectory whose time jumps 15 s backwards is refused, naming the place of the
+/// jump, instead of being replayed silently: in a CSV (the line) and in a bag (the sample).
+#[test]
+fn a_replay_trajectory_jumping_backwards_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut csv = String::from("time_sec,left_knee_joint\n");
+    for k in 0..50 {
+        csv.push_str(&format!("{},{}\n", 20.0 + k as f64 * 0.01, 0.2));
+    }
+    csv.push_str("5.5,0.2\n5.51,0.2\n");
+    write(d, "traj.csv", &csv);
+    let h = humanoid();
+    let args = ["sim", h.to_str().unwrap(), "--controller", "replay", "--trajectory", "traj.csv", "--duration", "0.1"];
+    let (ok, out, err) = run_in(d, &args, QUICK);
+    assert!(!ok, "replayed: {out}");
+    assert!(err.contains("traj.csv:52") && err.contains("does not increase"), "{err}");
+
+    let arm = repo_root().join("models/arm6.urdf");
+    let mut log =
+        sysid::synth::simulate(&arm, &sysid::synth::SynthOptions { duration_secs: 0.5, ..Default::default() }).unwrap();
+    let k = log.t_nanos.len() / 2;
+    log.t_nanos[k] -= 15_000_000_000;
+    log.write_mcap(d.join("back.mcap"), "/joint_states").unwrap();
+    let a = arm.to_str().unwrap();
+    let args = ["sim", a, "--controller", "replay", "--trajectory", "back.mcap", "--duration", "0.1"];
+    let (ok, out, err) = run_in(d, &args, QUICK);
+    assert!(!ok, "replayed: {out}");
+    // Samples are ordered by stamp, so the one 15 s early comes first: the jump is named there.
+    assert!(err.contains("back.mcap") && err.contains("clock is broken") && err.contains("14.75"), "{err}");
+}
