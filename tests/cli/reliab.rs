@@ -738,3 +738,20 @@ fn a_replay_trajectory_jumping_backwards_is_refused() {
     // Samples are ordered by stamp, so the one 15 s early comes first: the jump is named there.
     assert!(err.contains("back.mcap") && err.contains("clock is broken") && err.contains("14.75"), "{err}");
 }
+
+/// `.rrd` outputs keep what they replace like every other output: numbered backups, the oldest
+/// never overwritten (they were renamed to `NAME.bak`, losing an older `.bak`).
+#[test]
+fn rerun_outputs_keep_numbered_backups() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut versions = Vec::new();
+    for _ in 0..3 {
+        let (ok, _, err) = run_in(d, &["sim", "--duration", "0.01", "--rerun", "r.rrd"], QUICK);
+        assert!(ok, "{err}");
+        versions.push(std::fs::read(d.join("r.rrd")).unwrap());
+    }
+    assert_eq!(std::fs::read(d.join("r.rrd.bak")).unwrap(), versions[0], "the first recording");
+    assert_eq!(std::fs::read(d.join("r.rrd.bak.1")).unwrap(), versions[1]);
+    assert!(!d.join("r.rrd.bak.2").exists());
+}

@@ -6,10 +6,11 @@
 //! - `world/<body>/<geom>`: the geom's shape, posed statically in its body frame;
 //! - `series/...`: scalars logged with [`Recorder::scalar`].
 //!
-//! Time is the simulation (or log) time on the `sim_time` timeline and wall-clock log time is
-//! off, so recordings of the same run hold the same data (`rerun rrd compare` finds them equal);
-//! their bytes differ, since rerun stamps every row and chunk with a unique id made from the wall
-//! clock and a random number (its SDK has no way to set them).
+//! Time is the simulation (or log) time on the `sim_time` timeline, wall-clock log time is off
+//! and files are cut into chunks by size only (no wall-clock flush tick), so recordings of the
+//! same run hold the same data in the same order (`rerun rrd compare` finds them equal); their
+//! bytes differ, since rerun stamps every row and chunk with a unique id made from the wall clock
+//! and a random number (its SDK has no way to set them).
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
@@ -62,21 +63,27 @@ fn vec3(v: [f64; 3]) -> [f32; 3] {
 
 impl Recorder {
     /// Records to a `.rrd` file at `path` under application id `app_id`; an existing file there is
-    /// kept as `<name>.bak`.
+    /// kept as the first free of `<name>.bak`, `<name>.bak.1`, …
     ///
     /// # Errors
     /// [`Error::Rerun`] if the file can't be created.
     pub fn to_file(model: &Model, app_id: &'static str, path: impl AsRef<Path>) -> Result<Recorder> {
         let path = path.as_ref();
-        if path.exists() {
-            // Keep what was there, like the MCAP writer does.
-            let mut backup = path.as_os_str().to_owned();
-            backup.push(".bak");
-            std::fs::rename(path, &backup).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        // Not a folder or device; what was there is kept as the first free numbered backup
+        // (never over an older one), like the MCAP writer does.
+        let target = crate::fsio::check_output(path, &[])?;
+        if target.existing.is_some() {
+            crate::fsio::backup_numbered(&target.resolved)?;
         }
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             // A fixed id keeps re-recordings of the same run comparable.
             .recording_id(format!("{app_id}-recording"))
+            // Chunks cut by size only, never by a wall-clock tick: the same run gives the same
+            // chunks however busy the machine is.
+            .batcher_config(re_sdk::log::ChunkBatcherConfig {
+                flush_tick: std::time::Duration::MAX,
+                ..re_sdk::log::ChunkBatcherConfig::DEFAULT
+            })
             .save(path)
             .map_err(|e| rerun_err(Some(path), e))?;
         Self::start(rec, model, Some(path.to_path_buf()))
