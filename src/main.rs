@@ -16,6 +16,11 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         // `twin info … | head` must not report an error when the reader goes away.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,
+        // Stopped by Ctrl-C after closing its outputs and printing its summary.
+        Err(e) if e.is::<commands::Interrupted>() => {
+            eprintln!("{e}");
+            ExitCode::from(commands::EXIT_INTERRUPTED)
+        }
         Err(e) => {
             eprintln!("error: {e:#}");
             ExitCode::FAILURE

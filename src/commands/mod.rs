@@ -35,6 +35,24 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     }
 }
 
+/// A command that Ctrl-C (SIGINT, or SIGTERM/SIGHUP) stopped early and that then finished
+/// cleanly: its outputs are closed and readable up to where it stopped and its summary is
+/// printed. `main` prints the message and exits with status 130 (128 + SIGINT, what a shell
+/// reports for a command stopped by Ctrl-C), so scripts can tell a cut run from a complete one.
+#[derive(Debug)]
+pub struct Interrupted(pub String);
+
+impl std::fmt::Display for Interrupted {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(f, "interrupted: {}", self.0)
+    }
+}
+
+impl std::error::Error for Interrupted {}
+
+/// Exit status of a command stopped by Ctrl-C after finishing cleanly ([`Interrupted`]).
+pub const EXIT_INTERRUPTED: u8 = 130;
+
 /// Shortest simulated duration an option accepts, seconds.
 pub const MIN_SECS: f64 = 1e-6;
 /// Longest simulated duration an option accepts, seconds (one day: far beyond any twin run,

@@ -281,7 +281,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     }
     if report.interrupted {
-        eprintln!("interrupted: {} of {} episodes finished", report.summary.episodes, requested);
+        return Err(
+            super::Interrupted(format!("{} of {} episodes finished", report.summary.episodes, requested)).into()
+        );
     }
     Ok(())
 }

@@ -224,6 +224,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         topics: args.topics.clone(),
         ..RecordOptions::default()
     };
+    // From here on, Ctrl-C (or SIGTERM) ends the run after the current step: recordings are
+    // closed, the summary printed, and twin exits with status 130; a second one aborts.
+    twin_core::fsio::cooperate();
+    let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
     #[cfg(feature = "ros")]
     let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
@@ -284,6 +288,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         disturbances.push(f);
     }
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
+    observers.push(&mut stop);
     let report = sim::simulate_with(
         &robot,
         controller,
@@ -355,6 +360,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(stats) = live_stats {
         live::report(&mut out, &stats)?;
     }
+    // A live run also ends on the flag, through its controller.
+    let interrupted = twin_core::fsio::interrupted();
+    if interrupted {
+        writeln!(out, "stopped by Ctrl-C at {:.3} s of {duration} s simulated", report.sim_secs)?;
+    }
     if let (Some(c), Some(s)) = (&check, &scenario) {
         writeln!(out, "{}", c.metrics.summary())?;
         let verdicts = c.verdicts();
@@ -365,9 +375,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
         let failed = verdicts.iter().filter(|v| !v.passed).count();
-        if failed > 0 {
+        if failed > 0 && !interrupted {
             bail!("{failed} of {} checks of {} failed", verdicts.len(), s.path.display());
         }
+    }
+    if interrupted {
+        out.flush()?;
+        return Err(super::Interrupted(format!(
+            "simulated {:.3} of {duration} s; the recordings are closed and readable",
+            report.sim_secs
+        ))
+        .into());
     }
     Ok(())
 }

@@ -68,7 +68,11 @@ fn run_view(args: Args) -> anyhow::Result<()> {
         joint_states_topic: args.topic.clone(),
         odom_topic: args.odom_topic.clone(),
         pose_rate_hz: args.fps,
+        stop: Some(twin_core::fsio::interrupt_flag()),
     };
+    // Ctrl-C (or SIGTERM) stops after the current frame: the recording is closed, the summary
+    // printed, and twin exits with status 130; a second one aborts.
+    twin_core::fsio::cooperate();
     let mut out = std::io::stdout().lock();
     let summary =
         record_log(&robot, &log, &options, &recorder).with_context(|| format!("reading {}", args.log.display()))?;
@@ -76,7 +80,7 @@ fn run_view(args: Args) -> anyhow::Result<()> {
     for w in &summary.warnings {
         eprintln!("warning: {w}");
     }
-    if summary.joints_matched.is_empty() {
+    if summary.joints_matched.is_empty() && !summary.interrupted {
         bail!(
             "none of the log's joints ({}) is a joint of {}; pass the robot's model with --model",
             summary.joints_unknown.join(", "),
@@ -113,6 +117,15 @@ fn run_view(args: Args) -> anyhow::Result<()> {
             writeln!(out, "{}: {bytes} bytes", path.display())?;
         }
         (None, None) => {}
+    }
+    if summary.interrupted {
+        out.flush()?;
+        let shown_secs = summary.frames.saturating_sub(1) as f64 / args.fps;
+        return Err(super::Interrupted(format!(
+            "{} frames recorded, up to {shown_secs:.3} s of the {:.3} s log; the recording is closed and readable",
+            summary.frames, summary.duration_secs
+        ))
+        .into());
     }
     Ok(())
 }

@@ -273,6 +273,25 @@ pub fn despike(x: &mut [f64]) -> Vec<(usize, f64)> {
     out
 }
 
+/// The warning for the samples [`despike`] replaced in one joint's `what` series (`ts`: their
+/// times, s): how many, the first few times and the worst offset.
+fn spike_warning(joint: &str, what: &str, spikes: &[(usize, f64)], ts: &[f64], guess: &str) -> Option<String> {
+    let &(k, worst) = spikes.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs()))?;
+    const LISTED: usize = 5;
+    let mut times: Vec<String> = spikes.iter().take(LISTED).map(|(k, _)| format!("{:.3}", ts[*k])).collect();
+    if spikes.len() > LISTED {
+        times.push(format!("… ({} more)", spikes.len() - LISTED));
+    }
+    Some(format!(
+        "joint \"{joint}\": {} {what} sample(s) jump away from their neighbours and back (worst {worst:+.4} \
+         at t = {:.3} s from the log's start; all at t = {} s): {guess} Replaced by the median of their \
+         neighbours (Hampel filter) before filtering, so they do not pull the fit",
+        spikes.len(),
+        ts[k],
+        times.join(", ")
+    ))
+}
+
 /// Conditions `log` for `robot`.
 ///
 /// # Errors
@@ -410,17 +429,18 @@ pub fn condition(log: &JointLog, robot: &RobotModel, opts: &ConditionOptions) ->
             // A glitched encoder reading becomes, after filtering and differentiating twice, a
             // burst of huge accelerations that pulls the fit: such samples are replaced first.
             let spikes = despike(&mut raw_q);
-            if let Some(&(k, jump)) = spikes.iter().max_by(|a, b| a.1.abs().total_cmp(&b.1.abs())) {
-                warnings.push(format!(
-                    "joint \"{}\": {} position sample(s) jump away from their neighbours and back (worst {jump:+.4} \
-                     at t = {:.3} s from the log's start): glitched encoder readings? Replaced by the median of \
-                     their neighbours (Hampel filter)",
-                    log.joint_names[i],
-                    spikes.len(),
-                    ts[k]
-                ));
+            if let Some(w) = spike_warning(&log.joint_names[i], "position", &spikes, &ts, "glitched encoder readings?")
+            {
+                warnings.push(w);
             }
-            let raw_tau: Vec<f64> = idx.iter().map(|&k| log.effort[i][k]).collect();
+            let mut raw_tau: Vec<f64> = idx.iter().map(|&k| log.effort[i][k]).collect();
+            // Likewise a glitched torque reading: the low-pass would smear it over several
+            // regressor rows, where it no longer looks like one bad sample, and pull the fit by
+            // many standard deviations. A sample is the last place it can be told apart.
+            let spikes = despike(&mut raw_tau);
+            if let Some(w) = spike_warning(&log.joint_names[i], "effort", &spikes, &ts, "glitched torque readings?") {
+                warnings.push(w);
+            }
             let q = filter.filtfilt(&resample(&ts, &raw_q, &grid), pad);
             let tau = filter.filtfilt(&resample(&ts, &raw_tau, &grid), pad);
             let qd = derivative(&q, dt);

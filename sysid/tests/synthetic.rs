@@ -252,3 +252,43 @@ fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
     assert!(warning.contains("+0.12"), "{warning}");
     assert!(!a.report.warnings.iter().any(|w| w.contains("Hampel")), "{:?}", a.report.warnings);
 }
+
+/// Issue 15: one glitched torque reading (a bit flip in the effort field: +200 N·m for one
+/// sample at the elbow) must not move an identifiable parameter by a standard deviation, and
+/// is reported with its joint, count and time. Without outlier handling it is smeared by the
+/// low-pass filter over a few regressor rows and pulls the fit by many σ.
+#[test]
+fn one_glitched_torque_sample_is_reported_and_does_not_move_the_fit() {
+    let truth = models_dir().join("arm6.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let start = dir.path().join("arm6.urdf");
+    perturbed_urdf(&truth, &start, 3).unwrap();
+    let clean = simulate(&truth, &SynthOptions { duration_secs: 20.0, seed: 1, ..Default::default() }).unwrap();
+    let mut glitched = clean.clone();
+    let j = glitched.joint_names.iter().position(|n| n == "elbow_joint").unwrap();
+    let k = glitched.t_nanos.len() / 3;
+    glitched.effort[j][k] += 200.0;
+    let glitch_secs = (glitched.t_nanos[k] - glitched.t_nanos[0]) as f64 * 1e-9;
+
+    let robot = RobotModel::from_urdf(&start).unwrap();
+    let opts = SysidOptions::default();
+    let a = identify(&robot, &clean, &opts).unwrap();
+    let b = identify(&robot, &glitched, &opts).unwrap();
+    let mut worst: f64 = 0.0;
+    for i in 0..a.after.len() {
+        if a.identifiability[i] == sysid::estimate::Identifiability::Identifiable {
+            worst = worst.max((b.after[i] - a.after[i]).abs() / a.std[i].max(1e-300));
+        }
+    }
+    eprintln!("torque glitch: worst shift of an identifiable parameter {worst:.2}σ");
+    assert!(worst < 1.0, "one glitched torque sample moved a parameter by {worst:.1}σ");
+    let warning = b.report.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains("effort"));
+    let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", b.report.warnings));
+    assert!(warning.contains("1 effort sample(s)"), "{warning}");
+    let at: f64 = warning.split("at t = ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!((at - glitch_secs).abs() < 1e-3, "{warning} (glitch at {glitch_secs:.3} s)");
+    // By how much it was off its neighbours: the glitch, up to the torque's change over 3 ms.
+    let off: f64 = warning.split("worst ").nth(1).unwrap().split(' ').next().unwrap().parse().unwrap();
+    assert!((off - 200.0).abs() < 1.0, "{warning}");
+    assert!(!a.report.warnings.iter().any(|w| w.contains("effort sample")), "{:?}", a.report.warnings);
+}

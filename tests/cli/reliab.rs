@@ -18,10 +18,21 @@ fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) 
         .stderr(Stdio::piped())
         .spawn()
         .expect("twin starts");
+    // Drained while it runs: a child blocked on a full pipe would look like a hang.
+    let drain = |mut r: Box<dyn std::io::Read + Send>| {
+        std::thread::spawn(move || {
+            let mut buf = Vec::new();
+            let _ = r.read_to_end(&mut buf);
+            buf
+        })
+    };
+    let stdout = drain(Box::new(child.stdout.take().unwrap()));
+    let stderr = drain(Box::new(child.stderr.take().unwrap()));
     let started = Instant::now();
     loop {
-        if child.try_wait().expect("wait").is_some() {
-            return output_of(child.wait_with_output().expect("output"));
+        if let Some(status) = child.try_wait().expect("wait") {
+            let out = std::process::Output { status, stdout: stdout.join().unwrap(), stderr: stderr.join().unwrap() };
+            return output_of(out);
         }
         if started.elapsed() > limit {
             let _ = child.kill();
@@ -454,4 +465,293 @@ fn time_jumps_in_a_log_are_reported_not_rendered() {
         assert!(err.contains("clock is broken") && err.contains("31536000."), "{args:?}: {err}");
     }
     assert!(!d.join("jump.rrd").exists() || std::fs::metadata(d.join("jump.rrd")).unwrap().len() < 1 << 20);
+}
+
+/// Starts `twin args` in `dir` with stdout and stderr piped.
+fn spawn_in(dir: &Path, args: &[&str]) -> std::process::Child {
+    twin()
+        .current_dir(dir)
+        .args(args)
+        .stdin(Stdio::null())
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .expect("twin starts")
+}
+
+/// Waits (bounded) until `ready` holds, then sends SIGINT to `child` and waits (bounded) for
+/// it: (exit code, stdout, stderr).
+fn interrupt_when(
+    mut child: std::process::Child,
+    what: &str,
+    ready: impl Fn() -> bool,
+) -> (Option<i32>, String, String) {
+    let started = Instant::now();
+    while !ready() {
+        if started.elapsed() > Duration::from_secs(240) || child.try_wait().unwrap().is_some() {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!("{what}: not ready to interrupt in time or ended early:\n{}", String::from_utf8_lossy(&out.stderr));
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let kill = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(kill.success());
+    let stopping = Instant::now();
+    while child.try_wait().unwrap().is_none() {
+        if stopping.elapsed() > Duration::from_secs(60) {
+            let _ = child.kill();
+            panic!("{what}: did not stop within 60 s of Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(20));
+    }
+    let out = child.wait_with_output().unwrap();
+    let code = out.status.code();
+    let (_, stdout, stderr) = output_of(out);
+    (code, stdout, stderr)
+}
+
+fn file_len(path: &Path) -> u64 {
+    std::fs::metadata(path).map(|m| m.len()).unwrap_or(0)
+}
+
+/// Ctrl-C during `twin sim --record --rerun` and `twin view`: the run stops after the current
+/// step (frame), the MCAP is complete (summary, footer: `log info --strict` accepts it) and holds
+/// exactly the steps the printed summary counts, the `.rrd` files verify, the summary is printed
+/// and the exit status is 130.
+#[test]
+fn ctrl_c_in_sim_and_view_closes_the_files_and_prints_a_summary() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let (mcap, rrd) = (d.join("run.mcap"), d.join("run.rrd"));
+    let child = spawn_in(d, &["sim", "--duration", "3600", "--record", "run.mcap", "--rerun", "run.rrd"]);
+    // A few seconds of simulated time are in the file (8 MB ≈ 17 s at 500 Hz).
+    let (code, out, err) = interrupt_when(child, "twin sim", || file_len(&mcap) > 8 << 20);
+    assert_eq!(code, Some(130), "{out}\n{err}");
+    assert!(err.contains("interrupted: simulated"), "{err}");
+    let stopped_secs: f64 = out
+        .split("stopped by Ctrl-C at ")
+        .nth(1)
+        .and_then(|r| r.split(' ').next())
+        .and_then(|t| t.parse().ok())
+        .unwrap_or_else(|| panic!("no summary line:\n{out}"));
+    assert!(stopped_secs > 1.0 && stopped_secs < 3600.0, "{out}");
+    let printed: u64 = out
+        .lines()
+        .find_map(|l| l.trim().strip_prefix("/joint_states").map(|n| n.trim().parse().unwrap()))
+        .unwrap_or_else(|| panic!("no topic counts:\n{out}"));
+    // One /joint_states per 2 ms step, stamped from 0 to the last step's start.
+    assert_eq!(printed, (stopped_secs / 0.002).round() as u64, "{out}");
+    let (ok, info, err) = run_in(d, &["log", "info", "--strict", "run.mcap"], QUICK);
+    assert!(ok, "{err}");
+    assert!(
+        info.contains(&format!("messages: {}", out.split("run.mcap: ").nth(1).unwrap().split(' ').next().unwrap()))
+    );
+    let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions { strict: true }).unwrap();
+    let (states, report) = log.read_typed::<twin_core::log::JointState>("/joint_states").unwrap();
+    assert!(report.warnings().is_empty(), "{:?}", report.warnings());
+    assert_eq!(states.len() as u64, printed);
+    let last_secs = states.last().unwrap().1.header.stamp_nanos as f64 * 1e-9;
+    assert!((last_secs - (stopped_secs - 0.002)).abs() < 1e-6, "last stamp {last_secs} s, stopped at {stopped_secs} s");
+    assert!(super::sim::rerun_verify(&rrd));
+
+    // `twin view` of that log at 1000 frames/s runs for minutes: stop it once it writes.
+    let view = d.join("view.rrd");
+    let child = spawn_in(d, &["view", "run.mcap", "-o", "view.rrd", "--fps", "1000"]);
+    let (code, out, err) = interrupt_when(child, "twin view", || file_len(&view) > 0);
+    assert_eq!(code, Some(130), "{out}\n{err}");
+    assert!(err.contains("interrupted:") && err.contains("frames recorded"), "{err}");
+    assert!(out.contains("run.mcap: ") && out.contains("view.rrd: "), "{out}");
+    assert!(super::sim::rerun_verify(&view));
+}
+
+/// `twin log info --strict` refuses a shipped log cut inside its summary, its footer or its end
+/// magic (each cut keeps every message; the lenient reading says the file was not closed).
+/// Every byte position of the tail is covered by twin-core's
+/// `cuts_anywhere_in_the_summary_footer_or_magic_are_not_complete`.
+#[test]
+fn log_info_strict_refuses_files_cut_in_the_summary_footer_or_magic() {
+    let dir = tempfile::tempdir().unwrap();
+    let bytes = std::fs::read(repo_root().join("data/humanoid_joint_states.mcap")).unwrap();
+    let n = bytes.len();
+    // 1 000 bytes from the end: inside the summary; 20: inside the footer; 3: inside the magic.
+    for cut in [n - 1000, n - 20, n - 3] {
+        std::fs::write(dir.path().join("cut.mcap"), &bytes[..cut]).unwrap();
+        let (ok, out, err) = run_in(dir.path(), &["log", "info", "--strict", "cut.mcap"], QUICK);
+        assert!(!ok, "cut at {cut} of {n} accepted:\n{out}");
+        assert!(err.contains("not closed cleanly") && err.contains("--strict"), "cut at {cut}: {err}");
+        let (ok, out, err) = run_in(dir.path(), &["log", "info", "cut.mcap"], QUICK);
+        assert!(ok, "{err}");
+        assert!(format!("{out}{err}").contains("not closed cleanly"), "cut at {cut}: {out}{err}");
+    }
+}
+
+/// A URDF chain of `n` revolute joints.
+fn chain_urdf(n: usize) -> String {
+    let mut out = String::from("<?xml version=\"1.0\"?>\n<robot name=\"chain\">\n");
+    for i in 0..=n {
+        out.push_str(&format!(
+            "  <link name=\"l{i}\"><inertial><mass value=\"0.1\"/><inertia ixx=\"1e-4\" iyy=\"1e-4\" izz=\"1e-4\" \
+             ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial><visual><geometry><box size=\"0.01 0.01 0.01\"/></geometry>\
+             </visual></link>\n"
+        ));
+    }
+    for i in 0..n {
+        out.push_str(&format!(
+            "  <joint name=\"j{i}\" type=\"revolute\"><parent link=\"l{i}\"/><child link=\"l{}\"/><origin \
+             xyz=\"0 0 0.01\"/><axis xyz=\"0 1 0\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" velocity=\"1\"/>\
+             </joint>\n",
+            i + 1
+        ));
+    }
+    out + "</robot>\n"
+}
+
+/// A valid 600-link chain is deeper than MuJoCo's XML parser nests (tinyxml2's element depth
+/// limit): refused before MuJoCo sees it, naming the URDF, the deepest link and its line, the
+/// depth and the limit, instead of "Element nesting is too deep" at a line of a generated file.
+/// The deepest chain MuJoCo accepts (496 bodies) still loads, with every joint.
+#[test]
+fn a_600_link_chain_is_refused_with_the_depth_and_the_limit() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    write(d, "chain600.urdf", &chain_urdf(600));
+    for args in [vec!["info", "chain600.urdf"], vec!["convert", "chain600.urdf", "-o", "chain600.xml"]] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?}");
+        // The deepest link, l600, is on line 603 of the URDF.
+        assert!(err.contains("chain600.urdf:603") && err.contains("l600"), "{err}");
+        assert!(err.contains("601 bodies deep") && err.contains("at most 496 nested bodies"), "{err}");
+        assert!(!err.contains("Line number="), "{err}");
+    }
+    assert!(!d.join("chain600.xml").exists());
+    write(d, "chain495.urdf", &chain_urdf(495));
+    let (ok, out, err) = run_in(d, &["info", "chain495.urdf"], QUICK);
+    assert!(ok, "{err}");
+    // A floating base (7 + 495 positions) and one actuator per joint.
+    assert!(out.contains("nq 502") && out.contains("nu 495"), "{out}");
+}
+
+/// `twin randomize --record-worst` run twice (1 and 2 threads) writes the same worst episodes:
+/// byte-identical CSV and MCAP, and `.rrd` recordings with the same data (`rerun rrd compare`;
+/// their bytes differ only by rerun's own wall-clock row ids, as the README says).
+#[test]
+fn randomize_worst_recordings_are_the_same_run_to_run() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let model = repo_root().join("randomize/tests/fixtures/humanoid.xml");
+    let model = model.to_str().unwrap();
+    for (out, threads) in [("a", "1"), ("b", "2")] {
+        let args = ["randomize", model, "--episodes", "4", "--duration", "0.3", "--seed", "5", "--record-worst", "2"];
+        let (ok, _, err) = run_in(d, &[&args[..], &["--threads", threads, "--out", out]].concat(), QUICK);
+        assert!(ok, "{err}");
+    }
+    let mut names: Vec<String> =
+        std::fs::read_dir(d.join("a/worst")).unwrap().map(|e| e.unwrap().file_name().into_string().unwrap()).collect();
+    names.sort();
+    for ext in ["csv", "mcap", "rrd"] {
+        assert_eq!(names.iter().filter(|n| n.ends_with(ext)).count(), 2, "{names:?}");
+    }
+    let exe = super::sim::python_exe();
+    let rerun = Path::new(&exe).parent().map(|p| p.join("rerun")).filter(|p| p.is_file());
+    for name in &names {
+        let (a, b) = (d.join("a/worst").join(name), d.join("b/worst").join(name));
+        if !name.ends_with(".rrd") {
+            assert!(std::fs::read(&a).unwrap() == std::fs::read(&b).unwrap(), "{name} differs");
+            continue;
+        }
+        let Some(rerun) = &rerun else {
+            super::sim::missing_python::<()>(&format!("no `rerun` next to {exe} (pip install rerun-sdk==0.36.3)"));
+            continue;
+        };
+        let out = std::process::Command::new(rerun).args(["rrd", "compare"]).arg(&a).arg(&b).output().unwrap();
+        assert!(out.status.success(), "{name}: {}", String::from_utf8_lossy(&out.stderr));
+    }
+}
+
+/// `twin sysid` refuses what every other command refuses (one URDF loader): duplicate joint
+/// names, two root links and a NaN inertial origin, with the same message as `twin info`, and
+/// leaves the URDF untouched.
+#[test]
+fn sysid_refuses_urdfs_that_the_other_commands_refuse() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let text = std::fs::read_to_string(repo_root().join("models/arm6.urdf")).unwrap();
+    let inertial = text.find("<inertial>").unwrap();
+    let origin = inertial + text[inertial..].find("<origin").unwrap();
+    let end = origin + text[origin..].find("/>").unwrap();
+    let cases = [
+        (
+            "dup.urdf",
+            text.replacen("<joint name=\"shoulder_lift_joint\"", "<joint name=\"shoulder_pan_joint\"", 1),
+            "duplicate joint name",
+        ),
+        (
+            "roots.urdf",
+            text.replacen("<link name=\"base_link\">", "<link name=\"extra_root\"/>\n  <link name=\"base_link\">", 1),
+            "2 root links",
+        ),
+        ("nan.urdf", format!("{}<origin xyz=\"nan 0 0\" rpy=\"0 0 0\"{}", &text[..origin], &text[end..]), "finite"),
+    ];
+    let bag = repo_root().join("data/arm6_identification.mcap");
+    for (name, urdf, expect) in cases {
+        write(d, name, &urdf);
+        let (ok, _, info_err) = run_in(d, &["info", name], QUICK);
+        assert!(!ok && info_err.contains(expect), "{name}: {info_err}");
+        let (ok, _, err) = run_in(d, &["sysid", "--log", bag.to_str().unwrap(), "--update", name], QUICK);
+        assert!(!ok, "sysid accepted {name}");
+        let line = |e: &str| e.lines().find(|l| l.contains(expect)).map(|l| l[l.find(name).unwrap()..].to_string());
+        assert_eq!(line(&err), line(&info_err), "{name}: the same message");
+        assert_eq!(std::fs::read_to_string(d.join(name)).unwrap(), urdf);
+        assert!(!d.join(format!("{name}.bak")).exists());
+    }
+}
+
+/// A replay trajectory whose time jumps 15 s backwards is refused, naming the place of the
+/// jump, instead of being replayed silently: in a CSV (the line) and in a bag (the sample).
+#[test]
+fn a_replay_trajectory_jumping_backwards_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut csv = String::from("time_sec,left_knee_joint\n");
+    for k in 0..50 {
+        csv.push_str(&format!("{},{}\n", 20.0 + k as f64 * 0.01, 0.2));
+    }
+    csv.push_str("5.5,0.2\n5.51,0.2\n");
+    write(d, "traj.csv", &csv);
+    let h = humanoid();
+    let args = ["sim", h.to_str().unwrap(), "--controller", "replay", "--trajectory", "traj.csv", "--duration", "0.1"];
+    let (ok, out, err) = run_in(d, &args, QUICK);
+    assert!(!ok, "replayed: {out}");
+    assert!(err.contains("traj.csv:52") && err.contains("does not increase"), "{err}");
+
+    let arm = repo_root().join("models/arm6.urdf");
+    let mut log =
+        sysid::synth::simulate(&arm, &sysid::synth::SynthOptions { duration_secs: 0.5, ..Default::default() }).unwrap();
+    let k = log.t_nanos.len() / 2;
+    log.t_nanos[k] -= 15_000_000_000;
+    log.write_mcap(d.join("back.mcap"), "/joint_states").unwrap();
+    let a = arm.to_str().unwrap();
+    let args = ["sim", a, "--controller", "replay", "--trajectory", "back.mcap", "--duration", "0.1"];
+    let (ok, out, err) = run_in(d, &args, QUICK);
+    assert!(!ok, "replayed: {out}");
+    // Samples are ordered by stamp, so the one 15 s early comes first: the jump is named there.
+    assert!(err.contains("back.mcap") && err.contains("clock is broken") && err.contains("14.75"), "{err}");
+}
+
+/// `.rrd` outputs keep what they replace like every other output: numbered backups, the oldest
+/// never overwritten (they were renamed to `NAME.bak`, losing an older `.bak`).
+#[test]
+fn rerun_outputs_keep_numbered_backups() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let mut versions = Vec::new();
+    for _ in 0..3 {
+        let (ok, _, err) = run_in(d, &["sim", "--duration", "0.01", "--rerun", "r.rrd"], QUICK);
+        assert!(ok, "{err}");
+        versions.push(std::fs::read(d.join("r.rrd")).unwrap());
+    }
+    assert_eq!(std::fs::read(d.join("r.rrd.bak")).unwrap(), versions[0], "the first recording");
+    assert_eq!(std::fs::read(d.join("r.rrd.bak.1")).unwrap(), versions[1]);
+    assert!(!d.join("r.rrd.bak.2").exists());
 }

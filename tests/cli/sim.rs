@@ -22,7 +22,7 @@ const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/twin-core/tests/pytho
 const ACCEL_STD: f64 = 0.017;
 const GYRO_STD: f64 = 0.002;
 
-fn python_exe() -> String {
+pub(crate) fn python_exe() -> String {
     std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into())
 }
 
@@ -395,7 +395,7 @@ fn rerun_recordings_of_sim_and_view_verify() {
 /// A Python cross-check whose tool is missing fails the test (CI installs them from
 /// `.ci/requirements.txt` and sets TWIN_PYTHON). Only an explicit
 /// `TWIN_ALLOW_MISSING_PYTHON=1` turns the failure into a note, for machines without the tools.
-fn missing_python<T>(why: &str) -> Option<T> {
+pub(crate) fn missing_python<T>(why: &str) -> Option<T> {
     if std::env::var("TWIN_ALLOW_MISSING_PYTHON").is_ok_and(|v| v == "1") {
         eprintln!("note: Python cross-check not run (TWIN_ALLOW_MISSING_PYTHON=1): {why}");
         return None;

@@ -6,13 +6,25 @@
 //! - `world/<body>/<geom>`: the geom's shape, posed statically in its body frame;
 //! - `series/...`: scalars logged with [`Recorder::scalar`].
 //!
-//! Time is the simulation (or log) time on the `sim_time` timeline, so recordings of the same
-//! run are identical byte for byte apart from rerun's own file header.
+//! Time is the simulation (or log) time on the `sim_time` timeline, wall-clock log time is off
+//! and files are cut into chunks by size only (no wall-clock flush tick), so recordings of the
+//! same run hold the same data in the same order (`rerun rrd compare` finds them equal); their
+//! bytes differ, since rerun stamps every row and chunk with a unique id made from the wall clock
+//! and a random number (its SDK has no way to set them).
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
 use mujoco_sys as sys;
 use std::path::{Path, PathBuf};
+
+/// The rerun names twin uses, as the `rerun` umbrella crate re-exports them (twin depends on the
+/// SDK crates alone, see the workspace manifest).
+mod rerun {
+    pub use re_sdk::{AsComponents, RecordingStream, RecordingStreamBuilder};
+    pub use re_sdk_types::archetypes::*;
+    pub use re_sdk_types::components::{Color, FillMode};
+    pub use re_sdk_types::datatypes::Quaternion;
+}
 
 /// How long [`Recorder::finish`] waits for a viewer to take the recording.
 const VIEWER_TIMEOUT: std::time::Duration = std::time::Duration::from_secs(10);
@@ -51,21 +63,27 @@ fn vec3(v: [f64; 3]) -> [f32; 3] {
 
 impl Recorder {
     /// Records to a `.rrd` file at `path` under application id `app_id`; an existing file there is
-    /// kept as `<name>.bak`.
+    /// kept as the first free of `<name>.bak`, `<name>.bak.1`, …
     ///
     /// # Errors
     /// [`Error::Rerun`] if the file can't be created.
     pub fn to_file(model: &Model, app_id: &'static str, path: impl AsRef<Path>) -> Result<Recorder> {
         let path = path.as_ref();
-        if path.exists() {
-            // Keep what was there, like the MCAP writer does.
-            let mut backup = path.as_os_str().to_owned();
-            backup.push(".bak");
-            std::fs::rename(path, &backup).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        // Not a folder or device; what was there is kept as the first free numbered backup
+        // (never over an older one), like the MCAP writer does.
+        let target = crate::fsio::check_output(path, &[])?;
+        if target.existing.is_some() {
+            crate::fsio::backup_numbered(&target.resolved)?;
         }
         let rec = rerun::RecordingStreamBuilder::new(app_id)
             // A fixed id keeps re-recordings of the same run comparable.
             .recording_id(format!("{app_id}-recording"))
+            // Chunks cut by size only, never by a wall-clock tick: the same run gives the same
+            // chunks however busy the machine is.
+            .batcher_config(re_sdk::log::ChunkBatcherConfig {
+                flush_tick: std::time::Duration::MAX,
+                ..re_sdk::log::ChunkBatcherConfig::DEFAULT
+            })
             .save(path)
             .map_err(|e| rerun_err(Some(path), e))?;
         Self::start(rec, model, Some(path.to_path_buf()))
@@ -332,11 +350,20 @@ pub struct ViewOptions {
     pub odom_topic: String,
     /// Rate of the posed frames, Hz; joint and IMU scalars keep every sample (default: 50).
     pub pose_rate_hz: f64,
+    /// Polled between frames and topics: once raised (e.g. Ctrl-C through
+    /// [`crate::fsio::interrupt_flag`]), [`record_log`] stops and returns what it logged so far
+    /// with [`ViewSummary::interrupted`] set (default: none).
+    pub stop: Option<&'static std::sync::atomic::AtomicBool>,
 }
 
 impl Default for ViewOptions {
     fn default() -> Self {
-        ViewOptions { joint_states_topic: "/joint_states".into(), odom_topic: "/odom".into(), pose_rate_hz: 50.0 }
+        ViewOptions {
+            joint_states_topic: "/joint_states".into(),
+            odom_topic: "/odom".into(),
+            pose_rate_hz: 50.0,
+            stop: None,
+        }
     }
 }
 
@@ -359,6 +386,9 @@ pub struct ViewSummary {
     pub duration_secs: f64,
     /// Warnings about the log (damage, odd stamps).
     pub warnings: Vec<String>,
+    /// Whether [`ViewOptions::stop`] ended the recording early (its frames cover the start of
+    /// the log only).
+    pub interrupted: bool,
 }
 
 /// Turns a robot's ROS 2 log into a recording: the model posed from the log's joint states
@@ -379,6 +409,7 @@ pub fn record_log(
     use crate::log::{Imu, Odometry};
     let model = &robot.model;
     let mut summary = ViewSummary::default();
+    let stopped = || options.stop.is_some_and(|f| f.load(std::sync::atomic::Ordering::Relaxed));
     let series = log.joint_states(&options.joint_states_topic)?;
     summary.warnings = series.report.warnings();
     let trajectory = JointTrajectory::from_log(log.path(), &options.joint_states_topic)?;
@@ -387,8 +418,13 @@ pub fn record_log(
         let t = if stamp_nanos != 0 { stamp_nanos } else { log_nanos as i64 };
         (t - t0) as f64 * 1e-9
     };
+    summary.duration_secs = trajectory.duration_secs();
     let mut animated = Vec::new();
     for j in &trajectory.joints {
+        if stopped() {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
         match model.id(ObjType::Joint, &j.name) {
             Some(id) if model.jnt_type()[id] as u32 != sys::mjtJoint_mjJNT_FREE => {
                 summary.joints_matched.push(j.name.clone());
@@ -402,7 +438,6 @@ pub fn record_log(
             summary.scalars += 1;
         }
     }
-    summary.duration_secs = trajectory.duration_secs();
 
     let topics = log.info()?.topics;
     let free_adr = robot.base.map(|b| b.qpos_adr);
@@ -420,6 +455,10 @@ pub fn record_log(
         summary.odom_messages = odom.len() as u64;
     }
     for t in topics.iter().filter(|t| t.type_name == "sensor_msgs/msg/Imu") {
+        if stopped() {
+            summary.interrupted = true;
+            return Ok(summary);
+        }
         let (msgs, _) = log.read_typed::<Imu>(&t.topic)?;
         let name = entity_name(t.topic.trim_start_matches('/'), "imu", 0);
         for (log_nanos, m) in &msgs {
@@ -438,6 +477,10 @@ pub fn record_log(
     let frames = ((summary.duration_secs * options.pose_rate_hz.max(1e-3)).floor() as u64) + 1;
     let mut next_odom = 0usize;
     for k in 0..frames {
+        if stopped() {
+            summary.interrupted = true;
+            break;
+        }
         let t = k as f64 / options.pose_rate_hz;
         for (adr, j) in &animated {
             data.qpos_mut()[*adr] = j.sample(t).0;

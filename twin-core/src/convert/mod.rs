@@ -281,6 +281,46 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     })
 }
 
+/// Deepest element nesting MuJoCo's XML parser (tinyxml2, `TINYXML2_MAX_ELEMENT_DEPTH`)
+/// accepts is one less than this: a 496-link chain is refused with "Element nesting is too
+/// deep", a 495-link one loads.
+pub const MAX_XML_DEPTH: usize = 500;
+
+/// The deepest body of a generated MJCF (one element per line, as twin writes them).
+struct Nesting {
+    /// Bodies from the root body down to `body`, both included.
+    bodies: usize,
+    /// Element depth of `body`'s children (`<mujoco>` is depth 1).
+    element_depth: usize,
+    body: String,
+    root: String,
+}
+
+fn body_nesting(mjcf: &str) -> Option<Nesting> {
+    let mut stack: Vec<String> = Vec::new();
+    let mut deepest: Option<Nesting> = None;
+    for l in mjcf.lines().map(str::trim_start) {
+        if let Some(rest) = l.strip_prefix("<body") {
+            let name = rest.split("name=\"").nth(1).and_then(|r| r.split('"').next()).unwrap_or("").to_string();
+            if !l.ends_with("/>") {
+                stack.push(name);
+            }
+            if deepest.as_ref().is_none_or(|d| stack.len() > d.bodies) {
+                deepest = Some(Nesting {
+                    bodies: stack.len(),
+                    // <mujoco>, <worldbody>, the bodies, and a child element of the deepest.
+                    element_depth: stack.len() + 3,
+                    body: stack.last().cloned().unwrap_or_default(),
+                    root: stack.first().cloned().unwrap_or_default(),
+                });
+            }
+        } else if l.starts_with("</body>") {
+            stack.pop();
+        }
+    }
+    deepest
+}
+
 /// `qpos0` with every limited hinge and slide clamped into its range (some URDFs put 0
 /// outside the range, e.g. knees of quadrupeds): the nominal pose of keyframe `home`.
 fn home_pose(model: &Model) -> Vec<f64> {
@@ -937,35 +977,105 @@ impl<'a> Converter<'a> {
         Ok(out)
     }
 
+    /// The URDF element a name of the generated MJCF stands for: (URDF line, kind, name).
+    fn urdf_element(&self, name: &str) -> Option<(u32, &'static str, String)> {
+        self.robot
+            .links
+            .iter()
+            .find(|l| l.name == name)
+            .map(|l| (l.line, "link", l.name.clone()))
+            .or_else(|| self.robot.joints.iter().find(|j| j.name == name).map(|j| (j.line, "joint", j.name.clone())))
+    }
+
+    /// Compiles the generated MJCF. MuJoCo's errors name the generated document (a line the
+    /// user never sees) or one of its elements: they are translated back to the URDF's file,
+    /// line and element, or explained.
     fn compile(&self, mjcf: &str) -> Result<Model> {
+        if let Some(deep) = body_nesting(mjcf)
+            && deep.element_depth >= MAX_XML_DEPTH
+        {
+            let (line, _, _) = self.urdf_element(&deep.body).unwrap_or((0, "link", String::new()));
+            return Err(Error::Urdf {
+                path: self.robot.path.clone(),
+                line,
+                element: "link".into(),
+                name: Some(deep.body.clone()),
+                message: format!(
+                    "the kinematic tree is {} bodies deep here (from link \"{}\"), but MuJoCo's XML parser \
+                     accepts at most {} nested bodies (its element nesting limit is {MAX_XML_DEPTH}, counting \
+                     <mujoco>, <worldbody> and the elements inside a body); shorten the chain or join links \
+                     with fixed joints (merged into one body)",
+                    deep.bodies,
+                    deep.root,
+                    MAX_XML_DEPTH - 4,
+                ),
+            });
+        }
         Model::from_xml_str(mjcf).map_err(|e| match e {
-            Error::Load { message, .. } => {
-                // MuJoCo names the element ("Element name 'X'"): point at the URDF line.
-                let named = message.split("name '").nth(1).and_then(|r| r.split('\'').next()).map(str::to_string);
-                let hit = named.as_deref().and_then(|n| {
-                    self.robot
-                        .links
-                        .iter()
-                        .find(|l| l.name == n)
-                        .map(|l| (l.line, "link"))
-                        .or_else(|| self.robot.joints.iter().find(|j| j.name == n).map(|j| (j.line, "joint")))
-                });
-                match (hit, named) {
-                    (Some((line, element)), Some(n)) => Error::Urdf {
-                        path: self.robot.path.clone(),
-                        line,
-                        element: element.into(),
-                        name: Some(n),
-                        message: format!("MuJoCo rejected the converted {element}: {message}"),
-                    },
-                    _ => Error::Load {
-                        path: Some(self.robot.path.clone()),
-                        message: format!("MuJoCo rejected the converted model: {message}"),
-                    },
-                }
-            }
+            Error::Load { message, .. } => self.translate(mjcf, message),
             other => other,
         })
+    }
+
+    fn translate(&self, mjcf: &str, message: String) -> Error {
+        // MuJoCo names the element ("Element name 'X'"): point at the URDF line.
+        let named = message.split("name '").nth(1).and_then(|r| r.split('\'').next());
+        if let Some((line, element, name)) = named.and_then(|n| self.urdf_element(n)) {
+            return Error::Urdf {
+                path: self.robot.path.clone(),
+                line,
+                element: element.into(),
+                name: Some(name),
+                message: format!("MuJoCo rejected the converted {element}: {message}"),
+            };
+        }
+        // Or a line of the generated document (twin writes one element per line): the URDF
+        // joint or link named on it, else the link whose body holds it.
+        let generated_line = ["Line number=", "line "].iter().find_map(|key| {
+            message.split(key).nth(1).and_then(|r| r.split(|c: char| !c.is_ascii_digit()).next()?.parse::<usize>().ok())
+        });
+        if let Some(n) = generated_line.filter(|&n| n >= 1) {
+            let lines: Vec<&str> = mjcf.lines().collect();
+            let name_on = |l: &str| l.split(" name=\"").nth(1)?.split('"').next().map(str::to_string);
+            // The element on that line (a joint, a link's body), else the body it is inside.
+            let hit = lines.get(n - 1).and_then(|l| self.urdf_element(&name_on(l)?)).or_else(|| {
+                // Upwards, skipping bodies closed before that line.
+                let mut closed = 0usize;
+                for l in lines[..(n - 1).min(lines.len())].iter().rev().map(|l| l.trim_start()) {
+                    if l.starts_with("</body>") {
+                        closed += 1;
+                    } else if l.starts_with("<body") && !l.ends_with("/>") {
+                        if closed == 0 {
+                            return self.urdf_element(&name_on(l)?);
+                        }
+                        closed -= 1;
+                    }
+                }
+                None
+            });
+            let text = lines.get(n - 1).map_or(String::new(), |l| crate::fsio::excerpt(l.trim(), 120));
+            if let Some((line, element, name)) = hit {
+                return Error::Urdf {
+                    path: self.robot.path.clone(),
+                    line,
+                    element: element.into(),
+                    name: Some(name),
+                    message: format!("MuJoCo rejected what twin generated for this {element} (`{text}`): {message}"),
+                };
+            }
+            return Error::Load {
+                path: Some(self.robot.path.clone()),
+                message: format!(
+                    "MuJoCo rejected the model twin generated from it, at `{text}` (line {n} of the MJCF; see it \
+                     with `twin convert {} -o model.xml`): {message}",
+                    self.robot.path.display()
+                ),
+            };
+        }
+        Error::Load {
+            path: Some(self.robot.path.clone()),
+            message: format!("MuJoCo rejected the converted model: {message}"),
+        }
     }
 
     fn contype(&self, link: &LinkIr) -> (i32, i32) {
@@ -1380,6 +1490,62 @@ pub fn actuated_joints(model: &Model) -> Vec<(usize, usize)> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// A URDF chain of `n` revolute joints (n + 1 links), one element per line.
+    pub(crate) fn chain_urdf(n: usize) -> String {
+        let mut out = String::from("<?xml version=\"1.0\"?>\n<robot name=\"chain\">\n");
+        for i in 0..=n {
+            out.push_str(&format!(
+                "  <link name=\"l{i}\"><inertial><mass value=\"0.1\"/><inertia ixx=\"1e-4\" iyy=\"1e-4\" \
+                 izz=\"1e-4\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial><visual><geometry><box size=\"0.01 0.01 \
+                 0.01\"/></geometry></visual></link>\n"
+            ));
+        }
+        for i in 0..n {
+            out.push_str(&format!(
+                "  <joint name=\"j{i}\" type=\"revolute\"><parent link=\"l{i}\"/><child link=\"l{}\"/><origin \
+                 xyz=\"0 0 0.01\"/><axis xyz=\"0 1 0\"/><limit lower=\"-1\" upper=\"1\" effort=\"1\" \
+                 velocity=\"1\"/></joint>\n",
+                i + 1
+            ));
+        }
+        out + "</robot>\n"
+    }
+
+    /// Issue 15: a MuJoCo error at a line of the generated MJCF (which the user never sees) is
+    /// reported at the URDF element that line was written for.
+    #[test]
+    fn mujoco_errors_at_a_generated_line_point_at_the_urdf_element() {
+        crate::mj::init().unwrap();
+        let text = chain_urdf(3);
+        let path = Path::new("chain.urdf");
+        let doc = crate::urdf::parse(path, &text).unwrap();
+        let robot = ir::parse_robot(&Ctx { path, doc: &doc }).unwrap();
+        let tree = Tree::build(&robot).unwrap();
+        let opts = ConvertOptions::default();
+        let mut conv = Converter::new(&robot, &tree, &opts).unwrap();
+        conv.prepare().unwrap();
+        let mjcf = conv.emit(0.0, true, None, None).unwrap();
+        let k = mjcf.lines().position(|l| l.contains("name=\"l2_visual_0\"")).unwrap() + 1;
+        // MuJoCo's schema errors end with the element and the generated line.
+        let message = format!("XML Error: Schema violation: unrecognized attribute: 'x'\n\nElement 'geom', line {k}");
+        match conv.translate(&mjcf, message) {
+            Error::Urdf { path, line, name, message, .. } => {
+                assert_eq!(path, Path::new("chain.urdf"));
+                assert_eq!(name.as_deref(), Some("l2"));
+                assert_eq!(line, 5, "the line of <link name=\"l2\"> in the URDF");
+                assert!(message.contains("l2_visual_0") && message.contains("unrecognized attribute"), "{message}");
+            }
+            other => panic!("not translated: {other}"),
+        }
+        // A line before any URDF element is explained with the way to see the generated file.
+        match conv.translate(&mjcf, "XML Error: bad option\n\nElement 'option', line 4".into()) {
+            Error::Load { message, .. } => {
+                assert!(message.contains("line 4 of the MJCF") && message.contains("twin convert"), "{message}")
+            }
+            other => panic!("{other}"),
+        }
+    }
 
     #[test]
     fn topics_resolve_like_gazebo_ros() {

@@ -39,6 +39,34 @@ impl Observer for Divergence {
     }
 }
 
+/// Ends the rollout after the step during which `flag` was raised (e.g. Ctrl-C through
+/// [`crate::fsio::interrupt_flag`]): the observers after it still see that step, so recordings
+/// end on a whole step and are closed normally.
+#[derive(Debug, Clone, Copy)]
+pub struct StopFlag {
+    /// The flag polled once per step.
+    pub flag: &'static std::sync::atomic::AtomicBool,
+    /// Whether the flag ended the rollout.
+    pub stopped: bool,
+}
+
+impl StopFlag {
+    /// An observer polling `flag`.
+    pub fn new(flag: &'static std::sync::atomic::AtomicBool) -> Self {
+        StopFlag { flag, stopped: false }
+    }
+}
+
+impl Observer for StopFlag {
+    fn observe(&mut self, _step: &StepView<'_>) -> Result<Flow> {
+        if self.flag.load(std::sync::atomic::Ordering::Relaxed) {
+            self.stopped = true;
+            return Ok(Flow::EndAfterStep);
+        }
+        Ok(Flow::Continue)
+    }
+}
+
 /// Options of [`Fall`].
 #[derive(Debug, Clone, PartialEq)]
 pub struct FallOptions {

@@ -264,7 +264,10 @@ impl<'f> Scanner<'f> {
             }
             match opcode {
                 op::DATA_END | op::FOOTER => {
+                    // Closed cleanly only if the summary, footer and end magic are whole too.
+                    let tail_from = if opcode == op::FOOTER { record_offset } else { offset };
                     clean_end = true;
+                    self.check_tail(&mut r, tail_from, file_len)?;
                     break;
                 }
                 op::CHUNK => {
@@ -653,6 +656,89 @@ impl<'f> Scanner<'f> {
         };
         self.report.messages_delivered += 1;
         f(msg)
+    }
+
+    /// Checks what follows the data section (from `offset`, the byte after the data-end record,
+    /// or a footer record met in the data section): whole summary records, then the footer
+    /// whose offsets point into them and whose CRC matches, then the end magic, exactly to the
+    /// end of the file. A file cut anywhere in there was not closed cleanly: every message is
+    /// intact, but a strict reader must not call it complete.
+    fn check_tail(&mut self, r: &mut BufReader<File>, offset: u64, file_len: u64) -> Result<()> {
+        let Some(problem) = self.tail_problem(r, offset, file_len)? else { return Ok(()) };
+        self.damage(Damage {
+            path: self.path.clone(),
+            offset,
+            kind: DamageKind::Truncated,
+            lost_bytes: 0,
+            lost_messages: Some(0),
+            message: format!("{problem}: the recording was not closed cleanly (every message before it is intact)"),
+        })
+    }
+
+    fn tail_problem(&mut self, r: &mut BufReader<File>, offset: u64, file_len: u64) -> Result<Option<String>> {
+        r.seek(SeekFrom::Start(offset)).map_err(|e| self.io(e))?;
+        let mut tail = Vec::new();
+        r.read_to_end(&mut tail).map_err(|e| self.io(e))?;
+        if tail.len() as u64 != file_len - offset {
+            return Ok(Some("the file changed while it was read".into()));
+        }
+        // Record starts inside the tail (file offsets), for the footer's pointers.
+        let mut starts = Vec::new();
+        let mut pos = 0usize;
+        loop {
+            let at = offset + pos as u64;
+            if pos == tail.len() {
+                return Ok(Some(format!("the file ends at byte {at}, without its footer and end magic")));
+            }
+            if tail.len() - pos < 9 {
+                return Ok(Some(format!("the file is cut inside a summary or footer record header at byte {at}")));
+            }
+            let opcode = tail[pos];
+            let len = u64::from_le_bytes(tail[pos + 1..pos + 9].try_into().expect("8"));
+            if len > (tail.len() - pos - 9) as u64 {
+                let what = if opcode == op::FOOTER { "footer" } else { "summary section" };
+                return Ok(Some(format!("the file is cut inside its {what} (record at byte {at})")));
+            }
+            starts.push(at);
+            let body = &tail[pos + 9..pos + 9 + len as usize];
+            pos += 9 + len as usize;
+            if opcode != op::FOOTER {
+                continue;
+            }
+            if len != 20 {
+                return Ok(Some(format!("the footer at byte {at} has {len} bytes instead of 20")));
+            }
+            let rest = &tail[pos..];
+            if rest.len() < MAGIC.len() {
+                return Ok(Some(format!("the file is cut inside its end magic ({} of 8 bytes)", rest.len())));
+            }
+            if rest[..8] != MAGIC[..] {
+                return Ok(Some("the file does not end with the MCAP magic after its footer".into()));
+            }
+            if rest.len() > 8 {
+                return Ok(Some(format!("{} bytes follow the end magic", rest.len() - 8)));
+            }
+            let summary_start = u64::from_le_bytes(body[0..8].try_into().expect("8"));
+            let summary_offset_start = u64::from_le_bytes(body[8..16].try_into().expect("8"));
+            let crc = u32::from_le_bytes(body[16..20].try_into().expect("4"));
+            for (name, p) in [("summary", summary_start), ("summary offset", summary_offset_start)] {
+                if p != 0 && !starts.contains(&p) {
+                    return Ok(Some(format!("the footer's {name} start {p} is not a record after the data section")));
+                }
+            }
+            if summary_start != 0 && crc != 0 {
+                // CRC of the summary section up to the footer's summary_offset_start field.
+                let from = (summary_start - offset) as usize;
+                let to = pos - 4;
+                let calculated = crc32fast::hash(&tail[from..to]);
+                if calculated != crc {
+                    return Ok(Some(format!(
+                        "the summary section's CRC does not match (saved {crc:#010x}, calculated {calculated:#010x})"
+                    )));
+                }
+            }
+            return Ok(None);
+        }
     }
 
     /// Reads schemas, channels and statistics from the summary section when the file has one,

@@ -460,3 +460,62 @@ fn inline_and_background_writers_write_the_same_bytes_and_lz4_reads_back() {
         assert_eq!((late.len(), late[0].0), (1, 1500 * 2_000_000));
     }
 }
+
+/// File offset of the data-end record, walking the records from the start.
+fn data_end_offset(bytes: &[u8]) -> usize {
+    let mut pos = 8;
+    loop {
+        let opcode = bytes[pos];
+        let len = u64::from_le_bytes(bytes[pos + 1..pos + 9].try_into().unwrap()) as usize;
+        if opcode == mcap::records::op::DATA_END {
+            return pos;
+        }
+        pos += 9 + len;
+    }
+}
+
+/// Issue 15: `log info --strict` accepted files cut inside the summary, the footer or the end
+/// magic. Every cut from the data-end record to the last byte of the shipped logs (and of one
+/// twin writes) is refused by a strict reader and reported as cut (all messages kept) by a
+/// lenient one; only the whole file is complete.
+#[test]
+fn cuts_anywhere_in_the_summary_footer_or_magic_are_not_complete() {
+    let dir = tempfile::tempdir().unwrap();
+    let written = dir.path().join("run.mcap");
+    write_log(&written, 300, 4096);
+    let data = Path::new(env!("CARGO_MANIFEST_DIR")).join("../data");
+    let cut_path = dir.path().join("cut.mcap");
+    let mut cuts = 0;
+    for file in [written, data.join("humanoid_joint_states.mcap"), data.join("arm6_identification.mcap")] {
+        let bytes = std::fs::read(&file).unwrap();
+        let whole = Log::open(&file, ReadOptions { strict: true }).unwrap().info().unwrap();
+        assert!(whole.read.files.iter().all(|(_, r)| r.has_summary), "{}", file.display());
+        assert!(whole.read.damage().next().is_none(), "{}", file.display());
+        let start = data_end_offset(&bytes);
+        assert!(bytes.len() - start > 100, "{}: a summary section to cut", file.display());
+        // Every byte of the tail; for the 1.3 MB arm log (slow to reread in debug builds), every
+        // 7th byte of its summary and every byte of its footer and magic.
+        let step = if bytes.len() > 1 << 20 { 7 } else { 1 };
+        let footer = bytes.len() - 37;
+        for cut in (start..footer).step_by(step).chain(footer..bytes.len()) {
+            std::fs::write(&cut_path, &bytes[..cut]).unwrap();
+            let strict = Log::open(&cut_path, ReadOptions { strict: true }).and_then(|l| l.info());
+            let err = match strict {
+                Ok(_) => panic!("{} cut at byte {cut} of {} accepted as complete", file.display(), bytes.len()),
+                Err(e) => e.to_string(),
+            };
+            // Past the data-end record (13 bytes), the message names what was not closed.
+            assert!(err.contains("--strict"), "cut {cut}: {err}");
+            assert!(cut < start + 13 || err.contains("not closed cleanly"), "cut {cut}: {err}");
+            if cut % 16 != 0 {
+                cuts += 1;
+                continue;
+            }
+            let lenient = Log::open(&cut_path, ReadOptions { strict: false }).unwrap().info().unwrap();
+            assert_eq!(lenient.message_count, whole.message_count, "cut {cut}: every message is before the cut");
+            assert!(lenient.read.damage().any(|d| d.kind == DamageKind::Truncated), "cut {cut}");
+            cuts += 1;
+        }
+    }
+    assert!(cuts > 2000, "{cuts} cuts");
+}
