@@ -10,7 +10,10 @@
 //! - `/tf` (`tf2_msgs/msg/TFMessage`) at the tf rate; `/tf_static` once (latched), when an IMU
 //!   frame is not a body;
 //! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`) per body, from its first contact on;
-//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent.
+//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent;
+//! - each ray-cast sensor's topics ([`crate::sense::rig`]): depth cameras
+//!   `<prefix>/depth/image_raw`, `<prefix>/depth/camera_info`, `<prefix>/points`; LiDARs a
+//!   `LaserScan` or `PointCloud2`, at the sensor's rate.
 
 use crate::error::Result;
 use crate::log::{Float64MultiArray, Imu, JointState, Odometry, RosMessage, TfMessage, WrenchStamped};
@@ -74,6 +77,14 @@ pub enum TopicKind {
     Contacts(usize),
     /// The command sent.
     Commands,
+    /// Stream `stream` of ray-cast sensor `sensor` of [`crate::sense::ray_sensors`] (depth
+    /// image, camera info, points, laser scan), at the sensor's rate.
+    Sensor {
+        /// Index in [`crate::sense::ray_sensors`].
+        sensor: usize,
+        /// Which of its messages.
+        stream: crate::sense::SensorStream,
+    },
 }
 
 /// One topic of the table.
@@ -200,6 +211,18 @@ impl TopicTable {
                 kind: TopicKind::Contacts(b),
             });
         }
+        for (k, s) in crate::sense::ray_sensors(robot).iter().enumerate() {
+            for (name, stream) in &s.topics {
+                topics.push(TopicInfo {
+                    name: name.clone(),
+                    type_name: stream.type_name(),
+                    rate_hz: Some(s.rate_hz),
+                    frame_id: s.frame_id.clone(),
+                    qos: Qos::STREAM,
+                    kind: TopicKind::Sensor { sensor: k, stream: *stream },
+                });
+            }
+        }
         TopicTable { topics }
     }
 
@@ -229,6 +252,9 @@ pub enum TypedMessage<'a> {
     Wrench(&'a WrenchStamped),
     /// `std_msgs/msg/Float64MultiArray`.
     Float64MultiArray(&'a Float64MultiArray),
+    /// `sensor_msgs/msg/Image`, `sensor_msgs/msg/CameraInfo`, `sensor_msgs/msg/PointCloud2`
+    /// or `sensor_msgs/msg/LaserScan` of a ray-cast sensor.
+    Sensor(&'a crate::sense::SensorMessage),
 }
 
 impl TypedMessage<'_> {
@@ -241,6 +267,7 @@ impl TypedMessage<'_> {
             TypedMessage::Tf(_) => TfMessage::TYPE_NAME,
             TypedMessage::Wrench(_) => WrenchStamped::TYPE_NAME,
             TypedMessage::Float64MultiArray(_) => Float64MultiArray::TYPE_NAME,
+            TypedMessage::Sensor(m) => m.type_name(),
         }
     }
 }

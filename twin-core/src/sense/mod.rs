@@ -1,13 +1,16 @@
 //! Sensing by ray casting, without OpenGL: depth cameras ([`depth`]), scanning range finders
-//! ([`lidar`]) and finding a cup on a table in their point clouds ([`cup`]).
+//! ([`lidar`]), both as a robot's file describes them with their topics ([`rig`]), and finding a
+//! cup on a table in their point clouds ([`cup`]).
 
 pub mod cup;
 pub mod depth;
 pub mod lidar;
+pub mod rig;
 
 pub use cup::{CupDetectOptions, CupEstimate, detect_cup};
 pub use depth::{DepthCamera, DepthCameraOptions, DepthFrame, Intrinsics};
 pub use lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
+pub use rig::{Device, RaySensor, RaySensorKind, Reading, SensorMessage, SensorStream, ray_sensors};
 
 use crate::log::{Header, PointCloud2, PointField};
 

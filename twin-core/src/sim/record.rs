@@ -16,6 +16,8 @@
 //!   touches nothing); from its first contact on, at the state rate.
 //! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent (actuator
 //!   controls, or joint forces for models without actuators), at the state rate.
+//! - each ray-cast sensor's topics ([`crate::sense::rig`]: depth image, camera info and points
+//!   of a depth camera; a LiDAR's scan or points) at the sensor's rate, cast only on its ticks.
 //!
 //! The rerun recording gets the posed geometry at [`RecordOptions::rerun_rate_hz`] and scalars:
 //! `series/joints/<joint>`, `series/imu/<imu>/{gyro,accel}_{x,y,z}`,
@@ -25,8 +27,8 @@ use super::Robot;
 use crate::error::{Error, Result};
 use crate::log::cdr::CdrWriter;
 use crate::log::{
-    Float64MultiArray, Imu, JointState, LogWriter, Odometry, RosMessage, TfMessage, Topic, WrenchStamped, WriteSummary,
-    WriterOptions,
+    CameraInfo, Float64MultiArray, Image, Imu, JointState, LaserScan, LogWriter, Odometry, PointCloud2, RosMessage,
+    TfMessage, Topic, WrenchStamped, WriteSummary, WriterOptions,
 };
 use crate::mj::{Data, ObjType};
 use crate::topics::{TopicInfo, TopicKind, TopicRates, TopicTable};
@@ -338,6 +340,26 @@ pub struct Recording {
     imu_due: Vec<bool>,
     /// `/contacts/<body>` topic of each body (from the topic table).
     contact_topics: Vec<String>,
+    /// Ray-cast sensors (depth cameras, LiDARs), read on their own ticks only.
+    sense: Vec<SenseOut>,
+}
+
+/// The MCAP stream of one topic of a ray-cast sensor.
+#[derive(Clone, Copy)]
+enum SenseStreamOut {
+    Image(Stream<Image>),
+    CameraInfo(Stream<CameraInfo>),
+    Points(Stream<PointCloud2>),
+    Scan(Stream<LaserScan>),
+}
+
+/// A ray-cast sensor being recorded.
+struct SenseOut {
+    sensor: crate::sense::RaySensor,
+    device: crate::sense::Device,
+    schedule: Schedule,
+    /// Per topic of `sensor.topics`: its stream when recorded.
+    streams: Vec<Option<SenseStreamOut>>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
@@ -406,6 +428,7 @@ impl Recording {
             imu_values: vec![[0.0; 6]; robot.imus.len()],
             imu_due: Vec::new(),
             contact_topics: Vec::new(),
+            sense: Vec::new(),
         };
 
         if let (Some(path), Some(wanted)) = (&options.mcap, &options.topics) {
@@ -417,6 +440,9 @@ impl Recording {
             }
             known.push(options.command_topic.clone().unwrap_or_else(|| format!("/{}/joint_commands", robot.name)));
             known.push("/contacts/*".into());
+            known.extend(
+                crate::sense::ray_sensors(robot).into_iter().flat_map(|s| s.topics.into_iter().map(|(n, _)| n)),
+            );
             for t in wanted {
                 if !known.contains(t) && !t.starts_with("/contacts/") {
                     return Err(Error::LogTopic {
@@ -517,6 +543,37 @@ impl Recording {
                     recorders,
                     schedule: Schedule::new(options.rerun_rate_hz, dt_nanos),
                     joint_series: rec.joint_names.iter().map(|n| format!("joints/{n}")).collect(),
+                });
+            }
+        }
+        // Ray-cast sensors: only when something takes their readings.
+        for sensor in crate::sense::ray_sensors(robot) {
+            let mut streams = Vec::new();
+            if let Some(out) = rec.mcap.as_mut() {
+                for (name, stream) in &sensor.topics {
+                    use crate::sense::SensorStream as S;
+                    streams.push(if !out.wants(name) {
+                        None
+                    } else {
+                        Some(match stream {
+                            S::DepthImage => SenseStreamOut::Image(out.add(name)?),
+                            S::CameraInfo => SenseStreamOut::CameraInfo(out.add(name)?),
+                            S::Points => SenseStreamOut::Points(out.add(name)?),
+                            S::Scan => SenseStreamOut::Scan(out.add(name)?),
+                        })
+                    });
+                }
+            }
+            #[cfg(feature = "rerun")]
+            let to_rerun = rec.rerun.is_some();
+            #[cfg(not(feature = "rerun"))]
+            let to_rerun = false;
+            if streams.iter().any(Option::is_some) || to_rerun {
+                rec.sense.push(SenseOut {
+                    device: sensor.build(robot)?,
+                    schedule: Schedule::new(sensor.rate_hz, dt_nanos),
+                    sensor,
+                    streams,
                 });
             }
         }
@@ -671,6 +728,45 @@ impl Recording {
         }
 
         self.imu_due = imu_due;
+
+        for s in &mut self.sense {
+            if !s.schedule.due(t_nanos) {
+                continue;
+            }
+            // Stamped t: `data`'s poses belong to the step's start, its clock to the end.
+            let mut reading = s.device.read(data)?;
+            match &mut reading {
+                crate::sense::Reading::Depth(f) => f.stamp_nanos = t_nanos,
+                crate::sense::Reading::Lidar(l) => l.stamp_nanos = t_nanos,
+            }
+            if let Some(out) = self.mcap.as_mut()
+                && s.streams.iter().any(Option::is_some)
+            {
+                for (stream, message) in s.streams.iter().zip(s.sensor.messages(&reading)) {
+                    match stream {
+                        Some(SenseStreamOut::Image(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
+                        Some(SenseStreamOut::CameraInfo(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
+                        Some(SenseStreamOut::Points(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
+                        Some(SenseStreamOut::Scan(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
+                        None => {}
+                    }
+                }
+            }
+            #[cfg(feature = "rerun")]
+            if let Some(r) = self.rerun.as_ref() {
+                for rec in &r.recorders {
+                    rec.set_time_secs(sample.time_secs);
+                    match &reading {
+                        crate::sense::Reading::Depth(f) => rec.depth_frame(&s.sensor.name, f)?,
+                        crate::sense::Reading::Lidar(l) => {
+                            let pts: Vec<_> =
+                                l.points_sensor().into_iter().flatten().map(|p| l.world_from_sensor * p).collect();
+                            rec.points(&s.sensor.name, &pts)?;
+                        }
+                    }
+                }
+            }
+        }
 
         #[cfg(feature = "rerun")]
         if rerun_due && let Some(r) = self.rerun.as_ref() {

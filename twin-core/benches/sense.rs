@@ -1,0 +1,139 @@
+//! Cost of the ray-cast depth camera on a grasp-like scene: the shipped humanoid in
+//! `models/table_cup.world` (table, cup, floor) seen by a head-height camera looking at the
+//! table.
+//!
+//!     cargo bench -p twin-core --bench sense -- [--frames N] [--secs S] [--reps R]
+//!
+//! 1. One 320×240 frame (76,800 rays), one thread and all threads: median of N renders.
+//! 2. The simulation's wall time (PD hold, S simulated seconds) without the camera and with it
+//!    rendering at 15 Hz on one thread, alternated R times; medians compared.
+
+use nalgebra::Vector3;
+use rand::SeedableRng;
+use std::sync::Arc;
+use std::time::Instant;
+use twin_core::control::{PdHold, PdHoldOptions};
+use twin_core::convert::{ConvertOptions, convert_urdf};
+use twin_core::engine::{Engine, Episode, Flow, Observer, StepView};
+use twin_core::mj::{Data, Model};
+use twin_core::robot::Robot;
+use twin_core::sense::{DepthCamera, DepthCameraOptions};
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// The humanoid at the table with a fixed camera at head height looking at the cup.
+fn grasp_scene() -> Arc<Model> {
+    let root = concat!(env!("CARGO_MANIFEST_DIR"), "/..");
+    let opts = ConvertOptions { world: Some(format!("{root}/models/table_cup.world").into()), ..Default::default() };
+    let converted = convert_urdf(std::path::Path::new(&format!("{root}/models/humanoid.urdf")), &opts)
+        .unwrap_or_else(|e| panic!("{e}"));
+    let (eye, target) = (Vector3::new(0.1, 0.0, 1.45), Vector3::new(0.5, 0.0, 0.75));
+    let d = (target - eye).normalize();
+    let right = d.cross(&Vector3::z()).normalize();
+    let up = right.cross(&d);
+    let camera = format!(
+        "<camera name=\"bench_head\" pos=\"{} {} {}\" xyaxes=\"{} {} {} {} {} {}\" fovy=\"58\"/>",
+        eye.x, eye.y, eye.z, right.x, right.y, right.z, up.x, up.y, up.z
+    );
+    let mjcf = converted.mjcf.replacen("<worldbody>", &format!("<worldbody>\n{camera}"), 1);
+    Arc::new(Model::from_xml_str(&mjcf).unwrap_or_else(|e| panic!("{e}")))
+}
+
+/// Renders the camera at its rate during a rollout.
+struct CameraTicks {
+    camera: DepthCamera,
+    period_nanos: u64,
+    next_nanos: u64,
+    frames: usize,
+    valid: usize,
+}
+
+impl Observer for CameraTicks {
+    fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
+        let t = (step.time_secs * 1e9).round() as u64;
+        if t >= self.next_nanos {
+            self.next_nanos += self.period_nanos;
+            let frame = self.camera.render(step.data.model(), step.data)?;
+            self.frames += 1;
+            self.valid += frame.depth_m.iter().filter(|z| z.is_finite()).count();
+        }
+        Ok(Flow::Continue)
+    }
+}
+
+fn main() {
+    let (mut frames, mut secs, mut reps) = (20usize, 2.0f64, 5usize);
+    let mut args = std::env::args().skip(1);
+    while let Some(a) = args.next() {
+        match a.as_str() {
+            "--frames" => frames = args.next().and_then(|v| v.parse().ok()).expect("--frames N"),
+            "--secs" => secs = args.next().and_then(|v| v.parse().ok()).expect("--secs S"),
+            "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
+            _ => {}
+        }
+    }
+    let model = grasp_scene();
+    let mut data = Data::new(model.clone()).unwrap();
+    twin_core::control::reset_to_home(&mut data).unwrap();
+    println!("scene: humanoid + table_cup.world, {} geoms, {} bodies", model.ngeom(), model.nbody());
+
+    println!("| frame | threads | median ms/frame | valid pixels |");
+    println!("|---|---|---|---|");
+    for threads in [1usize, 0] {
+        let opts = DepthCameraOptions { threads, ..DepthCameraOptions::default() };
+        let mut camera = DepthCamera::new(&model, "bench_head", opts).unwrap();
+        let first = camera.render(&model, &data).unwrap();
+        let valid = first.depth_m.iter().filter(|z| z.is_finite()).count();
+        let times: Vec<f64> = (0..frames)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(camera.render(&model, &data).unwrap());
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        let label = if threads == 1 { "1".to_string() } else { format!("all ({})", rayon::current_num_threads()) };
+        println!("| 320×240 | {label} | {:.2} | {valid} |", median(times));
+    }
+
+    let robot = Robot::from_model(model.clone(), "humanoid", std::path::Path::new("humanoid.urdf")).unwrap();
+    let steps = (secs / model.timestep_secs()).round() as u64;
+    let episode = Episode { steps, ..Episode::default() };
+    let mut engine = Engine::new();
+    let mut run = |with_camera: bool| -> (f64, usize) {
+        let mut controller = PdHold::new(&robot.model, PdHoldOptions::default());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
+        let opts = DepthCameraOptions { threads: 1, ..DepthCameraOptions::default() };
+        let mut ticks = CameraTicks {
+            camera: DepthCamera::new(&model, "bench_head", opts).unwrap(),
+            period_nanos: (1e9 / 15.0f64).round() as u64,
+            next_nanos: 0,
+            frames: 0,
+            valid: 0,
+        };
+        let t = Instant::now();
+        if with_camera {
+            engine.run(&robot.model, &episode, &mut controller, &mut [], &mut [&mut ticks], &mut rng).unwrap();
+        } else {
+            engine.run(&robot.model, &episode, &mut controller, &mut [], &mut [], &mut rng).unwrap();
+        }
+        (t.elapsed().as_secs_f64(), ticks.frames)
+    };
+    let (mut without, mut with) = (Vec::new(), Vec::new());
+    let mut frames_per_run = 0;
+    for _ in 0..reps {
+        without.push(run(false).0);
+        let (w, n) = run(true);
+        with.push(w);
+        frames_per_run = n;
+    }
+    let (a, b) = (median(without), median(with));
+    println!();
+    println!("| simulation ({secs} s, {steps} steps, PD hold) | median wall s | real-time factor |");
+    println!("|---|---|---|");
+    println!("| without camera | {a:.3} | {:.1} |", secs / a);
+    println!("| with camera at 15 Hz, 1 thread ({frames_per_run} frames) | {b:.3} | {:.1} |", secs / b);
+    println!("camera adds {:.1} % to the wall time", (b / a - 1.0) * 100.0);
+}
