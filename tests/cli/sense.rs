@@ -10,7 +10,7 @@ use super::common::{repo_root, run};
 use serde_json::Value as Json;
 use std::path::Path;
 use std::process::Command;
-use twin_core::log::{LaserScan, Log, ReadOptions};
+use twin_core::log::{LaserScan, Log, ReadOptions, TfMessage};
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/sense_check.py");
 
@@ -79,6 +79,41 @@ fn depth_camera_and_lidar_are_recorded_and_decode_elsewhere() {
             assert!((f64::from(*r) - 1.0 / a.cos()).abs() < 1e-3, "scan {k} beam {i}: {r} m");
         }
     }
+
+    // The sensor frames are placed on their links once, on /tf_static: the optical frame
+    // looks along its link's view axis (Gazebo: the link's x), the LiDAR frame is its link's.
+    let (statics, _) = log.read_typed::<TfMessage>("/tf_static").unwrap();
+    let transforms = &statics[0].1.transforms;
+    let find = |child: &str| transforms.iter().find(|t| t.child_frame_id == child).unwrap_or_else(|| panic!("{child}"));
+    // v rotated by the unit quaternion x y z w: v + 2w (u × v) + 2 u × (u × v).
+    let rotate = |q: [f64; 4], v: [f64; 3]| -> [f64; 3] {
+        let cross = |a: [f64; 3], b: [f64; 3]| {
+            [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+        };
+        let u = [q[0], q[1], q[2]];
+        let (t, tt) = (cross(u, v), cross(u, cross(u, v)));
+        [0, 1, 2].map(|i| v[i] + 2.0 * q[3] * t[i] + 2.0 * tt[i])
+    };
+    let dist =
+        |a: [f64; 3], b: [f64; 3]| ((a[0] - b[0]).powi(2) + (a[1] - b[1]).powi(2) + (a[2] - b[2]).powi(2)).sqrt();
+    let optical = find("depth_cam_optical_frame");
+    let (view, down) = (rotate(optical.rotation_xyzw, [0.0, 0.0, 1.0]), rotate(optical.rotation_xyzw, [0.0, 1.0, 0.0]));
+    match optical.header.frame_id.as_str() {
+        // The camera link fused into the bolted base (optical z down), or kept as a body
+        // (optical z along the link's x, Gazebo's view axis).
+        "base_link" => {
+            assert!(dist(optical.translation, [2.0, 0.0, 1.5]) < 1e-9, "{:?}", optical.translation);
+            assert!(dist(view, [0.0, 0.0, -1.0]) < 1e-9, "{view:?}");
+        }
+        "camera_link" => {
+            assert!(dist(optical.translation, [0.0; 3]) < 1e-9, "{:?}", optical.translation);
+            assert!(dist(view, [1.0, 0.0, 0.0]) < 1e-9, "{view:?}");
+        }
+        other => panic!("optical frame on {other}"),
+    }
+    assert!((down[0] * view[0] + down[1] * view[1] + down[2] * view[2]).abs() < 1e-9);
+    let lidar = find("front_lidar");
+    assert!(["base_link", "lidar_link"].contains(&lidar.header.frame_id.as_str()), "{}", lidar.header.frame_id);
 
     // The depth image, decoded by mcap-ros2-support.
     let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());

@@ -71,7 +71,7 @@ pub enum TopicKind {
     Odometry,
     /// Every body relative to its parent.
     Tf,
-    /// IMU frames that are no body, relative to their body (once).
+    /// IMU and ray-cast sensor frames that are no body, relative to their body (once).
     TfStatic,
     /// Net contact wrench on this body.
     Contacts(usize),
@@ -191,7 +191,10 @@ impl TopicTable {
             kind: TopicKind::Commands,
         });
         let frames: Vec<String> = (0..model.nbody()).map(|b| body_frame(robot, b)).collect();
-        if robot.imus.iter().any(|i| !frames.contains(&i.meta.frame_id)) {
+        let sensors = crate::sense::ray_sensors(robot);
+        if robot.imus.iter().any(|i| !frames.contains(&i.meta.frame_id))
+            || sensors.iter().any(|s| !frames.contains(&s.frame_id))
+        {
             topics.push(TopicInfo {
                 name: "/tf_static".into(),
                 type_name: TfMessage::TYPE_NAME,
@@ -211,7 +214,7 @@ impl TopicTable {
                 kind: TopicKind::Contacts(b),
             });
         }
-        for (k, s) in crate::sense::ray_sensors(robot).iter().enumerate() {
+        for (k, s) in sensors.iter().enumerate() {
             for (name, stream) in &s.topics {
                 topics.push(TopicInfo {
                     name: name.clone(),

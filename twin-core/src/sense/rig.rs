@@ -247,6 +247,25 @@ impl RaySensor {
         })
     }
 
+    /// Where the sensor's frame sits on the robot: `(body, body_from_frame translation (m),
+    /// rotation w x y z)`; a camera's frame is its optical frame (z forward, x right, y down),
+    /// a LiDAR's its site. `None` when the model lacks the camera or site.
+    pub fn body_from_frame(&self, model: &crate::mj::Model) -> Option<(usize, [f64; 3], [f64; 4])> {
+        match &self.kind {
+            RaySensorKind::Depth { camera, .. } => {
+                let c = model.id(ObjType::Camera, camera)?;
+                let q = model.cam_quat()[c];
+                // body_from_optical = body_from_camera · (half turn about x) = q ⊗ (0, 1, 0, 0).
+                let optical = [-q[1], q[0], q[3], -q[2]];
+                Some((model.cam_bodyid()[c] as usize, model.cam_pos()[c], optical))
+            }
+            RaySensorKind::Lidar { site, .. } => {
+                let s = model.id(ObjType::Site, site)?;
+                Some((model.site_bodyid()[s] as usize, model.site_pos()[s], model.site_quat()[s]))
+            }
+        }
+    }
+
     /// The messages of `reading`, one per topic of [`RaySensor::topics`], in that order.
     pub fn messages(&self, reading: &Reading) -> Vec<SensorMessage> {
         self.topics

@@ -10,7 +10,8 @@
 //! - `/odom` (`nav_msgs/msg/Odometry`, floating bases): pose of the base in `odom` (= the
 //!   simulation's world frame); twist in the child (base) frame, as REP-105 defines it.
 //! - `/tf` (`tf2_msgs/msg/TFMessage`): `odom` → base and every body relative to its parent, at
-//!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU frames that are not bodies.
+//!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU and ray-cast sensor frames that are
+//!   not bodies.
 //! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`): the net contact force and torque on
 //!   each body that has touched something, in the body frame about its origin (zero while it
 //!   touches nothing); from its first contact on, at the state rate.
@@ -509,18 +510,30 @@ impl Recording {
             out.tf = out.add_wanted(&tf)?;
             out.commands = out.add_wanted(&commands)?;
             // IMU frames that are no body: a static transform from their body.
-            let statics: Vec<&crate::robot::Imu> =
-                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
+            // IMU and ray-cast sensor frames that are no body: a static transform from their
+            // body, `(parent, child, translation, rotation w x y z)`.
+            let mut statics: Vec<(&str, String, [f64; 3], [f64; 4])> = robot
+                .imus
+                .iter()
+                .filter(|i| !rec.body_frames.contains(&i.meta.frame_id))
+                .map(|i| {
+                    (rec.body_frames[i.body].as_str(), i.meta.frame_id.clone(), i.body_from_imu.0, i.body_from_imu.1)
+                })
+                .collect();
+            for s in crate::sense::ray_sensors(robot) {
+                if let (false, Some((body, p, q))) = (rec.body_frames.contains(&s.frame_id), s.body_from_frame(model)) {
+                    statics.push((rec.body_frames[body].as_str(), s.frame_id, p, q));
+                }
+            }
             if let Some(tf_static) = tf_static.filter(|t| out.wants(t)) {
                 let topic: Stream<TfMessage> = out.add(&tf_static)?;
-                let body_frames = &rec.body_frames;
                 out.emit(topic, 0, |w| {
                     w.seq_len(statics.len());
-                    for imu in &statics {
-                        w.header(0, &body_frames[imu.body]);
-                        w.string(&imu.meta.frame_id);
-                        w.f64_fixed(&imu.body_from_imu.0);
-                        w.f64_fixed(&xyzw(imu.body_from_imu.1));
+                    for (parent, child, p, q) in &statics {
+                        w.header(0, parent);
+                        w.string(child);
+                        w.f64_fixed(p);
+                        w.f64_fixed(&xyzw(*q));
                     }
                 })?;
             }
