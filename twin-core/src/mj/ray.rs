@@ -494,6 +494,31 @@ impl Data {
         // SAFETY: as cam_xpos, 9 values per camera.
         unsafe { raw_slice(self.raw().cam_xmat as *const [f64; 9], n) }
     }
+
+    /// Copies what ray casting reads (geom, camera and site poses, time) from `other`, a
+    /// state of the same model, so readings can be taken from this copy on another thread.
+    ///
+    /// # Errors
+    /// [`Error::Size`] when `other` belongs to a model of another layout.
+    pub fn copy_poses_from(&mut self, other: &Data) -> Result<()> {
+        super::ModelLayout::of(self.model()).require_same(&super::ModelLayout::of(other.model()))?;
+        self.geom_xpos_mut().copy_from_slice(other.geom_xpos());
+        self.geom_xmat_mut().copy_from_slice(other.geom_xmat());
+        self.site_xpos_mut().copy_from_slice(other.site_xpos());
+        self.site_xmat_mut().copy_from_slice(other.site_xmat());
+        let n = self.model().raw().ncam as usize;
+        let (p, m) = (other.cam_xpos().as_ptr(), other.cam_xmat().as_ptr());
+        let (dp, dm) = (self.raw().cam_xpos as *mut [f64; 3], self.raw().cam_xmat as *mut [f64; 9]);
+        // SAFETY: both states have ncam camera rows (same layout, checked above); the source is
+        // borrowed shared and the destination exclusively through &mut self; they are distinct
+        // allocations.
+        unsafe {
+            std::ptr::copy_nonoverlapping(p, dp, n);
+            std::ptr::copy_nonoverlapping(m, dm, n);
+        }
+        self.set_time_secs(other.time_secs());
+        Ok(())
+    }
 }
 
 #[cfg(test)]

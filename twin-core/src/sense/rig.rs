@@ -294,3 +294,65 @@ impl Device {
         })
     }
 }
+
+/// A device read on another thread while the simulation goes on: the reading asked for at one
+/// tick comes back at the next ([`Pipelined::submit`]) or at the end ([`Pipelined::finish`]),
+/// whatever the threads' timing, so recordings stay the same run to run. The simulation thread
+/// only copies the poses the rays need (a few kB); the rays are cast on rayon's pool.
+#[derive(Debug)]
+pub struct Pipelined {
+    idle: Option<(Device, Data)>,
+    pending: Option<std::sync::mpsc::Receiver<(Device, Data, Result<Reading>)>>,
+}
+
+impl Pipelined {
+    /// `device` with a scratch state of `model` (the model its readings come from).
+    ///
+    /// # Errors
+    /// [`crate::Error::MuJoCo`] when MuJoCo can't allocate the scratch state.
+    pub fn new(device: Device, model: std::sync::Arc<crate::mj::Model>) -> Result<Pipelined> {
+        Ok(Pipelined { idle: Some((device, Data::new(model)?)), pending: None })
+    }
+
+    /// Starts a reading of `data`'s poses (its last forward pass), stamped `stamp_nanos`, and
+    /// hands back the previous reading, waiting for it if it is not ready.
+    ///
+    /// # Errors
+    /// The previous reading's error; [`crate::Error::Size`] for a `data` of another model
+    /// layout.
+    pub fn submit(&mut self, data: &Data, stamp_nanos: u64) -> Result<Option<Reading>> {
+        let previous = self.finish()?;
+        let (mut device, mut scratch) = self.idle.take().expect("finish() leaves the device idle");
+        if let Err(e) = scratch.copy_poses_from(data) {
+            self.idle = Some((device, scratch));
+            return Err(e);
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        rayon::spawn(move || {
+            let reading = device.read(&scratch).map(|mut r| {
+                match &mut r {
+                    Reading::Depth(f) => f.stamp_nanos = stamp_nanos,
+                    Reading::Lidar(l) => l.stamp_nanos = stamp_nanos,
+                }
+                r
+            });
+            // The receiver is gone only when the owner was dropped: nothing to hand back.
+            let _ = tx.send((device, scratch, reading));
+        });
+        self.pending = Some(rx);
+        Ok(previous)
+    }
+
+    /// Waits for the reading in flight, if any, and hands it back.
+    ///
+    /// # Errors
+    /// The reading's error; [`crate::Error::Options`] if its thread died (a panic).
+    pub fn finish(&mut self) -> Result<Option<Reading>> {
+        let Some(rx) = self.pending.take() else { return Ok(None) };
+        let (device, scratch, reading) = rx
+            .recv()
+            .map_err(|_| crate::Error::Options("a ray-cast sensor's thread ended without its reading".into()))?;
+        self.idle = Some((device, scratch));
+        reading.map(Some)
+    }
+}

@@ -357,7 +357,7 @@ enum SenseStreamOut {
 /// A ray-cast sensor being recorded.
 struct SenseOut {
     sensor: crate::sense::RaySensor,
-    device: crate::sense::Device,
+    pipe: crate::sense::Pipelined,
     schedule: Schedule,
     /// Per topic of `sensor.topics`: its stream when recorded.
     streams: Vec<Option<SenseStreamOut>>,
@@ -583,7 +583,7 @@ impl Recording {
             let to_rerun = false;
             if streams.iter().any(Option::is_some) || to_rerun {
                 rec.sense.push(SenseOut {
-                    device: sensor.build(robot)?,
+                    pipe: crate::sense::Pipelined::new(sensor.build(robot)?, robot.model.clone())?,
                     schedule: Schedule::new(sensor.rate_hz, dt_nanos),
                     sensor,
                     streams,
@@ -742,42 +742,17 @@ impl Recording {
 
         self.imu_due = imu_due;
 
+        // Ray-cast sensors on their ticks, cast on other threads: the reading of the previous
+        // tick comes back now (stamped with its own time), the last one in `finish`.
         for s in &mut self.sense {
             if !s.schedule.due(t_nanos) {
                 continue;
             }
-            // Stamped t: `data`'s poses belong to the step's start, its clock to the end.
-            let mut reading = s.device.read(data)?;
-            match &mut reading {
-                crate::sense::Reading::Depth(f) => f.stamp_nanos = t_nanos,
-                crate::sense::Reading::Lidar(l) => l.stamp_nanos = t_nanos,
-            }
-            if let Some(out) = self.mcap.as_mut()
-                && s.streams.iter().any(Option::is_some)
-            {
-                for (stream, message) in s.streams.iter().zip(s.sensor.messages(&reading)) {
-                    match stream {
-                        Some(SenseStreamOut::Image(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
-                        Some(SenseStreamOut::CameraInfo(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
-                        Some(SenseStreamOut::Points(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
-                        Some(SenseStreamOut::Scan(t)) => out.emit(*t, t_nanos, |w| message.encode(w))?,
-                        None => {}
-                    }
-                }
-            }
-            #[cfg(feature = "rerun")]
-            if let Some(r) = self.rerun.as_ref() {
-                for rec in &r.recorders {
-                    rec.set_time_secs(sample.time_secs);
-                    match &reading {
-                        crate::sense::Reading::Depth(f) => rec.depth_frame(&s.sensor.name, f)?,
-                        crate::sense::Reading::Lidar(l) => {
-                            let pts: Vec<_> =
-                                l.points_sensor().into_iter().flatten().map(|p| l.world_from_sensor * p).collect();
-                            rec.points(&s.sensor.name, &pts)?;
-                        }
-                    }
-                }
+            if let Some(reading) = s.pipe.submit(data, t_nanos)? {
+                #[cfg(feature = "rerun")]
+                write_reading(&mut self.mcap, self.rerun.as_ref(), s, &reading)?;
+                #[cfg(not(feature = "rerun"))]
+                write_reading(&mut self.mcap, s, &reading)?;
             }
         }
 
@@ -846,7 +821,15 @@ impl Recording {
     ///
     /// # Errors
     /// Write errors of the MCAP or rerun outputs.
-    pub fn finish(self) -> Result<RecordSummary> {
+    pub fn finish(mut self) -> Result<RecordSummary> {
+        for s in &mut self.sense {
+            if let Some(reading) = s.pipe.finish()? {
+                #[cfg(feature = "rerun")]
+                write_reading(&mut self.mcap, self.rerun.as_ref(), s, &reading)?;
+                #[cfg(not(feature = "rerun"))]
+                write_reading(&mut self.mcap, s, &reading)?;
+            }
+        }
         let mut summary = RecordSummary::default();
         if let Some(mut out) = self.mcap {
             out.record_exchanged()?;
@@ -880,6 +863,48 @@ impl crate::engine::Observer for Recording {
         self.record(&sample, step.data)?;
         Ok(crate::engine::Flow::Continue)
     }
+}
+
+/// Writes one reading of a ray-cast sensor to the MCAP streams and rerun, stamped with the
+/// reading's own time.
+fn write_reading(
+    mcap: &mut Option<McapOut>,
+    #[cfg(feature = "rerun")] rerun: Option<&RerunOut>,
+    s: &SenseOut,
+    reading: &crate::sense::Reading,
+) -> Result<()> {
+    let stamp = match reading {
+        crate::sense::Reading::Depth(f) => f.stamp_nanos,
+        crate::sense::Reading::Lidar(l) => l.stamp_nanos,
+    };
+    if let Some(out) = mcap.as_mut()
+        && s.streams.iter().any(Option::is_some)
+    {
+        for (stream, message) in s.streams.iter().zip(s.sensor.messages(reading)) {
+            match stream {
+                Some(SenseStreamOut::Image(t)) => out.emit(*t, stamp, |w| message.encode(w))?,
+                Some(SenseStreamOut::CameraInfo(t)) => out.emit(*t, stamp, |w| message.encode(w))?,
+                Some(SenseStreamOut::Points(t)) => out.emit(*t, stamp, |w| message.encode(w))?,
+                Some(SenseStreamOut::Scan(t)) => out.emit(*t, stamp, |w| message.encode(w))?,
+                None => {}
+            }
+        }
+    }
+    #[cfg(feature = "rerun")]
+    if let Some(r) = rerun {
+        for rec in &r.recorders {
+            rec.set_time_secs(stamp as f64 * 1e-9);
+            match reading {
+                crate::sense::Reading::Depth(f) => rec.depth_frame(&s.sensor.name, f)?,
+                crate::sense::Reading::Lidar(l) => {
+                    let pts: Vec<_> =
+                        l.points_sensor().into_iter().flatten().map(|p| l.world_from_sensor * p).collect();
+                    rec.points(&s.sensor.name, &pts)?;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Quaternion w x y z → x y z w (ROS order).
