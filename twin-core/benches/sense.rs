@@ -7,8 +7,9 @@
 //! (`TWIN_ROOT=DIR` runs the built binary against the repository at DIR.)
 //!
 //! 1. One 320×240 frame (76,800 rays), one thread and all threads: median of N renders.
-//! 2. The simulation's wall time (PD hold, S simulated seconds) without the camera and with it
-//!    rendering at 15 Hz on one thread, alternated R times; medians compared.
+//! 2. The simulation's wall and thread CPU time (PD hold, S simulated seconds) without the
+//!    camera, with it rendering at 15 Hz on the simulation's thread, and pipelined
+//!    ([`twin_core::sense::Pipelined`], as `twin sim --record` does), alternated R times.
 
 use nalgebra::Vector3;
 use rand::SeedableRng;
