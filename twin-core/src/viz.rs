@@ -224,8 +224,16 @@ impl Recorder {
     /// # Errors
     /// [`Error::Rerun`] if writing fails.
     pub fn log_poses_at(&self, t_secs: f64, data: &Data) -> Result<()> {
+        self.log_world_poses(t_secs, data.xpos(), data.xquat())
+    }
+
+    /// Logs every body's world pose, `xpos[b]` and `xquat[b]` (w x y z) per body id (the world
+    /// body's is not logged), stamped `t_secs`.
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn log_world_poses(&self, t_secs: f64, xpos: &[[f64; 3]], xquat: &[[f64; 4]]) -> Result<()> {
         self.set_time_secs(t_secs);
-        let (xpos, xquat) = (data.xpos(), data.xquat());
         for (b, path) in self.body_paths.iter().enumerate() {
             if let Some(path) = path {
                 let world_from_body = rerun::Transform3D::from_translation_rotation(vec3(xpos[b]), quat(xquat[b]));
@@ -272,18 +280,28 @@ impl Recorder {
             rerun::DepthImage::from_data_type_and_bytes(bytes, [k.width, k.height], rerun::ChannelDatatype::F32)
                 .with_meter(1.0);
         self.rec.log(format!("{base}/depth"), &depth).map_err(|e| self.err(e))?;
-        self.points(&format!("{}_points", entity_name(name, "camera", 0)), &frame.points_world())
+        self.sensor_points(&format!("{}_points", entity_name(name, "camera", 0)), &frame.points_world())
     }
 
     /// Logs points (world frame, metres) at `world/sensors/<name>` at the current time.
     ///
     /// # Errors
     /// [`Error::Rerun`] if writing fails.
-    pub fn points(&self, name: &str, points_world: &[nalgebra::Point3<f64>]) -> Result<()> {
+    pub fn sensor_points(&self, name: &str, points_world: &[nalgebra::Point3<f64>]) -> Result<()> {
         let pts = points_world.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]);
         self.rec
             .log(format!("world/sensors/{name}"), &rerun::Points3D::new(pts).with_radii([0.003]))
             .map_err(|e| self.err(e))
+    }
+
+    /// Logs points (world frame, m) at `<name>` at the current time (a controller's reference
+    /// CoM, its planned footsteps).
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn points(&self, name: &str, points: &[[f64; 3]]) -> Result<()> {
+        let points = rerun::Points3D::new(points.iter().map(|&p| vec3(p))).with_radii([0.02f32]);
+        self.rec.log(name, &points).map_err(|e| self.err(e))
     }
 
     /// The `.rrd` file, when recording to one.
@@ -315,6 +333,39 @@ impl Recorder {
             None => self.rec.flush_blocking().map_err(|e| self.err(e)),
         }
     }
+}
+
+/// A curve for [`write_curves`]: its entity path and points `(x, y)`.
+pub type Curve = (String, Vec<(f64, f64)>);
+
+/// Writes curves (no robot) to a `.rrd` file: each as scalars `y` at entity path `curve.0` on
+/// the sequence timeline `timeline`, whose index is `round(x · x_scale)` (a rerun timeline is
+/// an integer sequence: e.g. `log10(τ)` in thousandths for an Allan deviation plot). An
+/// existing file is replaced.
+///
+/// # Errors
+/// [`Error::Rerun`] if the file can't be written.
+pub fn write_curves(
+    path: &Path,
+    app_id: &'static str,
+    timeline: &'static str,
+    x_scale: f64,
+    curves: &[Curve],
+) -> Result<()> {
+    let rec = rerun::RecordingStreamBuilder::new(app_id)
+        .recording_id(format!("{app_id}-recording"))
+        .save(path)
+        .map_err(|e| rerun_err(Some(path), e))?;
+    for (entity, points) in curves {
+        for &(x, y) in points {
+            if !(x.is_finite() && y.is_finite()) {
+                continue;
+            }
+            rec.set_time_sequence(timeline, (x * x_scale).round() as i64);
+            rec.log(entity.as_str(), &rerun::Scalars::single(y)).map_err(|e| rerun_err(Some(path), e))?;
+        }
+    }
+    rec.flush_blocking().map_err(|e| rerun_err(Some(path), e))
 }
 
 /// Options of [`record_log`].

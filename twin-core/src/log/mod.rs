@@ -36,8 +36,8 @@ pub use reader::{Channel, Damage, DamageKind, RawMessage, ScanReport, Schema};
 pub use series::{JointSeries, JointStateReport, JointStateSeries};
 pub use typed::{
     CameraInfo, Clock, Float64MultiArray, Header, Image, Imu, JointState, JointTrajectory, JointTrajectoryPoint,
-    LaserScan, MultiArrayDimension, Odometry, PointCloud2, PointField, RegionOfInterest, RosMessage, RosString,
-    TfMessage, TransformStamped, WrenchStamped,
+    LaserScan, MultiArrayDimension, Odometry, PointCloud2, PointField, PointStamped, Pose, PoseArray, RegionOfInterest,
+    RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
 };
 pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 
