@@ -25,6 +25,8 @@ mod log;
 mod randomize;
 #[path = "cli/reliab.rs"]
 mod reliab;
+#[path = "cli/sense.rs"]
+mod sense;
 #[path = "cli/shards.rs"]
 mod shards;
 #[path = "cli/sim.rs"]

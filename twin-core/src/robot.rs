@@ -19,7 +19,7 @@
 //! - Feet and end-effectors come from the kinematic tree and the geometry, never from names.
 
 use crate::control::Actuation;
-use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta};
+use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, SensorMeta};
 use crate::error::{Error, Result};
 use crate::mj::{Data, FreeJoint, JointType, Model, ObjType};
 use std::path::{Path, PathBuf};
@@ -109,6 +109,8 @@ pub struct RobotMetadata {
     pub imus: Vec<ImuMeta>,
     /// Joints with their limits and command interfaces.
     pub joints: Vec<JointMeta>,
+    /// Other sensors (cameras, LiDARs, force/torque, contact), as the converter described them.
+    pub sensors: Vec<SensorMeta>,
 }
 
 impl RobotMetadata {
@@ -122,6 +124,7 @@ impl RobotMetadata {
             name: Some(m.name),
             imus: m.imus,
             joints: m.joints,
+            sensors: m.sensors,
         })
     }
 }
@@ -145,6 +148,9 @@ pub struct Robot {
     pub imus: Vec<Imu>,
     /// Cameras.
     pub cameras: Vec<Camera>,
+    /// Non-IMU sensors the file describes (Gazebo cameras and LiDARs become
+    /// [`crate::sense::RaySensor`]s).
+    pub sensors: Vec<SensorMeta>,
     /// 1-DOF joints, in model order.
     pub joints: Vec<Joint>,
     /// Actuators, in `ctrl` order.
@@ -193,8 +199,12 @@ impl Robot {
                 Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
                 other => other,
             })?;
-            let meta =
-                RobotMetadata { name: Some(converted.robot_name), imus: converted.imus, joints: converted.joints };
+            let meta = RobotMetadata {
+                name: Some(converted.robot_name),
+                imus: converted.imus,
+                joints: converted.joints,
+                sensors: converted.sensors,
+            };
             return Robot::from_parts(Arc::new(model), path, Some(meta));
         }
         let model = Model::from_mujoco_file(path)?;
@@ -274,6 +284,7 @@ impl Robot {
             end_effectors,
             imus,
             cameras,
+            sensors: meta.sensors.clone(),
             joints,
             actuators,
         })

@@ -14,7 +14,10 @@
 //! - `/tf` (`tf2_msgs/msg/TFMessage`) at the tf rate; `/tf_static` once (latched), when an IMU
 //!   frame is not a body;
 //! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`) per body, from its first contact on;
-//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent.
+//! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent;
+//! - each ray-cast sensor's topics ([`crate::sense::rig`]): depth cameras
+//!   `<prefix>/depth/image_raw`, `<prefix>/depth/camera_info`, `<prefix>/points`; LiDARs a
+//!   `LaserScan` or `PointCloud2`, at the sensor's rate.
 
 use crate::error::Result;
 use crate::log::cdr::CdrWriter;
@@ -75,7 +78,7 @@ pub enum TopicKind {
     Odometry,
     /// Every body relative to its parent.
     Tf,
-    /// IMU frames that are no body, relative to their body (once).
+    /// IMU and ray-cast sensor frames that are no body, relative to their body (once).
     TfStatic,
     /// Net contact wrench on this body.
     Contacts(usize),
@@ -84,6 +87,14 @@ pub enum TopicKind {
     /// Topic `k` of the controller's own ([`crate::control::Controller::topics`]): its
     /// diagnostics, or what a bridge exchanged.
     Controller(usize),
+    /// Stream `stream` of ray-cast sensor `sensor` of [`crate::sense::ray_sensors`] (depth
+    /// image, camera info, points, laser scan), at the sensor's rate.
+    Sensor {
+        /// Index in [`crate::sense::ray_sensors`].
+        sensor: usize,
+        /// Which of its messages.
+        stream: crate::sense::SensorStream,
+    },
 }
 
 /// One topic of the table.
@@ -190,7 +201,10 @@ impl TopicTable {
             kind: TopicKind::Commands,
         });
         let frames: Vec<String> = (0..model.nbody()).map(|b| body_frame(robot, b)).collect();
-        if robot.imus.iter().any(|i| !frames.contains(&i.meta.frame_id)) {
+        let sensors = crate::sense::ray_sensors(robot);
+        if robot.imus.iter().any(|i| !frames.contains(&i.meta.frame_id))
+            || sensors.iter().any(|s| !frames.contains(&s.frame_id))
+        {
             topics.push(TopicInfo {
                 name: "/tf_static".into(),
                 type_name: TfMessage::TYPE_NAME,
@@ -209,6 +223,18 @@ impl TopicTable {
                 qos: Qos::STREAM,
                 kind: TopicKind::Contacts(b),
             });
+        }
+        for (k, s) in sensors.iter().enumerate() {
+            for (name, stream) in &s.topics {
+                topics.push(TopicInfo {
+                    name: name.clone(),
+                    type_name: stream.type_name(),
+                    rate_hz: Some(s.rate_hz),
+                    frame_id: s.frame_id.clone(),
+                    qos: Qos::STREAM,
+                    kind: TopicKind::Sensor { sensor: k, stream: *stream },
+                });
+            }
         }
         TopicTable { topics }
     }
@@ -249,6 +275,9 @@ pub enum TypedMessage<'a> {
     /// A message of its topic's type that is CDR already (encapsulation header included): one
     /// received off the wire, kept byte for byte even when it does not decode.
     Cdr(&'a [u8]),
+    /// `sensor_msgs/msg/Image`, `sensor_msgs/msg/CameraInfo`, `sensor_msgs/msg/PointCloud2`
+    /// or `sensor_msgs/msg/LaserScan` of a ray-cast sensor.
+    Sensor(&'a crate::sense::SensorMessage),
 }
 
 impl TypedMessage<'_> {
@@ -271,6 +300,11 @@ impl TypedMessage<'_> {
             TypedMessage::Poses(m) => encode(m, buf),
             TypedMessage::Clock(m) => encode(m, buf),
             TypedMessage::Cdr(bytes) => bytes,
+            TypedMessage::Sensor(m) => {
+                buf.reset();
+                m.encode(buf);
+                buf.bytes()
+            }
         }
     }
 }

@@ -4,7 +4,9 @@
 //! Entity layout (Z up, metres, radians):
 //! - `world/<body>`: the body's frame, a `Transform3D` in the world frame per logged frame;
 //! - `world/<body>/<geom>`: the geom's shape, posed statically in its body frame;
-//! - `series/...`: scalars logged with [`Recorder::scalar`].
+//! - `series/...`: scalars logged with [`Recorder::scalar`];
+//! - `world/sensors/<camera>` (pose + pinhole) with `…/depth` (a depth image), and
+//!   `world/sensors/<sensor>_points` (a point cloud in the world) for ray-cast sensors.
 //!
 //! Time is the simulation (or log) time on the `sim_time` timeline, wall-clock log time is off
 //! and files are cut into chunks by size only (no wall-clock flush tick), so recordings of the
@@ -265,6 +267,49 @@ impl Recorder {
     /// [`Error::Rerun`] if writing fails.
     pub fn scalar(&self, name: &str, value: f64) -> Result<()> {
         self.rec.log(format!("series/{name}"), &rerun::Scalars::single(value)).map_err(|e| self.err(e))
+    }
+
+    /// Logs a depth camera's frame at the current time under `world/sensors/<name>`: the
+    /// optical frame's pose, a pinhole with the intrinsics (RDF, as ROS's optical frame), the
+    /// depth image (metres) at `…/depth`, and its returns as a 3-D point cloud in the world at
+    /// `world/sensors/<name>_points`.
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn depth_frame(&self, name: &str, frame: &crate::sense::DepthFrame) -> Result<()> {
+        let base = format!("world/sensors/{}", entity_name(name, "camera", 0));
+        let t = frame.world_from_optical;
+        let q = t.rotation;
+        let pose = rerun::Transform3D::from_translation_rotation(
+            vec3([t.translation.x, t.translation.y, t.translation.z]),
+            quat([q.w, q.i, q.j, q.k]),
+        );
+        self.rec.log(base.as_str(), &pose).map_err(|e| self.err(e))?;
+        let k = &frame.intrinsics;
+        // rerun puts pixel centres at +0.5; ROS at integers.
+        let pinhole = rerun::Pinhole::from_focal_length_and_resolution(
+            [k.fx as f32, k.fy as f32],
+            [k.width as f32, k.height as f32],
+        )
+        .with_principal_point([(k.cx + 0.5) as f32, (k.cy + 0.5) as f32]);
+        self.rec.log(base.as_str(), &pinhole).map_err(|e| self.err(e))?;
+        let bytes: Vec<u8> = frame.depth_m.iter().flat_map(|z| z.to_le_bytes()).collect();
+        let depth =
+            rerun::DepthImage::from_data_type_and_bytes(bytes, [k.width, k.height], rerun::ChannelDatatype::F32)
+                .with_meter(1.0);
+        self.rec.log(format!("{base}/depth"), &depth).map_err(|e| self.err(e))?;
+        self.sensor_points(&format!("{}_points", entity_name(name, "camera", 0)), &frame.points_world())
+    }
+
+    /// Logs points (world frame, metres) at `world/sensors/<name>` at the current time.
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn sensor_points(&self, name: &str, points_world: &[nalgebra::Point3<f64>]) -> Result<()> {
+        let pts = points_world.iter().map(|p| [p.x as f32, p.y as f32, p.z as f32]);
+        self.rec
+            .log(format!("world/sensors/{name}"), &rerun::Points3D::new(pts).with_radii([0.003]))
+            .map_err(|e| self.err(e))
     }
 
     /// Logs points (world frame, m) at `<name>` at the current time (a controller's reference

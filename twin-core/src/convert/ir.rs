@@ -162,6 +162,10 @@ pub(crate) struct CameraIr {
     pub height: f64,
     /// `sensor_from_camera` (Gazebo convention: view along +X).
     pub pose: Pose,
+    /// `<clip><near>`, `<far>`, metres.
+    pub clip_m: Option<[f64; 2]>,
+    /// `<noise><stddev>`, metres for depth (0 when none).
+    pub noise_std: f64,
 }
 
 #[derive(Debug, Clone)]
@@ -169,7 +173,10 @@ pub(crate) struct RayIr {
     /// (samples, min angle, max angle), radians.
     pub horizontal: (usize, f64, f64),
     pub vertical: (usize, f64, f64),
+    pub min_range_m: f64,
     pub max_range_m: f64,
+    /// `<noise><stddev>`, metres (0 when none).
+    pub noise_std: f64,
 }
 
 /// A ros_control `DifferentialTransmission` or PAL's `HalfDifferentialTransmission`.
@@ -936,6 +943,10 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
                     Some(v) => Pose::from_xyz_rpy([v[0], v[1], v[2]], [v[3], v[4], v[5]]),
                     None => Pose::IDENTITY,
                 },
+                clip_m: child(cam, "clip").and_then(|c| {
+                    Some([child_text(c, "near").and_then(parse_num)?, child_text(c, "far").and_then(parse_num)?])
+                }),
+                noise_std: child(cam, "noise").and_then(|n| child_text(n, "stddev")).and_then(parse_num).unwrap_or(0.0),
             }
         })
         .collect();
@@ -951,7 +962,9 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
         RayIr {
             horizontal: axis("horizontal"),
             vertical: axis("vertical"),
+            min_range_m: child(r, "range").and_then(|r| child_text(r, "min")).and_then(parse_num).unwrap_or(0.0),
             max_range_m: child(r, "range").and_then(|r| child_text(r, "max")).and_then(parse_num).unwrap_or(10.0),
+            noise_std: child(r, "noise").and_then(|n| child_text(n, "stddev")).and_then(parse_num).unwrap_or(0.0),
         }
     });
     Ok(SensorIr {

@@ -6,7 +6,7 @@
 //! Each record is one text element named `twin:<kind>:<index>` whose data is
 //! `key=value;key=value`, with `%`, `;`, `=` and `,` percent-encoded in values.
 
-use super::{DifferentialMeta, ImuMeta, Interface, JointMeta, SensorMeta};
+use super::{DifferentialMeta, ImuMeta, Interface, JointMeta, ScanMeta, SensorMeta};
 use crate::mj::Model;
 use std::collections::HashMap;
 
@@ -157,7 +157,18 @@ impl RobotMeta {
                     .put("rate_hz", opt_num(s.update_rate_hz))
                     .put("topic", s.topic.clone().unwrap_or_default())
                     .put("frame_id", s.frame_id.clone().unwrap_or_default())
-                    .put_list("mujoco", &s.mujoco),
+                    .put_list("mujoco", &s.mujoco)
+                    .put("range", s.range_m.map(|r| format!("{}:{}", r[0], r[1])).unwrap_or_default())
+                    .put("noise_std", format!("{}", s.noise_std))
+                    .put(
+                        "scan",
+                        s.scan
+                            .map(|c| {
+                                let (h, v) = (c.horizontal, c.vertical);
+                                format!("{}:{}:{}:{}:{}:{}", h.0, h.1, h.2, v.0, v.1, v.2)
+                            })
+                            .unwrap_or_default(),
+                    ),
             ));
         }
         for (k, j) in self.joints.iter().enumerate() {
@@ -242,6 +253,21 @@ impl RobotMeta {
                     topic: f.opt_s("topic"),
                     frame_id: f.opt_s("frame_id"),
                     mujoco: f.list("mujoco"),
+                    range_m: {
+                        let r = f.s("range");
+                        r.split_once(':').and_then(|(a, b)| Some([a.parse().ok()?, b.parse().ok()?]))
+                    },
+                    noise_std: f.num("noise_std").unwrap_or(0.0),
+                    scan: {
+                        let v: Vec<f64> = f.s("scan").split(':').filter_map(|x| x.parse().ok()).collect();
+                        match v.as_slice() {
+                            &[hn, hlo, hhi, vn, vlo, vhi] => Some(ScanMeta {
+                                horizontal: (hn as usize, hlo, hhi),
+                                vertical: (vn as usize, vlo, vhi),
+                            }),
+                            _ => None,
+                        }
+                    },
                 }),
                 "joint" => {
                     let range = f.s("range");

@@ -41,8 +41,9 @@
 //! - Sensors: every 1-DOF joint gets `<joint>_pos` (`jointpos`) and `<joint>_vel` (`jointvel`)
 //!   when [`ConvertOptions::joint_sensors`]; Gazebo IMU → site + `<imu>_quat` (`framequat`),
 //!   `<imu>_gyro`, `<imu>_accel` with the plugin's noise stored as `noise` (MuJoCo does not apply
-//!   it); camera → `camera` (Gazebo +X view axis turned to MuJoCo's −Z); ray/lidar → replicated
-//!   sites with `rangefinder` (`cutoff` = max range); force_torque on a joint → site in the child
+//!   it); camera → `camera` (Gazebo +X view axis turned to MuJoCo's −Z), imaged by ray casting
+//!   ([`crate::sense`]); ray/lidar → a site in the sensor frame, its beams cast at full resolution
+//!   on scan ticks ([`crate::sense::lidar`]); force_torque on a joint → site in the child
 //!   body + `<name>_force` / `<name>_torque`; contact → `touch` on a site covering the link's
 //!   first collision geom.
 //! - Contacts: robot collision geoms have `contype=2 conaffinity=1`, so they touch the floor and
@@ -142,8 +143,24 @@ pub struct SensorMeta {
     pub topic: Option<String>,
     /// `frame_id` from the plugin's `frame_name`, when given.
     pub frame_id: Option<String>,
-    /// Names of the MuJoCo sensors or cameras created for it.
+    /// Names of the MuJoCo sensors or cameras created for it (a ray sensor: its site).
     pub mujoco: Vec<String>,
+    /// Range limits `[min, max]`, metres: a ray sensor's `<range>`, a camera's `<clip>`.
+    pub range_m: Option<[f64; 2]>,
+    /// Gaussian noise standard deviation, metres (ranges, depths); 0 for none.
+    pub noise_std: f64,
+    /// Beam pattern of a ray sensor.
+    pub scan: Option<ScanMeta>,
+}
+
+/// The beams of a Gazebo `ray`/`lidar` sensor: `(samples, min angle, max angle)` per axis,
+/// radians; horizontal about the sensor's z from x, vertical up from its x–y plane.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ScanMeta {
+    /// Horizontal samples and angle range.
+    pub horizontal: (usize, f64, f64),
+    /// Vertical samples (rings) and angle range.
+    pub vertical: (usize, f64, f64),
 }
 
 /// A URDF joint as converted.

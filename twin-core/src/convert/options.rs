@@ -97,9 +97,6 @@ pub struct ConvertOptions {
     /// Gain of `velocity` actuators per N·m of effort limit, s/rad (default: 1; 10 when no
     /// effort is given).
     pub velocity_kv_per_effort: f64,
-    /// At most this many rangefinder rays per ray/lidar sensor; denser scans are subsampled
-    /// evenly, said in the notes (default: 32).
-    pub max_rays: usize,
 }
 
 impl Default for ConvertOptions {
@@ -121,7 +118,6 @@ impl Default for ConvertOptions {
             position_kp_per_effort: 20.0,
             position_kv_per_kp: 0.05,
             velocity_kv_per_effort: 1.0,
-            max_rays: 32,
         }
     }
 }

@@ -1,7 +1,7 @@
 //! Gazebo sensors → MuJoCo sites, sensors and cameras, with the metadata twin publishes them by.
 
 use super::ir::{Pose, SensorIr, Shape};
-use super::{Converter, ImuMeta, SensorMeta, esc, f, fv, pose_attrs};
+use super::{Converter, ImuMeta, ScanMeta, SensorMeta, esc, f, fv, pose_attrs};
 use crate::error::Result;
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 
@@ -97,6 +97,9 @@ impl Converter<'_> {
                         topic: topic.clone(),
                         frame_id: s.frame_name.clone(),
                         mujoco: made,
+                        range_m: cams.first().and_then(|c| c.clip_m),
+                        noise_std: cams.first().map_or(0.0, |c| c.noise_std),
+                        scan: None,
                     });
                 }
                 "ray" | "gpu_ray" | "lidar" | "gpu_lidar" => {
@@ -107,41 +110,10 @@ impl Converter<'_> {
                         ));
                         continue;
                     };
-                    let (hn, hlo, hhi) = ray.horizontal;
-                    let (vn, vlo, vhi) = ray.vertical;
-                    let max_range = ray.max_range_m;
-                    let total = hn * vn;
-                    let keep = total.min(self.opts.max_rays.max(1));
-                    if keep < total {
-                        self.notes.push(format!(
-                            "ray sensor \"{}\": {total} rays subsampled to {keep} rangefinders (ConvertOptions::max_rays)",
-                            s.name
-                        ));
-                    }
-                    let mut made = Vec::new();
-                    for k in 0..keep {
-                        let idx = if keep == 1 { 0 } else { k * (total - 1) / (keep - 1) };
-                        let (hi_i, vi_i) = (idx % hn, idx / hn);
-                        let lerp = |n: usize, lo: f64, hi: f64, i: usize| {
-                            if n <= 1 { lo } else { lo + (hi - lo) * i as f64 / (n - 1) as f64 }
-                        };
-                        let yaw = lerp(hn, hlo, hhi, hi_i);
-                        let pitch = lerp(vn, vlo, vhi, vi_i);
-                        // Ray direction in the sensor frame; rangefinders look along site +Z.
-                        let dir = Vector3::new(yaw.cos() * pitch.cos(), yaw.sin() * pitch.cos(), -pitch.sin());
-                        let rot = UnitQuaternion::rotation_between(&Vector3::z(), &dir).unwrap_or_else(|| {
-                            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI)
-                        });
-                        let p = pose.then(&Pose { xyz: Vector3::zeros(), rot });
-                        let site = format!("{name}_ray{k}");
-                        self.sites[link]
-                            .push(format!("<site name=\"{site}\"{} size=\"0.003\" group=\"4\"/>", pose_attrs(&p)));
-                        self.sensor_xml.push(format!(
-                            "<rangefinder name=\"{site}\" site=\"{site}\" cutoff=\"{}\"/>",
-                            f(max_range)
-                        ));
-                        made.push(site);
-                    }
+                    // One site in the sensor frame (x forward, z up); its beams are cast at full
+                    // resolution on scan ticks (crate::sense::lidar), not every physics step.
+                    self.sites[link]
+                        .push(format!("<site name=\"{name}\"{} size=\"0.005\" group=\"4\"/>", pose_attrs(&pose)));
                     self.sensor_meta.push(SensorMeta {
                         name: s.name.clone(),
                         kind: s.kind.clone(),
@@ -149,7 +121,10 @@ impl Converter<'_> {
                         update_rate_hz: s.update_rate_hz,
                         topic: topic.clone(),
                         frame_id: s.frame_name.clone(),
-                        mujoco: made,
+                        mujoco: vec![unique.clone()],
+                        range_m: Some([ray.min_range_m, ray.max_range_m]),
+                        noise_std: ray.noise_std,
+                        scan: Some(ScanMeta { horizontal: ray.horizontal, vertical: ray.vertical }),
                     });
                 }
                 "force_torque" => {
@@ -166,6 +141,9 @@ impl Converter<'_> {
                         topic: topic.clone(),
                         frame_id: s.frame_name.clone(),
                         mujoco: vec![format!("{}_force", s.name), format!("{}_torque", s.name)],
+                        range_m: None,
+                        noise_std: 0.0,
+                        scan: None,
                     });
                 }
                 "contact" => {
@@ -206,6 +184,9 @@ impl Converter<'_> {
                         topic: topic.clone(),
                         frame_id: s.frame_name.clone(),
                         mujoco: vec![s.name.clone()],
+                        range_m: None,
+                        noise_std: 0.0,
+                        scan: None,
                     });
                 }
                 other => {

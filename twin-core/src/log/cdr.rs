@@ -167,6 +167,28 @@ impl<'a> CdrReader<'a> {
         self.f64_array(n, out)
     }
 
+    /// A `uint8[]` sequence, borrowed.
+    pub fn bytes(&mut self) -> CdrResult<&'a [u8]> {
+        let n = self.seq_len(1)?;
+        self.take_aligned(1, n)
+    }
+
+    /// A `float32[]` sequence.
+    pub fn f32_seq(&mut self, out: &mut Vec<f32>) -> CdrResult<()> {
+        let n = self.seq_len(4)?;
+        out.clear();
+        if n == 0 {
+            return Ok(());
+        }
+        let bytes = self.take_aligned(4, n * 4)?;
+        let le = self.little_endian;
+        out.extend(bytes.chunks_exact(4).map(|c| {
+            let a: [u8; 4] = c.try_into().expect("chunks_exact(4)");
+            if le { f32::from_le_bytes(a) } else { f32::from_be_bytes(a) }
+        }));
+        Ok(())
+    }
+
     /// A fixed `float64[N]`.
     pub fn f64_fixed<const N: usize>(&mut self) -> CdrResult<[f64; N]> {
         let mut out = [0.0; N];
@@ -241,6 +263,24 @@ impl CdrWriter {
     pub fn f64(&mut self, v: f64) {
         self.align(8);
         self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// f32.
+    pub fn f32(&mut self, v: f32) {
+        self.align(4);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// A `uint8[]` (count, then the bytes).
+    pub fn u8_seq(&mut self, v: &[u8]) {
+        self.seq_len(v.len());
+        self.buf.extend_from_slice(v);
+    }
+    /// A `float32[]`.
+    pub fn f32_seq(&mut self, v: &[f32]) {
+        self.seq_len(v.len());
+        self.buf.reserve(v.len() * 4);
+        for x in v {
+            self.buf.extend_from_slice(&x.to_le_bytes());
+        }
     }
     /// A string with its length (including the NUL) and NUL.
     pub fn string(&mut self, s: &str) {

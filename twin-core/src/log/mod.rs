@@ -35,8 +35,9 @@ pub use info::{LogInfo, TopicInfo};
 pub use reader::{Channel, Damage, DamageKind, RawMessage, ScanReport, Schema};
 pub use series::{JointSeries, JointStateReport, JointStateSeries};
 pub use typed::{
-    Clock, Float64MultiArray, Header, Imu, JointState, JointTrajectory, JointTrajectoryPoint, MultiArrayDimension,
-    Odometry, PointStamped, Pose, PoseArray, RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
+    CameraInfo, Clock, Float64MultiArray, Header, Image, Imu, JointState, JointTrajectory, JointTrajectoryPoint,
+    LaserScan, MultiArrayDimension, Odometry, PointCloud2, PointField, PointStamped, Pose, PoseArray, RegionOfInterest,
+    RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
 };
 pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 

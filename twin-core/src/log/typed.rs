@@ -559,6 +559,295 @@ impl RosMessage for JointTrajectory {
     }
 }
 
+/// `sensor_msgs/msg/Image`. A depth image (REP 118) is `32FC1`: metres along the optical
+/// axis as little-endian f32, `step = 4 · width`, NaN where there is no return.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Image {
+    /// Header (frame: the camera's optical frame).
+    pub header: Header,
+    /// Rows.
+    pub height: u32,
+    /// Columns.
+    pub width: u32,
+    /// Pixel encoding, e.g. `32FC1`, `rgb8`.
+    pub encoding: String,
+    /// Whether multi-byte pixels are big endian.
+    pub is_bigendian: bool,
+    /// Bytes per row.
+    pub step: u32,
+    /// Pixels, row-major.
+    pub data: Vec<u8>,
+}
+
+/// `sensor_msgs/msg/RegionOfInterest`.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct RegionOfInterest {
+    /// Leftmost column.
+    pub x_offset: u32,
+    /// Topmost row.
+    pub y_offset: u32,
+    /// Rows (0: the full image).
+    pub height: u32,
+    /// Columns (0: the full image).
+    pub width: u32,
+    /// Whether the region is to be rectified.
+    pub do_rectify: bool,
+}
+
+/// `sensor_msgs/msg/CameraInfo`: a pinhole camera's calibration.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct CameraInfo {
+    /// Header (frame: the camera's optical frame).
+    pub header: Header,
+    /// Rows of the image.
+    pub height: u32,
+    /// Columns of the image.
+    pub width: u32,
+    /// Distortion model, e.g. `plumb_bob`.
+    pub distortion_model: String,
+    /// Distortion coefficients (plumb_bob: k1 k2 t1 t2 k3).
+    pub d: Vec<f64>,
+    /// Intrinsic camera matrix K, row-major.
+    pub k: [f64; 9],
+    /// Rectification rotation R, row-major.
+    pub r: [f64; 9],
+    /// Projection matrix P (3×4), row-major.
+    pub p: [f64; 12],
+    /// Horizontal binning.
+    pub binning_x: u32,
+    /// Vertical binning.
+    pub binning_y: u32,
+    /// Region of interest.
+    pub roi: RegionOfInterest,
+}
+
+/// `sensor_msgs/msg/PointField`.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointField {
+    /// Field name, e.g. `x`.
+    pub name: String,
+    /// Byte offset in a point.
+    pub offset: u32,
+    /// Type: [`PointField::FLOAT32`], …
+    pub datatype: u8,
+    /// Elements in the field.
+    pub count: u32,
+}
+
+impl PointField {
+    /// `datatype` of a 32-bit float.
+    pub const FLOAT32: u8 = 7;
+}
+
+/// `sensor_msgs/msg/PointCloud2`. Organized clouds have `height` rows; `is_dense = false` when
+/// some points are NaN.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointCloud2 {
+    /// Header (frame the points are in).
+    pub header: Header,
+    /// Rows (1: unorganized).
+    pub height: u32,
+    /// Points per row.
+    pub width: u32,
+    /// Layout of a point.
+    pub fields: Vec<PointField>,
+    /// Whether the data is big endian.
+    pub is_bigendian: bool,
+    /// Bytes per point.
+    pub point_step: u32,
+    /// Bytes per row.
+    pub row_step: u32,
+    /// The points.
+    pub data: Vec<u8>,
+    /// Whether no point is invalid (NaN).
+    pub is_dense: bool,
+}
+
+/// `sensor_msgs/msg/LaserScan`: one ring of a planar laser, ranges in metres along each beam
+/// (outside `[range_min, range_max]`: invalid; +Inf: no return within range, REP 117).
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct LaserScan {
+    /// Header (frame: the laser; angles about its z axis, 0 along x).
+    pub header: Header,
+    /// Angle of the first beam, radians.
+    pub angle_min: f32,
+    /// Angle of the last beam, radians.
+    pub angle_max: f32,
+    /// Angle between beams, radians.
+    pub angle_increment: f32,
+    /// Time between beams, seconds.
+    pub time_increment: f32,
+    /// Time between scans, seconds.
+    pub scan_time: f32,
+    /// Nearest valid range, metres.
+    pub range_min: f32,
+    /// Farthest valid range, metres.
+    pub range_max: f32,
+    /// Range of each beam, metres.
+    pub ranges: Vec<f32>,
+    /// Intensity of each beam (may be empty).
+    pub intensities: Vec<f32>,
+}
+
+impl RosMessage for Image {
+    const TYPE_NAME: &'static str = "sensor_msgs/msg/Image";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.string(&self.encoding);
+        w.u8(u8::from(self.is_bigendian));
+        w.u32(self.step);
+        w.u8_seq(&self.data);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Self {
+            header: header(r)?,
+            height: r.u32()?,
+            width: r.u32()?,
+            encoding: r.string()?.to_string(),
+            is_bigendian: r.u8()? != 0,
+            step: r.u32()?,
+            data: r.bytes()?.to_vec(),
+        })
+    }
+}
+
+impl RosMessage for CameraInfo {
+    const TYPE_NAME: &'static str = "sensor_msgs/msg/CameraInfo";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.string(&self.distortion_model);
+        w.f64_seq(&self.d);
+        w.f64_fixed(&self.k);
+        w.f64_fixed(&self.r);
+        w.f64_fixed(&self.p);
+        w.u32(self.binning_x);
+        w.u32(self.binning_y);
+        w.u32(self.roi.x_offset);
+        w.u32(self.roi.y_offset);
+        w.u32(self.roi.height);
+        w.u32(self.roi.width);
+        w.u8(u8::from(self.roi.do_rectify));
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let header = header(r)?;
+        let (height, width) = (r.u32()?, r.u32()?);
+        let distortion_model = r.string()?.to_string();
+        let mut d = Vec::new();
+        r.f64_seq(&mut d)?;
+        Ok(Self {
+            header,
+            height,
+            width,
+            distortion_model,
+            d,
+            k: r.f64_fixed()?,
+            r: r.f64_fixed()?,
+            p: r.f64_fixed()?,
+            binning_x: r.u32()?,
+            binning_y: r.u32()?,
+            roi: RegionOfInterest {
+                x_offset: r.u32()?,
+                y_offset: r.u32()?,
+                height: r.u32()?,
+                width: r.u32()?,
+                do_rectify: r.u8()? != 0,
+            },
+        })
+    }
+}
+
+impl RosMessage for PointCloud2 {
+    const TYPE_NAME: &'static str = "sensor_msgs/msg/PointCloud2";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.u32(self.height);
+        w.u32(self.width);
+        w.seq_len(self.fields.len());
+        for f in &self.fields {
+            w.string(&f.name);
+            w.u32(f.offset);
+            w.u8(f.datatype);
+            w.u32(f.count);
+        }
+        w.u8(u8::from(self.is_bigendian));
+        w.u32(self.point_step);
+        w.u32(self.row_step);
+        w.u8_seq(&self.data);
+        w.u8(u8::from(self.is_dense));
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let header = header(r)?;
+        let (height, width) = (r.u32()?, r.u32()?);
+        let n = r.seq_len(13)?;
+        let mut fields = Vec::with_capacity(n);
+        for _ in 0..n {
+            fields.push(PointField {
+                name: r.string()?.to_string(),
+                offset: r.u32()?,
+                datatype: r.u8()?,
+                count: r.u32()?,
+            });
+        }
+        Ok(Self {
+            header,
+            height,
+            width,
+            fields,
+            is_bigendian: r.u8()? != 0,
+            point_step: r.u32()?,
+            row_step: r.u32()?,
+            data: r.bytes()?.to_vec(),
+            is_dense: r.u8()? != 0,
+        })
+    }
+}
+
+impl RosMessage for LaserScan {
+    const TYPE_NAME: &'static str = "sensor_msgs/msg/LaserScan";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        for x in [
+            self.angle_min,
+            self.angle_max,
+            self.angle_increment,
+            self.time_increment,
+            self.scan_time,
+            self.range_min,
+            self.range_max,
+        ] {
+            w.f32(x);
+        }
+        w.f32_seq(&self.ranges);
+        w.f32_seq(&self.intensities);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let header = header(r)?;
+        let mut v = [0f32; 7];
+        for x in &mut v {
+            *x = r.f32()?;
+        }
+        let (mut ranges, mut intensities) = (Vec::new(), Vec::new());
+        r.f32_seq(&mut ranges)?;
+        r.f32_seq(&mut intensities)?;
+        Ok(Self {
+            header,
+            angle_min: v[0],
+            angle_max: v[1],
+            angle_increment: v[2],
+            time_increment: v[3],
+            scan_time: v[4],
+            range_min: v[5],
+            range_max: v[6],
+            ranges,
+            intensities,
+        })
+    }
+}
+
 /// `.msg` bodies of the types above and their dependencies (`pkg/Type`, body).
 const DEFINITIONS: &[(&str, &str)] = &[
     ("builtin_interfaces/Time", "int32 sec\nuint32 nanosec\n"),
@@ -608,6 +897,38 @@ const DEFINITIONS: &[(&str, &str)] = &[
     (
         "trajectory_msgs/JointTrajectory",
         "std_msgs/Header header\nstring[] joint_names\nJointTrajectoryPoint[] points\n",
+    ),
+    (
+        "sensor_msgs/Image",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring encoding\nuint8 is_bigendian\n\
+         uint32 step\nuint8[] data\n",
+    ),
+    (
+        "sensor_msgs/RegionOfInterest",
+        "uint32 x_offset\nuint32 y_offset\nuint32 height\nuint32 width\nbool do_rectify\n",
+    ),
+    (
+        "sensor_msgs/CameraInfo",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nstring distortion_model\nfloat64[] d\n\
+         float64[9]  k\nfloat64[9]  r\nfloat64[12] p\nuint32 binning_x\nuint32 binning_y\n\
+         RegionOfInterest roi\n",
+    ),
+    (
+        "sensor_msgs/PointField",
+        "uint8 INT8    = 1\nuint8 UINT8   = 2\nuint8 INT16   = 3\nuint8 UINT16  = 4\nuint8 INT32   = 5\n\
+         uint8 UINT32  = 6\nuint8 FLOAT32 = 7\nuint8 FLOAT64 = 8\nstring name\nuint32 offset\n\
+         uint8  datatype\nuint32 count\n",
+    ),
+    (
+        "sensor_msgs/PointCloud2",
+        "std_msgs/Header header\nuint32 height\nuint32 width\nPointField[] fields\nbool    is_bigendian\n\
+         uint32  point_step\nuint32  row_step\nuint8[] data\nbool is_dense\n",
+    ),
+    (
+        "sensor_msgs/LaserScan",
+        "std_msgs/Header header\nfloat32 angle_min\nfloat32 angle_max\nfloat32 angle_increment\n\
+         float32 time_increment\nfloat32 scan_time\nfloat32 range_min\nfloat32 range_max\n\
+         float32[] ranges\nfloat32[] intensities\n",
     ),
 ];
 
@@ -723,6 +1044,56 @@ mod tests {
                 translation: [0.0, 0.0, 0.71],
                 rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
             }],
+        });
+    }
+
+    #[test]
+    fn sensor_messages_roundtrip_and_match_their_schemas() {
+        let h = Header { stamp_nanos: 66_666_667, frame_id: "head_optical_frame".into() };
+        let depth = [1.0f32, f32::NAN, 0.5, 2.25];
+        roundtrip(&Image {
+            header: h.clone(),
+            height: 2,
+            width: 2,
+            encoding: "32FC1".into(),
+            is_bigendian: false,
+            step: 8,
+            data: depth.iter().flat_map(|x| x.to_le_bytes()).collect(),
+        });
+        roundtrip(&CameraInfo {
+            header: h.clone(),
+            height: 240,
+            width: 320,
+            distortion_model: "plumb_bob".into(),
+            d: vec![0.0; 5],
+            k: [277.0, 0.0, 159.5, 0.0, 277.0, 119.5, 0.0, 0.0, 1.0],
+            r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: [277.0, 0.0, 159.5, 0.0, 0.0, 277.0, 119.5, 0.0, 0.0, 0.0, 1.0, 0.0],
+            ..Default::default()
+        });
+        let field =
+            |name: &str, offset| PointField { name: name.into(), offset, datatype: PointField::FLOAT32, count: 1 };
+        roundtrip(&PointCloud2 {
+            header: h.clone(),
+            height: 1,
+            width: 2,
+            fields: vec![field("x", 0), field("y", 4), field("z", 8)],
+            is_bigendian: false,
+            point_step: 12,
+            row_step: 24,
+            data: [0.1f32, 0.2, 1.0, f32::NAN, f32::NAN, f32::NAN].iter().flat_map(|x| x.to_le_bytes()).collect(),
+            is_dense: false,
+        });
+        roundtrip(&LaserScan {
+            header: h,
+            angle_min: -1.5,
+            angle_max: 1.5,
+            angle_increment: 0.01,
+            scan_time: 0.1,
+            range_min: 0.1,
+            range_max: 30.0,
+            ranges: vec![1.0, f32::INFINITY, 2.5],
+            ..Default::default()
         });
     }
 

@@ -369,6 +369,10 @@ model_arrays! {
     actuator_biastype: i32 = nu;
     /// Body each camera is attached to (len `ncam`).
     cam_bodyid: i32 = ncam;
+    /// Position of each camera in its body's frame, metres (len `ncam`).
+    cam_pos: f64 x 3 = ncam;
+    /// Orientation of each camera in its body's frame, quaternion w x y z (len `ncam`).
+    cam_quat: f64 x 4 = ncam;
 }
 
 /// The free joint of a floating-base model: which body it moves and where its state is.

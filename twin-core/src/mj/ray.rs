@@ -101,6 +101,24 @@ struct SceneGeom {
     rbound: f64,
 }
 
+/// A geom as seen from one ray origin (see [`RayScene::seen_from`]).
+#[derive(Debug, Clone, Copy)]
+struct Seen {
+    /// Index in the scene.
+    k: u32,
+    /// From the origin to the geom's centre, and its length.
+    v: [f64; 3],
+    d: f64,
+    /// No point of the geom is nearer than this, metres.
+    near: f64,
+    /// Every direction may hit it (a plane, or the origin inside its bounding sphere).
+    always: bool,
+    /// Sine, cosine and angle of its bounding sphere's angular radius.
+    sin_b: f64,
+    cos_b: f64,
+    beta: f64,
+}
+
 /// The seen geoms of one simulation instant, for casting many rays, from many threads.
 ///
 /// Borrowing the [`Data`] keeps the state unchanged while rays are cast.
@@ -171,41 +189,58 @@ impl<'a> RayScene<'a> {
         self.geoms.is_empty()
     }
 
-    /// Indices (into the scene) of the geoms whose bounding sphere meets the cone of apex
-    /// `origin`, unit axis `axis` and half-angle `half_angle_rad` within `max_dist_m`, nearest
-    /// first. Every ray inside the cone can only hit these.
-    fn cull(&self, origin: [f64; 3], axis: [f64; 3], half_angle_rad: f64, max_dist_m: f64, out: &mut Vec<(f64, u32)>) {
+    /// The geoms as seen from `origin`, nearest first by a lower bound of their distance
+    /// (planes: the perpendicular distance; others: to their bounding sphere), those beyond
+    /// `max_dist_m` left out. Computed once per origin, shared by every bundle.
+    fn seen_from(&self, origin: [f64; 3], max_dist_m: f64) -> Vec<Seen> {
+        let mut seen: Vec<Seen> = self
+            .geoms
+            .iter()
+            .enumerate()
+            .filter_map(|(k, g)| {
+                let v = sub(g.pos, origin);
+                let d = dot(v, v).sqrt();
+                let (near, always, sin_b) = if g.rbound.is_infinite() {
+                    // A plane: no point of it is nearer than its perpendicular distance.
+                    let n = [g.mat[2], g.mat[5], g.mat[8]];
+                    (dot(v, n).abs(), true, 1.0)
+                } else if d <= g.rbound {
+                    (0.0, true, 1.0)
+                } else {
+                    (d - g.rbound, false, g.rbound / d)
+                };
+                (near <= max_dist_m).then(|| Seen {
+                    k: k as u32,
+                    v,
+                    d,
+                    near,
+                    always,
+                    sin_b,
+                    cos_b: (1.0 - sin_b * sin_b).max(0.0).sqrt(),
+                    beta: sin_b.min(1.0).asin(),
+                })
+            })
+            .collect();
+        seen.sort_by(|a, b| a.near.total_cmp(&b.near).then(a.k.cmp(&b.k)));
+        seen
+    }
+
+    /// The geoms of `seen` whose bounding sphere meets the cone of unit axis `axis` and
+    /// half-angle `half_angle_rad` (apex at the origin of `seen`), nearest first: every ray
+    /// inside the cone can only hit these.
+    fn cull(seen: &[Seen], axis: [f64; 3], half_angle_rad: f64, out: &mut Vec<(f64, u32)>) {
         out.clear();
         let (sin_a, cos_a) = half_angle_rad.min(std::f64::consts::PI).sin_cos();
-        for (k, g) in self.geoms.iter().enumerate() {
-            if g.rbound.is_infinite() {
-                out.push((0.0, k as u32));
-                continue;
-            }
-            let v = sub(g.pos, origin);
-            let d = dot(v, v).sqrt();
-            if d <= g.rbound {
-                out.push((0.0, k as u32));
-                continue;
-            }
-            let near = d - g.rbound;
-            if near > max_dist_m {
-                continue;
-            }
-            // The sphere meets the cone when the angle between the axis and the centre is at
-            // most the half-angle plus the sphere's angular radius asin(r/d):
-            // cos(θ) ≥ cos(α + β) with β = asin(r / d).
-            let (sin_b, cos_b) = (g.rbound / d, (1.0 - (g.rbound / d).powi(2)).max(0.0).sqrt());
-            let cos_ab = if half_angle_rad + sin_b.asin() >= std::f64::consts::PI {
-                -1.0
-            } else {
-                cos_a * cos_b - sin_a * sin_b
-            };
-            if dot(v, axis) >= d * cos_ab - 1e-12 {
-                out.push((near, k as u32));
+        for s in seen {
+            // The sphere meets the cone when the angle between the axis and its centre is at
+            // most the half-angle plus its angular radius β = asin(r/d): cos θ ≥ cos(α + β).
+            let meets = s.always
+                || half_angle_rad + s.beta >= std::f64::consts::PI
+                || dot(s.v, axis) >= s.d * (cos_a * s.cos_b - sin_a * s.sin_b) - 1e-12;
+            if meets {
+                out.push((s.near, s.k));
             }
         }
-        out.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
     }
 
     /// Distance along the unit direction `dir` from `origin` to geom `g`, if it is hit.
@@ -265,23 +300,45 @@ impl<'a> RayScene<'a> {
     /// `max_dist_m`.
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64) -> Option<RayHit> {
         let mut candidates = Vec::new();
-        self.cull(origin, dir, 0.0, max_dist_m, &mut candidates);
-        self.nearest(origin, dir, max_dist_m, &candidates)
+        Self::cull(&self.seen_from(origin, max_dist_m), dir, 0.0, &mut candidates);
+        self.nearest(origin, dir, max_dist_m, &candidates, None).map(|(h, _)| h)
     }
 
-    fn nearest(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64, candidates: &[(f64, u32)]) -> Option<RayHit> {
-        let mut best: Option<RayHit> = None;
+    /// The nearest hit among `candidates` (nearest-first), trying scene geom `hint` first (the
+    /// geom the previous ray of the bundle hit: neighbouring rays mostly hit the same geom, and
+    /// its distance then skips every candidate known to be farther). The answer does not
+    /// depend on the hint. Returns the hit and its scene index.
+    fn nearest(
+        &self,
+        origin: [f64; 3],
+        dir: [f64; 3],
+        max_dist_m: f64,
+        candidates: &[(f64, u32)],
+        hint: Option<u32>,
+    ) -> Option<(RayHit, u32)> {
+        let mut best: Option<(RayHit, u32)> = None;
+        if let Some(k) = hint {
+            let g = &self.geoms[k as usize];
+            if let Some(d) = self.hit(g, origin, dir)
+                && d <= max_dist_m
+            {
+                best = Some((RayHit { dist_m: d, geom: g.id }, k));
+            }
+        }
         for &(near, k) in candidates {
-            let limit = best.map_or(max_dist_m, |b| b.dist_m);
+            let limit = best.map_or(max_dist_m, |b| b.0.dist_m);
             if near > limit {
                 break;
+            }
+            if Some(k) == hint {
+                continue;
             }
             let g = &self.geoms[k as usize];
             if let Some(d) = self.hit(g, origin, dir)
                 && d <= limit
-                && best.is_none_or(|b| d < b.dist_m || (d == b.dist_m && g.id < b.geom))
+                && best.is_none_or(|(b, _)| d < b.dist_m || (d == b.dist_m && g.id < b.geom))
             {
-                best = Some(RayHit { dist_m: d, geom: g.id });
+                best = Some((RayHit { dist_m: d, geom: g.id }, k));
             }
         }
         best
@@ -308,11 +365,15 @@ impl<'a> RayScene<'a> {
             return Err(Error::Size { what: "ray output length", expected: dirs.len(), got: out.len() });
         }
         let bundle = bundle.max(1);
+        let seen = self.seen_from(origin, max_dist_m);
         let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), candidates: &mut Vec<(f64, u32)>| {
             let (axis, half_angle) = bundle_cone(dirs);
-            self.cull(origin, axis, half_angle, max_dist_m, candidates);
+            Self::cull(&seen, axis, half_angle, candidates);
+            let mut hint = None;
             for (d, o) in dirs.iter().zip(out.iter_mut()) {
-                *o = self.nearest(origin, *d, max_dist_m, candidates);
+                let best = self.nearest(origin, *d, max_dist_m, candidates, hint);
+                hint = best.map(|(_, k)| k).or(hint);
+                *o = best.map(|(h, _)| h);
             }
         };
         if parallel {
@@ -432,6 +493,31 @@ impl Data {
         let n = self.model().raw().ncam as usize;
         // SAFETY: as cam_xpos, 9 values per camera.
         unsafe { raw_slice(self.raw().cam_xmat as *const [f64; 9], n) }
+    }
+
+    /// Copies what ray casting reads (geom, camera and site poses, time) from `other`, a
+    /// state of the same model, so readings can be taken from this copy on another thread.
+    ///
+    /// # Errors
+    /// [`Error::Size`] when `other` belongs to a model of another layout.
+    pub fn copy_poses_from(&mut self, other: &Data) -> Result<()> {
+        super::ModelLayout::of(self.model()).require_same(&super::ModelLayout::of(other.model()))?;
+        self.geom_xpos_mut().copy_from_slice(other.geom_xpos());
+        self.geom_xmat_mut().copy_from_slice(other.geom_xmat());
+        self.site_xpos_mut().copy_from_slice(other.site_xpos());
+        self.site_xmat_mut().copy_from_slice(other.site_xmat());
+        let n = self.model().raw().ncam as usize;
+        let (p, m) = (other.cam_xpos().as_ptr(), other.cam_xmat().as_ptr());
+        let (dp, dm) = (self.raw().cam_xpos as *mut [f64; 3], self.raw().cam_xmat as *mut [f64; 9]);
+        // SAFETY: both states have ncam camera rows (same layout, checked above); the source is
+        // borrowed shared and the destination exclusively through &mut self; they are distinct
+        // allocations.
+        unsafe {
+            std::ptr::copy_nonoverlapping(p, dp, n);
+            std::ptr::copy_nonoverlapping(m, dm, n);
+        }
+        self.set_time_secs(other.time_secs());
+        Ok(())
     }
 }
 

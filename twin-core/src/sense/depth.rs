@@ -18,6 +18,7 @@
 //! ```
 
 use crate::error::{Error, Result};
+use crate::log::{CameraInfo, Header, Image, PointCloud2, RegionOfInterest};
 use crate::mj::{Data, Model, ObjType, RayFilter, RayHit, RayScene};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::{Rng, SeedableRng};
@@ -140,6 +141,62 @@ impl DepthFrame {
     /// Every return as a point in the world frame, metres, row-major order.
     pub fn points_world(&self) -> Vec<Point3<f64>> {
         self.points_optical().into_iter().map(|p| self.world_from_optical * p).collect()
+    }
+
+    fn header(&self) -> Header {
+        Header { stamp_nanos: self.stamp_nanos as i64, frame_id: self.frame_id.clone() }
+    }
+
+    /// The depth image as `sensor_msgs/Image`, encoding `32FC1` (REP 118).
+    pub fn image(&self) -> Image {
+        let k = &self.intrinsics;
+        Image {
+            header: self.header(),
+            height: k.height,
+            width: k.width,
+            encoding: "32FC1".into(),
+            is_bigendian: false,
+            step: 4 * k.width,
+            data: self.depth_m.iter().flat_map(|z| z.to_le_bytes()).collect(),
+        }
+    }
+
+    /// The calibration as `sensor_msgs/CameraInfo`: K and P from the intrinsics, no
+    /// distortion (`plumb_bob`, zeros), R the identity.
+    pub fn camera_info(&self) -> CameraInfo {
+        let k = &self.intrinsics;
+        CameraInfo {
+            header: self.header(),
+            height: k.height,
+            width: k.width,
+            distortion_model: "plumb_bob".into(),
+            d: vec![0.0; 5],
+            k: k.k(),
+            r: [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+            p: k.p(),
+            binning_x: 0,
+            binning_y: 0,
+            roi: RegionOfInterest::default(),
+        }
+    }
+
+    /// The organized point cloud (one point per pixel, NaN without a return) in the optical
+    /// frame, as `sensor_msgs/PointCloud2` with float32 x, y, z.
+    pub fn point_cloud(&self) -> PointCloud2 {
+        let k = &self.intrinsics;
+        let xyz: Vec<[f32; 3]> = self
+            .depth_m
+            .iter()
+            .enumerate()
+            .map(|(i, &z)| {
+                if !z.is_finite() {
+                    return [f32::NAN; 3];
+                }
+                let r = k.ray_optical(i as u32 % k.width, i as u32 / k.width) * f64::from(z);
+                [r.x as f32, r.y as f32, z]
+            })
+            .collect();
+        super::xyz_cloud(self.header(), k.height, k.width, &xyz)
     }
 }
 
@@ -482,6 +539,30 @@ mod tests {
                 "{p}"
             );
         }
+    }
+
+    #[test]
+    fn messages_carry_the_image() {
+        let (model, data) = setup(BOX_SCENE);
+        let opts = DepthCameraOptions { width: 64, height: 48, ..DepthCameraOptions::default() };
+        let frame = DepthCamera::new(&model, "down", opts).unwrap().render(&model, &data).unwrap();
+        let image = frame.image();
+        assert_eq!((image.encoding.as_str(), image.width, image.height, image.step), ("32FC1", 64, 48, 256));
+        let px = |u: usize, v: usize| f32::from_le_bytes(image.data[(v * 64 + u) * 4..][..4].try_into().unwrap());
+        assert_eq!(px(5, 7), frame.depth_at(5, 7));
+        let info = frame.camera_info();
+        // f = (H/2) / tan(fovy/2) for MuJoCo's fovy = 60°.
+        assert!((info.k[0] - 24.0 / (30f64.to_radians()).tan()).abs() < 1e-9 && info.k[2] == 31.5 && info.k[5] == 23.5);
+        assert_eq!(info.d, vec![0.0; 5]);
+        let cloud = frame.point_cloud();
+        assert_eq!((cloud.height, cloud.width, cloud.point_step, cloud.row_step), (48, 64, 12, 768));
+        // Point (u, v) = depth · K⁻¹ (u, v, 1).
+        let at = |u: usize, v: usize, c: usize| {
+            f32::from_le_bytes(cloud.data[(v * 64 + u) * 12 + 4 * c..][..4].try_into().unwrap())
+        };
+        let p = frame.point_optical(3, 40).unwrap();
+        assert!((f64::from(at(3, 40, 0)) - p.x).abs() < 1e-6 && (f64::from(at(3, 40, 1)) - p.y).abs() < 1e-6);
+        assert_eq!(at(3, 40, 2), frame.depth_at(3, 40));
     }
 
     #[test]

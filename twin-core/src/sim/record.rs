@@ -10,12 +10,17 @@
 //! - `/odom` (`nav_msgs/msg/Odometry`, floating bases): pose of the base in `odom` (= the
 //!   simulation's world frame); twist in the child (base) frame, as REP-105 defines it.
 //! - `/tf` (`tf2_msgs/msg/TFMessage`): `odom` → base and every body relative to its parent, at
-//!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU frames that are not bodies.
+//!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU and ray-cast sensor frames that are
+//!   not bodies.
 //! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`): the net contact force and torque on
 //!   each body that has touched something, in the body frame about its origin (zero while it
 //!   touches nothing); from its first contact on, at the state rate.
 //! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent (actuator
 //!   controls, or joint forces for models without actuators), at the state rate.
+//! - each ray-cast sensor's topics ([`crate::sense::rig`]: depth image, camera info and points
+//!   of a depth camera; a LiDAR's scan or points) at the sensor's rate, cast on other threads
+//!   on its ticks only ([`crate::sense::Pipelined`]); rerun shows depth images and clouds at
+//!   `world/sensors/<sensor>`.
 //!
 //! - the controller's own topics ([`crate::control::Controller::topics`]: a walking controller's
 //!   footsteps and CoM/ZMP/DCM, the live bridge's `/clock` and received commands), from their
@@ -482,6 +487,17 @@ pub struct Recording {
     /// origin.
     wrench: Vec<[f64; 6]>,
     touching: Vec<bool>,
+    /// Ray-cast sensors (depth cameras, LiDARs), read on their own ticks only.
+    sense: Vec<SenseOut>,
+}
+
+/// A ray-cast sensor being recorded.
+struct SenseOut {
+    sensor: crate::sense::RaySensor,
+    pipe: crate::sense::Pipelined,
+    schedule: Schedule,
+    /// Topic id of each of `sensor.topics`.
+    ids: Vec<Option<usize>>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
@@ -526,6 +542,9 @@ impl Recording {
             known.extend(name_of(TopicKind::Odometry));
             known.extend(name_of(TopicKind::Commands));
             known.push("/contacts/*".into());
+            known.extend(
+                crate::sense::ray_sensors(robot).into_iter().flat_map(|s| s.topics.into_iter().map(|(n, _)| n)),
+            );
             for t in wanted {
                 if !known.contains(t) && !t.starts_with("/contacts/") {
                     return Err(Error::LogTopic {
@@ -645,6 +664,7 @@ impl Recording {
             command: Float64MultiArray::default(),
             wrench: vec![[0.0; 6]; model.nbody()],
             touching: vec![false; model.nbody()],
+            sense: Vec::new(),
         };
 
         // Every topic but the contacts (which appear with a body's first contact) now, in table
@@ -656,7 +676,7 @@ impl Recording {
                     rec.out.offer(id)?;
                     if rec.out.takes(id) {
                         let statics = robot.imus.iter().filter(|i| !body_frames.contains(&i.meta.frame_id));
-                        let tf_static = TfMessage {
+                        let mut tf_static = TfMessage {
                             transforms: statics
                                 .map(|imu| TransformStamped {
                                     header: Header { stamp_nanos: 0, frame_id: body_frames[imu.body].clone() },
@@ -666,10 +686,43 @@ impl Recording {
                                 })
                                 .collect(),
                         };
+                        // Ray-cast sensor frames (a camera's optical frame, a LiDAR's site).
+                        for s in crate::sense::ray_sensors(robot) {
+                            if let (false, Some((body, p, q))) =
+                                (body_frames.contains(&s.frame_id), s.body_from_frame(model))
+                            {
+                                tf_static.transforms.push(TransformStamped {
+                                    header: Header { stamp_nanos: 0, frame_id: body_frames[body].clone() },
+                                    child_frame_id: s.frame_id,
+                                    translation: p,
+                                    rotation_xyzw: xyzw(q),
+                                });
+                            }
+                        }
                         rec.out.write(id, 0, &TypedMessage::Tf(&tf_static))?;
                     }
                 }
                 _ => rec.out.offer(id)?,
+            }
+        }
+        // Ray-cast sensors: only when something takes their readings.
+        #[cfg(feature = "rerun")]
+        let to_rerun = rec.out.sinks.iter().any(|s| matches!(s, SinkSlot::Rerun(..)));
+        #[cfg(not(feature = "rerun"))]
+        let to_rerun = false;
+        for (k, sensor) in crate::sense::ray_sensors(robot).into_iter().enumerate() {
+            let ids: Vec<Option<usize>> = sensor
+                .topics
+                .iter()
+                .map(|(_, stream)| id_of(TopicKind::Sensor { sensor: k, stream: *stream }))
+                .collect();
+            if ids.iter().flatten().any(|&id| rec.out.takes(id)) || to_rerun {
+                rec.sense.push(SenseOut {
+                    pipe: crate::sense::Pipelined::new(sensor.build(robot)?, robot.model.clone())?,
+                    schedule: Schedule::new(sensor.rate_hz, dt_nanos),
+                    sensor,
+                    ids,
+                });
             }
         }
         Ok(rec)
@@ -803,6 +856,17 @@ impl Recording {
             }
             self.out.write(id, t_nanos, &TypedMessage::Tf(&self.tf))?;
         }
+
+        // Ray-cast sensors on their ticks, cast on other threads: the reading of the previous
+        // tick comes back now (stamped with its own time), the last one in `finish`.
+        for s in &mut self.sense {
+            if !s.schedule.due(t_nanos) {
+                continue;
+            }
+            if let Some(reading) = s.pipe.submit(data, t_nanos)? {
+                write_reading(&mut self.out, s, &reading)?;
+            }
+        }
         Ok(())
     }
 
@@ -843,7 +907,12 @@ impl Recording {
     ///
     /// # Errors
     /// Errors of the sinks (write errors of the MCAP or rerun outputs).
-    pub fn finish(self) -> Result<RecordSummary> {
+    pub fn finish(mut self) -> Result<RecordSummary> {
+        for s in &mut self.sense {
+            if let Some(reading) = s.pipe.finish()? {
+                write_reading(&mut self.out, s, &reading)?;
+            }
+        }
         let mut summary = RecordSummary { topics: self.out.counts, ..RecordSummary::default() };
         for mut slot in self.out.sinks {
             slot.sink().finish()?;
@@ -870,6 +939,38 @@ impl crate::engine::Observer for Recording {
         self.record(step)?;
         Ok(crate::engine::Flow::Continue)
     }
+}
+
+/// Writes one reading of a ray-cast sensor to the sinks that take its topics and to rerun
+/// (depth image, pinhole and world points), stamped with the reading's own time.
+fn write_reading(out: &mut Outputs, s: &SenseOut, reading: &crate::sense::Reading) -> Result<()> {
+    let stamp = match reading {
+        crate::sense::Reading::Depth(f) => f.stamp_nanos,
+        crate::sense::Reading::Lidar(l) => l.stamp_nanos,
+    };
+    if s.ids.iter().flatten().any(|&id| out.takes(id)) {
+        for (id, message) in s.ids.iter().zip(s.sensor.messages(reading)) {
+            if let Some(id) = id.filter(|&id| out.takes(id)) {
+                out.write(id, stamp, &TypedMessage::Sensor(&message))?;
+            }
+        }
+    }
+    #[cfg(feature = "rerun")]
+    for slot in &out.sinks {
+        let SinkSlot::Rerun(sink, _) = slot else { continue };
+        for rec in &sink.recorders {
+            rec.set_time_secs(stamp as f64 * 1e-9);
+            match reading {
+                crate::sense::Reading::Depth(f) => rec.depth_frame(&s.sensor.name, f)?,
+                crate::sense::Reading::Lidar(l) => {
+                    let pts: Vec<_> =
+                        l.points_sensor().into_iter().flatten().map(|p| l.world_from_sensor * p).collect();
+                    rec.sensor_points(&s.sensor.name, &pts)?;
+                }
+            }
+        }
+    }
+    Ok(())
 }
 
 /// Quaternion w x y z → x y z w (ROS order).

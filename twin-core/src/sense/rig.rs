@@ -1,0 +1,358 @@
+//! A robot's ray-cast sensors as its file describes them, with their topics: each Gazebo
+//! camera (`camera`, `depth`, `rgbd_camera`, …) is a depth camera publishing
+//! `<prefix>/depth/image_raw` (`32FC1`), `<prefix>/depth/camera_info` and `<prefix>/points`;
+//! each `ray`/`gpu_ray`/`lidar` sensor publishes one ring as `sensor_msgs/LaserScan` (`scan`)
+//! or several as an organized `PointCloud2` (`points`). MJCF cameras that no metadata covers
+//! count as depth cameras when they give a `resolution` (beyond MuJoCo's default 1×1).
+//!
+//! `<prefix>` is the plugin's topic without a trailing `/image_raw` (or `/depth/image_raw`),
+//! else `/<robot>/<sensor>`.
+
+use super::depth::{DepthCamera, DepthCameraOptions, DepthFrame};
+use super::lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
+use crate::error::Result;
+use crate::log::cdr::CdrWriter;
+use crate::log::{CameraInfo, Image, LaserScan, PointCloud2, RosMessage};
+use crate::mj::{Data, ObjType};
+use crate::robot::Robot;
+
+/// What a topic of a ray-cast sensor carries.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum SensorStream {
+    /// `sensor_msgs/Image`, `32FC1` depth.
+    DepthImage,
+    /// `sensor_msgs/CameraInfo`.
+    CameraInfo,
+    /// Organized `sensor_msgs/PointCloud2` (camera: optical frame; LiDAR: sensor frame).
+    Points,
+    /// `sensor_msgs/LaserScan` (one ring).
+    Scan,
+}
+
+impl SensorStream {
+    /// ROS 2 type of the stream.
+    pub fn type_name(self) -> &'static str {
+        match self {
+            SensorStream::DepthImage => Image::TYPE_NAME,
+            SensorStream::CameraInfo => CameraInfo::TYPE_NAME,
+            SensorStream::Points => PointCloud2::TYPE_NAME,
+            SensorStream::Scan => LaserScan::TYPE_NAME,
+        }
+    }
+}
+
+/// How a ray-cast sensor is built.
+#[derive(Debug, Clone, PartialEq)]
+pub enum RaySensorKind {
+    /// A depth camera on a MuJoCo camera.
+    Depth {
+        /// MuJoCo camera name.
+        camera: String,
+        /// Its options.
+        options: DepthCameraOptions,
+    },
+    /// A scanning range finder on a MuJoCo site.
+    Lidar {
+        /// MuJoCo site name.
+        site: String,
+        /// Its options.
+        options: LidarOptions,
+    },
+}
+
+/// One ray-cast sensor of a robot, with its topics.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RaySensor {
+    /// Sensor name (the Gazebo sensor's, or the MJCF camera's).
+    pub name: String,
+    /// Device and options.
+    pub kind: RaySensorKind,
+    /// `frame_id` of its messages.
+    pub frame_id: String,
+    /// Publication rate, Hz.
+    pub rate_hz: f64,
+    /// Its topics, in publication order.
+    pub topics: Vec<(String, SensorStream)>,
+}
+
+/// The ray-cast sensors of `robot`, in model order of its metadata, then plain MJCF cameras.
+pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
+    let model = &robot.model;
+    let mut out = Vec::new();
+    let mut covered = Vec::new();
+    let prefix_of = |topic: &Option<String>, name: &str| -> String {
+        match topic {
+            Some(t) => {
+                let t = t.trim_end_matches('/');
+                let t = t.strip_suffix("/depth/image_raw").or_else(|| t.strip_suffix("/image_raw")).unwrap_or(t);
+                if t.starts_with('/') { t.to_string() } else { format!("/{t}") }
+            }
+            None => format!("/{}/{}", robot.name, crate::topics::topic_safe(name)),
+        }
+    };
+    for s in &robot.sensors {
+        match s.kind.as_str() {
+            "camera" | "depth" | "depth_camera" | "rgbd_camera" | "wideanglecamera" | "multicamera" => {
+                for (k, cam) in s.mujoco.iter().enumerate() {
+                    let Some(id) = model.id(ObjType::Camera, cam) else { continue };
+                    covered.push(id);
+                    let name = if s.mujoco.len() == 1 { s.name.clone() } else { format!("{}_{k}", s.name) };
+                    let [w, h] = model.cam_resolution()[id];
+                    let mut options = DepthCameraOptions {
+                        width: w.max(1) as u32,
+                        height: h.max(1) as u32,
+                        noise_std_m: s.noise_std,
+                        ..DepthCameraOptions::default()
+                    };
+                    if let Some([near, far]) = s.range_m {
+                        options.min_range_m = near;
+                        options.max_range_m = far;
+                    }
+                    options.rate_hz = s.update_rate_hz.unwrap_or(options.rate_hz);
+                    let prefix = prefix_of(&if s.mujoco.len() == 1 { s.topic.clone() } else { None }, &name);
+                    out.push(RaySensor {
+                        frame_id: s.frame_id.clone().unwrap_or_else(|| format!("{name}_optical_frame")),
+                        rate_hz: options.rate_hz,
+                        kind: RaySensorKind::Depth { camera: cam.clone(), options },
+                        topics: depth_topics(&prefix),
+                        name,
+                    });
+                }
+            }
+            "ray" | "gpu_ray" | "lidar" | "gpu_lidar" => {
+                let (Some(scan), Some(site)) = (s.scan, s.mujoco.first()) else { continue };
+                if model.id(ObjType::Site, site).is_none() {
+                    continue;
+                }
+                let axis = |(samples, min_rad, max_rad): (usize, f64, f64)| ScanAxis { samples, min_rad, max_rad };
+                let mut options = LidarOptions {
+                    horizontal: axis(scan.horizontal),
+                    vertical: axis(scan.vertical),
+                    noise_std_m: s.noise_std,
+                    ..LidarOptions::default()
+                };
+                if let Some([lo, hi]) = s.range_m {
+                    options.min_range_m = lo;
+                    options.max_range_m = hi;
+                }
+                options.rate_hz = s.update_rate_hz.unwrap_or(options.rate_hz);
+                let stream = if scan.vertical.0 <= 1 { SensorStream::Scan } else { SensorStream::Points };
+                let topic = s.topic.clone().unwrap_or_else(|| {
+                    let leaf = if stream == SensorStream::Scan { "scan" } else { "points" };
+                    format!("/{}/{}/{leaf}", robot.name, crate::topics::topic_safe(&s.name))
+                });
+                out.push(RaySensor {
+                    name: s.name.clone(),
+                    frame_id: s.frame_id.clone().unwrap_or_else(|| s.name.clone()),
+                    rate_hz: options.rate_hz,
+                    kind: RaySensorKind::Lidar { site: site.clone(), options },
+                    topics: vec![(topic, stream)],
+                });
+            }
+            _ => {}
+        }
+    }
+    for c in &robot.cameras {
+        let [w, h] = model.cam_resolution()[c.id];
+        if covered.contains(&c.id) || c.name.is_empty() || (w <= 1 && h <= 1) {
+            continue;
+        }
+        let options = DepthCameraOptions { width: w as u32, height: h as u32, ..DepthCameraOptions::default() };
+        out.push(RaySensor {
+            name: c.name.clone(),
+            frame_id: format!("{}_optical_frame", c.name),
+            rate_hz: options.rate_hz,
+            kind: RaySensorKind::Depth { camera: c.name.clone(), options },
+            topics: depth_topics(&prefix_of(&None, &c.name)),
+        });
+    }
+    out
+}
+
+fn depth_topics(prefix: &str) -> Vec<(String, SensorStream)> {
+    vec![
+        (format!("{prefix}/depth/image_raw"), SensorStream::DepthImage),
+        (format!("{prefix}/depth/camera_info"), SensorStream::CameraInfo),
+        (format!("{prefix}/points"), SensorStream::Points),
+    ]
+}
+
+/// One reading of a ray-cast sensor.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Reading {
+    /// A depth image.
+    Depth(DepthFrame),
+    /// A LiDAR scan.
+    Lidar(LidarScan),
+}
+
+/// One message of a ray-cast sensor's topic.
+#[derive(Debug, Clone, PartialEq)]
+pub enum SensorMessage {
+    /// `sensor_msgs/Image`.
+    Image(Image),
+    /// `sensor_msgs/CameraInfo` (boxed: it is several times the others' size).
+    CameraInfo(Box<CameraInfo>),
+    /// `sensor_msgs/PointCloud2`.
+    PointCloud2(PointCloud2),
+    /// `sensor_msgs/LaserScan`.
+    LaserScan(LaserScan),
+}
+
+impl SensorMessage {
+    /// The ROS 2 type name.
+    pub fn type_name(&self) -> &'static str {
+        match self {
+            SensorMessage::Image(_) => Image::TYPE_NAME,
+            SensorMessage::CameraInfo(_) => CameraInfo::TYPE_NAME,
+            SensorMessage::PointCloud2(_) => PointCloud2::TYPE_NAME,
+            SensorMessage::LaserScan(_) => LaserScan::TYPE_NAME,
+        }
+    }
+
+    /// Encodes the message's fields (CDR, after the encapsulation header).
+    pub fn encode(&self, w: &mut CdrWriter) {
+        match self {
+            SensorMessage::Image(m) => m.encode(w),
+            SensorMessage::CameraInfo(m) => m.encode(w),
+            SensorMessage::PointCloud2(m) => m.encode(w),
+            SensorMessage::LaserScan(m) => m.encode(w),
+        }
+    }
+}
+
+/// A built ray-cast sensor: reads on demand.
+#[derive(Debug)]
+pub enum Device {
+    /// A depth camera.
+    Depth(DepthCamera),
+    /// A LiDAR.
+    Lidar(Lidar),
+}
+
+impl RaySensor {
+    /// Builds the device on `robot`'s model.
+    ///
+    /// # Errors
+    /// As [`DepthCamera::new`] and [`Lidar::new`] (bad options from the file, a missing
+    /// camera or site).
+    pub fn build(&self, robot: &Robot) -> Result<Device> {
+        Ok(match &self.kind {
+            RaySensorKind::Depth { camera, options } => {
+                Device::Depth(DepthCamera::new(&robot.model, camera, options.clone())?.with_frame_id(&self.frame_id))
+            }
+            RaySensorKind::Lidar { site, options } => {
+                Device::Lidar(Lidar::new(&robot.model, site, options.clone())?.with_frame_id(&self.frame_id))
+            }
+        })
+    }
+
+    /// Where the sensor's frame sits on the robot: `(body, body_from_frame translation (m),
+    /// rotation w x y z)`; a camera's frame is its optical frame (z forward, x right, y down),
+    /// a LiDAR's its site. `None` when the model lacks the camera or site.
+    pub fn body_from_frame(&self, model: &crate::mj::Model) -> Option<(usize, [f64; 3], [f64; 4])> {
+        match &self.kind {
+            RaySensorKind::Depth { camera, .. } => {
+                let c = model.id(ObjType::Camera, camera)?;
+                let q = model.cam_quat()[c];
+                // body_from_optical = body_from_camera · (half turn about x) = q ⊗ (0, 1, 0, 0).
+                let optical = [-q[1], q[0], q[3], -q[2]];
+                Some((model.cam_bodyid()[c] as usize, model.cam_pos()[c], optical))
+            }
+            RaySensorKind::Lidar { site, .. } => {
+                let s = model.id(ObjType::Site, site)?;
+                Some((model.site_bodyid()[s] as usize, model.site_pos()[s], model.site_quat()[s]))
+            }
+        }
+    }
+
+    /// The messages of `reading`, one per topic of [`RaySensor::topics`], in that order.
+    pub fn messages(&self, reading: &Reading) -> Vec<SensorMessage> {
+        self.topics
+            .iter()
+            .map(|(_, stream)| match (stream, reading) {
+                (SensorStream::DepthImage, Reading::Depth(f)) => SensorMessage::Image(f.image()),
+                (SensorStream::CameraInfo, Reading::Depth(f)) => SensorMessage::CameraInfo(Box::new(f.camera_info())),
+                (SensorStream::Points, Reading::Depth(f)) => SensorMessage::PointCloud2(f.point_cloud()),
+                (SensorStream::Points, Reading::Lidar(s)) => SensorMessage::PointCloud2(s.point_cloud()),
+                (_, Reading::Lidar(s)) => SensorMessage::LaserScan(s.laser_scan(0, 1.0 / self.rate_hz)),
+                (_, Reading::Depth(f)) => SensorMessage::Image(f.image()),
+            })
+            .collect()
+    }
+}
+
+impl Device {
+    /// Reads the state of `data` (its last forward pass).
+    ///
+    /// # Errors
+    /// As [`DepthCamera::render`] and [`Lidar::scan`].
+    pub fn read(&mut self, data: &Data) -> Result<Reading> {
+        Ok(match self {
+            Device::Depth(c) => Reading::Depth(c.render(data.model(), data)?),
+            Device::Lidar(l) => Reading::Lidar(l.scan(data)?),
+        })
+    }
+}
+
+/// A device read on another thread while the simulation goes on: the reading asked for at one
+/// tick comes back at the next ([`Pipelined::submit`]) or at the end ([`Pipelined::finish`]),
+/// whatever the threads' timing, so recordings stay the same run to run. The simulation thread
+/// only copies the poses the rays need (a few kB); the rays are cast on rayon's pool.
+#[derive(Debug)]
+pub struct Pipelined {
+    idle: Option<(Device, Data)>,
+    pending: Option<std::sync::mpsc::Receiver<(Device, Data, Result<Reading>)>>,
+}
+
+impl Pipelined {
+    /// `device` with a scratch state of `model` (the model its readings come from).
+    ///
+    /// # Errors
+    /// [`crate::Error::MuJoCo`] when MuJoCo can't allocate the scratch state.
+    pub fn new(device: Device, model: std::sync::Arc<crate::mj::Model>) -> Result<Pipelined> {
+        Ok(Pipelined { idle: Some((device, Data::new(model)?)), pending: None })
+    }
+
+    /// Starts a reading of `data`'s poses (its last forward pass), stamped `stamp_nanos`, and
+    /// hands back the previous reading, waiting for it if it is not ready.
+    ///
+    /// # Errors
+    /// The previous reading's error; [`crate::Error::Size`] for a `data` of another model
+    /// layout.
+    pub fn submit(&mut self, data: &Data, stamp_nanos: u64) -> Result<Option<Reading>> {
+        let previous = self.finish()?;
+        let (mut device, mut scratch) = self.idle.take().expect("finish() leaves the device idle");
+        if let Err(e) = scratch.copy_poses_from(data) {
+            self.idle = Some((device, scratch));
+            return Err(e);
+        }
+        let (tx, rx) = std::sync::mpsc::channel();
+        rayon::spawn(move || {
+            let reading = device.read(&scratch).map(|mut r| {
+                match &mut r {
+                    Reading::Depth(f) => f.stamp_nanos = stamp_nanos,
+                    Reading::Lidar(l) => l.stamp_nanos = stamp_nanos,
+                }
+                r
+            });
+            // The receiver is gone only when the owner was dropped: nothing to hand back.
+            let _ = tx.send((device, scratch, reading));
+        });
+        self.pending = Some(rx);
+        Ok(previous)
+    }
+
+    /// Waits for the reading in flight, if any, and hands it back.
+    ///
+    /// # Errors
+    /// The reading's error; [`crate::Error::Options`] if its thread died (a panic).
+    pub fn finish(&mut self) -> Result<Option<Reading>> {
+        let Some(rx) = self.pending.take() else { return Ok(None) };
+        let (device, scratch, reading) = rx
+            .recv()
+            .map_err(|_| crate::Error::Options("a ray-cast sensor's thread ended without its reading".into()))?;
+        self.idle = Some((device, scratch));
+        reading.map(Some)
+    }
+}
