@@ -228,7 +228,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut recording, mut live_controller) = match live {
         Some((sink, controller)) => {
             let options = RecordOptions { command_topic: Some(twin_core::live::actuator_topic(&robot)), ..options };
-            (Some(Recording::with_sink(&robot, &options, Some(Box::new(sink)))?), Some(controller))
+            (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
         }
         None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
     };

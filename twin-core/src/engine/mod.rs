@@ -90,6 +90,8 @@ pub struct StepView<'a> {
     pub actuation: Actuation,
     /// The simulation after the step (see above).
     pub data: &'a Data,
+    /// The rollout's controller (e.g. for its diagnostics, [`Controller::diagnostics`]).
+    pub controller: &'a dyn Controller,
 }
 
 /// Watches a rollout: fall and divergence detection, metrics, checks, recorders.
@@ -416,6 +418,7 @@ impl Engine {
                 saturated,
                 actuation,
                 data,
+                controller: &*controller,
             };
             let mut end = false;
             for (k, o) in observers.iter_mut().enumerate() {

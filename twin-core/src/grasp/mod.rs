@@ -58,6 +58,8 @@ pub struct GraspOptions {
     pub camera_rate_hz: f64,
     /// Depth noise standard deviation, m (default: 0.002).
     pub camera_noise_std_m: f64,
+    /// Seed of the depth noise (default: 0).
+    pub camera_seed: u64,
     /// Frames whose estimates are averaged (default: 3).
     pub detect_frames: usize,
     /// Distance of the pre-grasp pose before the grasp pose along the approach, m (default: 0.1).
@@ -112,6 +114,7 @@ impl Default for GraspOptions {
             camera: "head_depth".into(),
             camera_rate_hz: 15.0,
             camera_noise_std_m: 0.002,
+            camera_seed: 0,
             detect_frames: 3,
             pregrasp_distance_m: 0.1,
             raise_secs: 1.0,
@@ -295,7 +298,7 @@ impl Grasper {
             arms.push(Arm::find(model, side, &o.grasp_bodies[k], ids[1 - k], o.saturation_error, &o.trunk_joints)?);
         }
         self.arms = arms;
-        self.eye = Some(Eye::new(model, &o.camera)?);
+        self.eye = Some(Eye::new(model, &o.camera, o.camera_noise_std_m, o.camera_seed)?);
         Ok(())
     }
 

@@ -3,12 +3,13 @@
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
+use crate::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, detect_cup};
 use nalgebra::Vector3;
 
 /// Where the cup is, as perceived.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CupSighting {
-    /// Centre of the cup's axis at mid-height, world, m.
+    /// Centre of the cup's axis at mid-height above the table, world, m.
     pub centre_world: Vector3<f64>,
     /// Radius, m.
     pub radius_m: f64,
@@ -38,49 +39,53 @@ impl CupSighting {
     }
 }
 
-/// The robot's eye: its depth camera and the cup detector.
-#[derive(Debug, Clone)]
+/// The robot's eye: its depth camera ([`crate::sense::DepthCamera`], ray cast) and the cup
+/// detector ([`crate::sense::detect_cup`]): the cup is found in the depth image's point cloud
+/// alone, never read from the model.
 pub struct Eye {
-    camera: usize,
-    cup_body: Option<usize>,
+    camera: DepthCamera,
+    detect: CupDetectOptions,
+}
+
+impl std::fmt::Debug for Eye {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Eye").field("camera", &self.camera).finish()
+    }
 }
 
 impl Eye {
-    /// The eye of `model` looking through camera `camera`.
+    /// The eye of `model` looking through camera `camera` with depth noise `noise_std_m`
+    /// (seeded by `seed`).
     ///
     /// # Errors
-    /// [`Error::Grasp`] when the model has no such camera.
-    pub fn new(model: &Model, camera: &str) -> Result<Eye> {
-        let cam = model.id(ObjType::Camera, camera).ok_or_else(|| Error::Grasp {
-            message: format!(
-                "the model has no camera \"{camera}\": give the robot a Gazebo depth sensor (as \
-                 models/humanoid_gripper.urdf's head_depth) or name its camera in [grasp] camera"
-            ),
-        })?;
-        // STAND-IN until twin_core::sense lands (REMOVE): reads the cup body's pose.
-        let cup_body = model.id(ObjType::Body, "cup");
-        Ok(Eye { camera: cam, cup_body })
+    /// [`Error::Grasp`] when the model has no such camera; as [`DepthCamera::new`].
+    pub fn new(model: &Model, camera: &str, noise_std_m: f64, seed: u64) -> Result<Eye> {
+        if model.id(ObjType::Camera, camera).is_none() {
+            return Err(Error::Grasp {
+                message: format!(
+                    "the model has no camera \"{camera}\": give the robot a Gazebo depth sensor (as \
+                     models/humanoid_gripper.urdf's head_depth) or name its camera in [grasp] camera"
+                ),
+            });
+        }
+        // One thread: randomized batches already run one episode per core.
+        let options = DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, ..Default::default() };
+        Ok(Eye { camera: DepthCamera::new(model, camera, options)?, detect: CupDetectOptions::default() })
     }
 
-    /// One look at the scene in `data` (positions current): the cup, or why not.
+    /// One depth frame of the scene in `data` (positions current) and the cup in it.
     ///
     /// # Errors
-    /// [`Error::Grasp`] when no cup is seen.
+    /// As [`DepthCamera::render`] and [`detect_cup`] (no table or cup in view).
     pub fn look(&mut self, model: &Model, data: &Data) -> Result<CupSighting> {
-        let _ = self.camera;
-        // STAND-IN until twin_core::sense lands (REMOVE).
-        let body = self.cup_body.ok_or_else(|| Error::Grasp { message: "no cup in view".into() })?;
-        let g = (0..model.ngeom())
-            .find(|&g| model.geom_bodyid()[g] as usize == body)
-            .ok_or_else(|| Error::Grasp { message: "no cup in view".into() })?;
-        let size = model.geom_size()[g];
-        let c = Vector3::from(data.geom_xpos()[g]);
+        let frame = self.camera.render(model, data)?;
+        let cup = detect_cup(&frame.points_world(), &self.detect)?;
         Ok(CupSighting {
-            centre_world: c,
-            radius_m: size[0],
-            height_m: 2.0 * size[1],
-            table_height_m: c.z - size[1],
-            n_points: 0,
+            centre_world: cup.centre_world.coords,
+            radius_m: cup.radius_m,
+            height_m: cup.height_m,
+            table_height_m: cup.table_height_m,
+            n_points: cup.n_points,
         })
     }
 }

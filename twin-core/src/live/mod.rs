@@ -2,14 +2,14 @@
 //! ROS install.
 //!
 //! [`start`] gives two halves that plug into the one simulation loop ([`crate::sim::simulate`]):
-//! - a [`LiveSink`], the recording's second destination ([`crate::sim::Recording::with_sink`]):
-//!   every topic the recorder writes (`/joint_states`, the IMUs, `/odom`, `/tf`, `/tf_static`,
-//!   `/contacts/<body>`) is published with the same CDR bytes, encoded once;
+//! - a [`LiveSink`], a [`Sink`] of the recording ([`crate::sim::Recording::with_sinks`]): every
+//!   topic the recorder writes (`/joint_states`, the IMUs, `/odom`, `/tf`, `/tf_static`,
+//!   `/contacts/<body>`, a controller's diagnostics) is published as CDR;
 //! - a [`LiveController`], the [`Controller`](crate::control::Controller) of the run: it
 //!   publishes `/clock` at each control period, takes `Float64MultiArray` commands on
 //!   `/<robot>/joint_commands` and `JointTrajectory` on `/<robot>/joint_trajectory`, paces the
-//!   run (real time × factor, as fast as possible, or lockstep) and hands the commands it
-//!   received to the recording.
+//!   run (real time × factor, as fast as possible, or lockstep); `/clock` and the commands it
+//!   received are its own topics ([`Controller::topics`]), recorded byte for byte.
 //!
 //! ROS naming: topic `/x` is DDS topic `rt/x`, type `pkg/msg/T` is `pkg::msg::dds_::T_`. QoS:
 //! reliable + volatile (keep last 100; matches rclpy/rclcpp defaults and best-effort sensor
@@ -37,8 +37,7 @@ use crate::log::cdr::{CdrReader, CdrWriter};
 use crate::log::{Clock, Float64MultiArray, JointTrajectory, RosMessage, RosString};
 use crate::mj::Model;
 use crate::robot::Robot;
-use crate::sim::record::{ExchangedMessage, TopicSink};
-use crate::topics::{TopicInfo, TopicKind};
+use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
 use std::collections::HashMap;
 use std::net::IpAddr;
@@ -96,44 +95,62 @@ impl Default for LiveOptions {
 /// In lockstep, how often `/clock` is said again while twin waits for a command.
 const CLOCK_RESEND: Duration = Duration::from_millis(200);
 
-/// Messages exchanged by the controller half, waiting for the recording.
-type Exchanged = Arc<Mutex<Vec<ExchangedMessage>>>;
+/// A message the controller half exchanged (`/clock` sent, a command received), waiting for
+/// the recording: topic index in [`LiveController::topics`], simulation time, CDR bytes.
+struct ExchangedMessage {
+    topic: usize,
+    log_time_nanos: u64,
+    cdr: Vec<u8>,
+}
 
-/// Publishes the recorder's topics ([`TopicSink`]).
+/// Messages exchanged by the controller half, waiting for the recording.
+type Exchanged = Mutex<Vec<ExchangedMessage>>;
+
+/// The controller half's topics, in [`LiveController::topics`] order.
+const CLOCK: usize = 0;
+const COMMANDS: usize = 1;
+const TRAJECTORY: usize = 2;
+
+/// Publishes the recorder's topics (a [`Sink`]).
 pub struct LiveSink {
     node: Arc<Node>,
     writers: HashMap<String, RawWriter>,
-    exchanged: Exchanged,
+    /// Writer of each topic id.
+    by_id: Vec<Option<String>>,
+    /// Topics the bridge exchanges itself (`/clock`, its command inputs): recorded, never
+    /// published again.
+    own: Vec<String>,
+    cdr: CdrWriter,
     /// Failed writes (a reader that vanished mid-write), counted, not fatal.
     write_failures: u64,
 }
 
-impl TopicSink for LiveSink {
-    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()> {
+impl Sink for LiveSink {
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         // The recorder's own per-step command stream is not published: the bridge's
         // `/<robot>/joint_commands` is the controller's input.
-        if topic.kind == TopicKind::Commands || self.writers.contains_key(&topic.name) {
-            return Ok(());
+        if topic.kind == TopicKind::Commands || self.own.contains(&topic.name) {
+            return Ok(false);
         }
-        let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
-        self.writers.insert(topic.name.clone(), w);
-        Ok(())
+        if !self.writers.contains_key(&topic.name) {
+            let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
+            self.writers.insert(topic.name.clone(), w);
+        }
+        if self.by_id.len() <= id {
+            self.by_id.resize(id + 1, None);
+        }
+        self.by_id[id] = Some(topic.name.clone());
+        Ok(true)
     }
 
-    fn write(&mut self, topic: &str, log_time_nanos: u64, cdr: &[u8]) -> Result<()> {
-        let _ = log_time_nanos;
-        if let Some(w) = self.writers.get(topic)
-            && w.write(RawCdr(cdr.to_vec()), None).is_err()
+    fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        if let Some(Some(name)) = self.by_id.get(id)
+            && let Some(w) = self.writers.get(name)
+            && w.write(RawCdr(message.to_cdr(&mut self.cdr).to_vec()), None).is_err()
         {
             self.write_failures += 1;
         }
         Ok(())
-    }
-
-    fn take_exchanged(&mut self, out: &mut Vec<ExchangedMessage>) {
-        if let Ok(mut q) = self.exchanged.lock() {
-            out.append(&mut q);
-        }
     }
 }
 
@@ -238,13 +255,19 @@ pub fn start(
         });
     }
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
-    let exchanged: Exchanged = Arc::default();
+    let exchanged: Exchanged = Mutex::default();
     let command_topic = command_topic(robot);
     let trajectory_topic = format!("/{}/joint_trajectory", robot.name);
 
     let text = std::fs::read_to_string(&robot.path).unwrap_or_default();
-    let mut sink =
-        LiveSink { node: node.clone(), writers: HashMap::new(), exchanged: exchanged.clone(), write_failures: 0 };
+    let mut sink = LiveSink {
+        node: node.clone(),
+        writers: HashMap::new(),
+        by_id: Vec::new(),
+        own: vec!["/clock".into(), command_topic.clone(), trajectory_topic.clone()],
+        cdr: CdrWriter::new(),
+        write_failures: 0,
+    };
     if crate::urdf::is_urdf(&text) {
         let w = node.writer("/robot_description", RosString::TYPE_NAME, TopicQos::Latched)?;
         let mut cdr = CdrWriter::new();
@@ -338,9 +361,9 @@ impl LiveController {
         (self.log)(&message);
     }
 
-    fn record(&self, topic: &str, type_name: &'static str, t_nanos: u64, cdr: Vec<u8>) {
+    fn record(&self, topic: usize, t_nanos: u64, cdr: Vec<u8>) {
         if let Ok(mut q) = self.exchanged.lock() {
-            q.push(ExchangedMessage { topic: topic.to_string(), type_name, log_time_nanos: t_nanos, cdr });
+            q.push(ExchangedMessage { topic, log_time_nanos: t_nanos, cdr });
         }
     }
 
@@ -351,7 +374,7 @@ impl LiveController {
             Ok(m) => self.commander.check(m),
             Err(e) => Err(format!("not a Float64MultiArray: {}", e.message)),
         };
-        self.record(&self.command_topic.clone(), Float64MultiArray::TYPE_NAME, t_nanos, raw.0);
+        self.record(COMMANDS, t_nanos, raw.0);
         match (verdict, decoded) {
             (Ok(()), Ok(m)) => {
                 self.commander.set_direct(&m);
@@ -369,7 +392,7 @@ impl LiveController {
 
     fn take_trajectory(&mut self, raw: RawCdr, t_nanos: u64) {
         let decoded = CdrReader::new(&raw.0).and_then(|mut r| JointTrajectory::decode(&mut r));
-        self.record(&self.trajectory_topic.clone(), JointTrajectory::TYPE_NAME, t_nanos, raw.0);
+        self.record(TRAJECTORY, t_nanos, raw.0);
         let now = t_nanos as f64 * 1e-9;
         let verdict = match decoded {
             Ok(t) => self.commander.set_trajectory(&t, now, &self.qpos),
@@ -476,7 +499,7 @@ impl LiveController {
         });
         let bytes = self.clock_cdr.bytes().to_vec();
         let _ = self.clock.write(RawCdr(bytes.clone()), None);
-        self.record("/clock", Clock::TYPE_NAME, t_nanos, bytes);
+        self.record(CLOCK, t_nanos, bytes);
         match self.options.pacing {
             Pacing::Lockstep => self.wait_one(t_nanos)?,
             _ => {
@@ -527,5 +550,31 @@ impl Controller for LiveController {
             return Err(e);
         }
         Ok(!self.stop.load(std::sync::atomic::Ordering::Relaxed))
+    }
+
+    /// `/clock` as sent and the commands as received (CDR bytes as they were, rejected ones
+    /// included), for the recording.
+    fn topics(&self) -> Vec<TopicInfo> {
+        let topic = |name: &str, type_name, rate_hz, k| TopicInfo {
+            name: name.to_string(),
+            type_name,
+            rate_hz,
+            frame_id: String::new(),
+            qos: Qos::STREAM,
+            kind: TopicKind::Controller(k),
+        };
+        vec![
+            topic("/clock", Clock::TYPE_NAME, Some(self.options.control_rate_hz), CLOCK),
+            topic(&self.command_topic, Float64MultiArray::TYPE_NAME, None, COMMANDS),
+            topic(&self.trajectory_topic, JointTrajectory::TYPE_NAME, None, TRAJECTORY),
+        ]
+    }
+
+    fn diagnostics(&self, emit: &mut dyn FnMut(usize, u64, TypedMessage<'_>)) {
+        if let Ok(mut q) = self.exchanged.lock() {
+            for m in q.drain(..) {
+                emit(m.topic, m.log_time_nanos, TypedMessage::Cdr(&m.cdr));
+            }
+        }
     }
 }
