@@ -142,3 +142,27 @@ fn nominal_grasp_lifts_and_holds_the_cup() {
     assert!(r.measure.grasp.held_secs >= 2.0, "{:?}", r.measure.grasp);
     assert!(all_pass(&r), "{:?}", r.verdicts);
 }
+
+/// The head camera sees the cup (depth image → point cloud → table plane and cylinder fit)
+/// within 1 cm of where it is, wherever it stands on the table in view.
+#[test]
+fn head_camera_finds_the_cup_within_a_centimetre() {
+    use twin_core::grasp::Eye;
+    let scenario = nominal();
+    for (x, y) in [(0.33, -0.12), (0.3, 0.1), (0.42, -0.2), (0.38, 0.0)] {
+        let mut s = scenario.clone();
+        s.cup.as_mut().unwrap().position = [x, y];
+        let robot = s.robot(&scenarios().join("../models/humanoid_gripper.urdf")).unwrap();
+        let model = robot.model.clone();
+        let mut data = twin_core::mj::Data::new(model.clone()).unwrap();
+        twin_core::control::reset_to_home(&mut data).unwrap();
+        let mut eye = Eye::new(&model, "head_depth", 0.002, 7).unwrap();
+        let seen = eye.look(&model, &data).unwrap();
+        let truth = Vector3::from(data.xpos()[model.require_id(ObjType::Body, "cup").unwrap()]);
+        let err = (seen.centre_world - truth).norm();
+        println!("cup at ({x}, {y}): seen {:?}, error {err:.4} m", seen.centre_world);
+        assert!(err < 0.01, "cup at ({x}, {y}) seen {err} m off");
+        assert!((seen.radius_m - 0.04).abs() < 0.005, "{seen:?}");
+        assert!((seen.table_height_m - 0.62).abs() < 0.005, "{seen:?}");
+    }
+}

@@ -353,10 +353,13 @@ impl Observer for GraspCheck {
             if !self.allowed(rb, wb) {
                 if self.m.collision.is_none() {
                     self.m.collision = Some(format!(
-                        "t = {:.3} s: robot \"{}\" touches \"{}\"",
+                        "t = {:.3} s: robot \"{}\" touches \"{}\" at ({:.3}, {:.3}, {:.3}) m",
                         step.time_secs,
                         model.name(ObjType::Body, rb),
-                        if wb == 0 { "the world (floor or table)".to_string() } else { model.name(ObjType::Body, wb).to_string() }
+                        if wb == 0 { "the world (floor or table)".to_string() } else { model.name(ObjType::Body, wb).to_string() },
+                        w.position[0],
+                        w.position[1],
+                        w.position[2]
                     ));
                 }
                 self.m.min_clearance_m = self.m.min_clearance_m.min(-1.0);

@@ -2,7 +2,7 @@
 //! the robot's depth camera sees it into a cup estimate.
 
 use crate::error::{Error, Result};
-use crate::mj::{Data, Model, ObjType};
+use crate::mj::{Data, Model, ObjType, RayFilter};
 use crate::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, detect_cup};
 use nalgebra::Vector3;
 
@@ -60,16 +60,19 @@ impl Eye {
     /// # Errors
     /// [`Error::Grasp`] when the model has no such camera; as [`DepthCamera::new`].
     pub fn new(model: &Model, camera: &str, noise_std_m: f64, seed: u64) -> Result<Eye> {
-        if model.id(ObjType::Camera, camera).is_none() {
+        let Some(cam) = model.id(ObjType::Camera, camera) else {
             return Err(Error::Grasp {
                 message: format!(
                     "the model has no camera \"{camera}\": give the robot a Gazebo depth sensor (as \
                      models/humanoid_gripper.urdf's head_depth) or name its camera in [grasp] camera"
                 ),
             });
-        }
+        };
+        // The camera's own housing and the head it sits on are not in view.
+        let body = model.cam_bodyid()[cam] as usize;
+        let filter = RayFilter { exclude_bodies: vec![body, model.body_parentid()[body] as usize], ..Default::default() };
         // One thread: randomized batches already run one episode per core.
-        let options = DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, ..Default::default() };
+        let options = DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, filter, ..Default::default() };
         Ok(Eye { camera: DepthCamera::new(model, camera, options)?, detect: CupDetectOptions::default() })
     }
 
