@@ -39,6 +39,9 @@ impl Observer for Watch {
             let c = d.xpos()[self.cup];
             let g = d.xpos()[m.id(ObjType::Body, "right_grasp_link").unwrap()];
             let fa = m.id(ObjType::Body, "right_forearm_link").unwrap();
+            let lf = d.xpos()[m.id(ObjType::Body, "left_forearm_link").unwrap()];
+            let yaw = step.qpos[m.jnt_qposadr()[m.id(ObjType::Joint, "waist_yaw_joint").unwrap()] as usize];
+            eprintln!("   left forearm ({:.3} {:.3} {:.3}) waist yaw {yaw:.3}", lf[0], lf[1], lf[2]);
             let low = (0..m.ngeom())
                 .filter(|&k| m.geom_bodyid()[k] as usize == fa && m.geom_contype()[k] != 0)
                 .filter_map(|k| twin_core::control::geom_lowest_z(m, d, k))

@@ -62,6 +62,8 @@ pub struct GraspMeasure {
     pub tilt_deg: f64,
     /// Least CoM margin inside the support polygon, m.
     pub min_com_margin_m: f64,
+    /// When the CoM margin was least, s.
+    pub min_com_margin_secs: f64,
     /// Largest cup height above its start, m.
     pub max_lift_m: f64,
     /// Cup height above its start at the end, m.
@@ -380,10 +382,14 @@ impl Observer for GraspCheck {
         for ff in &finger_force {
             self.m.max_grip_force_n = self.m.max_grip_force_n.max(ff[0]).max(ff[1]);
         }
-        // Balance: the robot's CoM over the hull of the feet's contacts.
+        // Balance: the robot's CoM over the hull of the feet's contacts (after the first
+        // 0.1 s, while the feet's contacts form).
         let com = data.subtree_com()[self.robot_root];
         let margin = margin_inside(&convex_hull(support), Vector2::new(com[0], com[1]));
-        self.m.min_com_margin_m = self.m.min_com_margin_m.min(margin);
+        if step.time_secs >= 0.1 && margin < self.m.min_com_margin_m {
+            self.m.min_com_margin_m = margin;
+            self.m.min_com_margin_secs = step.time_secs;
+        }
         // Arm clearance, every 10th step (50 Hz at 2 ms).
         if step.index % 10 == 0 && !self.pairs.is_empty() {
             let scratch = match self.scratch.as_mut() {
