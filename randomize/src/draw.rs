@@ -54,6 +54,8 @@ enum Kind {
     InitQpos,
     PushInterval,
     PushSpeed,
+    ObjectPosition,
+    CameraNoise,
 }
 
 /// A term bound to model objects: each target is (object, column of its draw, nominal value).
@@ -264,6 +266,30 @@ impl Layout {
                     }
                 }
             }
+            "object_position" => {
+                kind = Kind::ObjectPosition;
+                for j in 0..model.njnt() {
+                    let b = model.jnt_bodyid()[j] as usize;
+                    let name = name_or(model, ObjType::Body, b);
+                    if model.joint_type(j) == JointType::Free && select(&name) {
+                        let adr = model.jnt_qposadr()[j] as usize;
+                        for (axis, a) in ["x", "y"].iter().enumerate() {
+                            objects.push((adr + axis, format!("{name}:{a}"), self.home_qpos[adr + axis], axis));
+                        }
+                    }
+                }
+            }
+            "camera_noise_std" => {
+                kind = Kind::CameraNoise;
+                for c in 0..model.ncam() {
+                    let name = name_or(model, ObjType::Camera, c);
+                    if let Some(&nominal) = model.cam_user(c).first()
+                        && select(&name)
+                    {
+                        objects.push((c, name, nominal, 0));
+                    }
+                }
+            }
             "latency_steps" => {
                 kind = Kind::Latency;
                 objects.push((0, String::new(), 0.0, 0));
@@ -290,6 +316,8 @@ impl Layout {
                 Kind::Mass | Kind::Com => ("body with mass", ObjType::Body),
                 Kind::Strength if self.actuation == Actuation::Ctrl => ("actuator", ObjType::Actuator),
                 Kind::ImuNoise | Kind::ImuBias => ("gyro/accelerometer sensor", ObjType::Sensor),
+                Kind::ObjectPosition => ("free body (scene object)", ObjType::Body),
+                Kind::CameraNoise => ("camera keeping its noise (user 0; grasping scenarios)", ObjType::Camera),
                 _ => ("hinge or slide joint", ObjType::Joint),
             };
             let count = match what.1 {
@@ -297,6 +325,7 @@ impl Layout {
                 ObjType::Body => model.nbody(),
                 ObjType::Actuator => model.nu(),
                 ObjType::Sensor => model.nsensor(),
+                ObjType::Camera => model.ncam(),
                 _ => model.njnt(),
             };
             let names: Vec<String> =
@@ -309,8 +338,11 @@ impl Layout {
             )));
         }
         // Column naming: the key for one shared draw, key:object for independent draws.
-        let label =
-            if base == "object_mass" { format!("object_mass:{}", term.select.join("|")) } else { key.to_string() };
+        let label = if base == "object_mass" || base == "object_position" {
+            format!("{base}:{}", term.select.join("|"))
+        } else {
+            key.to_string()
+        };
         let mut targets = Vec::new();
         let mut group_columns: Vec<Option<usize>> = vec![None; 3];
         for (object, name, nominal, group) in objects {
@@ -320,7 +352,11 @@ impl Layout {
             } else if let Some(c) = group_columns[group] {
                 c
             } else {
-                let suffix = if kind == Kind::Com { format!(":{}", ["x", "y", "z"][group]) } else { String::new() };
+                let suffix = if matches!(kind, Kind::Com | Kind::ObjectPosition) {
+                    format!(":{}", ["x", "y", "z"][group])
+                } else {
+                    String::new()
+                };
                 self.columns.push(format!("{label}{suffix}"));
                 group_columns[group] = Some(self.columns.len() - 1);
                 self.columns.len() - 1
@@ -431,6 +467,10 @@ impl Layout {
                         } else {
                             v
                         };
+                    }
+                    Kind::ObjectPosition => init_qpos[object] = v,
+                    Kind::CameraNoise => {
+                        edit.set_cam_user(object, 0, v.max(0.0)).map_err(apply_err)?;
                     }
                     Kind::PushInterval => push_interval_secs = Some(v),
                     Kind::PushSpeed => push_speed_mps = v,

@@ -29,6 +29,8 @@
 //! world = "../models/table_cup.world" # composed with the robot (relative to this file)
 //! impratio = 10.0                     # elliptic friction cones with this impratio
 //!
+//! randomize = "grasp_randomize.toml"  # spec of `twin randomize --scenario` (without --config)
+//!
 //! [cup]                               # where the cup starts: x y on the table, world, m
 //! position = [0.38, -0.12]
 //!
@@ -207,6 +209,7 @@ struct File {
     cup: Option<Placement>,
     #[serde(default)]
     grasp: crate::grasp::GraspOptions,
+    randomize: Option<PathBuf>,
 }
 
 fn default_controller() -> String {
@@ -244,6 +247,9 @@ pub struct Scenario {
     pub cup: Option<Placement>,
     /// Grasping options.
     pub grasp: crate::grasp::GraspOptions,
+    /// The randomization spec `twin randomize --scenario` uses without `--config`, resolved
+    /// against the scenario's folder.
+    pub randomize: Option<PathBuf>,
 }
 
 /// 1-based line of byte `offset` in `text`.
@@ -353,6 +359,7 @@ impl Scenario {
         let resolve = |m: PathBuf| if m.is_absolute() { m } else { path.parent().unwrap_or(Path::new(".")).join(m) };
         let model = file.model.map(resolve);
         let world = file.world.map(resolve);
+        let randomize = file.randomize.map(resolve);
         Ok(Scenario {
             path: path.to_path_buf(),
             model,
@@ -368,6 +375,7 @@ impl Scenario {
             impratio: file.impratio,
             cup: file.cup,
             grasp: file.grasp,
+            randomize,
         })
     }
 
@@ -379,10 +387,17 @@ impl Scenario {
     pub fn robot(&self, default_model: &Path) -> Result<Robot> {
         let path = self.model.clone().unwrap_or_else(|| default_model.to_path_buf());
         let convert = crate::convert::ConvertOptions { world: self.world.clone(), ..Default::default() };
-        let robot = Robot::load_with(&path, &convert)?;
+        // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where
+        // `twin randomize` draws it per episode.
+        let grasping = self.controller == "grasp";
+        let extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" };
+        let robot = Robot::load_with_extra(&path, &convert, extra)?;
         let mut model = prepare_model(&robot.model, self.armature, self.friction)?;
-        if self.impratio.is_some() || self.cup.is_some() {
+        if self.impratio.is_some() || self.cup.is_some() || grasping {
             let mut edit = model.edit()?;
+            if grasping && let Some(cam) = model.id(ObjType::Camera, &self.grasp.camera) {
+                edit.set_cam_user(cam, 0, self.grasp.camera_noise_std_m)?;
+            }
             if let Some(r) = self.impratio {
                 edit.set_elliptic_cone(r)?;
             }
@@ -470,11 +485,13 @@ impl Scenario {
     /// # Errors
     /// As [`GaitMetrics::for_model`].
     pub fn check(&self, model: &Model) -> Result<ScenarioCheck> {
-        let grasp = self
-            .checks
-            .grasp()
-            .any()
-            .then(|| crate::grasp::GraspCheck::new(self.checks.grasp(), &self.cup.as_ref().map_or_else(default_cup, |c| c.body.clone()), self.grasp.grasp_bodies.clone()));
+        let grasp = self.checks.grasp().any().then(|| {
+            crate::grasp::GraspCheck::new(
+                self.checks.grasp(),
+                &self.cup.as_ref().map_or_else(default_cup, |c| c.body.clone()),
+                self.grasp.grasp_bodies.clone(),
+            )
+        });
         Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp })
     }
 

@@ -21,7 +21,6 @@ struct Watch {
     q0: Vec<f64>,
     cup_start: Option<Vector3<f64>>,
     max_arm_move: f64,
-    trace: bool,
 }
 
 impl Observer for Watch {
@@ -34,49 +33,18 @@ impl Observer for Watch {
         for (&a, &q0) in self.arm_qpos.iter().zip(&self.q0) {
             self.max_arm_move = self.max_arm_move.max((step.qpos[a] - q0).abs());
         }
-        if self.trace && step.index % 50 == 0 {
-            let m = d.model();
-            let c = d.xpos()[self.cup];
-            let g = d.xpos()[m.id(ObjType::Body, "right_grasp_link").unwrap()];
-            let fa = m.id(ObjType::Body, "right_forearm_link").unwrap();
-            let lf = d.xpos()[m.id(ObjType::Body, "left_forearm_link").unwrap()];
-            let yaw = step.qpos[m.jnt_qposadr()[m.id(ObjType::Joint, "waist_yaw_joint").unwrap()] as usize];
-            eprintln!("   left forearm ({:.3} {:.3} {:.3}) waist yaw {yaw:.3}", lf[0], lf[1], lf[2]);
-            let low = (0..m.ngeom())
-                .filter(|&k| m.geom_bodyid()[k] as usize == fa && m.geom_contype()[k] != 0)
-                .filter_map(|k| twin_core::control::geom_lowest_z(m, d, k))
-                .fold(f64::INFINITY, f64::min);
-            eprintln!(
-                "t {:.2} pelvis z {:.3} cup ({:.3} {:.3} {:.3}) grasp ({:.3} {:.3} {:.3}) forearm low {:.3} ncon {}",
-                step.time_secs,
-                d.xpos()[1][2],
-                c[0],
-                c[1],
-                c[2],
-                g[0],
-                g[1],
-                g[2],
-                low,
-                d.ncon()
-            );
-        }
         Ok(Flow::Continue)
     }
 }
 
 struct Run {
     verdicts: Vec<Verdict>,
-    measure: GaitMeasureAndGrasp,
+    fell: bool,
+    grasp: GraspMeasure,
     estimate_error_m: Option<f64>,
     refusal: Option<String>,
     phase: Phase,
     max_arm_move_rad: f64,
-}
-
-#[allow(dead_code)]
-struct GaitMeasureAndGrasp {
-    fell: bool,
-    grasp: GraspMeasure,
 }
 
 fn run(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> Run {
@@ -91,14 +59,7 @@ fn run(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> Run {
         .map(|j| model.jnt_qposadr()[model.require_id(ObjType::Joint, &j).unwrap()] as usize)
         .collect();
     let cup = model.require_id(ObjType::Body, "cup").unwrap();
-    let mut watch = Watch {
-        cup,
-        arm_qpos,
-        q0: Vec::new(),
-        cup_start: None,
-        max_arm_move: 0.0,
-        trace: std::env::var_os("TWIN_GRASP_TRACE").is_some(),
-    };
+    let mut watch = Watch { cup, arm_qpos, q0: Vec::new(), cup_start: None, max_arm_move: 0.0 };
     let options = SimOptions { duration_secs: scenario.duration_secs };
     sim::simulate_with(&robot, &mut grasper, &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut watch])
         .unwrap();
@@ -114,7 +75,8 @@ fn run(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> Run {
     let truth = watch.cup_start.unwrap();
     Run {
         verdicts,
-        measure: GaitMeasureAndGrasp { fell: check.metrics.summary().fell, grasp },
+        fell: check.metrics.summary().fell,
+        grasp,
         estimate_error_m: grasper.estimate().map(|e| {
             let c = e.centre_world;
             (Vector3::new(c.x, c.y, e.table_height_m + e.height_m / 2.0) - truth).norm()
@@ -133,6 +95,10 @@ fn all_pass(r: &Run) -> bool {
     r.verdicts.iter().all(|v| v.passed)
 }
 
+fn verdict<'a>(r: &'a Run, name: &str) -> &'a Verdict {
+    r.verdicts.iter().find(|v| v.name == name).unwrap()
+}
+
 /// The shipped scenario: the cup seen within 1 cm, lifted ≥ 10 cm and held 2 s, every check
 /// passing.
 #[test]
@@ -141,8 +107,8 @@ fn nominal_grasp_lifts_and_holds_the_cup() {
     let e = r.estimate_error_m.expect("the cup was seen");
     assert!(e < 0.01, "estimate off by {e} m");
     assert_eq!(r.phase, Phase::Hold);
-    assert!(r.measure.grasp.final_lift_m >= 0.1, "{:?}", r.measure.grasp);
-    assert!(r.measure.grasp.held_secs >= 2.0, "{:?}", r.measure.grasp);
+    assert!(r.grasp.final_lift_m >= 0.1, "{:?}", r.grasp);
+    assert!(r.grasp.held_secs >= 2.0, "{:?}", r.grasp);
     assert!(all_pass(&r), "{:?}", r.verdicts);
 }
 
@@ -168,4 +134,43 @@ fn head_camera_finds_the_cup_within_a_centimetre() {
         assert!((seen.radius_m - 0.04).abs() < 0.005, "{seen:?}");
         assert!((seen.table_height_m - 0.62).abs() < 0.005, "{seen:?}");
     }
+}
+
+/// Cups where the shipped scenario never puts them, both sides of the robot (the left arm
+/// takes the cup on the left): each one seen within 1 cm, lifted and held, every check passing.
+#[test]
+fn grasps_cups_at_positions_it_has_not_seen() {
+    for (x, y) in [(0.3, -0.06), (0.35, -0.16), (0.32, 0.12), (0.36, 0.04)] {
+        let r = run(nominal(), |s| s.cup.as_mut().unwrap().position = [x, y]);
+        println!("cup at ({x}, {y}): {:?}", r.grasp);
+        assert!(r.estimate_error_m.unwrap() < 0.01, "({x}, {y}): {:?}", r.estimate_error_m);
+        assert!(r.grasp.final_lift_m >= 0.1 && r.grasp.held_secs >= 2.0, "({x}, {y}): {:?}", r.grasp);
+        assert!(all_pass(&r), "({x}, {y}): {:?}", r.verdicts);
+    }
+}
+
+/// A grip of 0.5 N per finger can't hold 0.2 kg at μ 0.8 (1.2 N needed): the hand rises
+/// without the cup, and the slip and lift checks fail with their numbers.
+#[test]
+fn too_weak_a_grip_slips_and_fails() {
+    let r = run(nominal(), |s| s.grasp.grip_force_n = 0.5);
+    let slip = verdict(&r, "max_slip_m");
+    assert!(!slip.passed && slip.value > 0.05, "{slip:?}");
+    assert!(!verdict(&r, "min_lift_m").passed, "{:?}", r.grasp);
+    assert!(r.grasp.final_lift_m < 0.02, "{:?}", r.grasp);
+    assert!(!r.fell);
+}
+
+/// A cup at the far end of the table: the controller refuses before moving (its reason names
+/// the cup and the reach), the arms stay where they were, and the lift check fails.
+#[test]
+fn cup_out_of_reach_is_refused_before_moving() {
+    let r = run(nominal(), |s| s.cup.as_mut().unwrap().position = [0.75, -0.1]);
+    let why = r.refusal.clone().expect("refused");
+    assert!(why.contains("out of reach") && why.contains("0.75"), "{why}");
+    assert_eq!(r.phase, Phase::Refused);
+    assert!(r.max_arm_move_rad < 0.05, "the arms moved {} rad", r.max_arm_move_rad);
+    assert!(!verdict(&r, "min_lift_m").passed);
+    assert!(!all_pass(&r));
+    assert!(!r.fell);
 }

@@ -171,7 +171,10 @@ impl GraspCheck {
 
     fn bind(&mut self, model: &Model) -> Result<()> {
         self.cup_body = model.id(ObjType::Body, &self.cup_name).ok_or_else(|| Error::Grasp {
-            message: format!("grasp checks: the model has no body \"{}\" (the cup): compose a world with it", self.cup_name),
+            message: format!(
+                "grasp checks: the model has no body \"{}\" (the cup): compose a world with it",
+                self.cup_name
+            ),
         })?;
         self.robot_root = model.free_joint().map_or(0, |f| f.body);
         self.feet = crate::robot::find_feet(model)?;
@@ -194,7 +197,11 @@ impl GraspCheck {
             fingers.dedup();
             if fingers.len() != 2 {
                 return Err(Error::Grasp {
-                    message: format!("grasp checks: the gripper of \"{}\" has {} fingers, not 2", model.name(ObjType::Body, g), fingers.len()),
+                    message: format!(
+                        "grasp checks: the gripper of \"{}\" has {} fingers, not 2",
+                        model.name(ObjType::Body, g),
+                        fingers.len()
+                    ),
                 });
             }
             // The arm: below the first ancestor shared with the other gripper.
@@ -220,7 +227,12 @@ impl GraspCheck {
                 .unwrap_or(self.robot_root);
             let top = up.iter().copied().take_while(|&x| x != trunk).last().unwrap_or(hand);
             let arm_bodies: Vec<usize> = (0..model.nbody()).filter(|&x| below(model, top, x)).collect();
-            self.grippers.push(GripperSet { grasp_body: g, fingers: [fingers[0], fingers[1]], gripper_bodies, arm_bodies });
+            self.grippers.push(GripperSet {
+                grasp_body: g,
+                fingers: [fingers[0], fingers[1]],
+                gripper_bodies,
+                arm_bodies,
+            });
         }
         // Watched pairs: each arm's geoms against every other robot geom outside that arm,
         // except the trunk body the arm hangs from (its shoulder joint sits on it).
@@ -256,7 +268,11 @@ impl GraspCheck {
 /// Signed distance of `p` inside the convex polygon `hull` (counter-clockwise), m.
 fn margin_inside(hull: &[Vector2<f64>], p: Vector2<f64>) -> f64 {
     if hull.len() < 3 {
-        return if hull.is_empty() { f64::NEG_INFINITY } else { -hull.iter().map(|h| (h - p).norm()).fold(f64::INFINITY, f64::min) };
+        return if hull.is_empty() {
+            f64::NEG_INFINITY
+        } else {
+            -hull.iter().map(|h| (h - p).norm()).fold(f64::INFINITY, f64::min)
+        };
     }
     let mut m = f64::INFINITY;
     for i in 0..hull.len() {
@@ -358,7 +374,11 @@ impl Observer for GraspCheck {
                         "t = {:.3} s: robot \"{}\" touches \"{}\" at ({:.3}, {:.3}, {:.3}) m",
                         step.time_secs,
                         model.name(ObjType::Body, rb),
-                        if wb == 0 { "the world (floor or table)".to_string() } else { model.name(ObjType::Body, wb).to_string() },
+                        if wb == 0 {
+                            "the world (floor or table)".to_string()
+                        } else {
+                            model.name(ObjType::Body, wb).to_string()
+                        },
                         w.position[0],
                         w.position[1],
                         w.position[2]

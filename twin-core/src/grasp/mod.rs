@@ -56,7 +56,8 @@ pub struct GraspOptions {
     pub camera: String,
     /// Camera frame rate, Hz (default: 15).
     pub camera_rate_hz: f64,
-    /// Depth noise standard deviation, m (default: 0.002).
+    /// Depth noise standard deviation, m (default: 0.002). A scenario stores it in the model
+    /// (the camera's user number 0), which wins, so that `twin randomize` can draw it.
     pub camera_noise_std_m: f64,
     /// Seed of the depth noise (default: 0).
     pub camera_seed: u64,
@@ -292,8 +293,7 @@ impl Grasper {
 
     fn bind(&mut self, model: &Model) -> Result<()> {
         let o = &self.options;
-        let ids: Vec<Option<usize>> =
-            o.grasp_bodies.iter().map(|n| model.id(crate::mj::ObjType::Body, n)).collect();
+        let ids: Vec<Option<usize>> = o.grasp_bodies.iter().map(|n| model.id(crate::mj::ObjType::Body, n)).collect();
         let mut arms = Vec::new();
         for (k, side) in [ArmSide::Left, ArmSide::Right].into_iter().enumerate() {
             let wanted = o.arm == "auto" || o.arm == side.label();
@@ -303,7 +303,12 @@ impl Grasper {
             arms.push(Arm::find(model, side, &o.grasp_bodies[k], ids[1 - k], o.saturation_error, &o.trunk_joints)?);
         }
         self.arms = arms;
-        self.eye = Some(Eye::new(model, &o.camera, o.camera_noise_std_m, o.camera_seed)?);
+        // The model's camera user 0 holds the noise when it has one (scenarios, randomized).
+        let noise = model
+            .id(crate::mj::ObjType::Camera, &o.camera)
+            .and_then(|c| model.cam_user(c).first().copied())
+            .unwrap_or(o.camera_noise_std_m);
+        self.eye = Some(Eye::new(model, &o.camera, noise, o.camera_seed)?);
         Ok(())
     }
 
@@ -359,9 +364,11 @@ impl Grasper {
         let scratch = match self.scratch.as_mut() {
             Some(s) => s,
             None => {
-                let model = self.sim.as_ref().map(|s| s.model().clone()).ok_or_else(|| Error::Grasp {
-                    message: "IK before the first observation".into(),
-                })?;
+                let model = self
+                    .sim
+                    .as_ref()
+                    .map(|s| s.model().clone())
+                    .ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
                 self.scratch.insert(Data::new(model)?)
             }
         };
@@ -371,7 +378,8 @@ impl Grasper {
 
     /// Position-only IK of arm `a` (no orientation tasks), 200 iterations.
     fn ik_position_only(&mut self, a: usize, qpos: &[f64], target: &Target, q: &mut [f64]) -> Result<IkResult> {
-        let scratch = self.scratch.as_mut().ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
+        let scratch =
+            self.scratch.as_mut().ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
         scratch.qpos_mut().copy_from_slice(qpos);
         arm::solve_position(scratch, &self.arms[a], target.position, q, 200, 0.05)
     }
@@ -397,7 +405,8 @@ impl Grasper {
             self.ik_position_only(a, qpos, &reach, &mut q).map_err(|e| e.to_string())?;
             let target = Target { position: grasp, approach: Some(self.options.approach_pitch_rad) };
             let r = self.ik(a, qpos, &target, &mut q, 400).map_err(|e| e.to_string())?;
-            let mut failed = (r.position_error_m > self.options.reach_tolerance_m || r.jaw_tilt_rad > self.options.max_jaw_tilt_rad)
+            let mut failed = (r.position_error_m > self.options.reach_tolerance_m
+                || r.jaw_tilt_rad > self.options.max_jaw_tilt_rad)
                 .then_some(("grasp", grasp, r));
             let mut dir = self.approach_of(a, qpos, &q).unwrap_or_else(|| {
                 let s = shoulders[a];
@@ -415,14 +424,23 @@ impl Grasper {
             let q_via = self.raised(a, &q_start);
             let via = self.grasp_point(a, qpos, &q_via).unwrap_or(pre);
             if failed.is_none() && via.z < cup.table_height_m + self.options.clearance_height_m {
-                failed = Some(("raised", via, IkResult { position_error_m: cup.table_height_m + self.options.clearance_height_m - via.z, jaw_tilt_rad: 0.0 }));
+                failed = Some((
+                    "raised",
+                    via,
+                    IkResult {
+                        position_error_m: cup.table_height_m + self.options.clearance_height_m - via.z,
+                        jaw_tilt_rad: 0.0,
+                    },
+                ));
             }
             if failed.is_none() {
                 for (name, p) in [("pre-grasp", pre), ("lifted", lifted)] {
                     let mut qq = q_grasp.clone();
                     let target = Target { position: p, approach: Some(self.options.approach_pitch_rad) };
                     let r = self.ik(a, qpos, &target, &mut qq, 300).map_err(|e| e.to_string())?;
-                    if r.position_error_m > self.options.reach_tolerance_m || r.jaw_tilt_rad > self.options.max_jaw_tilt_rad {
+                    if r.position_error_m > self.options.reach_tolerance_m
+                        || r.jaw_tilt_rad > self.options.max_jaw_tilt_rad
+                    {
                         failed = Some((name, p, r));
                         break;
                     }

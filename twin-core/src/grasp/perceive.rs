@@ -70,9 +70,11 @@ impl Eye {
         };
         // The camera's own housing and the head it sits on are not in view.
         let body = model.cam_bodyid()[cam] as usize;
-        let filter = RayFilter { exclude_bodies: vec![body, model.body_parentid()[body] as usize], ..Default::default() };
+        let filter =
+            RayFilter { exclude_bodies: vec![body, model.body_parentid()[body] as usize], ..Default::default() };
         // One thread: randomized batches already run one episode per core.
-        let options = DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, filter, ..Default::default() };
+        let options =
+            DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, filter, ..Default::default() };
         Ok(Eye { camera: DepthCamera::new(model, camera, options)?, detect: CupDetectOptions::default() })
     }
 

@@ -282,6 +282,24 @@ impl ModelEdit {
         Ok(self)
     }
 
+    /// Sets user number `index` of camera `cam` (e.g. a depth camera's noise σ, see
+    /// [`Model::cam_user`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a non-finite value; [`Error::Size`] for a bad camera or index.
+    pub fn set_cam_user(&mut self, cam: usize, index: usize, value: f64) -> Result<&mut Self> {
+        check("camera id", cam, self.model.ncam())?;
+        let n = self.model.raw().nuser_cam.max(0) as usize;
+        check("camera user index (nuser_cam)", index, n)?;
+        finite("camera user value", &[value])?;
+        let ncam = self.model.ncam();
+        let m = self.raw_mut();
+        // SAFETY: cam_user has ncam rows of nuser_cam entries; both checked; exclusive access.
+        let all = unsafe { raw_slice_mut(m.cam_user, ncam * n) };
+        all[cam * n + index] = value;
+        Ok(self)
+    }
+
     /// Sets the friction cone to elliptic (`cone="elliptic"`) with `impratio`, the ratio of
     /// frictional to normal constraint impedance (MuJoCo's remedy for slip of held objects).
     ///
