@@ -653,6 +653,28 @@ mod tests {
     }
 
     #[test]
+    fn grasp_keys_are_read_and_checked_with_their_lines() {
+        let s = parse(
+            "duration = 5\ncontroller = \"grasp\"\nworld = \"w.world\"\nimpratio = 10\nrandomize = \"r.toml\"\n\
+             [cup]\nposition = [0.3, -0.1]\n[grasp]\ngrip_force_n = 6.0\n[checks]\nmin_lift_m = 0.1\n",
+        )
+        .unwrap();
+        assert_eq!(s.world.as_deref(), Some(Path::new("w.world")));
+        assert_eq!(s.randomize.as_deref(), Some(Path::new("r.toml")));
+        assert_eq!(s.cup.as_ref().map(|c| (c.body.as_str(), c.position)), Some(("cup", [0.3, -0.1])));
+        assert_eq!(s.grasp.grip_force_n, 6.0);
+        assert!(s.checks.grasp().any());
+        let e = parse("duration = 5\n[grasp]\n\ngrip_force_n = -1.0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:4: `grasp.grip_force_n`") && e.contains("non-negative"), "{e}");
+        let e = parse("duration = 5\n[grasp]\ngrip = 1.0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:3: `grip`") && e.contains("unknown field"), "{e}");
+        let e = parse("duration = 5\nimpratio = 0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:2: `impratio`"), "{e}");
+        let e = parse("duration = 5\n[cup]\nposition = [0.3]\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:3: `position`"), "{e}");
+    }
+
+    #[test]
     fn checks_pass_and_fail_with_their_numbers() {
         let s = parse("duration = 1\n[checks]\nfalls = 0\nmin_forward = 10.0\nmax_slip = 0.01\n").unwrap();
         let summary = GaitSummary { forward_m: 12.0, slip_max_m: 0.05, ..GaitSummary::default() };

@@ -361,17 +361,8 @@ impl Grasper {
 
     /// Solves `target` for arm `a` from `q` on the scratch state set to the observed `qpos`.
     fn ik(&mut self, a: usize, qpos: &[f64], target: &Target, q: &mut [f64], iterations: usize) -> Result<IkResult> {
-        let scratch = match self.scratch.as_mut() {
-            Some(s) => s,
-            None => {
-                let model = self
-                    .sim
-                    .as_ref()
-                    .map(|s| s.model().clone())
-                    .ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
-                self.scratch.insert(Data::new(model)?)
-            }
-        };
+        let scratch =
+            self.scratch.as_mut().ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
         scratch.qpos_mut().copy_from_slice(qpos);
         arm::solve(scratch, &self.arms[a], target, q, iterations, 0.05)
     }
@@ -388,7 +379,7 @@ impl Grasper {
     fn plan(&mut self, qpos: &[f64], cup: &CupSighting) -> std::result::Result<Plan, String> {
         let grasp = Vector3::new(cup.centre_world.x, cup.centre_world.y, cup.table_height_m + cup.height_m / 2.0);
         let mut order: Vec<usize> = (0..self.arms.len()).collect();
-        // The cup's side first (in the trunk's heading: y of the shoulders' midpoint frame).
+        // The arm whose shoulder is nearer the cup first.
         let sim = self.sim.as_ref().ok_or("no observation yet")?;
         let shoulders: Vec<Vector3<f64>> =
             self.arms.iter().map(|a| Vector3::from(sim.xpos()[a.shoulder_body])).collect();
@@ -399,8 +390,8 @@ impl Grasper {
         for a in order {
             let q_start = self.arms[a].q(qpos);
             let mut q = q_start.clone();
-            // The grasp pose first; its approach axis is the approach path.
-            // Position alone first (well-posed from a hanging arm), then the jaw and approach.
+            // The grasp pose first (its approach axis is the approach path): position alone
+            // (well-posed from a hanging arm), then with the jaw level and the approach pitch.
             let reach = Target { position: grasp, approach: None };
             self.ik_position_only(a, qpos, &reach, &mut q).map_err(|e| e.to_string())?;
             let target = Target { position: grasp, approach: Some(self.options.approach_pitch_rad) };
@@ -449,7 +440,7 @@ impl Grasper {
             match failed {
                 None => return Ok(Plan { arm: a, grasp, approach: dir, via, q_start, q_via }),
                 Some((name, p, r)) => why.push(format!(
-                    "the {} arm's {name} pose at ({:.3}, {:.3}, {:.3}) m stays {:.3} m away (jaw tilt {:.2} rad)",
+                    "the {} arm's {name} pose at ({:.3}, {:.3}, {:.3}) m is off by {:.3} m (jaw tilt {:.2} rad)",
                     self.arms[a].side.label(),
                     p.x,
                     p.y,
