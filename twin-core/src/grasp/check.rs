@@ -411,7 +411,7 @@ impl Observer for GraspCheck {
             self.m.min_com_margin_secs = step.time_secs;
         }
         // Arm clearance, every 10th step (50 Hz at 2 ms).
-        if step.index % 10 == 0 && !self.pairs.is_empty() {
+        if step.index.is_multiple_of(10) && !self.pairs.is_empty() {
             let scratch = match self.scratch.as_mut() {
                 Some(s) => s,
                 None => self.scratch.insert(data.try_clone()?),
