@@ -10,6 +10,8 @@ mod convert;
 mod deploy;
 #[path = "cli/engine.rs"]
 mod engine;
+#[path = "cli/grasp.rs"]
+mod grasp;
 #[path = "cli/info.rs"]
 mod info;
 #[cfg(feature = "ros")]

@@ -498,3 +498,40 @@ impl Layout {
         })
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::Spec;
+
+    /// A scene object's start and a depth camera's noise are drawn per episode within their
+    /// ranges, into the initial state and the model.
+    #[test]
+    fn object_position_and_camera_noise_are_drawn() {
+        let model = Model::from_xml_str(
+            r#"<mujoco><size nuser_cam="1"/><worldbody><geom type="plane" size="1 1 0.1"/>
+               <camera name="eye" pos="0 0 1" user="0.002"/>
+               <body name="cup" pos="0.3 -0.1 0.05"><freejoint/><geom type="cylinder" size="0.04 0.05" mass="0.2"/></body>
+               </worldbody></mujoco>"#,
+        )
+        .unwrap();
+        let spec = Spec::from_toml_str(
+            "[[object_position]]\nselect = [\"cup\"]\nmode = \"add\"\ndist = \"uniform\"\nlow = -0.05\nhigh = 0.05\n\
+             [camera_noise_std]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0.0\nhigh = 0.006\n",
+        )
+        .unwrap();
+        let layout = Layout::new(&spec, &model).unwrap();
+        assert_eq!(layout.columns, ["camera_noise_std", "object_position:cup:x", "object_position:cup:y"]);
+        let mut seen_x = Vec::new();
+        for episode in 0..20 {
+            let draw = layout.draw(&model, episode, &mut episode_rng(3, episode, 0)).unwrap();
+            let (x, y) = (draw.init_qpos[0], draw.init_qpos[1]);
+            assert!((x - 0.3).abs() <= 0.05 && (y + 0.1).abs() <= 0.05, "{x} {y}");
+            assert_eq!((x, y), (0.3 + draw.values[1], -0.1 + draw.values[2]));
+            let noise = draw.model.cam_user(0)[0];
+            assert!((0.0..=0.006).contains(&noise) && noise == draw.values[0], "{noise}");
+            seen_x.push(x);
+        }
+        assert!(seen_x.iter().any(|&x| x > 0.32) && seen_x.iter().any(|&x| x < 0.28), "{seen_x:?}");
+    }
+}

@@ -523,5 +523,16 @@ mod tests {
         let e =
             Spec::from_toml_str("[[object_mass]]\ndist = \"gaussian\"\nmean = 1\nstd = 0.1\n").unwrap_err().to_string();
         assert!(e.contains("object_mass.0") && e.contains("select"), "{e}");
+        let e =
+            Spec::from_toml_str("[[object_position]]\nmode = \"add\"\ndist = \"uniform\"\nlow = -0.1\nhigh = 0.1\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("object_position.0") && e.contains("select"), "{e}");
+        let e = Spec::from_toml_str(
+            "[camera_noise_std]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = -0.01\nhigh = 0.01\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("camera_noise_std"), "{e}");
     }
 }

@@ -18,7 +18,8 @@ pub struct GraspChecks {
     pub max_grip_force_n: Option<f64>,
     /// Least mean finger–cup normal force of each finger while the cup is held up, N.
     pub min_grip_force_n: Option<f64>,
-    /// Largest cup displacement in the grasp frame after the lift started, m.
+    /// Largest cup displacement in the grasp frame after the lift started (the grasp frame,
+    /// once at the cup, rose 1 cm), m.
     pub max_slip_m: Option<f64>,
     /// Largest cup tilt in the grasp frame after the lift started, degrees.
     pub max_tilt_deg: Option<f64>,
@@ -93,8 +94,9 @@ pub struct GraspCheck {
     /// Geom pairs (arm geom, other robot geom) whose distance is watched.
     pairs: Vec<(usize, usize)>,
     cup_z0: f64,
-    /// Per gripper: grasp z at the first two-finger contact.
-    grasp_z_at_contact: Vec<Option<f64>>,
+    /// Per gripper: lowest grasp-frame z while the grasp point was at the cup (within 2 cm of
+    /// its centre).
+    grasp_z_at_cup: Vec<Option<f64>>,
     /// Cup pose in the grasp frame when the lift started: (gripper, position, rotation).
     lift_ref: Option<(usize, Vector3<f64>, Matrix3<f64>)>,
     hold_force_sum: [f64; 2],
@@ -125,7 +127,7 @@ impl GraspCheck {
             grippers: Vec::new(),
             pairs: Vec::new(),
             cup_z0: 0.0,
-            grasp_z_at_contact: Vec::new(),
+            grasp_z_at_cup: Vec::new(),
             lift_ref: None,
             hold_force_sum: [0.0; 2],
             hold_steps: 0,
@@ -322,7 +324,7 @@ impl Observer for GraspCheck {
     fn start(&mut self, model: &Model, data: &Data) -> Result<()> {
         self.bind(model)?;
         self.cup_z0 = data.xpos()[self.cup_body][2];
-        self.grasp_z_at_contact = vec![None; self.grippers.len()];
+        self.grasp_z_at_cup = vec![None; self.grippers.len()];
         self.lift_ref = None;
         self.hold_force_sum = [0.0; 2];
         self.hold_steps = 0;
@@ -437,17 +439,18 @@ impl Observer for GraspCheck {
         // Grasp, lift, slip.
         let cup_p = Vector3::from(data.xpos()[self.cup_body]);
         let cup_r = Matrix3::from_row_slice(&data.xmat()[self.cup_body]);
+        // The lift starts when a grasp frame that was at the cup has risen 1 cm: from then on
+        // the cup must move with it, whether the fingers hold it or not.
         for (k, gs) in self.grippers.iter().enumerate() {
-            let gz = data.xpos()[gs.grasp_body][2];
-            let both = finger_force[k][0] > 0.0 && finger_force[k][1] > 0.0;
-            if both && self.grasp_z_at_contact[k].is_none() {
-                self.grasp_z_at_contact[k] = Some(gz);
+            let gp = Vector3::from(data.xpos()[gs.grasp_body]);
+            if (gp - cup_p).norm() < 0.02 {
+                let z = self.grasp_z_at_cup[k].get_or_insert(gp.z);
+                *z = z.min(gp.z);
             }
             if self.lift_ref.is_none()
-                && let Some(z0) = self.grasp_z_at_contact[k]
-                && gz > z0 + 0.01
+                && let Some(z0) = self.grasp_z_at_cup[k]
+                && gp.z > z0 + 0.01
             {
-                let gp = Vector3::from(data.xpos()[gs.grasp_body]);
                 let gr = Matrix3::from_row_slice(&data.xmat()[gs.grasp_body]);
                 self.lift_ref = Some((k, gr.transpose() * (cup_p - gp), gr.transpose() * cup_r));
                 self.m.slip_m = 0.0;
