@@ -1,7 +1,11 @@
 //! The one ROS 2 topic table of a twin, derived from its [`Robot`]: each topic's name, message
-//! type, rate, `frame_id` and QoS intent. Recordings ([`crate::sim::Recording`]) write exactly
-//! these topics into their sinks ([`Sink`]: the MCAP writer today, a live DDS publisher next),
-//! as typed messages ([`TypedMessage`], the types of [`crate::log`]) built once per step.
+//! type, rate, `frame_id` and QoS intent. Recordings ([`crate::sim::Recording`]) turn the
+//! simulation into these topics' typed messages ([`TypedMessage`], the types of [`crate::log`])
+//! once per step and hand them to their sinks ([`Sink`]: the MCAP file
+//! [`crate::sim::McapSink`], the rerun recording `crate::sim::RerunSink`, the live DDS bridge
+//! `crate::live::LiveSink`, a user's own), each of which encodes what it takes. A controller adds
+//! topics of its own ([`crate::control::Controller::topics`], e.g. a walking controller's
+//! footsteps), recorded the same way.
 //!
 //! Topics (`<robot>` = [`Robot::name`]):
 //! - `/joint_states` (`sensor_msgs/msg/JointState`) at the state rate;

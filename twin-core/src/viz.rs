@@ -290,6 +290,39 @@ impl Recorder {
     }
 }
 
+/// A curve for [`write_curves`]: its entity path and points `(x, y)`.
+pub type Curve = (String, Vec<(f64, f64)>);
+
+/// Writes curves (no robot) to a `.rrd` file: each as scalars `y` at entity path `curve.0` on
+/// the sequence timeline `timeline`, whose index is `round(x · x_scale)` (a rerun timeline is
+/// an integer sequence: e.g. `log10(τ)` in thousandths for an Allan deviation plot). An
+/// existing file is replaced.
+///
+/// # Errors
+/// [`Error::Rerun`] if the file can't be written.
+pub fn write_curves(
+    path: &Path,
+    app_id: &'static str,
+    timeline: &'static str,
+    x_scale: f64,
+    curves: &[Curve],
+) -> Result<()> {
+    let rec = rerun::RecordingStreamBuilder::new(app_id)
+        .recording_id(format!("{app_id}-recording"))
+        .save(path)
+        .map_err(|e| rerun_err(Some(path), e))?;
+    for (entity, points) in curves {
+        for &(x, y) in points {
+            if !(x.is_finite() && y.is_finite()) {
+                continue;
+            }
+            rec.set_time_sequence(timeline, (x * x_scale).round() as i64);
+            rec.log(entity.as_str(), &rerun::Scalars::single(y)).map_err(|e| rerun_err(Some(path), e))?;
+        }
+    }
+    rec.flush_blocking().map_err(|e| rerun_err(Some(path), e))
+}
+
 /// Options of [`record_log`].
 #[derive(Debug, Clone)]
 pub struct ViewOptions {

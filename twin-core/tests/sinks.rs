@@ -59,9 +59,12 @@ impl Controller for HoldWithDiagnostics {
     }
 }
 
+/// What [`Counter`] saw: messages per topic, and `/odom`'s heights (log time, m).
+type Seen = (Vec<(String, u64)>, Vec<(u64, f64)>);
+
 /// A sink outside twin-core: counts messages per topic and keeps `/odom`'s heights.
 #[derive(Clone, Default)]
-struct Counter(Arc<Mutex<(Vec<(String, u64)>, Vec<(u64, f64)>)>>);
+struct Counter(Arc<Mutex<Seen>>);
 
 impl Sink for Counter {
     fn add_topic(&mut self, _id: usize, topic: &TopicInfo) -> twin_core::Result<bool> {

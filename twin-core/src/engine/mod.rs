@@ -252,6 +252,12 @@ impl Engine {
         self.data.as_ref()
     }
 
+    /// The simulation as the last rollout left it, taken out of the engine (e.g. to examine it
+    /// further; the next rollout makes a new one).
+    pub fn take_data(&mut self) -> Option<Data> {
+        self.data.take()
+    }
+
     /// Runs `episode` on `model` under `controller`, with `disturbances` and `observers`, random
     /// numbers from `rng` (see the module docs for the step order).
     ///

@@ -23,8 +23,8 @@
 //!
 //! The recorder turns `Data` into these typed messages ([`TypedMessage`]) once per step, for the
 //! topics that are due, and hands them to its [`Sink`]s: the MCAP file ([`McapSink`]), the rerun
-//! recording ([`RerunSink`]) and any given to [`Recording::with_sinks`] (the live ROS 2 bridge).
-//! Each sink encodes what it takes its own way.
+//! recording (`RerunSink`, with the `rerun` feature) and any given to [`Recording::with_sinks`]
+//! (the live ROS 2 bridge). Each sink encodes what it takes its own way.
 //!
 //! The rerun recording shows, at [`RecordOptions::rerun_rate_hz`], the posed geometry (from
 //! `/tf`) and scalars: `series/joints/<joint>`, `series/imu/<imu>/{gyro,accel}_{x,y,z}`,
@@ -501,7 +501,7 @@ impl Recording {
     }
 
     /// As [`Recording::new`], and every topic also goes to each of `sinks` (e.g. the live ROS 2
-    /// bridge, [`crate::live::LiveSink`]), which follow `--topics` like the MCAP file.
+    /// bridge, `crate::live::LiveSink`), which follow `--topics` like the MCAP file.
     ///
     /// # Errors
     /// As [`Recording::new`]; errors of the sinks' `add_topic`.
