@@ -14,6 +14,8 @@ mod engine;
 mod excite;
 #[path = "cli/gap.rs"]
 mod gap;
+#[path = "cli/grasp.rs"]
+mod grasp;
 #[path = "cli/info.rs"]
 mod info;
 #[cfg(feature = "ros")]

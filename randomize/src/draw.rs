@@ -54,6 +54,8 @@ enum Kind {
     InitQpos,
     PushInterval,
     PushSpeed,
+    ObjectPosition,
+    CameraNoise,
 }
 
 /// A term bound to model objects: each target is (object, column of its draw, nominal value).
@@ -264,6 +266,30 @@ impl Layout {
                     }
                 }
             }
+            "object_position" => {
+                kind = Kind::ObjectPosition;
+                for j in 0..model.njnt() {
+                    let b = model.jnt_bodyid()[j] as usize;
+                    let name = name_or(model, ObjType::Body, b);
+                    if model.joint_type(j) == JointType::Free && select(&name) {
+                        let adr = model.jnt_qposadr()[j] as usize;
+                        for (axis, a) in ["x", "y"].iter().enumerate() {
+                            objects.push((adr + axis, format!("{name}:{a}"), self.home_qpos[adr + axis], axis));
+                        }
+                    }
+                }
+            }
+            "camera_noise_std" => {
+                kind = Kind::CameraNoise;
+                for c in 0..model.ncam() {
+                    let name = name_or(model, ObjType::Camera, c);
+                    if let Some(&nominal) = model.cam_user(c).first()
+                        && select(&name)
+                    {
+                        objects.push((c, name, nominal, 0));
+                    }
+                }
+            }
             "latency_steps" => {
                 kind = Kind::Latency;
                 objects.push((0, String::new(), 0.0, 0));
@@ -290,6 +316,8 @@ impl Layout {
                 Kind::Mass | Kind::Com => ("body with mass", ObjType::Body),
                 Kind::Strength if self.actuation == Actuation::Ctrl => ("actuator", ObjType::Actuator),
                 Kind::ImuNoise | Kind::ImuBias => ("gyro/accelerometer sensor", ObjType::Sensor),
+                Kind::ObjectPosition => ("free body (scene object)", ObjType::Body),
+                Kind::CameraNoise => ("camera keeping its noise (user 0; grasping scenarios)", ObjType::Camera),
                 _ => ("hinge or slide joint", ObjType::Joint),
             };
             let count = match what.1 {
@@ -297,6 +325,7 @@ impl Layout {
                 ObjType::Body => model.nbody(),
                 ObjType::Actuator => model.nu(),
                 ObjType::Sensor => model.nsensor(),
+                ObjType::Camera => model.ncam(),
                 _ => model.njnt(),
             };
             let names: Vec<String> =
@@ -309,8 +338,11 @@ impl Layout {
             )));
         }
         // Column naming: the key for one shared draw, key:object for independent draws.
-        let label =
-            if base == "object_mass" { format!("object_mass:{}", term.select.join("|")) } else { key.to_string() };
+        let label = if base == "object_mass" || base == "object_position" {
+            format!("{base}:{}", term.select.join("|"))
+        } else {
+            key.to_string()
+        };
         let mut targets = Vec::new();
         let mut group_columns: Vec<Option<usize>> = vec![None; 3];
         for (object, name, nominal, group) in objects {
@@ -320,7 +352,11 @@ impl Layout {
             } else if let Some(c) = group_columns[group] {
                 c
             } else {
-                let suffix = if kind == Kind::Com { format!(":{}", ["x", "y", "z"][group]) } else { String::new() };
+                let suffix = if matches!(kind, Kind::Com | Kind::ObjectPosition) {
+                    format!(":{}", ["x", "y", "z"][group])
+                } else {
+                    String::new()
+                };
                 self.columns.push(format!("{label}{suffix}"));
                 group_columns[group] = Some(self.columns.len() - 1);
                 self.columns.len() - 1
@@ -432,6 +468,10 @@ impl Layout {
                             v
                         };
                     }
+                    Kind::ObjectPosition => init_qpos[object] = v,
+                    Kind::CameraNoise => {
+                        edit.set_cam_user(object, 0, v.max(0.0)).map_err(apply_err)?;
+                    }
                     Kind::PushInterval => push_interval_secs = Some(v),
                     Kind::PushSpeed => push_speed_mps = v,
                 }
@@ -456,5 +496,42 @@ impl Layout {
             push_speed_mps,
             command_scale,
         })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::spec::Spec;
+
+    /// A scene object's start and a depth camera's noise are drawn per episode within their
+    /// ranges, into the initial state and the model.
+    #[test]
+    fn object_position_and_camera_noise_are_drawn() {
+        let model = Model::from_xml_str(
+            r#"<mujoco><size nuser_cam="1"/><worldbody><geom type="plane" size="1 1 0.1"/>
+               <camera name="eye" pos="0 0 1" user="0.002"/>
+               <body name="cup" pos="0.3 -0.1 0.05"><freejoint/><geom type="cylinder" size="0.04 0.05" mass="0.2"/></body>
+               </worldbody></mujoco>"#,
+        )
+        .unwrap();
+        let spec = Spec::from_toml_str(
+            "[[object_position]]\nselect = [\"cup\"]\nmode = \"add\"\ndist = \"uniform\"\nlow = -0.05\nhigh = 0.05\n\
+             [camera_noise_std]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0.0\nhigh = 0.006\n",
+        )
+        .unwrap();
+        let layout = Layout::new(&spec, &model).unwrap();
+        assert_eq!(layout.columns, ["camera_noise_std", "object_position:cup:x", "object_position:cup:y"]);
+        let mut seen_x = Vec::new();
+        for episode in 0..20 {
+            let draw = layout.draw(&model, episode, &mut episode_rng(3, episode, 0)).unwrap();
+            let (x, y) = (draw.init_qpos[0], draw.init_qpos[1]);
+            assert!((x - 0.3).abs() <= 0.05 && (y + 0.1).abs() <= 0.05, "{x} {y}");
+            assert_eq!((x, y), (0.3 + draw.values[1], -0.1 + draw.values[2]));
+            let noise = draw.model.cam_user(0)[0];
+            assert!((0.0..=0.006).contains(&noise) && noise == draw.values[0], "{noise}");
+            seen_x.push(x);
+        }
+        assert!(seen_x.iter().any(|&x| x > 0.32) && seen_x.iter().any(|&x| x < 0.28), "{seen_x:?}");
     }
 }

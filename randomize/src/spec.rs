@@ -113,7 +113,8 @@ fn select_list<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Ve
 }
 
 /// Terms whose resulting value is a physical quantity that cannot be negative.
-const NON_NEGATIVE: [&str; 9] = [
+const NON_NEGATIVE: [&str; 10] = [
+    "camera_noise_std",
     "friction",
     "mass",
     "damping",
@@ -326,6 +327,15 @@ pub struct Spec {
     /// Masses of scene objects by body name (`select` required), kg; applied after `mass`.
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub object_mass: Vec<Term>,
+    /// Start position of scene objects (free bodies, e.g. a cup on a table) by body name
+    /// (`select` required), m: one draw for x and one for y, combined with the start position
+    /// (usually `mode = "add"`).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub object_position: Vec<Term>,
+    /// Standard deviation of depth-camera noise, m (cameras whose model keeps it: the camera's
+    /// user number 0, as grasping scenarios do; `select`: camera names).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub camera_noise_std: Option<Term>,
 }
 
 impl Spec {
@@ -385,7 +395,7 @@ impl Spec {
     /// All terms with their keys, in the fixed order draws are made.
     pub fn terms(&self) -> Vec<(String, &Term)> {
         let mut out = Vec::new();
-        let singles: [(&str, &Option<Term>); 13] = [
+        let singles: [(&str, &Option<Term>); 14] = [
             ("friction", &self.friction),
             ("mass", &self.mass),
             ("com_offset", &self.com_offset),
@@ -399,6 +409,7 @@ impl Spec {
             ("encoder_noise_std", &self.encoder_noise_std),
             ("latency_steps", &self.latency_steps),
             ("init_qpos", &self.init_qpos),
+            ("camera_noise_std", &self.camera_noise_std),
         ];
         for (key, term) in singles {
             if let Some(t) = term {
@@ -411,6 +422,9 @@ impl Spec {
         }
         for (i, t) in self.object_mass.iter().enumerate() {
             out.push((format!("object_mass.{i}"), t));
+        }
+        for (i, t) in self.object_position.iter().enumerate() {
+            out.push((format!("object_position.{i}"), t));
         }
         out
     }
@@ -432,6 +446,15 @@ impl Spec {
                 key: "push".into(),
                 message: format!("duration_secs must be a positive number, got {d}"),
             });
+        }
+        for (i, t) in self.object_position.iter().enumerate() {
+            if t.select.is_empty() {
+                return Err(Error::Spec {
+                    path: path.map(Path::to_path_buf),
+                    key: format!("object_position.{i}"),
+                    message: "needs `select = [\"body name\"]` naming the object".into(),
+                });
+            }
         }
         for (i, t) in self.object_mass.iter().enumerate() {
             if t.select.is_empty() {
@@ -500,5 +523,16 @@ mod tests {
         let e =
             Spec::from_toml_str("[[object_mass]]\ndist = \"gaussian\"\nmean = 1\nstd = 0.1\n").unwrap_err().to_string();
         assert!(e.contains("object_mass.0") && e.contains("select"), "{e}");
+        let e =
+            Spec::from_toml_str("[[object_position]]\nmode = \"add\"\ndist = \"uniform\"\nlow = -0.1\nhigh = 0.1\n")
+                .unwrap_err()
+                .to_string();
+        assert!(e.contains("object_position.0") && e.contains("select"), "{e}");
+        let e = Spec::from_toml_str(
+            "[camera_noise_std]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = -0.01\nhigh = 0.01\n",
+        )
+        .unwrap_err()
+        .to_string();
+        assert!(e.contains("camera_noise_std"), "{e}");
     }
 }

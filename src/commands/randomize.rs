@@ -155,7 +155,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => Robot::load(&model_path)?,
     };
     let model = robot.model.clone();
-    let spec = match &args.config {
+    // Without --config, a scenario's own spec (e.g. the grasp scenario's cup and camera draws).
+    let config = args.config.clone().or_else(|| scenario.as_ref().and_then(|s| s.randomize.clone()));
+    let spec = match &config {
         Some(path) => Spec::from_file(path)?,
         None => {
             let mut spec = Spec::default_spec();
@@ -170,12 +172,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             spec
         }
     };
-    let bound = if args.config.is_some() {
+    let bound = if config.is_some() {
         Layout::new(&spec, &model).map(|l| (l, Vec::new()))
     } else {
         Layout::new_skipping_missing(&spec, &model)
     };
-    let (layout, skipped) = bound.map_err(|e| match (&args.config, e) {
+    let (layout, skipped) = bound.map_err(|e| match (&config, e) {
         // Binding errors name the spec file the user wrote.
         (Some(path), randomize::Error::Spec { key, message, .. }) => randomize::Error::Spec {
             path: Some(path.clone()),

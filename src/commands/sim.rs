@@ -200,7 +200,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         (None, _) => None,
     };
     let walk = scenario.as_ref().map(|s| s.walk.clone()).unwrap_or_default();
-    let controller_options = ControllerOptions { trajectory, walk, ..ControllerOptions::default() };
+    let grasp = scenario.as_ref().map(|s| s.grasp.clone()).unwrap_or_default();
+    let controller_options = ControllerOptions { trajectory, walk, grasp, ..ControllerOptions::default() };
     let mut controller = twin_core::control::by_name_with(&controller_name, &robot.model, &controller_options)?;
     // A scenario's pushes and its gait metrics and checks.
     let mut pushes = scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
@@ -300,6 +301,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     )?;
     drop(observers);
     let controller_name = controller.name();
+    let controller_report = controller.report();
     if let Some(b) = bar {
         b.finish_and_clear();
     }
@@ -359,6 +361,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(feature = "ros")]
     if let Some(stats) = live_stats {
         live::report(&mut out, &stats)?;
+    }
+    for line in &controller_report {
+        writeln!(out, "{line}")?;
     }
     // A live run also ends on the flag, through its controller.
     let interrupted = twin_core::fsio::interrupted();

@@ -240,6 +240,14 @@ pub enum Error {
         message: String,
     },
 
+    /// The grasping controller can't drive this model with these options (no gripper or
+    /// camera found, an option out of range).
+    #[error("grasping controller: {message}")]
+    Grasp {
+        /// What is wrong and what to do.
+        message: String,
+    },
+
     /// A scenario file is invalid: the file, the line and key when known, what is wrong.
     #[error("{}{}{}: {message}", path.display(), line.map_or_else(String::new, |l| format!(":{l}")), key.as_deref().map_or_else(String::new, |k| format!(": `{k}`")))]
     Scenario {

@@ -33,6 +33,7 @@ pub mod convert;
 pub mod engine;
 pub mod error;
 pub mod fsio;
+pub mod grasp;
 #[cfg(feature = "ros")]
 pub mod live;
 pub mod log;

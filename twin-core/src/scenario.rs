@@ -22,6 +22,26 @@
 //! min_forward = 10.0
 //! ```
 //!
+//! Grasping scenarios (`controller = "grasp"`, see `scenarios/grasp.toml`) add a world, the
+//! contact model, where the cup starts, the grasper's options and the grasp checks:
+//!
+//! ```toml
+//! world = "../models/table_cup.world" # composed with the robot (relative to this file)
+//! impratio = 10.0                     # elliptic friction cones with this impratio
+//!
+//! randomize = "grasp_randomize.toml"  # spec of `twin randomize --scenario` (without --config)
+//!
+//! [cup]                               # where the cup starts: x y on the table, world, m
+//! position = [0.38, -0.12]
+//!
+//! [grasp]                             # grasp::GraspOptions, by field name
+//! grip_force_n = 8.0
+//!
+//! [checks]
+//! min_lift_m = 0.1
+//! min_hold_secs = 2.0
+//! ```
+//!
 //! Unknown keys, wrong types and impossible values are errors naming the file, the line and the
 //! key.
 //!
@@ -89,6 +109,53 @@ pub struct Checks {
     pub max_step_length_error: Option<f64>,
     /// Largest cost of transport.
     pub max_cost_of_transport: Option<f64>,
+    /// Grasp: least clearance of the arms (and no forbidden contact), m.
+    pub min_clearance_m: Option<f64>,
+    /// Grasp: largest normal force of one finger on the cup, N.
+    pub max_grip_force_n: Option<f64>,
+    /// Grasp: least mean normal force of each finger while the cup is up, N.
+    pub min_grip_force_n: Option<f64>,
+    /// Grasp: largest cup displacement in the grasp frame after the lift started, m.
+    pub max_slip_m: Option<f64>,
+    /// Grasp: largest cup tilt in the grasp frame after the lift started, degrees.
+    pub max_tilt_deg: Option<f64>,
+    /// Grasp: least CoM margin inside the support polygon, m.
+    pub min_com_margin_m: Option<f64>,
+    /// Grasp: least cup height above its start at the end, m.
+    pub min_lift_m: Option<f64>,
+    /// Grasp: how long the cup stays lifted at the end, s.
+    pub min_hold_secs: Option<f64>,
+}
+
+impl Checks {
+    /// The grasp thresholds among these checks.
+    pub fn grasp(&self) -> crate::grasp::GraspChecks {
+        crate::grasp::GraspChecks {
+            min_clearance_m: self.min_clearance_m,
+            max_grip_force_n: self.max_grip_force_n,
+            min_grip_force_n: self.min_grip_force_n,
+            max_slip_m: self.max_slip_m,
+            max_tilt_deg: self.max_tilt_deg,
+            min_com_margin_m: self.min_com_margin_m,
+            min_lift_m: self.min_lift_m,
+            min_hold_secs: self.min_hold_secs,
+        }
+    }
+}
+
+/// Where a scene object (the cup) starts.
+#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Placement {
+    /// The object's body (default: `cup`).
+    #[serde(default = "default_cup")]
+    pub body: String,
+    /// Its x y, world frame, m (height and orientation: the world file's).
+    pub position: [f64; 2],
+}
+
+fn default_cup() -> String {
+    "cup".into()
 }
 
 /// One check's verdict.
@@ -137,6 +204,12 @@ struct File {
     push: Vec<Push>,
     #[serde(default)]
     checks: Checks,
+    world: Option<PathBuf>,
+    impratio: Option<f64>,
+    cup: Option<Placement>,
+    #[serde(default)]
+    grasp: crate::grasp::GraspOptions,
+    randomize: Option<PathBuf>,
 }
 
 fn default_controller() -> String {
@@ -166,6 +239,17 @@ pub struct Scenario {
     pub pushes: Vec<Push>,
     /// Checks.
     pub checks: Checks,
+    /// World composed with the robot, resolved against the scenario's folder.
+    pub world: Option<PathBuf>,
+    /// Elliptic friction cones with this impratio, if set.
+    pub impratio: Option<f64>,
+    /// Where the cup starts, if moved.
+    pub cup: Option<Placement>,
+    /// Grasping options.
+    pub grasp: crate::grasp::GraspOptions,
+    /// The randomization spec `twin randomize --scenario` uses without `--config`, resolved
+    /// against the scenario's folder.
+    pub randomize: Option<PathBuf>,
 }
 
 /// 1-based line of byte `offset` in `text`.
@@ -251,6 +335,17 @@ impl Scenario {
             return Err(bad(None, "friction", format!("must be a non-negative coefficient (got {f})")));
         }
         file.walk.validate().map_err(|(key, m)| bad(Some("walk"), key, m))?;
+        file.grasp.validate().map_err(|(key, m)| bad(Some("grasp"), key, m))?;
+        if let Some(r) = file.impratio
+            && !(r > 0.0 && r.is_finite())
+        {
+            return Err(bad(None, "impratio", format!("must be a positive number (got {r})")));
+        }
+        if let Some(c) = &file.cup
+            && !c.position.iter().all(|v| v.is_finite())
+        {
+            return Err(bad(Some("cup"), "position", "must be two finite numbers (x, y in metres)".into()));
+        }
         for (i, p) in file.push.iter().enumerate() {
             if !(p.time >= 0.0 && p.duration > 0.0 && p.force.iter().all(|f| f.is_finite())) {
                 return Err(Error::Scenario {
@@ -261,8 +356,10 @@ impl Scenario {
                 });
             }
         }
-        let model =
-            file.model.map(|m| if m.is_absolute() { m } else { path.parent().unwrap_or(Path::new(".")).join(m) });
+        let resolve = |m: PathBuf| if m.is_absolute() { m } else { path.parent().unwrap_or(Path::new(".")).join(m) };
+        let model = file.model.map(resolve);
+        let world = file.world.map(resolve);
+        let randomize = file.randomize.map(resolve);
         Ok(Scenario {
             path: path.to_path_buf(),
             model,
@@ -274,6 +371,11 @@ impl Scenario {
             walk: file.walk,
             pushes: file.push,
             checks: file.checks,
+            world,
+            impratio: file.impratio,
+            cup: file.cup,
+            grasp: file.grasp,
+            randomize,
         })
     }
 
@@ -284,8 +386,41 @@ impl Scenario {
     /// As [`Robot::load`]; [`Error::Scenario`] for a push on a missing body.
     pub fn robot(&self, default_model: &Path) -> Result<Robot> {
         let path = self.model.clone().unwrap_or_else(|| default_model.to_path_buf());
-        let robot = Robot::load(&path)?;
-        let robot = robot.with_model(Arc::new(prepare_model(&robot.model, self.armature, self.friction)?))?;
+        let convert = crate::convert::ConvertOptions { world: self.world.clone(), ..Default::default() };
+        // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where
+        // `twin randomize` draws it per episode.
+        let grasping = self.controller == "grasp";
+        let extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" };
+        let robot = Robot::load_with_extra(&path, &convert, extra)?;
+        let mut model = prepare_model(&robot.model, self.armature, self.friction)?;
+        if self.impratio.is_some() || self.cup.is_some() || grasping {
+            let mut edit = model.edit()?;
+            if grasping && let Some(cam) = model.id(ObjType::Camera, &self.grasp.camera) {
+                edit.set_cam_user(cam, 0, self.grasp.camera_noise_std_m)?;
+            }
+            if let Some(r) = self.impratio {
+                edit.set_elliptic_cone(r)?;
+            }
+            if let Some(c) = &self.cup {
+                let missing = || Error::Scenario {
+                    path: self.path.clone(),
+                    line: None,
+                    key: Some("cup.body".into()),
+                    message: format!(
+                        "the model has no free body \"{}\" with a keyframe `home`: compose a world with it (`world`)",
+                        c.body
+                    ),
+                };
+                let body = model.id(ObjType::Body, &c.body).ok_or_else(missing)?;
+                let joint = (0..model.njnt())
+                    .find(|&j| model.jnt_bodyid()[j] as usize == body && model.joint_type(j) == JointType::Free)
+                    .ok_or_else(missing)?;
+                let key = model.id(ObjType::Key, "home").ok_or_else(missing)?;
+                edit.set_key_qpos(key, model.jnt_qposadr()[joint] as usize, &c.position)?;
+            }
+            model = edit.finish()?;
+        }
+        let robot = robot.with_model(Arc::new(model))?;
         for (i, p) in self.pushes.iter().enumerate() {
             if let Some(b) = &p.body
                 && robot.model.id(ObjType::Body, b).is_none()
@@ -308,7 +443,8 @@ impl Scenario {
     /// [`Error::Walk`] when the walker can't drive the model (e.g. unreachable steps); as
     /// [`crate::control::by_name_with`].
     pub fn controller(&self, model: &Model) -> Result<Box<dyn Controller>> {
-        let options = ControllerOptions { walk: self.walk.clone(), ..ControllerOptions::default() };
+        let options =
+            ControllerOptions { walk: self.walk.clone(), grasp: self.grasp.clone(), ..ControllerOptions::default() };
         crate::control::by_name_with(&self.controller, model, &options)
     }
 
@@ -349,7 +485,14 @@ impl Scenario {
     /// # Errors
     /// As [`GaitMetrics::for_model`].
     pub fn check(&self, model: &Model) -> Result<ScenarioCheck> {
-        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone() })
+        let grasp = self.checks.grasp().any().then(|| {
+            crate::grasp::GraspCheck::new(
+                self.checks.grasp(),
+                &self.cup.as_ref().map_or_else(default_cup, |c| c.body.clone()),
+                self.grasp.grasp_bodies.clone(),
+            )
+        });
+        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp })
     }
 
     /// Each check against `summary`.
@@ -410,21 +553,33 @@ pub struct ScenarioCheck {
     /// The gait metrics so far.
     pub metrics: GaitMetrics,
     checks: Checks,
+    /// The grasp checks, when the scenario has grasp thresholds.
+    pub grasp: Option<crate::grasp::GraspCheck>,
 }
 
 impl ScenarioCheck {
     /// Each threshold's verdict on the gait so far.
     pub fn verdicts(&self) -> Vec<Verdict> {
-        self.checks.evaluate(&self.metrics.summary())
+        let mut v = self.checks.evaluate(&self.metrics.summary());
+        if let Some(g) = &self.grasp {
+            v.extend(g.verdicts());
+        }
+        v
     }
 }
 
 impl Observer for ScenarioCheck {
     fn start(&mut self, model: &Model, data: &Data) -> Result<()> {
+        if let Some(g) = self.grasp.as_mut() {
+            g.start(model, data)?;
+        }
         self.metrics.start(model, data)
     }
 
     fn observe(&mut self, step: &StepView<'_>) -> Result<Flow> {
+        if let Some(g) = self.grasp.as_mut() {
+            g.observe(step)?;
+        }
         self.metrics.observe(step)
     }
 }
@@ -495,6 +650,28 @@ mod tests {
         assert_eq!(s.model.as_deref(), Some(Path::new("robot.urdf")));
         assert_eq!(s.pushes[0].duration, 0.1);
         assert_eq!(s.armature, WALK_ARMATURE);
+    }
+
+    #[test]
+    fn grasp_keys_are_read_and_checked_with_their_lines() {
+        let s = parse(
+            "duration = 5\ncontroller = \"grasp\"\nworld = \"w.world\"\nimpratio = 10\nrandomize = \"r.toml\"\n\
+             [cup]\nposition = [0.3, -0.1]\n[grasp]\ngrip_force_n = 6.0\n[checks]\nmin_lift_m = 0.1\n",
+        )
+        .unwrap();
+        assert_eq!(s.world.as_deref(), Some(Path::new("w.world")));
+        assert_eq!(s.randomize.as_deref(), Some(Path::new("r.toml")));
+        assert_eq!(s.cup.as_ref().map(|c| (c.body.as_str(), c.position)), Some(("cup", [0.3, -0.1])));
+        assert_eq!(s.grasp.grip_force_n, 6.0);
+        assert!(s.checks.grasp().any());
+        let e = parse("duration = 5\n[grasp]\n\ngrip_force_n = -1.0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:4: `grasp.grip_force_n`") && e.contains("non-negative"), "{e}");
+        let e = parse("duration = 5\n[grasp]\ngrip = 1.0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:3: `grip`") && e.contains("unknown field"), "{e}");
+        let e = parse("duration = 5\nimpratio = 0\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:2: `impratio`"), "{e}");
+        let e = parse("duration = 5\n[cup]\nposition = [0.3]\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:3: `position`"), "{e}");
     }
 
     #[test]

@@ -25,7 +25,7 @@ mod rerun {
     pub use re_sdk::{AsComponents, RecordingStream, RecordingStreamBuilder};
     pub use re_sdk_types::archetypes::*;
     pub use re_sdk_types::components::{Color, FillMode};
-    pub use re_sdk_types::datatypes::Quaternion;
+    pub use re_sdk_types::datatypes::{ChannelDatatype, Quaternion};
 }
 
 /// How long [`Recorder::finish`] waits for a viewer to take the recording.

@@ -164,6 +164,12 @@ pub trait Controller: Send {
         Ok(true)
     }
 
+    /// Lines saying what the controller decided during the run (e.g. a grasp refused before
+    /// moving), printed by `twin sim`. Default: none.
+    fn report(&self) -> Vec<String> {
+        Vec::new()
+    }
+
     /// The controller's own topics, besides the robot's [`crate::topics::TopicTable`]: its
     /// diagnostics (a walking controller's planned footsteps, reference and measured CoM, ZMP,
     /// DCM), recorded into every sink (MCAP, rerun, live ROS 2) like the table's topics. Give each
@@ -185,7 +191,7 @@ pub trait Controller: Send {
 
 /// Names accepted by [`by_name`]: the one controller registry of twin (`twin sim`,
 /// `twin randomize`).
-pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "replay", "walk"];
+pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "replay", "walk", "grasp"];
 
 /// What [`by_name`] may need beyond the model.
 #[derive(Debug, Clone, Default)]
@@ -196,6 +202,8 @@ pub struct ControllerOptions {
     pub trajectory: Option<JointTrajectory>,
     /// Parameters of `walk` (velocity command, gait, gains). (default: [`crate::walk::WalkOptions::default`])
     pub walk: crate::walk::WalkOptions,
+    /// Parameters of `grasp` (its legs balance with `walk`). (default: [`crate::grasp::GraspOptions::default`])
+    pub grasp: crate::grasp::GraspOptions,
 }
 
 /// The controller called `name` for `model`: `pd-hold` (alias `hold`) holds the nominal pose,
@@ -224,8 +232,9 @@ pub fn by_name_with(name: &str, model: &Model, options: &ControllerOptions) -> R
             Ok(Box::new(Replay::new(model, trajectory, replay_options)?))
         }
         "walk" => Ok(Box::new(crate::walk::Walker::new(model, options.walk.clone())?)),
+        "grasp" => Ok(Box::new(crate::grasp::Grasper::new(model, options.grasp.clone(), options.walk.clone())?)),
         _ => Err(Error::NotFound {
-            kind: "controller (available: pd-hold, passive, replay, walk)",
+            kind: "controller (available: pd-hold, passive, replay, walk, grasp)",
             name: name.to_string(),
         }),
     }

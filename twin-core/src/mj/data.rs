@@ -440,6 +440,76 @@ impl Data {
         guarded("mj_jacDot", |e, n| unsafe { ffi::twin_jac_body_dot(m, d, body as c_int, p, r, pd, rd, e, n) })
     }
 
+    /// Jacobian of the world point `point_world` attached to body `body` (`mj_jac`), world
+    /// frame, each row-major 3 × nv: translational `jacp` (m per unit of each DOF) and
+    /// rotational `jacr`. Needs body poses and `cdof` of the current `qpos` (a forward pass, or
+    /// [`Data::kinematics_with_velocity`]).
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a bad body id or output lengths other than `3 * nv`.
+    pub fn point_jacobian(&self, body: usize, point_world: [f64; 3], jacp: &mut [f64], jacr: &mut [f64]) -> Result<()> {
+        let nbody = self.model.nbody();
+        if body >= nbody {
+            return Err(Error::Size { what: "body id", expected: nbody, got: body });
+        }
+        let len = 3 * self.model.nv();
+        for out in [&*jacp, &*jacr] {
+            if out.len() != len {
+                return Err(Error::Size { what: "Jacobian buffer length (3 * nv)", expected: len, got: out.len() });
+            }
+        }
+        // SAFETY: body checked in range and each buffer has 3 * nv entries, as mj_jac writes;
+        // mj_jac only reads the model and data (it raises no error for valid ids).
+        unsafe {
+            sys::mj_jac(
+                self.model.as_ptr(),
+                self.ptr.as_ptr(),
+                jacp.as_mut_ptr(),
+                jacr.as_mut_ptr(),
+                point_world.as_ptr(),
+                body as c_int,
+            );
+        }
+        Ok(())
+    }
+
+    /// Signed distance between geoms `geom1` and `geom2` (`mj_geomDistance`), metres (negative:
+    /// penetration), capped at `distmax`: a pair farther apart than `distmax` reads `distmax`.
+    /// Needs geom poses of the current `qpos`. Planes, height fields and SDFs are refused
+    /// (MuJoCo's distance is defined for convex geoms).
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a bad geom id; [`Error::Options`] for a non-convex geom type.
+    pub fn geom_distance(&mut self, geom1: usize, geom2: usize, distmax: f64) -> Result<f64> {
+        let ngeom = self.model.ngeom();
+        for g in [geom1, geom2] {
+            if g >= ngeom {
+                return Err(Error::Size { what: "geom id", expected: ngeom, got: g });
+            }
+            let t = self.model.geom_type()[g] as u32;
+            if matches!(t, sys::mjtGeom_mjGEOM_PLANE | sys::mjtGeom_mjGEOM_HFIELD | sys::mjtGeom_mjGEOM_SDF) {
+                return Err(Error::Options(format!(
+                    "geom {g} (\"{}\"): mj_geomDistance needs convex geoms, not planes, height fields or SDFs",
+                    self.model.name(super::ObjType::Geom, g)
+                )));
+            }
+        }
+        // SAFETY: both ids are valid convex geoms (checked above), for which MuJoCo's collision
+        // table has a distance function that raises no error; `fromto` may be NULL; the pair is
+        // live and exclusive through &mut self (mj_geomDistance uses the data's stack).
+        let d = unsafe {
+            sys::mj_geomDistance(
+                self.model.as_ptr(),
+                self.ptr.as_ptr(),
+                geom1 as c_int,
+                geom2 as c_int,
+                distmax,
+                std::ptr::null_mut(),
+            )
+        };
+        Ok(d)
+    }
+
     /// Resets to the model's default state (`mj_resetData`), warnings included.
     ///
     /// # Errors

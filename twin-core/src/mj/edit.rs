@@ -263,6 +263,58 @@ impl ModelEdit {
         Ok(self)
     }
 
+    /// Sets entries `adr..adr + values.len()` of keyframe `key`'s `qpos` (e.g. where a scene
+    /// object starts).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for non-finite values; [`Error::Size`] for a bad key or a range
+    /// beyond `nq`.
+    pub fn set_key_qpos(&mut self, key: usize, adr: usize, values: &[f64]) -> Result<&mut Self> {
+        check("keyframe id", key, self.model.nkey())?;
+        let nq = self.model.nq();
+        check("qpos address", adr + values.len().max(1) - 1, nq)?;
+        finite("keyframe qpos", values)?;
+        let nkey = self.model.nkey();
+        let m = self.raw_mut();
+        // SAFETY: key_qpos has nkey rows of nq entries; key and range checked; exclusive access.
+        let all = unsafe { raw_slice_mut(m.key_qpos, nkey * nq) };
+        all[key * nq + adr..key * nq + adr + values.len()].copy_from_slice(values);
+        Ok(self)
+    }
+
+    /// Sets user number `index` of camera `cam` (e.g. a depth camera's noise σ, see
+    /// [`Model::cam_user`]).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a non-finite value; [`Error::Size`] for a bad camera or index.
+    pub fn set_cam_user(&mut self, cam: usize, index: usize, value: f64) -> Result<&mut Self> {
+        check("camera id", cam, self.model.ncam())?;
+        let n = self.model.raw().nuser_cam.max(0) as usize;
+        check("camera user index (nuser_cam)", index, n)?;
+        finite("camera user value", &[value])?;
+        let ncam = self.model.ncam();
+        let m = self.raw_mut();
+        // SAFETY: cam_user has ncam rows of nuser_cam entries; both checked; exclusive access.
+        let all = unsafe { raw_slice_mut(m.cam_user, ncam * n) };
+        all[cam * n + index] = value;
+        Ok(self)
+    }
+
+    /// Sets the friction cone to elliptic (`cone="elliptic"`) with `impratio`, the ratio of
+    /// frictional to normal constraint impedance (MuJoCo's remedy for slip of held objects).
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for an impratio that is not positive and finite.
+    pub fn set_elliptic_cone(&mut self, impratio: f64) -> Result<&mut Self> {
+        if !(impratio > 0.0 && impratio.is_finite()) {
+            return Err(Error::InvalidEdit(format!("impratio must be positive and finite, got {impratio}")));
+        }
+        let opt = &mut self.raw_mut().opt;
+        opt.cone = mujoco_sys::mjtCone_mjCONE_ELLIPTIC as i32;
+        opt.impratio = impratio;
+        Ok(self)
+    }
+
     /// Recomputes derived quantities with `mj_setConst` and returns the edited model.
     ///
     /// # Errors

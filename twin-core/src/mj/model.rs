@@ -940,6 +940,20 @@ impl Model {
         unsafe { raw_slice(self.raw().dof_M0 as *const f64, self.nv()) }
     }
 
+    /// User numbers of camera `cam` (len `nuser_cam`; empty for a bad index). twin keeps a depth
+    /// camera's noise standard deviation (m) in entry 0 when the model has one
+    /// ([`crate::grasp`]).
+    pub fn cam_user(&self, cam: usize) -> &[f64] {
+        let n = self.raw().nuser_cam.max(0) as usize;
+        if cam >= self.ncam() || n == 0 {
+            return &[];
+        }
+        // SAFETY: cam_user has ncam rows of nuser_cam entries; cam checked above; model
+        // immutable while self is borrowed.
+        let all = unsafe { raw_slice(self.raw().cam_user as *const f64, self.ncam() * n) };
+        &all[cam * n..(cam + 1) * n]
+    }
+
     /// Joint positions of keyframe `key` (len `nq`), `None` for a bad index.
     pub fn key_qpos(&self, key: usize) -> Option<&[f64]> {
         if key >= self.nkey() {

@@ -205,6 +205,10 @@ impl GaitMetrics {
             } else {
                 continue;
             };
+            // Scene objects (a cup on a table) are not the robot.
+            if !crate::robot::in_subtree(&model, self.base, robot) {
+                continue;
+            }
             match self.feet.iter().position(|&f| f == robot) {
                 Some(k) => {
                     foot_contact[k] = true;
