@@ -338,6 +338,11 @@ pub struct Walker {
     /// Where the feet were planted (at the start and each touchdown): the standing feet's
     /// targets, so that an unloaded foot is held where it stands, not where it drifted.
     planted: [Foothold; 2],
+    /// Stepping to recover a push from standing: quick steps under the predicted capture
+    /// point until the DCM is back inside the feet's support. (Walking corrects its landing
+    /// spots against the preview reference instead: switching a walking walker to these steps
+    /// after a push fell more often, 16 of 20 randomized episodes against 13.)
+    recovering: bool,
 }
 
 impl Walker {
@@ -392,6 +397,7 @@ impl Walker {
             sole_z: 0.0,
             state: WalkerState::default(),
             planted: [Foothold { side: Side::Left, pos: Vector2::zeros(), yaw: 0.0 }; 2],
+            recovering: false,
             body,
             options,
         };
@@ -748,7 +754,7 @@ impl Walker {
     /// Starts a step with `swing` swinging from the feet `feet` at `t`.
     fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
-        if self.command.is_zero() {
+        if self.recovering {
             // A recovery step: quick, since the DCM diverges meanwhile.
             step.ds = self.options.recovery_double_support_secs;
             step.ss = self.options.recovery_swing_secs;
@@ -831,10 +837,8 @@ impl Controller for Walker {
             Mode::Standing => {
                 let ready = t >= o.settle_secs;
                 let push = ready && !self.inside_support(dcm, &feet, o.recovery_margin);
-                if push && std::env::var("WT").is_ok() {
-                    eprintln!("TRIGGER t={t:.3} dcm={dcm:?} feet={feet:?}");
-                }
                 if push {
+                    self.recovering = true;
                     // Plan from where the push left the body: the reference restarts at the
                     // measured CoM state, so the feedback does not pull it back to a stale one.
                     self.restart_preview(com);
@@ -856,7 +860,7 @@ impl Controller for Walker {
                     // The landed foot's heading is the plan's: measured ones let it drift.
                     now[step.swing_to.side.index()].yaw = step.swing_to.yaw;
                     self.planted = now;
-                    if self.command.is_zero() && self.inside_support(dcm, &now, o.recovery_margin) {
+                    if self.recovering && self.inside_support(dcm, &now, o.recovery_margin) {
                         // Stop: the ZMP moves from under the DCM to between the feet, and the
                         // reference restarts at the measured state.
                         self.mode = Mode::Standing;
@@ -864,13 +868,13 @@ impl Controller for Walker {
                         self.schedule.rest_from = self.clamp_to_support(dcm, &now);
                         self.schedule.rest_start = t;
                         self.restart_preview(com);
+                        self.recovering = false;
                     } else {
-                        let swing =
-                            if self.command.is_zero() { self.first_swing(Some(dcm), &now) } else { step.stance.side };
+                        let swing = if self.recovering { self.first_swing(Some(dcm), &now) } else { step.stance.side };
                         self.start_step(t, &now, swing, gait.ds_secs(), step.stance.pos);
                     }
                     replan = true;
-                } else if self.command.is_zero() && step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
+                } else if self.recovering && step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
                     // Recovery step: land under the capture point predicted at touchdown (the
                     // ZMP held at the stance foot meanwhile), at least a step width beside it.
                     let remaining = step.end() - t;
@@ -947,7 +951,7 @@ impl Controller for Walker {
         let dcm_err = dcm - dcm_ref;
         let zmp_ref = self.schedule.zmp(t, &mut 0);
         let (com_ref, dcm_ref, dcm_err, zmp_ref) = match self.mode {
-            Mode::Walking(step) if self.command.is_zero() => {
+            Mode::Walking(step) if self.recovering => {
                 // Recovery step: no reference to return to. The DCM, with the ZMP on the
                 // planned path, reaches `ξ_td` at touchdown; only the part of it outside the
                 // support the landing foot will give is an error, corrected through the ZMP
