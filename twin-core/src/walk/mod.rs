@@ -1026,8 +1026,10 @@ impl Controller for Walker {
                 self.q_des[ik.qpos_adr(k)] = *qk;
             }
         }
-        // The commanded configuration's CoM offset, for the next tick.
-        {
+        // The commanded configuration's CoM offset, for the next ticks: refreshed at the
+        // preview rate (it changes slowly with the legs' posture; a whole-tree pass per tick
+        // was a third of the walker's cost).
+        if self.tick.is_multiple_of(ratio) {
             let b = self.body.base_qpos;
             self.q_des[b..b + 3].copy_from_slice(pelvis_pos.as_slice());
             let qq = pelvis_rot.into_inner();
