@@ -34,4 +34,10 @@ pub enum Command {
     View(crate::commands::view::Args),
     /// Calibrate the twin's sensors from real logs (`twin calibrate noise --log still.mcap`).
     Calibrate(crate::commands::calibrate::Args),
+    /// Design an excitation trajectory for `twin sysid` within the robot's limits (CSV and a
+    /// ROS 2 JointTrajectory bag that `twin sim --controller replay` plays).
+    Excite(crate::commands::excite::Args),
+    /// Measure the reality gap: replay a real log's efforts on the twin open loop and compare
+    /// joint positions, velocities and torques.
+    Gap(crate::commands::gap::Args),
 }

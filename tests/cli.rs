@@ -10,6 +10,10 @@ mod convert;
 mod deploy;
 #[path = "cli/engine.rs"]
 mod engine;
+#[path = "cli/excite.rs"]
+mod excite;
+#[path = "cli/gap.rs"]
+mod gap;
 #[path = "cli/info.rs"]
 mod info;
 #[cfg(feature = "ros")]

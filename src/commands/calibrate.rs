@@ -55,6 +55,10 @@ pub struct NoiseArgs {
     /// Write a `twin randomize` spec fragment (TOML) with the measured noise.
     #[arg(long, value_name = "noise.toml")]
     pub spec: Option<PathBuf>,
+    /// Write the Allan deviation curves (data, confidence band, fit) to a rerun recording:
+    /// log10 σ against a timeline `log10_tau_milli` = 1000·log10 τ.
+    #[arg(long, value_name = "allan.rrd")]
+    pub rerun: Option<PathBuf>,
     /// Write the full report (Allan curves, fits, encoders) as JSON.
     #[arg(long, value_name = "noise.json")]
     pub report: Option<PathBuf>,
@@ -99,6 +103,10 @@ fn noise(args: NoiseArgs) -> anyhow::Result<()> {
     if let Some(p) = &args.plot {
         write(p, &report.svg(), "Allan deviation plot")?;
     }
+    if let Some(p) = &args.rerun {
+        write_allan_rrd(p, &report)?;
+        eprintln!("Allan deviation recording written to {}", p.display());
+    }
     if let Some(p) = &args.spec {
         write(p, &report.spec_fragment(), "randomization spec fragment")?;
     }
@@ -128,4 +136,14 @@ fn noise(args: NoiseArgs) -> anyhow::Result<()> {
         );
     }
     Ok(())
+}
+
+#[cfg(feature = "rerun")]
+fn write_allan_rrd(path: &std::path::Path, report: &sysid::noise::NoiseReport) -> anyhow::Result<()> {
+    Ok(twin_core::viz::write_curves(path, "twin_allan", "log10_tau_milli", 1000.0, &report.allan_curves())?)
+}
+
+#[cfg(not(feature = "rerun"))]
+fn write_allan_rrd(_path: &std::path::Path, _report: &sysid::noise::NoiseReport) -> anyhow::Result<()> {
+    Err(twin_core::sim::record::rerun_unavailable().into())
 }

@@ -3,6 +3,8 @@
 pub mod calibrate;
 pub mod check;
 pub mod convert;
+pub mod excite;
+pub mod gap;
 pub mod info;
 pub mod log;
 pub mod randomize;
@@ -28,6 +30,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Sim(args) => sim::run(*args),
         Command::View(args) => view::run(args),
         Command::Calibrate(args) => calibrate::run(args),
+        Command::Excite(args) => excite::run(args),
+        Command::Gap(args) => gap::run(args),
     }
 }
 

@@ -54,9 +54,14 @@ pub struct Args {
     /// JointState topic, or a CSV `time_sec,<joint>,…`.
     #[arg(long, value_name = "LOG_OR_CSV")]
     pub trajectory: Option<PathBuf>,
-    /// JointState topic of the trajectory log.
+    /// Topic of the trajectory log: sensor_msgs/JointState, or trajectory_msgs/JointTrajectory
+    /// (as `twin excite` writes on /joint_trajectory).
     #[arg(long, default_value = "/joint_states")]
     pub trajectory_topic: String,
+    /// Simulate the full Stribeck friction curves of this `twin sysid friction --report` JSON
+    /// on their joints, per step (replacing those joints' URDF friction and damping).
+    #[arg(long, value_name = "friction.json")]
+    pub friction_fit: Option<PathBuf>,
     /// Write the ROS 2 topics to this MCAP file.
     #[arg(long, value_name = "RUN.mcap")]
     pub record: Option<PathBuf>,
@@ -181,6 +186,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         Some(s) => s.robot(&path)?,
         None => Robot::load(&path)?,
     };
+    let mut stribeck = args.friction_fit.as_deref().map(|file| stribeck_curves(file, &robot)).transpose()?;
+    let robot = match &stribeck {
+        Some(f) => robot.with_model(std::sync::Arc::new(f.model_without_joint_friction(&robot.model)?))?,
+        None => robot,
+    };
     let trajectory = match (&args.trajectory, controller_name.as_str()) {
         (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
         (Some(_), _) => bail!("--trajectory is for --controller replay"),
@@ -227,7 +237,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut recording, mut live_controller) = match live {
         Some((sink, controller)) => {
             let options = RecordOptions { command_topic: Some(twin_core::live::actuator_topic(&robot)), ..options };
-            (Some(Recording::with_sink(&robot, &options, Some(Box::new(sink)))?), Some(controller))
+            (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
         }
         None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
     };
@@ -242,6 +252,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
         }
     }
+    #[cfg(feature = "ros")]
+    let mut live_reset = live_controller.as_ref().map(|c| c.reset_disturbance());
     #[cfg(feature = "ros")]
     let controller: &mut dyn Controller = match live_controller.as_mut() {
         Some(c) => c,
@@ -266,6 +278,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    #[cfg(feature = "ros")]
+    disturbances.extend(live_reset.iter_mut().map(|r| r as &mut dyn Disturbance));
+    if let Some(f) = stribeck.as_mut() {
+        disturbances.push(f);
+    }
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
     let report = sim::simulate_with(
         &robot,
@@ -448,6 +465,9 @@ mod live {
             robot.name
         )?;
         writeln!(out, "command order ({} joints): {}", c.joint_names().len(), c.joint_names().join(", "))?;
+        let services: Vec<String> =
+            bridge::simulation::SERVICES.iter().map(|(name, ty)| format!("{name} ({ty})")).collect();
+        writeln!(out, "services: {}", services.join(", "))?;
         out.flush()?;
         Ok(())
     }
@@ -455,11 +475,14 @@ mod live {
     pub fn report(out: &mut impl Write, s: &LiveStats) -> anyhow::Result<()> {
         writeln!(
             out,
-            "live: {} control periods, {} commands applied, {} rejected, {} safe holds; measured real-time factor {:.4}",
+            "live: {} control periods, {} commands applied, {} rejected, {} safe holds, {} service calls, {} resets; \
+             measured real-time factor {:.4}",
             s.periods,
             s.commands_applied,
             s.commands_rejected,
             s.safe_holds,
+            s.service_calls,
+            s.resets,
             s.real_time_factor()
         )?;
         if let (Some(p50), Some(p99)) =
@@ -474,4 +497,32 @@ mod live {
         }
         Ok(())
     }
+}
+
+/// The friction curves of a `twin sysid friction --report` JSON on `robot`'s joints.
+fn stribeck_curves(
+    file: &std::path::Path,
+    robot: &Robot,
+) -> anyhow::Result<twin_core::engine::disturb::StribeckFriction> {
+    use twin_core::engine::disturb::{StribeckCurve, StribeckFriction};
+    let mut curves = Vec::new();
+    for (name, fit) in sysid::friction::read_fits(file)? {
+        let curve = StribeckCurve {
+            coulomb: fit.coulomb,
+            breakaway: fit.breakaway,
+            stribeck_velocity: fit.stribeck_velocity,
+            exponent: fit.exponent,
+            viscous: fit.viscous,
+        };
+        let Some(joint) = robot.joints.iter().find(|j| j.name == name) else {
+            bail!(
+                "{}: joint \"{name}\" is not a joint of {}; its joints: {}",
+                file.display(),
+                robot.path.display(),
+                robot.joints.iter().map(|j| j.name.as_str()).collect::<Vec<_>>().join(", ")
+            );
+        };
+        curves.push((joint.dof, curve));
+    }
+    Ok(StribeckFriction::new(curves))
 }

@@ -148,7 +148,7 @@ fn friction(args: FrictionArgs) -> anyhow::Result<()> {
     Ok(())
 }
 
-fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyhow::Result<JointLog> {
+pub(crate) fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str>) -> anyhow::Result<JointLog> {
     let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("").to_ascii_lowercase();
     match ext.as_str() {
         "csv" if odom_topic.is_some() => bail!(

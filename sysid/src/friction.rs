@@ -83,7 +83,7 @@ pub struct CurvePoint {
 }
 
 /// Stribeck parameters.
-#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, serde::Deserialize)]
 pub struct Stribeck {
     /// Coulomb friction `Fc`, N·m.
     pub coulomb: f64,
@@ -771,4 +771,30 @@ pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptio
         }
     }
     Ok(log)
+}
+
+/// The fitted curves of a [`FrictionReport::to_json`] file (`twin sysid friction --report`):
+/// `(joint, curve)` per joint, e.g. for `twin sim --friction-fit`.
+///
+/// # Errors
+/// [`Error::Io`]; [`Error::Option`] naming the file when it is not such a report.
+pub fn read_fits(path: &std::path::Path) -> Result<Vec<(String, Stribeck)>> {
+    #[derive(serde::Deserialize)]
+    struct Entry {
+        joint: String,
+        fit: Stribeck,
+    }
+    #[derive(serde::Deserialize)]
+    struct Fits {
+        joints: Vec<Entry>,
+    }
+    let text = twin_core::fsio::read_to_string(path)?;
+    let fits: Fits = serde_json::from_str(&text).map_err(|e| Error::Option {
+        name: "friction fit",
+        message: format!("{}: not a `twin sysid friction --report` JSON ({e})", path.display()),
+    })?;
+    if fits.joints.is_empty() {
+        return Err(Error::Option { name: "friction fit", message: format!("{}: no joint fits", path.display()) });
+    }
+    Ok(fits.joints.into_iter().map(|e| (e.joint, e.fit)).collect())
 }

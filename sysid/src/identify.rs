@@ -134,7 +134,7 @@ pub const BASE_ROW_NAMES: [&str; 6] = [
 ];
 
 /// Columns joint `j`'s rows can be non-zero in.
-fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Vec<usize> {
+pub(crate) fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Vec<usize> {
     let mut cols = Vec::new();
     for (l, link) in robot.links.iter().enumerate() {
         if link.ancestor_joints.contains(&j) {

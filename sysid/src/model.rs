@@ -320,9 +320,32 @@ pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
     load_urdf_text(path, &text, extra_mujoco, false)
 }
 
+/// As [`load_urdf_in_mujoco`] (fixed base), with the robot's links colliding with each other
+/// when `self_collision`, and twin's [`twin_core::robot::Robot`] view of it (joint limits,
+/// actuators) kept: for designing trajectories that respect the limits and avoid
+/// self-collision (`twin excite`).
+///
+/// # Errors
+/// As [`load_urdf_in_mujoco`].
+pub fn load_urdf_robot(path: &Path, self_collision: bool) -> Result<twin_core::robot::Robot> {
+    let text = twin_core::fsio::read_to_string(path)?;
+    load_urdf_robot_text(path, &text, "", false, self_collision)
+}
+
 /// Converts URDF `text` (of `path`) and compiles it with `extra_mujoco` appended inside
 /// `<mujoco>`.
 fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, floating: bool) -> Result<Model> {
+    let robot = load_urdf_robot_text(path, text, extra_mujoco, floating, false)?;
+    Ok(Arc::try_unwrap(robot.model).unwrap_or_else(|shared| (*shared).clone()))
+}
+
+fn load_urdf_robot_text(
+    path: &Path,
+    text: &str,
+    extra_mujoco: &str,
+    floating: bool,
+    self_collision: bool,
+) -> Result<twin_core::robot::Robot> {
     let doc = roxmltree::Document::parse(text)
         .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
     if doc.root_element().children().any(|n| n.has_tag_name("mujoco")) {
@@ -336,10 +359,10 @@ fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, floating: bool) -
         floor: false,
         visuals: false,
         joint_sensors: false,
+        self_collision,
         ..twin_core::convert::ConvertOptions::default()
     };
-    let robot = twin_core::robot::Robot::load_with_extra(path, &options, extra_mujoco)?;
-    Ok(Arc::try_unwrap(robot.model).unwrap_or_else(|shared| (*shared).clone()))
+    Ok(twin_core::robot::Robot::load_with_extra(path, &options, extra_mujoco)?)
 }
 
 impl RobotModel {

@@ -722,6 +722,28 @@ impl NoiseReport {
         out
     }
 
+    /// The Allan deviation curves of [`NoiseReport::svg`] for a rerun recording: per IMU axis,
+    /// `allan/<topic>/<sensor>_<axis>/{data,low,high,fit}` with points `(log10 τ, log10 σ)`
+    /// (rerun plots scalars against a linear timeline, so both axes are logarithms).
+    pub fn allan_curves(&self) -> Vec<(String, Vec<(f64, f64)>)> {
+        let mut out = Vec::new();
+        for imu in &self.imus {
+            let topic: String =
+                imu.topic.chars().map(|c| if c.is_alphanumeric() || c == '_' { c } else { '_' }).collect();
+            for a in &imu.axes {
+                let base = format!("allan/{}/{}_{}", topic.trim_matches('_'), a.sensor, a.axis);
+                let curve = |f: &dyn Fn(&crate::allan::AllanPoint) -> f64| -> Vec<(f64, f64)> {
+                    a.points.iter().map(|p| (p.tau_secs.log10(), f(p).log10())).collect()
+                };
+                out.push((format!("{base}/data"), curve(&|p| p.adev)));
+                out.push((format!("{base}/low"), curve(&|p| p.adev_low)));
+                out.push((format!("{base}/high"), curve(&|p| p.adev_high)));
+                out.push((format!("{base}/fit"), curve(&|p| a.fit.adev_at(p.tau_secs))));
+            }
+        }
+        out
+    }
+
     /// SVG plot of each IMU's Allan deviations (band, points, fitted model), one panel per
     /// sensor (gyro, accelerometer).
     pub fn svg(&self) -> String {

@@ -5,7 +5,8 @@
 //! The true model is the URDF as MuJoCo compiles it (its `<dynamics damping friction>` become
 //! viscous damping and dry friction loss) plus an armature per joint. Each joint follows a sum
 //! of sines inside its range, tracked by a PD controller on top of MuJoCo's bias forces; the
-//! logged effort is the torque applied to the joint.
+//! logged effort is the torque applied to the joint, the only one driving it (the model's own
+//! actuators are disabled).
 
 use crate::error::Result;
 use crate::log::JointLog;
@@ -134,7 +135,21 @@ impl Default for FloatingSynthOptions {
 /// # Errors
 /// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
 pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
-    simulate_impl(urdf, opts, None)
+    simulate_impl(urdf, opts, None, None)
+}
+
+/// A joint-space reference: `(q, q̇, q̈)` of joint `j` ([`RobotModel::joints`] order) at time
+/// `t` seconds.
+pub type Reference<'a> = &'a dyn Fn(usize, f64) -> (f64, f64, f64);
+
+/// As [`simulate`], the robot tracking `reference` instead of the built-in sum of sines (e.g.
+/// an excitation trajectory of [`crate::excite`]); the options' trajectory fields
+/// (`max_amplitude`, `base_frequency_hz`) are then unused.
+///
+/// # Errors
+/// As [`simulate`].
+pub fn simulate_tracking(urdf: &Path, opts: &SynthOptions, reference: Reference<'_>) -> Result<JointLog> {
+    simulate_impl(urdf, opts, None, Some(reference))
 }
 
 /// Simulates the robot of `urdf` with a floating base (contacts off) and returns its log with
@@ -144,27 +159,27 @@ pub fn simulate(urdf: &Path, opts: &SynthOptions) -> Result<JointLog> {
 /// # Errors
 /// As [`simulate`]; [`crate::Error::Urdf`] for a wrench link the robot lacks.
 pub fn simulate_floating(urdf: &Path, opts: &SynthOptions, floating: &FloatingSynthOptions) -> Result<JointLog> {
-    simulate_impl(urdf, opts, Some(floating))
+    simulate_impl(urdf, opts, Some(floating), None)
 }
 
-fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSynthOptions>) -> Result<JointLog> {
+fn simulate_impl(
+    urdf: &Path,
+    opts: &SynthOptions,
+    floating: Option<&FloatingSynthOptions>,
+    custom: Option<Reference<'_>>,
+) -> Result<JointLog> {
     let dt = 1.0 / opts.rate_hz;
     let gravity = if floating.is_some_and(|f| !f.gravity) { r#" gravity="0 0 0""# } else { "" };
-    let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable"/></option>"#);
+    // The joints are driven by the logged torques alone (`qfrc_applied`): the converter's
+    // actuators (position servos for a URDF's `PositionJointInterface`, as on the UR5) would add
+    // forces that no log entry carries.
+    let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable" actuation="disable"/></option>"#);
     let base = match floating {
         Some(_) => crate::model::load_urdf_in_mujoco_floating(urdf, &extra)?,
         None => load_urdf_in_mujoco(urdf, &extra)?,
     };
     let free_dofs = if floating.is_some() { 6 } else { 0 };
-    let mut edit = base.edit()?;
-    for dof in free_dofs..base.nv() {
-        edit.set_dof_armature(dof, opts.armature)?;
-        // MuJoCo's friction loss is a soft constraint; with its defaults the friction of a
-        // light joint ramps up over ~0.1 rad/s. A stiff constraint (time constant of two steps)
-        // makes it the Coulomb friction the URDF's `friction` stands for.
-        edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
-    }
-    let model = Arc::new(edit.finish()?);
+    let model = stiff_friction(&base, free_dofs, dt, opts.armature)?;
     let robot = match floating {
         Some(_) => RobotModel::from_model_floating(urdf, model.clone())?,
         None => RobotModel::from_model(urdf, model.clone())?,
@@ -234,7 +249,7 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
             freq[j][k] = f0 * HARMONICS[k];
         }
     }
-    let reference = |j: usize, t: f64| -> (f64, f64, f64) {
+    let sines = |j: usize, t: f64| -> (f64, f64, f64) {
         let (mut q, mut qd, mut qdd) = (centre[j], 0.0, 0.0);
         for k in 0..5 {
             let w = 2.0 * PI * freq[j][k];
@@ -245,6 +260,7 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
         }
         (q, qd, qdd)
     };
+    let reference: Reference<'_> = custom.unwrap_or(&sines);
 
     let mut data = Data::new(model.clone())?;
     for (j, joint) in robot.joints.iter().enumerate() {
@@ -362,6 +378,35 @@ fn simulate_impl(urdf: &Path, opts: &SynthOptions, floating: Option<&FloatingSyn
         }
     }
     Ok(log)
+}
+
+/// `base` with armature `armature` on every DOF from `first_dof` on and a stiff friction-loss
+/// constraint: MuJoCo's friction loss is a soft constraint; with its defaults the friction of
+/// a light joint ramps up over ~0.1 rad/s. A time constant of two steps makes it the Coulomb
+/// friction the URDF's `friction` stands for.
+fn stiff_friction(
+    base: &twin_core::mj::Model,
+    first_dof: usize,
+    dt: f64,
+    armature: f64,
+) -> Result<Arc<twin_core::mj::Model>> {
+    let mut edit = base.edit()?;
+    for dof in first_dof..base.nv() {
+        edit.set_dof_armature(dof, armature)?;
+        edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
+    }
+    Ok(Arc::new(edit.finish()?))
+}
+
+/// The fixed-base model [`simulate`] runs `urdf` with (timestep `dt_secs`, contacts off,
+/// `armature` on every joint, friction loss as Coulomb friction): also the twin `twin gap`
+/// replays a log on.
+///
+/// # Errors
+/// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
+pub fn simulation_model(urdf: &Path, dt_secs: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
+    let extra = format!(r#"<option timestep="{dt_secs}"><flag contact="disable"/></option>"#);
+    stiff_friction(&load_urdf_in_mujoco(urdf, &extra)?, 0, dt_secs, armature)
 }
 
 /// Writes to `dst` a copy of the URDF `src` whose link inertials and joint friction are off by

@@ -66,9 +66,13 @@ fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
             "noise.toml",
             "--report",
             "noise.json",
+            "--rerun",
+            "allan.rrd",
         ],
     );
     assert!(out.status.success(), "{}", stderr(&out));
+    // The Allan plot in the rerun recording is a valid .rrd.
+    assert!(super::sim::rerun_verify(&d.join("allan.rrd")));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("IMU /humanoid/imu/data (frame imu_link)") && stdout.contains("gyro x"), "{stdout}");
     assert_eq!(std::fs::read_to_string(d.join("humanoid.urdf.bak")).unwrap(), original);
@@ -193,4 +197,28 @@ fn sysid_friction_refuses_a_log_without_constant_velocity_and_leaves_the_urdf_un
     assert!(err.contains("joint \"shoulder_pan_joint\""), "{err}");
     assert_eq!(std::fs::read(d.join("arm6.urdf")).unwrap(), original);
     assert!(!d.join("arm6.urdf.bak").exists());
+}
+
+/// `twin sim --friction-fit`: the fitted Stribeck curves of `twin sysid friction --report`
+/// run on their joints; a fit naming a joint the robot lacks is refused naming it.
+#[test]
+fn sim_runs_the_fitted_stribeck_curves_and_refuses_unknown_joints() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let arm = Path::new(env!("CARGO_MANIFEST_DIR")).join("models/arm6.urdf");
+    let fit = |joint: &str| {
+        format!(
+            r#"{{"log": "sweeps.mcap", "joints": [{{"joint": "{joint}", "fit": {{"coulomb": 2.0, "breakaway": 3.5,
+            "stribeck_velocity": 0.1, "exponent": 1.5, "viscous": 1.0}}, "ci95": [0,0,0,0,0], "rms_residual": 0.01,
+            "points": [], "segments": 10}}]}}"#
+        )
+    };
+    std::fs::write(d.join("friction.json"), fit("elbow_joint")).unwrap();
+    let out = twin(d, &["sim", arm.to_str().unwrap(), "--friction-fit", "friction.json", "--duration", "0.5"]);
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    std::fs::write(d.join("bad.json"), fit("no_such_joint")).unwrap();
+    let out = twin(d, &["sim", arm.to_str().unwrap(), "--friction-fit", "bad.json", "--duration", "0.5"]);
+    assert!(!out.status.success());
+    let err = String::from_utf8_lossy(&out.stderr);
+    assert!(err.contains("bad.json") && err.contains("\"no_such_joint\" is not a joint"), "{err}");
 }

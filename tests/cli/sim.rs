@@ -45,7 +45,7 @@ fn python_decode(file: &Path) -> Option<Json> {
 
 /// `rerun rrd verify FILE` with the `rerun` next to TWIN_PYTHON; false (after a note) when
 /// there is none.
-fn rerun_verify(file: &Path) -> bool {
+pub fn rerun_verify(file: &Path) -> bool {
     let exe = python_exe();
     let rerun = Path::new(&exe).parent().map(|d| d.join("rerun")).filter(|p| p.is_file());
     let Some(rerun) = rerun else {

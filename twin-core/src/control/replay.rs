@@ -110,12 +110,22 @@ impl JointTrajectory {
 
     /// From a `sensor_msgs/msg/JointState` topic: every joint logged, times from the header
     /// stamps (log time where zero) relative to the earliest sample; velocities kept when each
-    /// of a joint's samples has one.
+    /// of a joint's samples has one. A `trajectory_msgs/msg/JointTrajectory` topic (e.g. the
+    /// output of `twin excite`) is read with [`JointTrajectory::from_trajectory_messages`].
     ///
     /// # Errors
     /// As [`crate::log::Log::joint_states`]; [`Error::Trajectory`] when the topic has no samples.
     pub fn from_log(path: &std::path::Path, topic: &str) -> Result<JointTrajectory> {
         let log = crate::log::Log::open(path, crate::log::ReadOptions::default())?;
+        let trajectory_type = <crate::log::JointTrajectory as crate::log::RosMessage>::TYPE_NAME;
+        if log
+            .info()?
+            .topics
+            .iter()
+            .any(|t| t.topic == topic && crate::log::msgdef::normalize_type_name(&t.type_name) == trajectory_type)
+        {
+            return JointTrajectory::from_trajectory_messages(&log, topic);
+        }
         let series = log.joint_states(topic)?;
         let t0 = series.joints.iter().filter_map(|j| j.time_nanos.first().copied()).min().ok_or_else(|| {
             Error::Trajectory {
@@ -135,6 +145,83 @@ impl JointTrajectory {
                 velocity: (!j.velocity.is_empty() && j.velocity.iter().all(|v| v.is_finite())).then_some(j.velocity),
                 position: j.position,
                 name: j.name,
+            })
+            .collect();
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })
+    }
+
+    /// From a `trajectory_msgs/msg/JointTrajectory` topic: each message's points start at its
+    /// header stamp (its log time when the stamp is 0) plus `time_from_start`; as on a ROS 2
+    /// controller, a later message replaces the earlier ones' points from its first point on.
+    /// Velocities are kept when every point has them.
+    ///
+    /// # Errors
+    /// As [`crate::log::Log::read_typed`]; [`Error::Trajectory`] for no points, messages naming
+    /// different joints, a point whose positions don't match the joint names, or times that
+    /// don't increase.
+    pub fn from_trajectory_messages(log: &crate::log::Log, topic: &str) -> Result<JointTrajectory> {
+        let path = log.path();
+        let bad = |message: String| Error::Trajectory { path: path.to_path_buf(), line: None, message };
+        let (messages, _) = log.read_typed::<crate::log::JointTrajectory>(topic)?;
+        let mut names: Option<Vec<String>> = None;
+        // (time ns, positions, velocities)
+        let mut points: Vec<(i64, Vec<f64>, Vec<f64>)> = Vec::new();
+        for (i, (log_time, m)) in messages.iter().enumerate() {
+            match &names {
+                None => names = Some(m.joint_names.clone()),
+                Some(n) if *n != m.joint_names => {
+                    return Err(bad(format!(
+                        "topic {topic}: message {} names joints [{}], the first named [{}]; replay needs one set                          of joints",
+                        i + 1,
+                        m.joint_names.join(", "),
+                        n.join(", ")
+                    )));
+                }
+                Some(_) => {}
+            }
+            let start = if m.header.stamp_nanos != 0 { m.header.stamp_nanos } else { *log_time as i64 };
+            if let Some(first) = m.points.first() {
+                let from = start + first.time_from_start_nanos;
+                points.retain(|p| p.0 < from);
+            }
+            for (k, p) in m.points.iter().enumerate() {
+                if p.positions.len() != m.joint_names.len() {
+                    return Err(bad(format!(
+                        "topic {topic}: message {}, point {}: {} positions for {} joints",
+                        i + 1,
+                        k + 1,
+                        p.positions.len(),
+                        m.joint_names.len()
+                    )));
+                }
+                let velocities =
+                    if p.velocities.len() == m.joint_names.len() { p.velocities.clone() } else { Vec::new() };
+                points.push((start + p.time_from_start_nanos, p.positions.clone(), velocities));
+            }
+        }
+        let names = names.unwrap_or_default();
+        if points.is_empty() || names.is_empty() {
+            return Err(bad(format!("topic {topic} has no trajectory points")));
+        }
+        if let Some(k) = (1..points.len()).find(|&k| points[k].0 <= points[k - 1].0) {
+            return Err(bad(format!(
+                "topic {topic}: point times do not increase at point {} ({:.6} s after {:.6} s)",
+                k + 1,
+                (points[k].0 - points[0].0) as f64 * 1e-9,
+                (points[k - 1].0 - points[0].0) as f64 * 1e-9
+            )));
+        }
+        let t0 = points[0].0;
+        let time_secs: Vec<f64> = points.iter().map(|p| (p.0 - t0) as f64 * 1e-9).collect();
+        let with_velocity = points.iter().all(|p| !p.2.is_empty());
+        let joints = names
+            .iter()
+            .enumerate()
+            .map(|(j, name)| TrajectoryJoint {
+                name: name.clone(),
+                time_secs: time_secs.clone(),
+                position: points.iter().map(|p| p.1[j]).collect(),
+                velocity: with_velocity.then(|| points.iter().map(|p| p.2[j]).collect()),
             })
             .collect();
         Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })

@@ -1,0 +1,1163 @@
+//! Excitation trajectories for identification (`twin excite`): a finite Fourier series per
+//! joint (Swevers et al. 1997), starting and ending at rest, optimized for the condition
+//! number (or log-determinant) of the base-parameter regressor `twin sysid` will build,
+//! within position, velocity, acceleration and torque limits and free of self-collision.
+//!
+//! ## Trajectory
+//! Joint `i` follows, with `ω = 2π·f₀` and period `T = 1/f₀`,
+//!
+//! ```text
+//! q(t) = c + Σ_l [ a_l/(ωl)·sin(ωlt) − b_l/(ωl)·(cos(ωlt) − 1) ]
+//! q̇(t) = Σ_l [ a_l·cos(ωlt) + b_l·sin(ωlt) ]
+//! ```
+//!
+//! so `q(0) = q(T) = c`. Rest at both ends (`q̇ = q̈ = 0`) is `Σ a_l = 0` and `Σ l·b_l = 0`,
+//! enforced by eliminating `a₁` and `b₁`: the optimizer's variables per joint are `c`,
+//! `a₂…a_H`, `b₂…b_H`. The trajectory is periodic: repeated, it stays smooth.
+//!
+//! ## Criterion
+//! The regressor of [`crate::regressor`] (inertial, viscous, Coulomb and armature columns, the
+//! rows `twin sysid` would use: joints outside the velocity dead zone) on a grid over one
+//! period is compressed as in identification; its base columns (the leading columns of the
+//! column-pivoted QR of a generic trajectory, fixed for the whole design so that a degenerate
+//! trajectory cannot "improve" by losing rank) are scaled to unit norm, and the criterion is
+//! the condition number of that matrix (the figure `twin sysid` reports), or `−(2/n)·Σ ln σᵢ`
+//! (log-determinant of `WᵀW`).
+//!
+//! ## Limits
+//! Position (URDF range less a margin), velocity (a fraction of URDF `<limit velocity>`),
+//! acceleration (an option: URDF has none), torque (a fraction of URDF `<limit effort>`; the
+//! torque is the model's inverse dynamics `Y·π_URDF`, friction included) and self-collision
+//! (MuJoCo contacts between the robot's own links; pairs already touching at the rest pose,
+//! and each link with its grandparent, whose shapes overlap around the joint between them in
+//! most URDFs, excepted). Limits enter the optimization as a penalty; the result is then scaled per
+//! joint to use its position, velocity and acceleration room and shrunk until every limit
+//! holds on a 4× finer grid.
+//!
+//! ## Search
+//! 20 random 5-harmonic trajectories (scaled to the same limits) are generated; the best is
+//! the starting point of a quasi-Newton search (BFGS, forward-difference gradients,
+//! backtracking line search). Deterministic for a given seed.
+
+use crate::error::{Error, Result};
+use crate::estimate::Accumulator;
+use crate::model::RobotModel;
+use crate::regressor::{FrictionModel, Regressor};
+use crate::synth::Rng;
+use faer::Mat;
+use std::f64::consts::PI;
+use std::path::Path;
+use std::sync::Arc;
+use std::time::Instant;
+use twin_core::mj::{Data, ObjType};
+
+/// What the design minimizes.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Criterion {
+    /// Condition number of the column-scaled base regressor (default).
+    #[default]
+    Condition,
+    /// `−log det(WᵀW)` of the column-scaled base regressor, per parameter.
+    LogDet,
+}
+
+/// Options of [`design`].
+#[derive(Debug, Clone, PartialEq)]
+pub struct ExciteOptions {
+    /// Joints to excite, by name (default: empty: every revolute and prismatic joint). The
+    /// others hold their rest position (0 clamped into their range).
+    pub joints: Vec<String>,
+    /// Harmonics per joint (default: 5).
+    pub harmonics: usize,
+    /// Fundamental frequency `f₀`, Hz; the trajectory's period is `1/f₀` (default: 0.1: 10 s).
+    pub base_frequency_hz: f64,
+    /// Kept away from each end of a joint's range, rad or m (default: 0.05).
+    pub position_margin: f64,
+    /// Fraction of the URDF velocity limit used (default: 0.8).
+    pub velocity_fraction: f64,
+    /// Velocity limit of joints whose URDF gives none, rad/s or m/s (default: `None`: such a
+    /// joint is an error naming it).
+    pub default_velocity_limit: Option<f64>,
+    /// Acceleration limit of every joint, rad/s² or m/s² (default: 10).
+    pub max_acceleration: f64,
+    /// Fraction of the URDF effort limit the inverse-dynamics torque may reach (default: 0.8).
+    /// Joints without an effort limit are not torque-limited.
+    pub effort_fraction: f64,
+    /// Check self-collision with MuJoCo's contacts (default: true).
+    pub self_collision: bool,
+    /// What is minimized (default: [`Criterion::Condition`]).
+    pub criterion: Criterion,
+    /// Random trajectories tried first; the best is the search's start and the comparison
+    /// figure (default: 20).
+    pub random_candidates: usize,
+    /// Quasi-Newton iterations (default: 60).
+    pub max_iterations: usize,
+    /// Grid points per period for the criterion and the penalty (default: 100; limits are
+    /// checked at the end on a 4× finer grid).
+    pub samples: usize,
+    /// Seed of the random trajectories (default: 1).
+    pub seed: u64,
+    /// The Coulomb column is `tanh(q̇/ε)` with this `ε` in the design (rad/s): `twin sysid`'s
+    /// `sign(q̇)` with its dead zone made smooth, so that the criterion has a gradient
+    /// (default: 0.05, `twin sysid`'s dead zone).
+    pub velocity_deadzone: f64,
+}
+
+impl Default for ExciteOptions {
+    fn default() -> Self {
+        ExciteOptions {
+            joints: Vec::new(),
+            harmonics: 5,
+            base_frequency_hz: 0.1,
+            position_margin: 0.05,
+            velocity_fraction: 0.8,
+            default_velocity_limit: None,
+            max_acceleration: 10.0,
+            effort_fraction: 0.8,
+            self_collision: true,
+            criterion: Criterion::Condition,
+            random_candidates: 20,
+            max_iterations: 60,
+            samples: 100,
+            seed: 1,
+            velocity_deadzone: 0.05,
+        }
+    }
+}
+
+/// One joint's Fourier series.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct FourierJoint {
+    /// Joint name.
+    pub name: String,
+    /// Index into [`RobotModel::joints`].
+    pub index: usize,
+    /// Rest position at both ends, rad or m.
+    pub rest: f64,
+    /// Cosine coefficients of the velocity `a_l`, l = 1…H, rad/s.
+    pub a: Vec<f64>,
+    /// Sine coefficients of the velocity `b_l`, l = 1…H, rad/s.
+    pub b: Vec<f64>,
+}
+
+impl FourierJoint {
+    /// `(q, q̇, q̈)` at `t` for fundamental `omega` (rad/s).
+    pub fn sample(&self, omega: f64, t: f64) -> (f64, f64, f64) {
+        let (mut q, mut qd, mut qdd) = (self.rest, 0.0, 0.0);
+        for (l, (&a, &b)) in self.a.iter().zip(&self.b).enumerate() {
+            let w = omega * (l + 1) as f64;
+            let (s, c) = (w * t).sin_cos();
+            q += a / w * s - b / w * (c - 1.0);
+            qd += a * c + b * s;
+            qdd += w * (-a * s + b * c);
+        }
+        (q, qd, qdd)
+    }
+}
+
+/// An excitation trajectory: one period, starting and ending at rest.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Excitation {
+    /// Fundamental frequency, Hz.
+    pub base_frequency_hz: f64,
+    /// The excited joints.
+    pub joints: Vec<FourierJoint>,
+    /// Position of every joint of the robot ([`RobotModel::joints`] order) when not excited.
+    pub hold: Vec<f64>,
+    /// Names of every joint of the robot.
+    pub joint_names: Vec<String>,
+}
+
+impl Excitation {
+    /// Duration of one period, seconds.
+    pub fn period_secs(&self) -> f64 {
+        1.0 / self.base_frequency_hz
+    }
+
+    /// `(q, q̇, q̈)` of robot joint `j` ([`RobotModel::joints`] order) at `t` seconds (periodic).
+    pub fn reference(&self, j: usize, t: f64) -> (f64, f64, f64) {
+        match self.joints.iter().find(|f| f.index == j) {
+            Some(f) => f.sample(2.0 * PI * self.base_frequency_hz, t),
+            None => (self.hold[j], 0.0, 0.0),
+        }
+    }
+
+    /// CSV `time_sec,<joint>,<joint>_vel,…` of the excited joints at `rate_hz` over one
+    /// period (both ends included): what `twin sim --controller replay --trajectory` reads.
+    pub fn to_csv(&self, rate_hz: f64) -> String {
+        let mut s = String::from("time_sec");
+        for f in &self.joints {
+            s.push_str(&format!(",{0},{0}_vel", f.name));
+        }
+        s.push('\n');
+        let omega = 2.0 * PI * self.base_frequency_hz;
+        for t in self.times(rate_hz) {
+            s.push_str(&format!("{t:.6}"));
+            for f in &self.joints {
+                let (q, qd, _) = f.sample(omega, t);
+                s.push_str(&format!(",{q:.9},{qd:.9}"));
+            }
+            s.push('\n');
+        }
+        s
+    }
+
+    fn times(&self, rate_hz: f64) -> Vec<f64> {
+        let n = (self.period_secs() * rate_hz).round().max(1.0) as usize;
+        (0..=n).map(|k| k as f64 * self.period_secs() / n as f64).collect()
+    }
+
+    /// The trajectory as one ROS 2 `trajectory_msgs/msg/JointTrajectory` message (positions,
+    /// velocities, accelerations at `rate_hz`; header stamp 0: start on receipt).
+    pub fn to_message(&self, rate_hz: f64) -> twin_core::log::JointTrajectory {
+        let omega = 2.0 * PI * self.base_frequency_hz;
+        let points = self
+            .times(rate_hz)
+            .into_iter()
+            .map(|t| {
+                let s: Vec<(f64, f64, f64)> = self.joints.iter().map(|f| f.sample(omega, t)).collect();
+                twin_core::log::JointTrajectoryPoint {
+                    positions: s.iter().map(|x| x.0).collect(),
+                    velocities: s.iter().map(|x| x.1).collect(),
+                    accelerations: s.iter().map(|x| x.2).collect(),
+                    effort: Vec::new(),
+                    time_from_start_nanos: (t * 1e9).round() as i64,
+                }
+            })
+            .collect();
+        twin_core::log::JointTrajectory {
+            header: twin_core::log::Header::default(),
+            joint_names: self.joints.iter().map(|f| f.name.clone()).collect(),
+            points,
+        }
+    }
+
+    /// Writes [`Excitation::to_message`] to an MCAP file on `topic` (atomically).
+    ///
+    /// # Errors
+    /// [`Error::Core`] if the file can't be written.
+    pub fn write_mcap(&self, path: &Path, topic: &str, rate_hz: f64) -> Result<()> {
+        let tmp = path.with_extension("mcap.tmp");
+        let mut writer = twin_core::log::LogWriter::create(&tmp, &twin_core::log::WriterOptions::default())?;
+        let t = writer.add_topic::<twin_core::log::JointTrajectory>(topic)?;
+        writer.write(t, 0, &self.to_message(rate_hz))?;
+        writer.finish()?;
+        std::fs::rename(&tmp, path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+    }
+}
+
+/// One joint's limits as the design uses them.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct JointLimits {
+    /// Joint name.
+    pub name: String,
+    /// Lowest position allowed (range less the margin).
+    pub lower: f64,
+    /// Highest position allowed.
+    pub upper: f64,
+    /// Velocity limit used.
+    pub velocity: f64,
+    /// Acceleration limit used.
+    pub acceleration: f64,
+    /// Torque limit used (`None`: not limited).
+    pub torque: Option<f64>,
+}
+
+/// How much of each limit the trajectory uses (1 = at the limit).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct JointUse {
+    /// Joint name.
+    pub name: String,
+    /// Position span over the period, rad or m.
+    pub span: f64,
+    /// Largest |q̇| / velocity limit.
+    pub velocity: f64,
+    /// Largest |q̈| / acceleration limit.
+    pub acceleration: f64,
+    /// Largest |τ| / torque limit (0 when not limited).
+    pub torque: f64,
+}
+
+/// Result of [`design`].
+#[derive(Debug, Clone, serde::Serialize)]
+pub struct ExciteReport {
+    /// The designed trajectory.
+    pub trajectory: Excitation,
+    /// Criterion minimized.
+    pub criterion: Criterion,
+    /// Condition number of the base regressor `W_b` (SI units, the figure Swevers and
+    /// Gautier optimize) along the designed trajectory.
+    pub condition: f64,
+    /// Condition number of the column-scaled base regressor (the figure `twin sysid` reports).
+    pub scaled_condition: f64,
+    /// The same for the best random trajectory.
+    pub best_random_scaled_condition: f64,
+    /// The same for each random trajectory (scaled to the same limits).
+    pub random_conditions: Vec<f64>,
+    /// The best of them.
+    pub best_random_condition: f64,
+    /// The best random trajectory (the search's start).
+    pub best_random: Excitation,
+    /// Base parameters (columns of the base regressor).
+    pub base_parameters: usize,
+    /// Limits used.
+    pub limits: Vec<JointLimits>,
+    /// Use of each limit by the designed trajectory.
+    pub usage: Vec<JointUse>,
+    /// Criterion evaluations.
+    pub evaluations: usize,
+    /// Wall time of the design, seconds.
+    pub design_secs: f64,
+    /// Things the user should know.
+    pub notes: Vec<String>,
+}
+
+impl ExciteReport {
+    /// Human-readable summary.
+    pub fn table(&self) -> String {
+        let mut s = format!(
+            "excitation: {} joints, {} harmonics, period {:.2} s, {} base parameters\n\
+             condition number of the base regressor: designed {:.3e}, best of {} random {:.3e} ({:.1}× lower)\n\
+             column-scaled (as twin sysid reports it): designed {:.2}, best random {:.2}\n\
+             design time {:.2} s ({} evaluations)\n",
+            self.trajectory.joints.len(),
+            self.trajectory.joints.first().map_or(0, |f| f.a.len()),
+            self.trajectory.period_secs(),
+            self.base_parameters,
+            self.condition,
+            self.random_conditions.len(),
+            self.best_random_condition,
+            self.best_random_condition / self.condition,
+            self.scaled_condition,
+            self.best_random_scaled_condition,
+            self.design_secs,
+            self.evaluations
+        );
+        let w = self.usage.iter().map(|u| u.name.len()).max().unwrap_or(5).max(5);
+        s.push_str(&format!("{:<w$}  {:>8}  {:>8}  {:>8}  {:>8}\n", "joint", "span", "vel use", "acc use", "torque"));
+        for u in &self.usage {
+            let torque = if u.torque > 0.0 { format!("{:>7.0}%", 100.0 * u.torque) } else { "      -".into() };
+            s.push_str(&format!(
+                "{:<w$}  {:>8.3}  {:>7.0}%  {:>7.0}%  {torque}\n",
+                u.name,
+                u.span,
+                100.0 * u.velocity,
+                100.0 * u.acceleration
+            ));
+        }
+        for n in &self.notes {
+            s.push_str(&format!("note: {n}\n"));
+        }
+        s
+    }
+
+    /// The report as JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_default()
+    }
+}
+
+/// The worst limit violation found on a grid.
+#[derive(Debug, Clone, PartialEq)]
+struct Violation {
+    what: String,
+    excess: f64,
+}
+
+/// Evaluation of a trajectory on a grid.
+struct Eval {
+    cost: f64,
+    condition: f64,
+    scaled_condition: f64,
+    penalty: f64,
+}
+
+/// A trajectory fitted to the limits (with the violation that bound it, if any), or the
+/// violation that remains even at rest.
+type Fitted = std::result::Result<(Vec<FourierJoint>, Option<Violation>), Violation>;
+
+/// The design problem: model, limits, grid and the fixed base columns.
+struct Problem<'a> {
+    robot: &'a RobotModel,
+    reg: Regressor<'a>,
+    collide: Option<(Data, Vec<[usize; 2]>)>,
+    limits: Vec<JointLimits>,
+    selected: Vec<usize>,
+    cad: Vec<f64>,
+    cols: Vec<Vec<usize>>,
+    ncols: usize,
+    base_cols: Vec<usize>,
+    opts: ExciteOptions,
+    hold: Vec<f64>,
+    evaluations: usize,
+    /// Per body, the excited joints (indices into `selected`) that move it.
+    body_joints: Vec<Vec<usize>>,
+    /// Per excited joint: involved in a violation of the last [`Problem::assess`].
+    involved: Vec<bool>,
+}
+
+/// Free variables per joint: `c`, `a₂…a_H`, `b₂…b_H`.
+fn vars_per_joint(h: usize) -> usize {
+    2 * h - 1
+}
+
+fn joints_from_vars(x: &[f64], h: usize, template: &[FourierJoint]) -> Vec<FourierJoint> {
+    let nv = vars_per_joint(h);
+    template
+        .iter()
+        .enumerate()
+        .map(|(i, t)| {
+            let v = &x[i * nv..(i + 1) * nv];
+            let mut a = vec![0.0; h];
+            let mut b = vec![0.0; h];
+            for l in 1..h {
+                a[l] = v[l];
+                b[l] = v[h - 1 + l];
+            }
+            a[0] = -a[1..].iter().sum::<f64>();
+            b[0] = -(1..h).map(|l| (l + 1) as f64 * b[l]).sum::<f64>();
+            FourierJoint { name: t.name.clone(), index: t.index, rest: v[0], a, b }
+        })
+        .collect()
+}
+
+fn vars_from_joints(joints: &[FourierJoint], h: usize) -> Vec<f64> {
+    let mut x = Vec::with_capacity(joints.len() * vars_per_joint(h));
+    for f in joints {
+        x.push(f.rest);
+        x.extend_from_slice(&f.a[1..]);
+        x.extend_from_slice(&f.b[1..]);
+    }
+    x
+}
+
+/// Singular values of the columns `cols` of the compressed `rz`, each column scaled to unit
+/// norm when `scaled`.
+fn singular_values(rz: &Mat<f64>, cols: &[usize], scaled: bool) -> Option<Vec<f64>> {
+    let n = rz.nrows();
+    let norms: Vec<f64> = cols.iter().map(|&c| (0..n).map(|i| rz[(i, c)] * rz[(i, c)]).sum::<f64>().sqrt()).collect();
+    if norms.iter().any(|&x| !(x > 0.0 && x.is_finite())) {
+        return None;
+    }
+    let m = Mat::from_fn(n, cols.len(), |i, k| rz[(i, cols[k])] / if scaled { norms[k] } else { 1.0 });
+    m.singular_values().ok().filter(|sv| sv.iter().all(|&s| s > 0.0 && s.is_finite()))
+}
+
+/// Largest over smallest of `sv`.
+fn ratio(sv: &[f64]) -> f64 {
+    sv.iter().copied().fold(0.0, f64::max) / sv.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+impl<'a> Problem<'a> {
+    fn omega(&self) -> f64 {
+        2.0 * PI * self.opts.base_frequency_hz
+    }
+
+    fn excitation(&self, joints: Vec<FourierJoint>) -> Excitation {
+        Excitation {
+            base_frequency_hz: self.opts.base_frequency_hz,
+            joints,
+            hold: self.hold.clone(),
+            joint_names: self.robot.joints.iter().map(|j| j.name.clone()).collect(),
+        }
+    }
+
+    /// The compressed regressor along `joints` on an `n`-point grid, the squared penalty
+    /// and the worst violation.
+    fn assess(
+        &mut self,
+        joints: &[FourierJoint],
+        n: usize,
+        collisions: bool,
+    ) -> Result<(Mat<f64>, f64, Option<Violation>)> {
+        let nj = self.robot.joints.len();
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        let mut acc = Accumulator::new(self.ncols, self.cols.clone());
+        let (mut q, mut qd, mut qdd) = (self.hold.clone(), vec![0.0; nj], vec![0.0; nj]);
+        let mut rows = Vec::new();
+        let mut penalty = 0.0;
+        let mut worst: Option<Violation> = None;
+        let mut involved = vec![false; self.selected.len()];
+        let mut note = |what: String, excess: f64, penalty: &mut f64| {
+            *penalty += excess * excess;
+            if worst.as_ref().is_none_or(|w| excess > w.excess) {
+                worst = Some(Violation { what, excess });
+            }
+        };
+        for k in 0..n {
+            let t = k as f64 * period / n as f64;
+            for f in joints {
+                let (a, b, c) = f.sample(omega, t);
+                q[f.index] = a;
+                qd[f.index] = b;
+                qdd[f.index] = c;
+            }
+            let tau = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            for (s, &j) in self.selected.iter().enumerate() {
+                let lim = &self.limits[s];
+                let name = &lim.name;
+                if q[j] > lim.upper || q[j] < lim.lower || qd[j].abs() > lim.velocity || qdd[j].abs() > lim.acceleration
+                {
+                    involved[s] = true;
+                }
+                if let Some(tmax) = lim.torque
+                    && tau[j].abs() > tmax
+                {
+                    // A joint's torque comes from the motion of every joint: all are shrunk.
+                    involved.iter_mut().for_each(|x| *x = true);
+                }
+                if q[j] > lim.upper {
+                    note(
+                        format!("joint \"{name}\" position {:.3} above {:.3} at t = {t:.2} s", q[j], lim.upper),
+                        (q[j] - lim.upper) / (lim.upper - lim.lower).max(1e-6),
+                        &mut penalty,
+                    );
+                }
+                if q[j] < lim.lower {
+                    note(
+                        format!("joint \"{name}\" position {:.3} below {:.3} at t = {t:.2} s", q[j], lim.lower),
+                        (lim.lower - q[j]) / (lim.upper - lim.lower).max(1e-6),
+                        &mut penalty,
+                    );
+                }
+                if qd[j].abs() > lim.velocity {
+                    note(
+                        format!(
+                            "joint \"{name}\" velocity {:.3} beyond its limit {:.3} at t = {t:.2} s",
+                            qd[j], lim.velocity
+                        ),
+                        qd[j].abs() / lim.velocity - 1.0,
+                        &mut penalty,
+                    );
+                }
+                if qdd[j].abs() > lim.acceleration {
+                    note(
+                        format!(
+                            "joint \"{name}\" acceleration {:.3} beyond its limit {:.3} at t = {t:.2} s",
+                            qdd[j], lim.acceleration
+                        ),
+                        qdd[j].abs() / lim.acceleration - 1.0,
+                        &mut penalty,
+                    );
+                }
+                if let Some(tmax) = lim.torque
+                    && tau[j].abs() > tmax
+                {
+                    note(
+                        format!("joint \"{name}\" torque {:.2} beyond its limit {tmax:.2} at t = {t:.2} s", tau[j]),
+                        tau[j].abs() / tmax - 1.0,
+                        &mut penalty,
+                    );
+                }
+            }
+            let ncols = self.ncols;
+            for (s, &j) in self.selected.iter().enumerate() {
+                acc.push(s, &rows[j * ncols..(j + 1) * ncols], tau[j]);
+            }
+            if collisions && let Some((data, allowed)) = &mut self.collide {
+                for (j, joint) in self.robot.joints.iter().enumerate() {
+                    data.qpos_mut()[joint.qpos_adr] = q[j];
+                }
+                data.forward()?;
+                let model = data.model().clone();
+                for (dist, geoms) in data.contacts() {
+                    let bodies = [
+                        model.geom_bodyid()[geoms[0] as usize] as usize,
+                        model.geom_bodyid()[geoms[1] as usize] as usize,
+                    ];
+                    if dist < 0.0 && !allowed.contains(&sorted(bodies)) {
+                        // The joints that move one link and not the other.
+                        let (a, b) = (&self.body_joints[bodies[0]], &self.body_joints[bodies[1]]);
+                        for &x in a.iter().filter(|x| !b.contains(x)).chain(b.iter().filter(|x| !a.contains(x))) {
+                            involved[x] = true;
+                        }
+                        note(
+                            format!(
+                                "links \"{}\" and \"{}\" collide ({:.1} mm deep) at t = {t:.2} s",
+                                model.name(ObjType::Body, bodies[0]),
+                                model.name(ObjType::Body, bodies[1]),
+                                -dist * 1e3
+                            ),
+                            -dist / 0.01,
+                            &mut penalty,
+                        );
+                    }
+                }
+            }
+        }
+        acc.finish();
+        self.involved = involved;
+        let weights = vec![1.0; self.selected.len()];
+        Ok((acc.compressed(&weights), penalty, worst))
+    }
+
+    fn evaluate(&mut self, joints: &[FourierJoint]) -> Result<Eval> {
+        self.evaluations += 1;
+        let (rz, penalty, _) = self.assess(joints, self.opts.samples, self.opts.self_collision)?;
+        let (condition, scaled_condition, crit) =
+            match (singular_values(&rz, &self.base_cols, false), singular_values(&rz, &self.base_cols, true)) {
+                (Some(sv), Some(scaled)) => {
+                    let crit = match self.opts.criterion {
+                        Criterion::Condition => ratio(&sv).ln(),
+                        // Log-determinant of the column-scaled matrix: invariant to units.
+                        Criterion::LogDet => -2.0 * scaled.iter().map(|s| s.ln()).sum::<f64>() / scaled.len() as f64,
+                    };
+                    (ratio(&sv), ratio(&scaled), crit)
+                }
+                _ => (f64::INFINITY, f64::INFINITY, 100.0),
+            };
+        Ok(Eval { cost: crit + 100.0 * penalty, condition, scaled_condition, penalty })
+    }
+
+    /// Scales each joint's deviation from rest to use its position, velocity and acceleration
+    /// room (on the fine grid), then shrinks all together until torques and collisions are
+    /// within limits. Returns the feasible trajectory, or the violation at rest.
+    /// With `per_joint` false, the trajectory is only shrunk as a whole (a random trajectory
+    /// as drawn, made feasible).
+    fn fit_to_limits(&mut self, joints: &[FourierJoint], per_joint: bool) -> Result<Fitted> {
+        let n = 4 * self.opts.samples;
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        let mut scaled: Vec<FourierJoint> = Vec::with_capacity(joints.len());
+        for (f, lim) in joints.iter().zip(&self.limits) {
+            let mut f = f.clone();
+            f.rest = f.rest.clamp(lim.lower, lim.upper);
+            let (mut up, mut down, mut v, mut a) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+            for k in 0..n {
+                let (q, qd, qdd) = f.sample(omega, k as f64 * period / n as f64);
+                up = up.max(q - f.rest);
+                down = down.max(f.rest - q);
+                v = v.max(qd.abs());
+                a = a.max(qdd.abs());
+            }
+            let mut s = f64::INFINITY;
+            for (room, need) in
+                [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
+            {
+                if need > 1e-12 {
+                    s = s.min(room / need);
+                }
+            }
+            let s = if !s.is_finite() {
+                0.0
+            } else if per_joint {
+                0.999 * s
+            } else {
+                s.min(1.0)
+            };
+            f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+            scaled.push(f);
+        }
+        let shrink = |js: &[FourierJoint], s: f64| -> Vec<FourierJoint> {
+            js.iter()
+                .map(|f| {
+                    let mut f = f.clone();
+                    f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+                    f
+                })
+                .collect()
+        };
+        let (_, pen, worst) = self.assess(&scaled, n, self.opts.self_collision)?;
+        if pen == 0.0 {
+            return Ok(Ok((scaled, None)));
+        }
+        let (_, pen0, worst0) = self.assess(&shrink(&scaled, 0.0), n, self.opts.self_collision)?;
+        if pen0 > 0.0 {
+            return Ok(Err(worst0.or(worst).expect("a penalty has a violation")));
+        }
+        // Alternatively shrink only the joints involved in a violation (a collision involves
+        // the joints that move one link and not the other), so that one tight pair does not
+        // stop the whole robot; the better of the two by the criterion is kept.
+        let mut selective = None;
+        if per_joint {
+            let mut current = scaled.clone();
+            for _ in 0..60 {
+                let (_, p, _) = self.assess(&current, n, self.opts.self_collision)?;
+                if p == 0.0 {
+                    selective = Some(current);
+                    break;
+                }
+                for (f, &inv) in current.iter_mut().zip(&self.involved.clone()) {
+                    if inv {
+                        f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= 0.85);
+                    }
+                }
+            }
+        }
+        let (mut lo, mut hi) = (0.0, 1.0);
+        for _ in 0..12 {
+            let mid = 0.5 * (lo + hi);
+            let (_, p, _) = self.assess(&shrink(&scaled, mid), n, self.opts.self_collision)?;
+            if p == 0.0 {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        let global = (lo >= 1e-3).then(|| shrink(&scaled, lo));
+        let chosen = match (global, selective) {
+            (Some(g), Some(sel)) => {
+                if self.evaluate(&sel)?.cost < self.evaluate(&g)?.cost {
+                    sel
+                } else {
+                    g
+                }
+            }
+            (Some(g), None) => g,
+            (None, Some(sel)) => sel,
+            (None, None) => return Ok(Err(worst.expect("a penalty has a violation"))),
+        };
+        Ok(Ok((chosen, worst)))
+    }
+
+    fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {
+        let n = 4 * self.opts.samples;
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        let nj = self.robot.joints.len();
+        let mut out: Vec<JointUse> = self
+            .limits
+            .iter()
+            .map(|l| JointUse { name: l.name.clone(), span: 0.0, velocity: 0.0, acceleration: 0.0, torque: 0.0 })
+            .collect();
+        let mut range = vec![(f64::INFINITY, f64::NEG_INFINITY); joints.len()];
+        let (mut q, mut qd, mut qdd) = (self.hold.clone(), vec![0.0; nj], vec![0.0; nj]);
+        let mut rows = Vec::new();
+        for k in 0..n {
+            let t = k as f64 * period / n as f64;
+            for f in joints {
+                let (a, b, c) = f.sample(omega, t);
+                (q[f.index], qd[f.index], qdd[f.index]) = (a, b, c);
+            }
+            let tau = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            for (s, &j) in self.selected.iter().enumerate() {
+                let lim = &self.limits[s];
+                let u = &mut out[s];
+                range[s] = (range[s].0.min(q[j]), range[s].1.max(q[j]));
+                u.velocity = u.velocity.max(qd[j].abs() / lim.velocity);
+                u.acceleration = u.acceleration.max(qdd[j].abs() / lim.acceleration);
+                if let Some(tm) = lim.torque {
+                    u.torque = u.torque.max(tau[j].abs() / tm);
+                }
+            }
+        }
+        for (u, r) in out.iter_mut().zip(range) {
+            u.span = r.1 - r.0;
+        }
+        Ok(out)
+    }
+}
+
+fn sorted(b: [usize; 2]) -> [usize; 2] {
+    if b[0] <= b[1] { b } else { [b[1], b[0]] }
+}
+
+fn option_error(name: &'static str, message: String) -> Error {
+    Error::Option { name, message }
+}
+
+/// A random trajectory: rest inside the middle half of each range, each velocity coefficient
+/// uniform in `±v_max/H` (so that the velocity reaches about its limit), as drawn in practice
+/// (Gaz et al. 2019); [`Problem::fit_to_limits`] then shrinks it as a whole where it exceeds a
+/// limit.
+fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut Rng) -> Vec<FourierJoint> {
+    let nv = vars_per_joint(h);
+    let mut x = Vec::with_capacity(template.len() * nv);
+    for lim in limits {
+        let mid = 0.5 * (lim.lower + lim.upper);
+        let half = 0.5 * (lim.upper - lim.lower);
+        x.push(mid + half * 0.5 * (2.0 * rng.uniform() - 1.0));
+        for _ in 0..2 * (h - 1) {
+            x.push(lim.velocity / h as f64 * (2.0 * rng.uniform() - 1.0));
+        }
+    }
+    joints_from_vars(&x, h, template)
+}
+
+/// The starting inverse Hessian of [`bfgs`]: the step scales squared (variables of different
+/// units).
+fn initial_hinv(steps: &[f64]) -> Vec<Vec<f64>> {
+    let n = steps.len();
+    (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect()
+}
+
+/// Minimizes `f` from `x0` by BFGS with forward-difference gradients and a backtracking line
+/// search; returns the best point found. (Small dense updates keep index loops.)
+#[allow(clippy::needless_range_loop)]
+fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max_iter: usize) -> Result<Vec<f64>> {
+    let n = x0.len();
+    let mut x = x0.to_vec();
+    let mut fx = f(&x)?;
+    let grad = |f: &mut dyn FnMut(&[f64]) -> Result<f64>, x: &[f64], fx: f64| -> Result<Vec<f64>> {
+        let mut g = vec![0.0; n];
+        let mut xp = x.to_vec();
+        for i in 0..n {
+            let h = 1e-4 * steps[i];
+            xp[i] = x[i] + h;
+            g[i] = (f(&xp)? - fx) / h;
+            xp[i] = x[i];
+        }
+        Ok(g)
+    };
+    let mut g = grad(&mut f, &x, fx)?;
+    let mut hinv = initial_hinv(steps);
+    let mut restarted = false;
+    for _ in 0..max_iter {
+        let d: Vec<f64> = (0..n).map(|i| -(0..n).map(|j| hinv[i][j] * g[j]).sum::<f64>()).collect();
+        let slope: f64 = d.iter().zip(&g).map(|(a, b)| a * b).sum();
+        if slope >= 0.0 {
+            // Not a descent direction: restart from the scaled steepest descent.
+            hinv = initial_hinv(steps);
+            continue;
+        }
+        let mut alpha = 1.0;
+        let mut accepted = None;
+        for _ in 0..12 {
+            let xn: Vec<f64> = x.iter().zip(&d).map(|(a, b)| a + alpha * b).collect();
+            let fnew = f(&xn)?;
+            if fnew <= fx + 1e-4 * alpha * slope {
+                accepted = Some((xn, fnew));
+                break;
+            }
+            alpha *= 0.4;
+        }
+        let Some((xn, fnew)) = accepted else {
+            if restarted {
+                break;
+            }
+            // The quasi-Newton model went stale (the criterion is not smooth where two
+            // singular values cross): start again from the scaled steepest descent once.
+            restarted = true;
+            hinv = initial_hinv(steps);
+            continue;
+        };
+        restarted = false;
+        let gn = grad(&mut f, &xn, fnew)?;
+        let s: Vec<f64> = xn.iter().zip(&x).map(|(a, b)| a - b).collect();
+        let y: Vec<f64> = gn.iter().zip(&g).map(|(a, b)| a - b).collect();
+        let sy: f64 = s.iter().zip(&y).map(|(a, b)| a * b).sum();
+        if sy > 1e-12 {
+            let hy: Vec<f64> = (0..n).map(|i| (0..n).map(|j| hinv[i][j] * y[j]).sum()).collect();
+            let yhy: f64 = y.iter().zip(&hy).map(|(a, b)| a * b).sum();
+            for i in 0..n {
+                for j in 0..n {
+                    hinv[i][j] += (sy + yhy) * s[i] * s[j] / (sy * sy) - (hy[i] * s[j] + s[i] * hy[j]) / sy;
+                }
+            }
+        }
+        let improved = fx - fnew;
+        x = xn;
+        fx = fnew;
+        g = gn;
+        if improved < 1e-7 * fx.abs().max(1.0) {
+            break;
+        }
+    }
+    Ok(x)
+}
+
+/// Designs an excitation trajectory for `urdf`.
+///
+/// # Errors
+/// Loading errors; [`Error::Option`] for bad options or an unknown joint;
+/// [`Error::Urdf`] naming the joint and the limit when the limits leave no feasible
+/// trajectory (no range, no velocity limit, a torque limit below what holding still needs, a
+/// self-collision at rest, or no room to move).
+pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
+    let started = Instant::now();
+    faer::set_global_parallelism(faer::Par::Seq);
+    let h = opts.harmonics;
+    if !(1..=20).contains(&h) {
+        return Err(option_error("harmonics", format!("{h}: must be 1 to 20")));
+    }
+    if !(opts.base_frequency_hz > 0.0 && opts.base_frequency_hz <= 10.0) {
+        return Err(option_error(
+            "base_frequency_hz",
+            format!("{}: must be above 0 and at most 10 Hz", opts.base_frequency_hz),
+        ));
+    }
+    for (name, v) in [
+        ("velocity_fraction", opts.velocity_fraction),
+        ("effort_fraction", opts.effort_fraction),
+        ("max_acceleration", opts.max_acceleration),
+    ] {
+        if !(v > 0.0 && v.is_finite()) {
+            return Err(option_error(name, format!("{v}: must be positive (a zero limit leaves nothing to move)")));
+        }
+    }
+    if !(opts.position_margin >= 0.0 && opts.position_margin.is_finite()) {
+        return Err(option_error("position_margin", format!("{}: must be ≥ 0", opts.position_margin)));
+    }
+    if opts.samples < 10 || opts.random_candidates == 0 {
+        return Err(option_error("samples", "at least 10 grid samples and 1 random candidate".into()));
+    }
+    let twin = crate::model::load_urdf_robot(urdf, opts.self_collision)?;
+    let model: Arc<twin_core::mj::Model> = twin.model.clone();
+    let robot = RobotModel::from_model(urdf, model.clone())?;
+    let nj = robot.joints.len();
+    let selected: Vec<usize> = if opts.joints.is_empty() {
+        (0..nj).collect()
+    } else {
+        opts.joints
+            .iter()
+            .map(|name| {
+                robot.joint_index(name).ok_or_else(|| {
+                    option_error(
+                        "joints",
+                        format!(
+                            "\"{name}\" is not a revolute or prismatic joint of {}; its joints: {}",
+                            urdf.display(),
+                            crate::condition::quote_list(
+                                &robot.joints.iter().map(|j| j.name.clone()).collect::<Vec<_>>()
+                            )
+                        ),
+                    )
+                })
+            })
+            .collect::<Result<_>>()?
+    };
+    let urdf_err = |message: String| Error::Urdf { path: urdf.to_path_buf(), message };
+    let mut hold = vec![0.0; nj];
+    let mut limits = Vec::new();
+    let mut notes = Vec::new();
+    for (j, joint) in robot.joints.iter().enumerate() {
+        let tj = twin.joints.iter().find(|t| t.name == joint.name);
+        let range = tj.and_then(|t| t.range);
+        if let Some([lo, hi]) = range {
+            hold[j] = 0.0f64.clamp(lo, hi);
+        }
+        if !selected.contains(&j) {
+            continue;
+        }
+        let [lo, hi] = range.unwrap_or([-PI, PI]);
+        if range.is_none() {
+            notes.push(format!("joint \"{}\" has no position limits: kept within ±π", joint.name));
+        }
+        let (lower, upper) = (lo + opts.position_margin, hi - opts.position_margin);
+        if upper <= lower {
+            return Err(urdf_err(format!(
+                "joint \"{}\": its range [{lo}, {hi}] leaves no room to move inside the {} margin at each end; \
+                 widen <limit lower/upper> or lower the position margin",
+                joint.name, opts.position_margin
+            )));
+        }
+        let velocity = match (tj.and_then(|t| t.velocity_limit).filter(|v| *v > 0.0), opts.default_velocity_limit) {
+            (Some(v), _) => v * opts.velocity_fraction,
+            (None, Some(v)) if v > 0.0 => v,
+            _ => {
+                return Err(urdf_err(format!(
+                    "joint \"{}\" has no velocity limit (<limit velocity=\"…\"> is missing or 0): add one, or give \
+                     a default velocity limit (--max-velocity)",
+                    joint.name
+                )));
+            }
+        };
+        let torque = tj.and_then(|t| t.effort_limit).filter(|e| *e > 0.0).map(|e| e * opts.effort_fraction);
+        if torque.is_none() {
+            notes.push(format!("joint \"{}\" has no effort limit: its torque is not limited", joint.name));
+        }
+        limits.push(JointLimits {
+            name: joint.name.clone(),
+            lower,
+            upper,
+            velocity,
+            acceleration: opts.max_acceleration,
+            torque,
+        });
+    }
+    let friction = FrictionModel { coulomb_smoothing: Some(opts.velocity_deadzone.max(1e-3)), offset: false };
+    let reg = Regressor::new(&robot, friction)?;
+    let layout = reg.layout();
+    let cad = crate::identify::cad_params(&robot, &layout);
+    let cols: Vec<Vec<usize>> = selected.iter().map(|&j| crate::identify::joint_columns(&robot, &layout, j)).collect();
+    let collide = if opts.self_collision {
+        let mut data = Data::new(model.clone())?;
+        for (j, joint) in robot.joints.iter().enumerate() {
+            data.qpos_mut()[joint.qpos_adr] = hold[j];
+        }
+        data.forward()?;
+        let mut allowed: Vec<[usize; 2]> = data
+            .contacts()
+            .iter()
+            .map(|(_, g)| {
+                sorted([model.geom_bodyid()[g[0] as usize] as usize, model.geom_bodyid()[g[1] as usize] as usize])
+            })
+            .collect();
+        // Links two joints apart (a link and its grandparent) overlap around the joint between
+        // them in most URDFs' collision shapes; MuJoCo already skips parent and child.
+        let parent = model.body_parentid();
+        for b in 1..model.nbody() {
+            let p = parent[b] as usize;
+            if p > 0 {
+                allowed.push(sorted([b, parent[p] as usize]));
+            }
+        }
+        allowed.sort_unstable();
+        allowed.dedup();
+        let grandparents: Vec<[usize; 2]> = (1..model.nbody())
+            .filter(|&b| parent[b] > 0)
+            .map(|b| sorted([b, parent[parent[b] as usize] as usize]))
+            .collect();
+        for p in allowed.iter().filter(|p| !grandparents.contains(p)) {
+            notes.push(format!(
+                "links \"{}\" and \"{}\" already touch at the rest pose: their contacts are not counted as collisions",
+                model.name(ObjType::Body, p[0]),
+                model.name(ObjType::Body, p[1])
+            ));
+        }
+        Some((data, allowed))
+    } else {
+        None
+    };
+    let body_joints: Vec<Vec<usize>> = (0..model.nbody())
+        .map(|b| {
+            let mut out = Vec::new();
+            let mut k = b;
+            while k != 0 {
+                let (adr, num) = (model.body_dofadr()[k], model.body_dofnum()[k]);
+                for d in 0..num.max(0) {
+                    let dof = (adr + d) as usize;
+                    if let Some(s) = selected.iter().position(|&j| robot.joints[j].dof == dof) {
+                        out.push(s);
+                    }
+                }
+                k = model.body_parentid()[k] as usize;
+            }
+            out
+        })
+        .collect();
+    let mut problem = Problem {
+        robot: &robot,
+        reg,
+        collide,
+        limits,
+        selected: selected.clone(),
+        cad,
+        cols,
+        ncols: layout.ncols(),
+        base_cols: Vec::new(),
+        opts: opts.clone(),
+        hold,
+        evaluations: 0,
+        body_joints,
+        involved: Vec::new(),
+    };
+    let template: Vec<FourierJoint> = selected
+        .iter()
+        .map(|&j| FourierJoint {
+            name: robot.joints[j].name.clone(),
+            index: j,
+            rest: 0.0,
+            a: vec![0.0; h],
+            b: vec![0.0; h],
+        })
+        .collect();
+
+    // Random candidates, each scaled to the limits; the first feasible one fixes the base columns.
+    let mut rng = Rng::new(opts.seed);
+    let mut candidates = Vec::new();
+    let mut last_violation = None;
+    for _ in 0..opts.random_candidates {
+        let raw = random_joints(&template, &problem.limits, h, &mut rng);
+        match problem.fit_to_limits(&raw, false)? {
+            Ok((js, _)) => candidates.push(js),
+            Err(v) => last_violation = Some(v),
+        }
+    }
+    if candidates.is_empty() {
+        let v = last_violation.map_or_else(String::new, |v| v.what);
+        return Err(urdf_err(format!(
+            "the limits leave no feasible excitation trajectory: even holding still at rest, {v}; raise that \
+             limit (the URDF's <limit>, or the effort/velocity fraction) or choose another rest pose"
+        )));
+    }
+    if let (Some(v), true) = (&last_violation, candidates.len() < opts.random_candidates) {
+        notes.push(format!(
+            "{} of {} random trajectories were infeasible even at their rest pose (e.g. {})",
+            opts.random_candidates - candidates.len(),
+            opts.random_candidates,
+            v.what
+        ));
+    }
+    {
+        let (rz, _, _) = problem.assess(&candidates[0], 4 * opts.samples, false)?;
+        let ba = crate::estimate::base_analysis(&rz, 4 * opts.samples * selected.len())?;
+        problem.base_cols = ba.base.iter().map(|b| b.lead).collect();
+    }
+    let mut random_conditions = Vec::new();
+    let mut best: Option<(f64, Eval, Vec<FourierJoint>)> = None;
+    for js in candidates {
+        let e = problem.evaluate(&js)?;
+        random_conditions.push(e.condition);
+        if best.as_ref().is_none_or(|b| e.cost < b.0) {
+            best = Some((e.cost, e, js));
+        }
+    }
+    let (_, best_eval, best_random) = best.expect("at least one candidate");
+    let best_random_condition = best_eval.condition;
+
+    // Quasi-Newton searches from the best random trajectory as drawn and with each joint
+    // scaled to its room (better where nothing collides; on a collision boundary the
+    // penalty's kinks can stall the search there): the better result is kept.
+    let steps: Vec<f64> = problem
+        .limits
+        .iter()
+        .flat_map(|l| {
+            let mut s = vec![0.5 * (l.upper - l.lower)];
+            s.extend(std::iter::repeat_n(l.velocity, 2 * (h - 1)));
+            s
+        })
+        .collect();
+    let mut starts = vec![best_random.clone()];
+    if let Ok((js, _)) = problem.fit_to_limits(&best_random, true)? {
+        starts.push(js);
+    }
+    let (mut joints, mut condition, mut scaled_condition, mut cost) =
+        (best_random.clone(), best_random_condition, best_eval.scaled_condition, best_eval.cost);
+    let mut binding_note = None;
+    for start in starts {
+        let x = bfgs(
+            |x| {
+                let js = joints_from_vars(x, h, &template);
+                Ok(problem.evaluate(&js)?.cost)
+            },
+            &vars_from_joints(&start, h),
+            &steps,
+            opts.max_iterations,
+        )?;
+        let designed = joints_from_vars(&x, h, &template);
+        if let Ok((fitted, binding)) = problem.fit_to_limits(&designed, true)? {
+            let e = problem.evaluate(&fitted)?;
+            if e.penalty == 0.0 && e.cost < cost {
+                (joints, condition, scaled_condition, cost) = (fitted, e.condition, e.scaled_condition, e.cost);
+                binding_note = binding.map(|b| {
+                    format!("the designed trajectory was shrunk to fit the limits; the binding one: {}", b.what)
+                });
+            }
+        }
+    }
+    notes.extend(binding_note);
+    if condition >= best_random_condition {
+        notes.push("the search found nothing better than the best random trajectory".into());
+    }
+    let usage = problem.usage(&joints)?;
+    let report = ExciteReport {
+        trajectory: problem.excitation(joints),
+        criterion: opts.criterion,
+        condition,
+        scaled_condition,
+        best_random_scaled_condition: best_eval.scaled_condition,
+        random_conditions,
+        best_random_condition,
+        best_random: problem.excitation(best_random),
+        base_parameters: problem.base_cols.len(),
+        limits: problem.limits.clone(),
+        usage,
+        evaluations: problem.evaluations,
+        design_secs: started.elapsed().as_secs_f64(),
+        notes,
+    };
+    Ok(report)
+}
