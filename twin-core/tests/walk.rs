@@ -208,3 +208,37 @@ fn shipped_stand_scenario_passes() {
     assert!(!s.fell && s.distance_m < 0.1, "{s:?}");
     assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
 }
+
+/// The walker's diagnostics reach the recording: CoM, ZMP, DCM (reference and actual) and
+/// the planned footsteps at 100 Hz, in the world frame; the measured CoM is the model's.
+#[test]
+fn diagnostics_are_recorded() {
+    use twin_core::log::{Log, PointStamped, PoseArray, ReadOptions};
+    use twin_core::sim::{RecordOptions, Recording};
+    let scenario = stand(2.0);
+    let robot = scenario.robot(&humanoid()).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("walk.mcap");
+    let options = RecordOptions { mcap: Some(mcap.clone()), ..RecordOptions::default() };
+    let mut recording = Recording::with_sinks(&robot, &options, Vec::new()).unwrap();
+    let mut walker = Walker::new(&robot.model, WalkOptions { vx: 0.3, ..WalkOptions::default() }).unwrap();
+    sim::simulate(&robot, &mut walker, &SimOptions { duration_secs: 2.0 }, Some(&mut recording), &mut |_| {}).unwrap();
+    recording.finish().unwrap();
+    let log = Log::open(&mcap, ReadOptions::default()).unwrap();
+    let (com, _) = log.read_typed::<PointStamped>("/walk/com").unwrap();
+    assert_eq!(com.len(), 200, "100 Hz over 2 s");
+    let (com_ref, _) = log.read_typed::<PointStamped>("/walk/com_ref").unwrap();
+    let (dcm, _) = log.read_typed::<PointStamped>("/walk/dcm").unwrap();
+    assert_eq!((com_ref.len(), dcm.len()), (200, 200));
+    // After the 1-s crouch the CoM is near the commanded height and tracks its reference.
+    let (_, last) = com.last().unwrap();
+    let (_, last_ref) = com_ref.last().unwrap();
+    assert_eq!(last.header.frame_id, "odom");
+    assert!((last.point[2] - 0.62).abs() < 0.04, "{:?}", last.point);
+    assert!((last.point[0] - last_ref.point[0]).hypot(last.point[1] - last_ref.point[1]) < 0.05);
+    // Walking: footsteps ahead, each beside the last, advancing.
+    let (steps, _) = log.read_typed::<PoseArray>("/walk/footsteps").unwrap();
+    let (_, plan) = steps.last().unwrap();
+    assert!(plan.poses.len() >= 3, "{plan:?}");
+    assert!(plan.poses[2].position[0] > plan.poses[0].position[0] + 0.1, "{plan:?}");
+}

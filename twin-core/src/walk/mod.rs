@@ -343,6 +343,28 @@ pub struct Walker {
     /// spots against the preview reference instead: switching a walking walker to these steps
     /// after a push fell more often, 16 of 20 randomized episodes against 13.)
     recovering: bool,
+    /// The diagnostics of the last tick, when it was one to publish.
+    diagnostics: Diagnostics,
+}
+
+/// Rate of the walker's diagnostic topics, Hz.
+const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
+
+/// Names of the walker's diagnostic points ([`Walker::topics`] 0..6), world frame.
+const DIAGNOSTIC_POINTS: [&str; 6] =
+    ["/walk/com", "/walk/com_ref", "/walk/zmp", "/walk/zmp_ref", "/walk/dcm", "/walk/dcm_ref"];
+
+/// The walker's diagnostic messages, refreshed every `1 / DIAGNOSTICS_RATE_HZ`.
+#[derive(Debug, Clone, Default)]
+struct Diagnostics {
+    /// Whether the last tick refreshed them (then the recording publishes them).
+    fresh: bool,
+    /// Their stamp, simulation nanoseconds.
+    stamp_nanos: u64,
+    /// CoM, reference CoM, commanded ZMP, reference ZMP, DCM, reference DCM.
+    points: [crate::log::typed::PointStamped; 6],
+    /// Planned footholds ahead (the current landing first), at the sole.
+    footsteps: crate::log::typed::PoseArray,
 }
 
 impl Walker {
@@ -398,6 +420,7 @@ impl Walker {
             state: WalkerState::default(),
             planted: [Foothold { side: Side::Left, pos: Vector2::zeros(), yaw: 0.0 }; 2],
             recovering: false,
+            diagnostics: Diagnostics::default(),
             body,
             options,
         };
@@ -1093,7 +1116,79 @@ impl Controller for Walker {
         for s in self.schedule.steps.iter().take(6) {
             self.state.footholds.push((s.swing_to.side, [s.swing_to.pos.x, s.swing_to.pos.y], s.swing_to.yaw));
         }
+        self.publish_diagnostics(observation.time_secs);
         self.tick += 1;
+    }
+
+    /// CoM, ZMP and DCM (reference and actual) as points, the planned footsteps as poses, all
+    /// in the world (`odom`) frame at 100 Hz: Foxglove and PlotJuggler plot the points'
+    /// coordinates, rerun draws them in 3-D with the robot.
+    fn topics(&self) -> Vec<crate::topics::TopicInfo> {
+        use crate::log::typed::{PointStamped, PoseArray, RosMessage};
+        use crate::topics::{Qos, TopicInfo, TopicKind};
+        let topic = |name: &str, type_name, k| TopicInfo {
+            name: name.to_string(),
+            type_name,
+            rate_hz: Some(DIAGNOSTICS_RATE_HZ),
+            frame_id: "odom".into(),
+            qos: Qos::STREAM,
+            kind: TopicKind::Controller(k),
+        };
+        let mut topics: Vec<TopicInfo> =
+            DIAGNOSTIC_POINTS.iter().enumerate().map(|(k, n)| topic(n, PointStamped::TYPE_NAME, k)).collect();
+        topics.push(topic("/walk/footsteps", PoseArray::TYPE_NAME, DIAGNOSTIC_POINTS.len()));
+        topics
+    }
+
+    fn diagnostics(&self, emit: &mut dyn FnMut(usize, u64, crate::topics::TypedMessage<'_>)) {
+        let d = &self.diagnostics;
+        if !d.fresh {
+            return;
+        }
+        for (k, p) in d.points.iter().enumerate() {
+            emit(k, d.stamp_nanos, crate::topics::TypedMessage::Point(p));
+        }
+        emit(DIAGNOSTIC_POINTS.len(), d.stamp_nanos, crate::topics::TypedMessage::Poses(&d.footsteps));
+    }
+}
+
+impl Walker {
+    /// Refreshes the diagnostic messages from this tick's state at their rate.
+    fn publish_diagnostics(&mut self, time_secs: f64) {
+        let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.dt).round().max(1.0) as u64;
+        let d = &mut self.diagnostics;
+        d.fresh = self.tick.is_multiple_of(every);
+        if !d.fresh {
+            return;
+        }
+        let stamp = (time_secs.max(0.0) * 1e9).round();
+        d.stamp_nanos = stamp as u64;
+        let s = &self.state;
+        let z = self.sole_z;
+        let values = [
+            s.com,
+            s.com_ref,
+            [s.zmp_cmd[0], s.zmp_cmd[1], z],
+            [s.zmp_ref[0], s.zmp_ref[1], z],
+            [s.dcm[0], s.dcm[1], z],
+            [s.dcm_ref[0], s.dcm_ref[1], z],
+        ];
+        for (p, v) in d.points.iter_mut().zip(values) {
+            p.header.stamp_nanos = stamp as i64;
+            if p.header.frame_id.is_empty() {
+                p.header.frame_id = "odom".into();
+            }
+            p.point = v;
+        }
+        d.footsteps.header.stamp_nanos = stamp as i64;
+        if d.footsteps.header.frame_id.is_empty() {
+            d.footsteps.header.frame_id = "odom".into();
+        }
+        d.footsteps.poses.resize(s.footholds.len(), crate::log::typed::Pose::default());
+        for (pose, (_, xy, yaw)) in d.footsteps.poses.iter_mut().zip(&s.footholds) {
+            pose.position = [xy[0], xy[1], z];
+            pose.orientation_xyzw = [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()];
+        }
     }
 }
 
