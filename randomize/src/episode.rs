@@ -17,6 +17,10 @@ use twin_core::robot::Robot;
 /// starts each episode on that episode's model.
 pub type ControllerFactory = dyn Fn(&Robot) -> twin_core::Result<Box<dyn Controller>> + Send + Sync;
 
+/// Makes the scripted disturbances of one episode on that episode's model (e.g. a scenario's
+/// pushes), applied besides the spec's random ones.
+pub type DisturbanceFactory = dyn Fn(&Model) -> Vec<Box<dyn Disturbance>> + Send + Sync;
+
 /// Makes a batch's checks for a worker thread (see [`ControllerFactory`]); each check's
 /// verdict is part of every episode's result, and a failed check fails the episode.
 pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>> + Send + Sync;
@@ -63,6 +67,7 @@ pub struct Batch {
     controller: Arc<ControllerFactory>,
     controller_name: String,
     checks: Option<Arc<CheckFactory>>,
+    disturbances: Option<Arc<DisturbanceFactory>>,
 }
 
 impl Batch {
@@ -100,6 +105,7 @@ impl Batch {
             seed,
             controller: factory,
             checks: None,
+            disturbances: None,
         };
         let factory = batch.controller.clone();
         batch.with_controller_factory(factory)
@@ -136,6 +142,16 @@ impl Batch {
         factory(&self.robot)?;
         self.checks = Some(Arc::new(factory));
         Ok(self)
+    }
+
+    /// The batch with scripted disturbances from `factory` in every episode (made per episode
+    /// on its model), besides the spec's random pushes.
+    pub fn with_disturbances(
+        mut self,
+        factory: impl Fn(&Model) -> Vec<Box<dyn Disturbance>> + Send + Sync + 'static,
+    ) -> Batch {
+        self.disturbances = Some(Arc::new(factory));
+        self
     }
 
     /// Name of the controller.
@@ -339,9 +355,13 @@ impl Worker {
             command_scale,
         };
         let mut push = push_interval_secs.map(|every| Push::new(every, push_speed_mps, batch.layout.push_body));
+        let mut scripted = batch.disturbances.as_ref().map_or_else(Vec::new, |f| f(&model));
         let mut disturbances: Vec<&mut dyn Disturbance> = Vec::new();
         if let Some(p) = push.as_mut() {
             disturbances.push(p);
+        }
+        for d in scripted.iter_mut() {
+            disturbances.push(d.as_mut());
         }
         let mut divergence = Divergence::default();
         let mut saturation = Saturation::default();

@@ -50,7 +50,7 @@ pub mod spec;
 pub mod summary;
 
 pub use draw::Layout;
-pub use episode::{Batch, CheckFactory, ControllerFactory, EpisodeOptions, EpisodeResult, Worker};
+pub use episode::{Batch, CheckFactory, ControllerFactory, DisturbanceFactory, EpisodeOptions, EpisodeResult, Worker};
 pub use error::{Error, Result};
 pub use merge::{Merged, ShardManifest, ShardStart, merge};
 pub use run::{Report, RunInfo, RunOptions, Shard, run_batch};

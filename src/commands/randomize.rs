@@ -30,8 +30,8 @@ pub struct Args {
     pub duration: Option<f64>,
 
     /// Scenario file (TOML): model, physics options (armature, friction), duration, controller
-    /// and its parameters; its checks decide each episode's success. Its scripted pushes are
-    /// not applied: the randomization spec's pushes are.
+    /// and its parameters; its checks decide each episode's success. Its scripted pushes act
+    /// in every episode, besides the randomization spec's random ones.
     #[arg(long, value_name = "SCENARIO.toml")]
     pub scenario: Option<PathBuf>,
 
@@ -207,10 +207,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         s.controller = controller;
         let s = std::sync::Arc::new(s);
         let for_checks = s.clone();
-        batch = batch.with_controller(move |r| s.controller(&r.model))?.with_checks(move |r| {
-            let check: Box<dyn twin_core::engine::Check> = Box::new(for_checks.check(&r.model)?);
-            Ok(vec![check])
-        })?;
+        let for_pushes = s.clone();
+        batch = batch
+            .with_controller(move |r| s.controller(&r.model))?
+            .with_checks(move |r| {
+                let check: Box<dyn twin_core::engine::Check> = Box::new(for_checks.check(&r.model)?);
+                Ok(vec![check])
+            })?
+            // The scenario's scripted pushes too, besides the spec's random ones.
+            .with_disturbances(move |m| {
+                for_pushes
+                    .disturbances(m)
+                    .into_iter()
+                    .map(|d| Box::new(d) as Box<dyn twin_core::engine::Disturbance>)
+                    .collect()
+            });
     }
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {

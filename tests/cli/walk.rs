@@ -70,4 +70,18 @@ fn randomize_scenario_checks_decide_success() {
     let (ok, out, err) = run(&["randomize", "--scenario", far.to_str().unwrap(), "--episodes", "2"]);
     assert!(ok, "{err}");
     assert!(out.contains("success: 0/2") && out.contains("fell 0"), "{out}");
+    // The scenario's scripted pushes act in every episode too: 1000 N for 0.1 s (2.8 m/s of
+    // the whole robot, a capture point 0.7 m ahead) fells both, where the same standing passed.
+    let pushed = write(
+        dir.path(),
+        "pushed.toml",
+        &format!(
+            "model = {:?}\nduration = 2.5\n[walk]\nvx = 0.0\n[[push]]\ntime = 0.5\nforce = [1000.0, 0.0, 0.0]\n\
+             [checks]\nfalls = 0\n",
+            model.display().to_string()
+        ),
+    );
+    let (ok, out, err) = run(&["randomize", "--scenario", pushed.to_str().unwrap(), "--episodes", "2"]);
+    assert!(ok, "{err}");
+    assert!(out.contains("success: 0/2") && out.contains("fell 2"), "{out}");
 }

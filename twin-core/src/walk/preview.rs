@@ -87,6 +87,15 @@ impl PreviewAxis {
         PreviewAxis { x: [c, 0.0, 0.0], sum_error: 0.0 }
     }
 
+    /// At CoM `c` moving at `v`, with the integrated error that makes the state at rest at `c`
+    /// under a constant reference `c` an equilibrium: the control law is not translation
+    /// invariant without it, and a restart away from the origin would jerk the CoM.
+    pub fn restart(gains: &PreviewGains, c: f64, v: f64) -> PreviewAxis {
+        let sum_gd: f64 = gains.gd.iter().sum();
+        let sum_error = if gains.gi.abs() > 0.0 { -(gains.gx[0] + sum_gd) * c / gains.gi } else { 0.0 };
+        PreviewAxis { x: [c, v, 0.0], sum_error }
+    }
+
     /// The ZMP of the current state.
     pub fn zmp(&self, gains: &PreviewGains) -> f64 {
         gains.c.dot(&Vector3::from(self.x))
