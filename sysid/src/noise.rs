@@ -16,7 +16,7 @@
 //! else the log's rate), `dynamic_bias_stddev = K` and `dynamic_bias_correlation_time
 //! = 2·(1.074·B)²/K²`, the first-order Gauss–Markov bias whose short-τ random walk is `K` and
 //! whose Allan peak (0.618 of its stationary deviation `K·√(τc/2)`) equals the bias-instability
-//! floor `0.664·B`. They also go into a `twin randomize` spec fragment ([`spec_fragment`]).
+//! floor `0.664·B`. They also go into a `twin randomize` spec fragment ([`NoiseReport::spec_fragment`]).
 
 use crate::allan::{self, AllanPoint, NoiseFit};
 use crate::error::{Error, Result};
