@@ -237,7 +237,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let (mut recording, mut live_controller) = match live {
         Some((sink, controller)) => {
             let options = RecordOptions { command_topic: Some(twin_core::live::actuator_topic(&robot)), ..options };
-            (Some(Recording::with_sink(&robot, &options, Some(Box::new(sink)))?), Some(controller))
+            (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
         }
         None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
     };
@@ -252,6 +252,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
         }
     }
+    #[cfg(feature = "ros")]
+    let mut live_reset = live_controller.as_ref().map(|c| c.reset_disturbance());
     #[cfg(feature = "ros")]
     let controller: &mut dyn Controller = match live_controller.as_mut() {
         Some(c) => c,
@@ -276,6 +278,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
     };
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
+    #[cfg(feature = "ros")]
+    disturbances.extend(live_reset.iter_mut().map(|r| r as &mut dyn Disturbance));
     if let Some(f) = stribeck.as_mut() {
         disturbances.push(f);
     }
@@ -461,6 +465,9 @@ mod live {
             robot.name
         )?;
         writeln!(out, "command order ({} joints): {}", c.joint_names().len(), c.joint_names().join(", "))?;
+        let services: Vec<String> =
+            bridge::simulation::SERVICES.iter().map(|(name, ty)| format!("{name} ({ty})")).collect();
+        writeln!(out, "services: {}", services.join(", "))?;
         out.flush()?;
         Ok(())
     }
@@ -468,11 +475,14 @@ mod live {
     pub fn report(out: &mut impl Write, s: &LiveStats) -> anyhow::Result<()> {
         writeln!(
             out,
-            "live: {} control periods, {} commands applied, {} rejected, {} safe holds; measured real-time factor {:.4}",
+            "live: {} control periods, {} commands applied, {} rejected, {} safe holds, {} service calls, {} resets; \
+             measured real-time factor {:.4}",
             s.periods,
             s.commands_applied,
             s.commands_rejected,
             s.safe_holds,
+            s.service_calls,
+            s.resets,
             s.real_time_factor()
         )?;
         if let (Some(p50), Some(p99)) =

@@ -5,7 +5,8 @@
 //! The true model is the URDF as MuJoCo compiles it (its `<dynamics damping friction>` become
 //! viscous damping and dry friction loss) plus an armature per joint. Each joint follows a sum
 //! of sines inside its range, tracked by a PD controller on top of MuJoCo's bias forces; the
-//! logged effort is the torque applied to the joint.
+//! logged effort is the torque applied to the joint, the only one driving it (the model's own
+//! actuators are disabled).
 
 use crate::error::Result;
 use crate::log::JointLog;
@@ -169,7 +170,10 @@ fn simulate_impl(
 ) -> Result<JointLog> {
     let dt = 1.0 / opts.rate_hz;
     let gravity = if floating.is_some_and(|f| !f.gravity) { r#" gravity="0 0 0""# } else { "" };
-    let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable"/></option>"#);
+    // The joints are driven by the logged torques alone (`qfrc_applied`): the converter's
+    // actuators (position servos for a URDF's `PositionJointInterface`, as on the UR5) would add
+    // forces that no log entry carries.
+    let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable" actuation="disable"/></option>"#);
     let base = match floating {
         Some(_) => crate::model::load_urdf_in_mujoco_floating(urdf, &extra)?,
         None => load_urdf_in_mujoco(urdf, &extra)?,

@@ -17,6 +17,22 @@ fn lcg(state: &mut u64) -> f64 {
     ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
 }
 
+/// The model's own parameters in `layout`'s columns: each link's CAD, each joint's damping and
+/// Coulomb friction, and its armature (`armature`, when given, for every joint).
+fn model_params(robot: &RobotModel, layout: &sysid::regressor::Layout, armature: Option<f64>) -> Vec<f64> {
+    let mut params = vec![0.0; layout.ncols()];
+    for (l, link) in robot.links.iter().enumerate() {
+        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
+    }
+    for (j, joint) in robot.joints.iter().enumerate() {
+        let c = layout.joint_col(j);
+        params[c] = joint.damping;
+        params[c + 1] = joint.friction;
+        params[c + 2] = armature.unwrap_or(joint.armature);
+    }
+    params
+}
+
 fn check_against_inverse_dynamics(urdf: &Path) {
     // Damping and armature are part of MuJoCo's inverse dynamics; constraint forces (friction
     // loss, joint limits at random poses, self-contacts) are not part of the rigid-body model.
@@ -33,16 +49,8 @@ fn check_against_inverse_dynamics(urdf: &Path) {
     let fm = FrictionModel::default();
     let mut reg = Regressor::new(&robot, fm).unwrap();
     let layout = reg.layout();
-    let mut params = vec![0.0; layout.ncols()];
-    for (l, link) in robot.links.iter().enumerate() {
-        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
-    }
-    for (j, joint) in robot.joints.iter().enumerate() {
-        let c = layout.joint_col(j);
-        params[c] = joint.damping;
-        params[c + 1] = 0.0;
-        params[c + 2] = joint.armature;
-    }
+    // Friction loss is zeroed above: the Coulomb columns are 0.
+    let params = model_params(&robot, &layout, None);
     let mut data = Data::new(model.clone()).unwrap();
     let mut rng = 7u64;
     let nj = robot.joints.len();
@@ -104,14 +112,7 @@ fn regressor_on_a_free_base_model_matches_inverse_dynamics_of_the_joints() {
     assert_eq!(robot.links.iter().map(|l| l.name.as_str()).collect::<Vec<_>>(), ["a", "b"]);
     let mut reg = Regressor::new(&robot, FrictionModel::default()).unwrap();
     let layout = reg.layout();
-    let mut params = vec![0.0; layout.ncols()];
-    for (l, link) in robot.links.iter().enumerate() {
-        params[layout.link_col(l)..layout.link_col(l) + 10].copy_from_slice(&link.cad);
-    }
-    for (j, joint) in robot.joints.iter().enumerate() {
-        params[layout.joint_col(j)] = joint.damping;
-        params[layout.joint_col(j) + 2] = joint.armature;
-    }
+    let params = model_params(&robot, &layout, None);
     let mut data = Data::new(model.clone()).unwrap();
     let (q, qd, qdd) = ([0.4, -1.1], [1.3, -0.7], [-2.0, 5.0]);
     let mut rows = Vec::new();
@@ -225,4 +226,59 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
         assert!((nj..reg.nrows()).any(|r| ext[r].abs() > 1.0));
     }
     eprintln!("floating humanoid: worst relative error {worst:e}");
+}
+
+/// The UR5 of example-robot-data, compiled by twin's converter (`package://` STL and Collada
+/// meshes, massless `ee_link`/`tool0` frames welded to the wrist): `Y·π` with its CAD
+/// parameters is MuJoCo's inverse dynamics.
+#[test]
+fn regressor_matches_mujoco_inverse_dynamics_on_the_ur5() {
+    let cache = std::env::var_os("TWIN_URDF_CACHE")
+        .map(std::path::PathBuf::from)
+        .expect("TWIN_URDF_CACHE must name the example-robot-data cache");
+    check_against_inverse_dynamics(
+        &cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"),
+    );
+}
+
+/// The synthetic UR5 log's torques are the inverse dynamics of its logged motion: `Y·π` of the
+/// URDF's parameters (and the synthetic armature) at each sample's position, velocity and
+/// acceleration (the next velocity's difference: MuJoCo's Euler step) is the logged effort.
+/// The converter gives the UR5 position servos (its `PositionJointInterface`); they must not
+/// add torques the log does not carry.
+#[test]
+fn synthetic_ur5_torques_are_the_inverse_dynamics_of_its_logged_motion() {
+    use sysid::synth::{SynthOptions, simulate};
+    let cache = std::env::var_os("TWIN_URDF_CACHE")
+        .map(std::path::PathBuf::from)
+        .expect("TWIN_URDF_CACHE must name the example-robot-data cache");
+    let ur5 = cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    let opts = SynthOptions {
+        duration_secs: 1.0,
+        encoder_bits: 50,
+        velocity_noise: 0.0,
+        effort_noise_rel: 0.0,
+        ..SynthOptions::default()
+    };
+    let log = simulate(&ur5, &opts).unwrap();
+    let robot = RobotModel::from_urdf(&ur5).unwrap();
+    let mut reg = Regressor::new(&robot, FrictionModel::default()).unwrap();
+    let layout = reg.layout();
+    let params = model_params(&robot, &layout, Some(opts.armature));
+    let dt = 1.0 / opts.rate_hz;
+    let nj = robot.joints.len();
+    let mut rows = Vec::new();
+    let (mut worst, mut largest) = (0.0f64, 0.0f64);
+    for k in 0..log.t_nanos.len() - 1 {
+        let q: Vec<f64> = (0..nj).map(|j| log.position[j][k]).collect();
+        let qd: Vec<f64> = (0..nj).map(|j| log.velocity[j][k]).collect();
+        let qdd: Vec<f64> = (0..nj).map(|j| (log.velocity[j][k + 1] - log.velocity[j][k]) / dt).collect();
+        let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
+        for (t, effort) in tau.iter().zip(&log.effort) {
+            worst = worst.max((t - effort[k]).abs());
+            largest = largest.max(effort[k].abs());
+        }
+    }
+    assert!(largest > 1.0, "the UR5 needs torque to move: largest {largest} N·m");
+    assert!(worst < 1e-6 * largest, "Y·π differs from the logged effort by up to {worst} N·m (largest {largest} N·m)");
 }

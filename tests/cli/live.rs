@@ -65,7 +65,7 @@ fn wait(mut child: Child, limit: Duration, what: &str) -> Output {
     }
 }
 
-fn spawn_twin(domain: u32, args: &[&str]) -> Child {
+fn spawn_twin<S: AsRef<std::ffi::OsStr>>(domain: u32, args: &[S]) -> Child {
     twin()
         .args(["sim", MODEL, "--ros", "--ros-interface", "lo"])
         .args(args)
@@ -76,7 +76,7 @@ fn spawn_twin(domain: u32, args: &[&str]) -> Child {
         .expect("twin starts")
 }
 
-fn spawn_peer(domain: u32, out: &Path, args: &[String]) -> Child {
+fn spawn_peer<S: AsRef<std::ffi::OsStr>>(domain: u32, out: &Path, args: &[S]) -> Child {
     Command::new(python())
         .arg(PEER)
         .arg("--out")
@@ -90,6 +90,48 @@ fn spawn_peer(domain: u32, out: &Path, args: &[String]) -> Child {
         .stderr(Stdio::piped())
         .spawn()
         .expect("the peer starts")
+}
+
+/// A finished run of one `twin sim --ros` (recording to `mcap`) with the peer.
+struct Run {
+    _dir: tempfile::TempDir,
+    mcap: PathBuf,
+    peer: Json,
+    stdout: String,
+    stderr: String,
+}
+
+/// Runs the peer with `peer_args` and twin with `twin_args` (plus a recording and a bounded
+/// wait for the peer) in domain `domain(k)`; both must succeed.
+fn run_with_peer(k: u32, peer_args: &[&str], twin_args: &[&str]) -> Run {
+    let dir = tempfile::tempdir().unwrap();
+    let (mcap, peer_file) = (dir.path().join("live.mcap"), dir.path().join("peer.json"));
+    let d = domain(k);
+    let peer = spawn_peer(d, &peer_file, peer_args);
+    let mut args: Vec<&std::ffi::OsStr> = twin_args.iter().map(std::ffi::OsStr::new).collect();
+    args.extend(["--wait-for-subscriber", "30", "--record"].map(std::ffi::OsStr::new));
+    args.push(mcap.as_os_str());
+    let twin = spawn_twin(d, &args);
+    let (ok, stdout, stderr) = output_of(wait(twin, Duration::from_secs(120), "twin sim --ros"));
+    let peer_out = wait(peer, Duration::from_secs(120), "the Cyclone peer");
+    assert!(ok, "twin failed:\n{stdout}\n{stderr}");
+    assert!(
+        peer_out.status.success(),
+        "peer:\n{}\n{}",
+        String::from_utf8_lossy(&peer_out.stdout),
+        String::from_utf8_lossy(&peer_out.stderr)
+    );
+    let peer = peer_json(&peer_file, &peer_out);
+    Run { _dir: dir, mcap, peer, stdout, stderr }
+}
+
+/// 1 s of lockstep at 100 Hz, the peer in `mode` answering each `/clock` with the elbow
+/// command.
+fn lockstep_run(k: u32, mode: &str) -> Run {
+    let command = serde_json::to_string(&elbow_command()).unwrap();
+    let peer = ["--mode", mode, "--command", &command, "--until-clock", "0.99", "--timeout", "90"];
+    let twin = ["--lockstep", "--duration", "1.0", "--control-rate", "100", "--lockstep-timeout", "20"];
+    run_with_peer(k, &peer, &twin)
 }
 
 /// The position command: the home pose with the left elbow at [`ELBOW_TARGET`], in command
@@ -179,54 +221,10 @@ fn elbow_at_end(mcap: &Path) -> (u64, f64) {
     (*t, last.position[i])
 }
 
-fn tmp(dir: &tempfile::TempDir, name: &str) -> PathBuf {
-    dir.path().join(name)
-}
-
 #[test]
 fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_recording() {
-    let dir = tempfile::tempdir().unwrap();
-    let mcap = tmp(&dir, "live.mcap");
-    let d = domain(0);
-    let command = serde_json::to_string(&elbow_command()).unwrap();
-    let peer_file = tmp(&dir, "peer.json");
-    let peer = spawn_peer(
-        d,
-        &peer_file,
-        &[
-            "--mode".into(),
-            "lockstep".into(),
-            "--command".into(),
-            command,
-            "--until-clock".into(),
-            "0.99".into(),
-            "--timeout".into(),
-            "90".into(),
-        ],
-    );
-    let twin = spawn_twin(
-        d,
-        &[
-            "--lockstep",
-            "--duration",
-            "1.0",
-            "--control-rate",
-            "100",
-            "--wait-for-subscriber",
-            "30",
-            "--lockstep-timeout",
-            "20",
-            "--record",
-            mcap.to_str().unwrap(),
-        ],
-    );
-    let twin_out = wait(twin, Duration::from_secs(120), "twin sim --ros --lockstep");
-    let peer_out = wait(peer, Duration::from_secs(120), "the Cyclone peer");
-    let (ok, stdout, stderr) = output_of(twin_out);
-    assert!(ok, "twin failed:\n{stdout}\n{stderr}");
+    let Run { mcap, peer, stdout, .. } = &lockstep_run(0, "lockstep");
     assert!(stdout.contains("command order (") && stdout.contains(ELBOW), "{stdout}");
-    assert!(peer_out.status.success(), "peer:\n{}", String::from_utf8_lossy(&peer_out.stderr));
-    let peer = peer_json(&peer_file, &peer_out);
 
     // Sim time advances exactly one control period per command: the peer saw /clock at every
     // period, twin took one command at each, stamped with that period's time.
@@ -237,26 +235,26 @@ fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_rec
     clocks.dedup();
     let expected: Vec<u64> = (0..100).map(|k| k * PERIOD_NANOS).collect();
     assert_eq!(clocks, expected, "the peer's /clock");
-    let commands = read::<Float64MultiArray>(&mcap, "/humanoid/joint_commands");
+    let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
     let times: Vec<u64> = commands.iter().map(|(t, _)| *t).collect();
     assert_eq!(times, expected, "commands recorded at each period");
     assert_eq!(peer["sent"].as_u64(), Some(100));
     assert!(commands.iter().all(|(_, c)| c.data == elbow_command()));
-    let recorded_clock: Vec<u64> = read::<twin_core::log::Clock>(&mcap, "/clock").iter().map(|(t, _)| *t).collect();
+    let recorded_clock: Vec<u64> = read::<twin_core::log::Clock>(mcap, "/clock").iter().map(|(t, _)| *t).collect();
     assert_eq!(recorded_clock, expected);
 
     // The elbow reaches its target (0.3 rad of flexion) within 0.02 rad in 1 s of simulated time.
-    let (t, q) = elbow_at_end(&mcap);
+    let (t, q) = elbow_at_end(mcap);
     assert!(t <= 1_000_000_000, "{t}");
     assert!((q - ELBOW_TARGET).abs() < 0.02, "left elbow at {q} rad after {t} ns");
 
     // The peer decodes every topic to the values of the recording.
-    let n_js = compare(&mcap, &peer, "/joint_states", js_json);
-    let n_imu = compare(&mcap, &peer, "/humanoid/imu/data", imu_json);
-    let n_odom = compare(&mcap, &peer, "/odom", odom_json);
-    let n_tf = compare(&mcap, &peer, "/tf", tf_json);
-    let n_contacts = compare(&mcap, &peer, "/contacts/left_foot_link", wrench_json)
-        + compare(&mcap, &peer, "/contacts/right_foot_link", wrench_json);
+    let n_js = compare(mcap, peer, "/joint_states", js_json);
+    let n_imu = compare(mcap, peer, "/humanoid/imu/data", imu_json);
+    let n_odom = compare(mcap, peer, "/odom", odom_json);
+    let n_tf = compare(mcap, peer, "/tf", tf_json);
+    let n_contacts = compare(mcap, peer, "/contacts/left_foot_link", wrench_json)
+        + compare(mcap, peer, "/contacts/right_foot_link", wrench_json);
     // The peer joined before the first period, so (reliable) it got nearly everything.
     assert!(
         n_js >= 450 && n_imu >= 180 && n_odom >= 450 && n_tf >= 90 && n_contacts >= 900,
@@ -272,43 +270,7 @@ fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_rec
 
 #[test]
 fn ros_rejects_bad_commands_and_holds_the_last_good_one() {
-    let dir = tempfile::tempdir().unwrap();
-    let mcap = tmp(&dir, "bad.mcap");
-    let d = domain(1);
-    let command = serde_json::to_string(&elbow_command()).unwrap();
-    let peer_file = tmp(&dir, "peer.json");
-    let peer = spawn_peer(
-        d,
-        &peer_file,
-        &[
-            "--mode".into(),
-            "bad".into(),
-            "--command".into(),
-            command,
-            "--until-clock".into(),
-            "0.99".into(),
-            "--timeout".into(),
-            "90".into(),
-        ],
-    );
-    let twin = spawn_twin(
-        d,
-        &[
-            "--lockstep",
-            "--duration",
-            "1.0",
-            "--wait-for-subscriber",
-            "30",
-            "--lockstep-timeout",
-            "20",
-            "--record",
-            mcap.to_str().unwrap(),
-        ],
-    );
-    let (ok, stdout, stderr) = output_of(wait(twin, Duration::from_secs(120), "twin"));
-    let peer_out = wait(peer, Duration::from_secs(120), "the peer");
-    assert!(ok, "twin failed:\n{stdout}\n{stderr}");
-    assert!(peer_out.status.success(), "{}", String::from_utf8_lossy(&peer_out.stderr));
+    let Run { mcap, stdout, stderr, .. } = &lockstep_run(1, "bad");
     // Wrong length (short and long) and NaN: each rejected with a warning naming the topic.
     for k in 1..=3 {
         assert!(stderr.contains(&format!("rejected command #{k} on /humanoid/joint_commands")), "{stderr}");
@@ -317,20 +279,20 @@ fn ros_rejects_bad_commands_and_holds_the_last_good_one() {
     assert!(stdout.contains("3 rejected"), "{stdout}");
     // All 100 taken commands are recorded, bad ones included; the good ones still bring the
     // elbow to its target within the second.
-    let commands = read::<Float64MultiArray>(&mcap, "/humanoid/joint_commands");
+    let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
     assert_eq!(commands.len(), 100);
     assert!(commands[1].1.data[0].is_nan());
-    let (_, q) = elbow_at_end(&mcap);
+    let (_, q) = elbow_at_end(mcap);
     assert!((q - ELBOW_TARGET).abs() < 0.02, "elbow at {q}");
     // Before the first good command (three periods) the home pose was held.
-    assert_eq!(read::<JointState>(&mcap, "/joint_states").len(), 500);
+    assert_eq!(read::<JointState>(mcap, "/joint_states").len(), 500);
 }
 
 #[test]
 fn ros_survives_a_flood_a_peer_that_leaves_and_a_second_twin_in_the_domain() {
     python(); // before starting any twin: fail at once without cyclonedds
     let dir = tempfile::tempdir().unwrap();
-    let (a, b) = (tmp(&dir, "a.mcap"), tmp(&dir, "b.mcap"));
+    let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));
     let d = domain(2);
     let command = serde_json::to_string(&elbow_command()).unwrap();
     let args = |file: &Path| -> Vec<String> {
@@ -340,13 +302,11 @@ fn ros_survives_a_flood_a_peer_that_leaves_and_a_second_twin_in_the_domain() {
             .chain([file.to_str().unwrap().to_string()])
             .collect()
     };
-    let args_a = args(&a);
-    let args_b = args(&b);
-    let twin_a = spawn_twin(d, &args_a.iter().map(String::as_str).collect::<Vec<_>>());
-    let twin_b = spawn_twin(d, &args_b.iter().map(String::as_str).collect::<Vec<_>>());
+    let twin_a = spawn_twin(d, &args(&a));
+    let twin_b = spawn_twin(d, &args(&b));
     // 10 000 good commands at up to 10 kHz (as fast as Python manages on a loaded machine), then
     // the peer leaves mid-run.
-    let peer_file = tmp(&dir, "peer.json");
+    let peer_file = dir.path().join("peer.json");
     let peer = spawn_peer(
         d,
         &peer_file,
@@ -371,4 +331,96 @@ fn ros_survives_a_flood_a_peer_that_leaves_and_a_second_twin_in_the_domain() {
     let peer = peer_json(&peer_file, &peer_out);
     assert_eq!(peer["sent"].as_u64(), Some(10_000));
     eprintln!("flood: 10 000 commands at {:.0} Hz", peer["flood_rate_hz"].as_f64().unwrap());
+}
+
+/// The peer's call `k`: its result code, with the call itself in the failure message.
+fn result_of(call: &Json) -> u64 {
+    assert_eq!(call["answered"], json!(true), "no reply: {call}");
+    call["result"].as_u64().unwrap_or_else(|| panic!("{call}"))
+}
+
+/// Seconds on `/clock` as the peer noted them → nanoseconds.
+fn clock_nanos(call: &Json, key: &str) -> i64 {
+    (call[key].as_f64().unwrap_or_else(|| panic!("{key} of {call}")) * 1e9).round() as i64
+}
+
+#[test]
+fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() {
+    let Run { mcap, peer, stdout, stderr, .. } = &run_with_peer(
+        3,
+        &["--mode", "services", "--command", "[]", "--until-clock", "0", "--timeout", "90"],
+        &["--rtf", "1", "--duration", "60"],
+    );
+    let dt_nanos = {
+        let robot = twin_core::robot::Robot::load(MODEL).unwrap();
+        (robot.model.timestep_secs() * 1e9).round() as i64
+    };
+    let calls = peer["calls"].as_array().unwrap();
+    assert_eq!(calls.len(), 11, "{calls:?}");
+    // (state, result) codes of simulation_interfaces: PLAYING 1, PAUSED 2; OK 1,
+    // FEATURE_UNSUPPORTED 0, OPERATION_FAILED 4, ALREADY_IN_TARGET_STATE 101.
+    assert_eq!((calls[0]["state"].as_u64(), result_of(&calls[0])), (Some(1), 1), "{}", calls[0]);
+    assert_eq!(result_of(&calls[1]), 1, "pause: {}", calls[1]);
+    // Paused: /clock stays where the pause took it, 0.7 s of wall time later too.
+    let paused = clock_nanos(&calls[1], "clock_after");
+    assert!(paused > 0);
+    assert_eq!((calls[2]["state"].as_u64(), result_of(&calls[2])), (Some(2), 1), "{}", calls[2]);
+    assert_eq!(clock_nanos(&calls[2], "clock_after"), paused, "sim time moved while paused");
+    // Exactly 7 steps, then exactly one.
+    assert_eq!(result_of(&calls[3]), 1, "{}", calls[3]);
+    assert_eq!(clock_nanos(&calls[3], "clock_after"), paused + 7 * dt_nanos, "after 7 steps");
+    assert_eq!(result_of(&calls[4]), 1, "{}", calls[4]);
+    assert_eq!(clock_nanos(&calls[4], "clock_after"), paused + 8 * dt_nanos, "after one more step");
+    assert_eq!(result_of(&calls[5]), 101, "pausing a paused twin: {}", calls[5]);
+    // Resumed: time runs again (0.6 s of wall time at real time; a loaded machine may lag).
+    assert_eq!(result_of(&calls[6]), 1, "{}", calls[6]);
+    assert!(clock_nanos(&calls[6], "clock_after") > paused + 8 * dt_nanos + 200_000_000, "{}", calls[6]);
+    assert_eq!(result_of(&calls[7]), 4, "stepping while playing: {}", calls[7]);
+    assert!(calls[7]["message"].as_str().unwrap().contains("paused"), "{}", calls[7]);
+    assert_eq!(result_of(&calls[8]), 0, "resetting time: {}", calls[8]);
+    assert_eq!(result_of(&calls[9]), 1, "resetting the state: {}", calls[9]);
+    assert_eq!(result_of(&calls[10]), 1, "quitting: {}", calls[10]);
+
+    // Quitting ended the run cleanly, long before its 60 s, with the recording closed.
+    assert!(stdout.contains("11 service calls, 1 resets"), "{stdout}");
+    let js = read::<JointState>(mcap, "/joint_states");
+    let (t_end, _) = js.last().unwrap();
+    assert!(*t_end < 30_000_000_000, "{t_end}");
+    // The reset brought the robot back to its initial state, exactly, in the step after the
+    // call (between the clock before it and the clock after it).
+    let first = &js[0].1;
+    let back: Vec<u64> = js[1..]
+        .iter()
+        .filter(|(_, m)| m.position == first.position && m.velocity == first.velocity)
+        .map(|(t, _)| *t)
+        .collect();
+    assert_eq!(back.len(), 1, "states equal to the initial one at {back:?}\n{stderr}");
+    let (before, after) = (clock_nanos(&calls[9], "clock_before"), clock_nanos(&calls[9], "clock_after"));
+    assert!(
+        back[0] as i64 >= before && back[0] as i64 <= after,
+        "reset at {} ns, call between {before} and {after}",
+        back[0]
+    );
+    assert!(stderr.contains("reset_simulation"), "{stderr}");
+    // Live and recorded agree, the steps' /clock included.
+    let n = compare(mcap, peer, "/joint_states", js_json);
+    assert!(n * 2 > js.len(), "the peer got {n} of {} /joint_states", js.len());
+    let recorded_clock: Vec<i64> =
+        read::<twin_core::log::Clock>(mcap, "/clock").iter().map(|(t, _)| *t as i64).collect();
+    assert!(recorded_clock.contains(&(paused + 7 * dt_nanos)) && recorded_clock.windows(2).all(|w| w[0] <= w[1]));
+
+    // The graph: one node /twin whose readers and writers are the bridge's DDS endpoints, as
+    // Cyclone discovered them.
+    let graph = &peer["graph"][0]["nodes"][0];
+    assert_eq!((graph["namespace"].as_str(), graph["name"].as_str()), (Some("/"), Some("twin")), "{}", peer["graph"]);
+    let names = |key: &str| -> Vec<String> {
+        graph[key].as_array().unwrap().iter().map(|v| v.as_str().unwrap().to_string()).collect()
+    };
+    let (readers, writers) = (names("readers"), names("writers"));
+    for w in ["rt/clock", "rt/joint_states", "rt/humanoid/imu/data", "rt/tf", "rr/twin/step_simulationReply"] {
+        assert!(writers.iter().any(|x| x == w), "{w} not among the node's writers {writers:?}");
+    }
+    for r in ["rt/humanoid/joint_commands", "rt/humanoid/joint_trajectory", "rq/twin/set_simulation_stateRequest"] {
+        assert!(readers.iter().any(|x| x == r), "{r} not among the node's readers {readers:?}");
+    }
 }

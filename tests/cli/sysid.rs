@@ -204,9 +204,6 @@ fn sysid_floating_base_from_a_bag_and_refusal_without_odometry() {
 /// the model is built by twin's converter, as every command builds it, and the write-back only
 /// touches the identified numbers.
 #[test]
-#[ignore = "the barrier failure (massless welded frames ee_link/tool0 identified as links) is fixed and the \
-            write-back keeps every other byte, but sysid's regressor does not explain the synthetic UR5 \
-            log's torques (training NRMSE about 100 %, opposite sign on 5 joints): open, see the sysid2 report"]
 fn sysid_updates_a_urdf_with_package_meshes() {
     let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
         "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",

@@ -191,3 +191,12 @@ int twin_jac_body_dot(const mjModel* m, mjData* d, int body, mjtNum* jacp, mjtNu
              mj_jacDot(m, d, jacp_dot, jacr_dot, d->xpos + 3 * body, body), reset_stack(d))
 }
 
+
+// Rays from one point (mj_multiRay); it takes its scratch from d's stack, which can run out.
+int twin_multi_ray(const mjModel* m, mjData* d, const mjtNum* pnt, const mjtNum* vec,
+                   const mjtByte* geomgroup, mjtByte flg_static, int bodyexclude, int* geomid,
+                   mjtNum* dist, int nray, mjtNum cutoff, char* err, int err_sz) {
+  TWIN_GUARD(mj_multiRay(m, d, pnt, vec, geomgroup, flg_static, bodyexclude, geomid, dist, NULL,
+                         nray, cutoff),
+             reset_stack(d))
+}

@@ -104,6 +104,16 @@ pub enum Error {
         name: String,
     },
 
+    /// Perception found nothing usable in a sensor's data (no table plane in a point cloud, no
+    /// object on it); `message` says which stage failed and what to check.
+    #[error("{what}: {message}")]
+    Perception {
+        /// What was being perceived, e.g. `cup detection`.
+        what: String,
+        /// Which stage failed and why.
+        message: String,
+    },
+
     /// An index or a slice length does not fit the model.
     #[error("{what}: expected {expected}, got {got}")]
     Size {

@@ -3,7 +3,8 @@
 //! rollout engine ([`engine`]), the step-by-step model validation ([`check`]), controllers
 //! ([`control`]), model-based walking with gait metrics ([`walk`]), scenario files
 //! ([`scenario`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
-//! simulation runs with recording ([`sim`]) and, with the cargo feature `rerun`, rerun
+//! simulation runs with recording ([`sim`]), depth cameras, LiDARs and cup detection by ray
+//! casting ([`sense`]) and, with the cargo feature `rerun`, rerun
 //! recordings (`viz`).
 //!
 //! `unsafe` code is denied everywhere but in [`mj`], the MuJoCo wrapper.
@@ -39,6 +40,7 @@ pub mod log;
 pub mod mj;
 pub mod robot;
 pub mod scenario;
+pub mod sense;
 pub mod sim;
 pub mod topics;
 pub mod urdf;

@@ -250,27 +250,7 @@ impl Robot {
                 }
             })
             .collect();
-        let actuators = (0..model.nu())
-            .map(|a| {
-                let joint = (model.actuator_trntype()[a] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT)
-                    .then(|| model.actuator_trnid()[a][0])
-                    .filter(|&j| j >= 0)
-                    .map(|j| j as usize)
-                    .filter(|&j| matches!(model.joint_type(j), JointType::Hinge | JointType::Slide));
-                let from_file = joint.and_then(|j| {
-                    let jname = model.name(ObjType::Joint, j);
-                    meta.joints.iter().find(|m| m.name == jname).and_then(|m| m.actuator.as_ref()).map(|(_, i)| *i)
-                });
-                Actuator {
-                    id: a,
-                    name: model.name(ObjType::Actuator, a).to_string(),
-                    joint,
-                    gear: model.actuator_gear()[a][0],
-                    interface: from_file.unwrap_or_else(|| interface_of(&model, a)),
-                    ctrl_range: model.actuator_ctrllimited()[a].then(|| model.actuator_ctrlrange()[a]),
-                }
-            })
-            .collect();
+        let actuators = actuators_of(&model, &meta.joints);
         let cameras = (0..model.ncam())
             .map(|c| Camera {
                 id: c,
@@ -322,6 +302,34 @@ impl Robot {
 
 /// The command interface of actuator `a` from its gain and bias: a position servo has bias
 /// `−kp·q`, a velocity servo `−kv·q̇`; anything else commands force.
+/// The actuators of `model`, in `ctrl` order: each with the hinge or slide joint it drives (a
+/// joint transmission), its gear, its control range and its command interface (what
+/// `meta_joints`, the file's metadata, says; else what the actuator is in MuJoCo: a position
+/// or velocity servo, else effort). [`Robot::actuators`] and every controller read them here.
+pub fn actuators_of(model: &Model, meta_joints: &[JointMeta]) -> Vec<Actuator> {
+    (0..model.nu())
+        .map(|a| {
+            let joint = (model.actuator_trntype()[a] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT)
+                .then(|| model.actuator_trnid()[a][0])
+                .filter(|&j| j >= 0)
+                .map(|j| j as usize)
+                .filter(|&j| matches!(model.joint_type(j), JointType::Hinge | JointType::Slide));
+            let from_file = joint.and_then(|j| {
+                let jname = model.name(ObjType::Joint, j);
+                meta_joints.iter().find(|m| m.name == jname).and_then(|m| m.actuator.as_ref()).map(|(_, i)| *i)
+            });
+            Actuator {
+                id: a,
+                name: model.name(ObjType::Actuator, a).to_string(),
+                joint,
+                gear: model.actuator_gear()[a][0],
+                interface: from_file.unwrap_or_else(|| interface_of(model, a)),
+                ctrl_range: model.actuator_ctrllimited()[a].then(|| model.actuator_ctrlrange()[a]),
+            }
+        })
+        .collect()
+}
+
 fn interface_of(model: &Model, a: usize) -> Interface {
     let affine = model.actuator_biastype()[a] as u32 == mujoco_sys::mjtBias_mjBIAS_AFFINE;
     let bias = model.actuator_biasprm()[a];

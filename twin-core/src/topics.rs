@@ -1,7 +1,11 @@
 //! The one ROS 2 topic table of a twin, derived from its [`Robot`]: each topic's name, message
-//! type, rate, `frame_id` and QoS intent. Recordings ([`crate::sim::Recording`]) write exactly
-//! these topics into their sinks ([`Sink`]: the MCAP writer today, a live DDS publisher next),
-//! as typed messages ([`TypedMessage`], the types of [`crate::log`]) built once per step.
+//! type, rate, `frame_id` and QoS intent. Recordings ([`crate::sim::Recording`]) turn the
+//! simulation into these topics' typed messages ([`TypedMessage`], the types of [`crate::log`])
+//! once per step and hand them to their sinks ([`Sink`]: the MCAP file
+//! [`crate::sim::McapSink`], the rerun recording `crate::sim::RerunSink`, the live DDS bridge
+//! `crate::live::LiveSink`, a user's own), each of which encodes what it takes. A controller adds
+//! topics of its own ([`crate::control::Controller::topics`], e.g. a walking controller's
+//! footsteps), recorded the same way.
 //!
 //! Topics (`<robot>` = [`Robot::name`]):
 //! - `/joint_states` (`sensor_msgs/msg/JointState`) at the state rate;
@@ -13,7 +17,10 @@
 //! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent.
 
 use crate::error::Result;
-use crate::log::{Float64MultiArray, Imu, JointState, Odometry, RosMessage, TfMessage, WrenchStamped};
+use crate::log::cdr::CdrWriter;
+use crate::log::{
+    Clock, Float64MultiArray, Imu, JointState, Odometry, PointStamped, PoseArray, RosMessage, TfMessage, WrenchStamped,
+};
 use crate::mj::ObjType;
 use crate::robot::Robot;
 
@@ -74,6 +81,9 @@ pub enum TopicKind {
     Contacts(usize),
     /// The command sent.
     Commands,
+    /// Topic `k` of the controller's own ([`crate::control::Controller::topics`]): its
+    /// diagnostics, or what a bridge exchanged.
+    Controller(usize),
 }
 
 /// One topic of the table.
@@ -214,7 +224,8 @@ impl TopicTable {
     }
 }
 
-/// One message of the table's types, borrowed from the recording's buffers.
+/// One message, borrowed from its producer's buffers (the recording's, or a controller's for
+/// its own topics).
 #[derive(Debug, Clone, Copy)]
 pub enum TypedMessage<'a> {
     /// `sensor_msgs/msg/JointState`.
@@ -229,37 +240,67 @@ pub enum TypedMessage<'a> {
     Wrench(&'a WrenchStamped),
     /// `std_msgs/msg/Float64MultiArray`.
     Float64MultiArray(&'a Float64MultiArray),
+    /// `geometry_msgs/msg/PointStamped` (a controller's CoM, ZMP, DCM…).
+    Point(&'a PointStamped),
+    /// `geometry_msgs/msg/PoseArray` (a controller's planned footsteps…).
+    Poses(&'a PoseArray),
+    /// `rosgraph_msgs/msg/Clock`.
+    Clock(&'a Clock),
+    /// A message of its topic's type that is CDR already (encapsulation header included): one
+    /// received off the wire, kept byte for byte even when it does not decode.
+    Cdr(&'a [u8]),
 }
 
 impl TypedMessage<'_> {
-    /// The ROS 2 type name.
-    pub fn type_name(&self) -> &'static str {
-        match self {
-            TypedMessage::JointState(_) => JointState::TYPE_NAME,
-            TypedMessage::Imu(_) => Imu::TYPE_NAME,
-            TypedMessage::Odometry(_) => Odometry::TYPE_NAME,
-            TypedMessage::Tf(_) => TfMessage::TYPE_NAME,
-            TypedMessage::Wrench(_) => WrenchStamped::TYPE_NAME,
-            TypedMessage::Float64MultiArray(_) => Float64MultiArray::TYPE_NAME,
+    /// Its CDR bytes (encapsulation header included), encoded into `buf` unless it is CDR
+    /// already.
+    pub fn to_cdr<'b>(&'b self, buf: &'b mut CdrWriter) -> &'b [u8] {
+        fn encode<'b, T: RosMessage>(m: &T, buf: &'b mut CdrWriter) -> &'b [u8] {
+            buf.reset();
+            m.encode(buf);
+            buf.bytes()
+        }
+        match *self {
+            TypedMessage::JointState(m) => encode(m, buf),
+            TypedMessage::Imu(m) => encode(m, buf),
+            TypedMessage::Odometry(m) => encode(m, buf),
+            TypedMessage::Tf(m) => encode(m, buf),
+            TypedMessage::Wrench(m) => encode(m, buf),
+            TypedMessage::Float64MultiArray(m) => encode(m, buf),
+            TypedMessage::Point(m) => encode(m, buf),
+            TypedMessage::Poses(m) => encode(m, buf),
+            TypedMessage::Clock(m) => encode(m, buf),
+            TypedMessage::Cdr(bytes) => bytes,
         }
     }
 }
 
-/// Where a recording's messages go: an MCAP file, a live DDS bridge, a test's buffer.
-/// `add_topic` is called once per topic before its first message; `write` per message, in
-/// log-time order per topic.
+/// Where a recording's messages go: the MCAP file, the rerun recording, the live DDS bridge, a
+/// test's buffer. Topics are offered once each, before their first message, with an `id` (their
+/// index among the recording's topics: the [`TopicTable`]'s, then the controller's own, see
+/// [`crate::control::Controller::topics`]) that later writes repeat; messages of one topic come
+/// in log-time order.
 pub trait Sink: Send {
-    /// Announces `topic` (its name, type and QoS).
+    /// Offers topic `id` (name, type, rate, QoS); returns whether this sink takes its messages
+    /// (a sink may take only some topics, e.g. those it can show).
     ///
     /// # Errors
     /// When the sink can't offer it (e.g. the file can't be written).
-    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()>;
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool>;
 
-    /// Writes one message of `topic`, stamped `log_time_nanos` (simulation time).
+    /// Writes one message of topic `id`, stamped `log_time_nanos` (simulation time).
     ///
     /// # Errors
     /// When the sink can't take it.
-    fn write(&mut self, topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()>;
+    fn write(&mut self, id: usize, topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()>;
+
+    /// Ends the output (flushes, closes). Called once, after the last message.
+    ///
+    /// # Errors
+    /// When what was written can't be completed.
+    fn finish(&mut self) -> Result<()> {
+        Ok(())
+    }
 }
 
 #[cfg(test)]

@@ -222,8 +222,16 @@ impl Recorder {
     /// # Errors
     /// [`Error::Rerun`] if writing fails.
     pub fn log_poses_at(&self, t_secs: f64, data: &Data) -> Result<()> {
+        self.log_world_poses(t_secs, data.xpos(), data.xquat())
+    }
+
+    /// Logs every body's world pose, `xpos[b]` and `xquat[b]` (w x y z) per body id (the world
+    /// body's is not logged), stamped `t_secs`.
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn log_world_poses(&self, t_secs: f64, xpos: &[[f64; 3]], xquat: &[[f64; 4]]) -> Result<()> {
         self.set_time_secs(t_secs);
-        let (xpos, xquat) = (data.xpos(), data.xquat());
         for (b, path) in self.body_paths.iter().enumerate() {
             if let Some(path) = path {
                 let world_from_body = rerun::Transform3D::from_translation_rotation(vec3(xpos[b]), quat(xquat[b]));
@@ -239,6 +247,16 @@ impl Recorder {
     /// [`Error::Rerun`] if writing fails.
     pub fn scalar(&self, name: &str, value: f64) -> Result<()> {
         self.rec.log(format!("series/{name}"), &rerun::Scalars::single(value)).map_err(|e| self.err(e))
+    }
+
+    /// Logs points (world frame, m) at `<name>` at the current time (a controller's reference
+    /// CoM, its planned footsteps).
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn points(&self, name: &str, points: &[[f64; 3]]) -> Result<()> {
+        let points = rerun::Points3D::new(points.iter().map(|&p| vec3(p))).with_radii([0.02f32]);
+        self.rec.log(name, &points).map_err(|e| self.err(e))
     }
 
     /// The `.rrd` file, when recording to one.

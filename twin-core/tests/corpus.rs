@@ -13,7 +13,7 @@ use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions};
 use twin_core::convert::{ConvertOptions, convert_urdf};
-use twin_core::mj::{Data, JointType, Model, ObjType, Warning};
+use twin_core::mj::{Data, Model, ObjType, Warning};
 
 /// The extracted robots folder of example-robot-data 6.0.0.
 pub fn example_robot_data() -> PathBuf {
@@ -110,52 +110,10 @@ fn run_one(path: &Path) -> Result<Row, String> {
     let home = model.require_id(ObjType::Key, "home").unwrap();
     data.reset_to_keyframe(home).unwrap();
     data.forward().unwrap();
-    // The hold: servos (position / velocity actuators, with the gains the converter gave them)
-    // get the home pose / zero velocity; motors get twin's PD hold. Its gains come from effort
-    // limits, which some URDFs set as placeholders (1000 N·m on a 2 kg quadruped): soften them
-    // through its own option so the explicit loop stays stable on the joint's effective
-    // inertia (kp·dt²/I ≤ 0.2).
+    // twin's PD hold: motors get PD torques with gains capped for stability on each joint's
+    // inertia, servos (position / velocity actuators) their targets.
     let dt = model.timestep_secs();
-    let mut stiffest: f64 = 0.0;
-    let mut servo_target = vec![None; model.nu()];
-    for (u, target) in servo_target.iter_mut().enumerate() {
-        let is_joint = model.actuator_trntype()[u] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT;
-        let bias = model.actuator_biasprm()[u];
-        if bias[1] != 0.0 || bias[2] != 0.0 {
-            // Position servo (bias −kp·length) or velocity servo (−kv·velocity).
-            *target = Some(if bias[1] != 0.0 && is_joint {
-                let j = model.actuator_trnid()[u][0] as usize;
-                data.qpos()[model.jnt_qposadr()[j] as usize] * model.actuator_gear()[u][0]
-            } else {
-                0.0
-            });
-        } else if is_joint {
-            let j = model.actuator_trnid()[u][0] as usize;
-            let dof = model.jnt_dofadr()[j] as usize;
-            let [lo, hi] = model.actuator_ctrlrange()[u];
-            let effort = (lo.abs().min(hi.abs()) * model.actuator_gear()[u][0].abs()).min(1e6);
-            stiffest = stiffest.max(effort / 0.25 * dt * dt * model.dof_invweight0()[dof]);
-        }
-    }
-    if model.nu() == 0 {
-        // No actuators: the hold pushes every hinge and slide directly (qfrc_applied), with its
-        // effort limit or the hold's default effort.
-        let default_effort = PdHoldOptions::default().default_effort;
-        for j in 0..model.njnt() {
-            if matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
-                let dof = model.jnt_dofadr()[j] as usize;
-                let effort = if model.jnt_actfrclimited()[j] {
-                    let [lo, hi] = model.jnt_actfrcrange()[j];
-                    lo.abs().min(hi.abs())
-                } else {
-                    default_effort
-                };
-                stiffest = stiffest.max(effort / 0.25 * dt * dt * model.dof_invweight0()[dof]);
-            }
-        }
-    }
-    let options = PdHoldOptions { saturation_error: 0.25 * (stiffest / 0.2).max(1.0), ..PdHoldOptions::default() };
-    let mut hold = PdHold::new(&model, options);
+    let mut hold = PdHold::new(&model, PdHoldOptions::default());
     hold.reset(&model, &Observation::of(&data)).unwrap();
     let actuation = Actuation::of(&model);
     let mut command = vec![0.0; actuation.len(&model)];
@@ -163,13 +121,6 @@ fn run_one(path: &Path) -> Result<Row, String> {
     let mut max_qvel: f64 = 0.0;
     for _ in 0..steps {
         hold.compute(&model, &Observation::of(&data), &mut command);
-        if actuation == Actuation::Ctrl {
-            for (c, t) in command.iter_mut().zip(&servo_target) {
-                if let Some(t) = t {
-                    *c = *t;
-                }
-            }
-        }
         actuation.apply(&mut data, &command);
         data.step().map_err(|e| format!("{robot}: step failed: {e}"))?;
         max_qvel = data.qvel().iter().fold(max_qvel, |m, v| m.max(v.abs()));

@@ -163,6 +163,24 @@ pub trait Controller: Send {
     fn proceed(&mut self) -> Result<bool> {
         Ok(true)
     }
+
+    /// The controller's own topics, besides the robot's [`crate::topics::TopicTable`]: its
+    /// diagnostics (a walking controller's planned footsteps, reference and measured CoM, ZMP,
+    /// DCM), recorded into every sink (MCAP, rerun, live ROS 2) like the table's topics. Give each
+    /// [`TopicKind::Controller`](crate::topics::TopicKind::Controller)`(k)`, k its index here.
+    /// Asked once per run, before the first message; a topic appears in the sinks with its first
+    /// message. Default: none.
+    fn topics(&self) -> Vec<crate::topics::TopicInfo> {
+        Vec::new()
+    }
+
+    /// Emits this step's messages on [`Controller::topics`]: `emit(k, log_time_nanos, message)`
+    /// for topic `k`, stamped in simulation time (usually the time of the observation they were
+    /// computed from), each topic in time order. A recording calls it once per step, after the
+    /// step, so a controller emits what its last `compute` produced (e.g. on the steps that
+    /// start a control period, at the rate it declared). Messages borrow the controller's own
+    /// buffers, so nothing is allocated per call. Default: nothing.
+    fn diagnostics(&self, _emit: &mut dyn FnMut(usize, u64, crate::topics::TypedMessage<'_>)) {}
 }
 
 /// Names accepted by [`by_name`]: the one controller registry of twin (`twin sim`,

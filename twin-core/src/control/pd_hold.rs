@@ -2,8 +2,11 @@
 //! ([`pd_gains`]).
 
 use super::{Actuation, Controller, Observation, nominal_pose};
+use crate::convert::Interface;
 use crate::error::Result;
 use crate::mj::{JointType, Model};
+use nalgebra::DMatrix;
+use std::sync::Arc;
 
 /// Options of [`PdHold`].
 #[derive(Debug, Clone, PartialEq)]
@@ -24,6 +27,17 @@ pub struct PdHoldOptions {
     /// Cap `kp` at `inertia / dt²` for this timestep (seconds), so an explicit spring stays
     /// stable on the joint's own inertia. (default: none)
     pub stability_dt_secs: Option<f64>,
+    /// [`PdHold`]'s cap on its loops together: the largest stability margin
+    /// `a_K²/4 + a_D` of the coupled loops under the explicit step, with
+    /// `a_K = √λmax(M⁻¹K)·dt` and `a_D = λmax(M⁻¹D)·dt / 2` (K, D the loops' joint-space
+    /// stiffness and damping, M the inertia of the loops' joints at the home pose with every
+    /// other DOF held, as a floating base standing on the ground). A torque held over a step
+    /// from the state at its start is stable below 1
+    /// (the Jury bound of semi-implicit Euler, mode by mode). Above it, every kp is scaled down
+    /// by one factor (kd by its square root): light robots whose URDFs give placeholder effort
+    /// limits (1000 N·m on a 2 kg quadruped) stay stable. `f64::INFINITY`: no cap. (default:
+    /// 0.98; the shipped humanoid keeps its gains, down to 0.7 times its masses)
+    pub max_loop_margin: f64,
 }
 
 impl Default for PdHoldOptions {
@@ -34,6 +48,7 @@ impl Default for PdHoldOptions {
             default_effort: 100.0,
             min_natural_freq_hz: None,
             stability_dt_secs: None,
+            max_loop_margin: 0.98,
         }
     }
 }
@@ -59,12 +74,21 @@ pub struct PdLoop {
     pub target: f64,
     /// Command limits.
     pub limits: [f64; 2],
+    /// What the command entry means: a torque (the PD law), or a position or velocity target
+    /// for a servo actuator, which closes its own loop.
+    pub interface: Interface,
 }
+
+/// Rate at which a velocity servo is sent back to its target, 1/s: `q̇_cmd = rate · (q_target − q)`.
+const VELOCITY_SERVO_RATE: f64 = 10.0;
 
 /// Holds the nominal pose ([`nominal_pose`]) with PD control on every actuated hinge/slide joint:
 /// `τ = kp·(q_target − q) − kd·q̇`, clamped to the actuator's range / the joint's effort.
-/// With actuators, each joint-transmission actuator drives its joint (torque / gear);
-/// without, every hinge and slide joint gets `qfrc_applied`.
+/// With actuators ([`crate::robot::actuators_of`]), each joint-transmission actuator drives its
+/// joint: a torque actuator gets the PD torque / gear, a position servo its target position
+/// (`gear · q_target`), a velocity servo a velocity back to the target; without actuators, every
+/// hinge and slide joint gets `qfrc_applied`. Gains are capped for stability on each joint's
+/// coupled inertia at the model's timestep ([`PdHoldOptions::max_loop_margin`]).
 #[derive(Debug, Clone)]
 pub struct PdHold {
     options: PdHoldOptions,
@@ -102,32 +126,32 @@ impl PdHold {
         self.loops.clear();
         match actuation {
             Actuation::Ctrl => {
-                for (u, &[lo, hi]) in limits.iter().enumerate() {
+                for a in crate::robot::actuators_of(model, &[]) {
                     // Only joint transmissions on 1-DOF joints are PD-able; others get 0.
-                    if model.actuator_trntype()[u] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
-                        continue;
-                    }
-                    let joint = model.actuator_trnid()[u][0] as usize;
-                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
-                        continue;
-                    }
-                    let gear = model.actuator_gear()[u][0];
+                    let (Some(joint), gear) = (a.joint, a.gear) else { continue };
                     if gear == 0.0 {
                         continue;
                     }
+                    let [lo, hi] = limits[a.id];
                     let dof = model.jnt_dofadr()[joint] as usize;
-                    let mut effort = (hi.abs().min(lo.abs())) * gear.abs();
-                    if model.actuator_forcelimited()[u] {
-                        let [flo, fhi] = model.actuator_forcerange()[u];
-                        effort = effort.min(flo.abs().min(fhi.abs()));
-                    }
-                    if model.jnt_actfrclimited()[joint] {
-                        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
-                        effort = effort.min(jlo.abs().min(jhi.abs()));
-                    }
-                    let (kp, kd) = gains(effort, dof, gear);
+                    let (kp, kd) = match a.interface {
+                        // Servos close their own loop: no twin gains.
+                        Interface::Position | Interface::Velocity => (0.0, 0.0),
+                        Interface::Effort => {
+                            let mut effort = (hi.abs().min(lo.abs())) * gear.abs();
+                            if model.actuator_forcelimited()[a.id] {
+                                let [flo, fhi] = model.actuator_forcerange()[a.id];
+                                effort = effort.min(flo.abs().min(fhi.abs()));
+                            }
+                            if model.jnt_actfrclimited()[joint] {
+                                let [jlo, jhi] = model.jnt_actfrcrange()[joint];
+                                effort = effort.min(jlo.abs().min(jhi.abs()));
+                            }
+                            gains(effort, dof, gear)
+                        }
+                    };
                     self.loops.push(PdLoop {
-                        command: u,
+                        command: a.id,
                         joint,
                         qpos_adr: model.jnt_qposadr()[joint] as usize,
                         dof,
@@ -136,6 +160,7 @@ impl PdHold {
                         gear,
                         target: 0.0,
                         limits: [lo, hi],
+                        interface: a.interface,
                     });
                 }
             }
@@ -157,10 +182,52 @@ impl PdHold {
                         gear: 1.0,
                         target: 0.0,
                         limits: [lo, hi],
+                        interface: Interface::Effort,
                     });
                 }
             }
         }
+        if let Some(scale) = self.stability_scale(model) {
+            for l in &mut self.loops {
+                l.kp *= scale;
+                l.kd *= scale.sqrt();
+            }
+        }
+    }
+
+    /// The factor on every kp that brings the coupled loops' stability margin down to
+    /// [`PdHoldOptions::max_loop_margin`], when it is above (see there); `None` when it is not, or
+    /// when the inertia can't be evaluated.
+    fn stability_scale(&self, model: &Model) -> Option<f64> {
+        let cap = self.options.max_loop_margin;
+        let torque: Vec<&PdLoop> =
+            self.loops.iter().filter(|l| l.interface == Interface::Effort && l.kp > 0.0).collect();
+        if !cap.is_finite() || torque.is_empty() {
+            return None;
+        }
+        let mut data = crate::mj::Data::new(Arc::new(model.clone())).ok()?;
+        data.qpos_mut().copy_from_slice(&nominal_pose(model));
+        data.forward().ok()?;
+        let nv = model.nv();
+        let m = DMatrix::from_row_slice(nv, nv, &data.full_mass_matrix());
+        let n = torque.len();
+        // The loops' joints with every other DOF held (a floating base standing on the ground,
+        // not in free fall): the inverse of M's block of those joints.
+        let m_inv = DMatrix::from_fn(n, n, |i, j| m[(torque[i].dof, torque[j].dof)]).cholesky()?.inverse();
+        // λmax(M⁻¹K) = λmax(K^½ M⁻¹ K^½), symmetric; the same for D.
+        let largest = |gain: &dyn Fn(&PdLoop) -> f64| {
+            let r: Vec<f64> = torque.iter().map(|l| (gain(l) * l.gear).max(0.0).sqrt()).collect();
+            DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigenvalues().max()
+        };
+        let dt = model.timestep_secs();
+        let a_k = largest(&|l| l.kp).sqrt() * dt;
+        let a_d = largest(&|l| l.kd) * dt / 2.0;
+        if !(a_k.is_finite() && a_d.is_finite()) || a_k * a_k / 4.0 + a_d <= cap {
+            return None;
+        }
+        // With kp·s and kd·√s the margin is s·a_K²/4 + √s·a_D: solve for √s.
+        let r = (-a_d + (a_d * a_d + a_k * a_k * cap).sqrt()) / (a_k * a_k / 2.0);
+        Some(r * r)
     }
 }
 
@@ -183,7 +250,12 @@ impl Controller for PdHold {
         command.fill(0.0);
         for l in &self.loops {
             let error = l.target - observation.qpos[l.qpos_adr];
-            let u = l.kp * error - l.kd * observation.qvel[l.dof];
+            let u = match l.interface {
+                Interface::Effort => l.kp * error - l.kd * observation.qvel[l.dof],
+                // Actuator length and velocity are gear · q and gear · q̇.
+                Interface::Position => l.gear * l.target,
+                Interface::Velocity => l.gear * VELOCITY_SERVO_RATE * error,
+            };
             command[l.command] = u.clamp(l.limits[0], l.limits[1]);
         }
     }
@@ -210,4 +282,81 @@ pub fn pd_gains(effort: Option<f64>, inertia: f64, o: &PdHoldOptions) -> (f64, f
         kp = kp.max(inertia * w * w);
     }
     (kp, 2.0 * o.damping_ratio * (kp * inertia).sqrt())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::control::Actuation;
+    use crate::mj::Data;
+
+    /// Runs `hold` for `steps` steps from the nominal pose; returns the largest |q̇| and the final
+    /// joint errors.
+    fn hold_run(model: &Arc<Model>, hold: &mut PdHold, steps: usize) -> (f64, Vec<f64>) {
+        let mut data = Data::new(model.clone()).unwrap();
+        data.qpos_mut().copy_from_slice(&nominal_pose(model));
+        data.forward().unwrap();
+        hold.reset(model, &Observation::of(&data)).unwrap();
+        let actuation = Actuation::of(model);
+        let mut command = vec![0.0; actuation.len(model)];
+        let mut max_qvel: f64 = 0.0;
+        for _ in 0..steps {
+            hold.compute(model, &Observation::of(&data), &mut command);
+            actuation.apply(&mut data, &command);
+            data.step().unwrap();
+            max_qvel =
+                data.qvel().iter().fold(max_qvel, |m, v| if v.is_finite() { m.max(v.abs()) } else { f64::INFINITY });
+        }
+        let errors = hold.loops().iter().map(|l| data.qpos()[l.qpos_adr] - l.target).collect();
+        (max_qvel, errors)
+    }
+
+    #[test]
+    fn light_arm_with_placeholder_effort_limits_holds_with_capped_gains() {
+        // 20 g links and 1000 N·m "limits": kp = 4000 N·m/rad on ~1e-5 kg·m² is ω·dt ≈ 40.
+        let xml = r#"<mujoco><option timestep="0.002"/><worldbody>
+            <body name="a"><joint name="j1" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.01" mass="0.02"/>
+            <body name="b" pos="0.1 0 0"><joint name="j2" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.01" mass="0.02"/>
+            </body></body></worldbody><actuator>
+            <motor joint="j1" ctrlrange="-1000 1000"/><motor joint="j2" ctrlrange="-1000 1000"/></actuator></mujoco>"#;
+        let model = Arc::new(Model::from_xml_str(xml).unwrap());
+        let mut uncapped =
+            PdHold::new(&model, PdHoldOptions { max_loop_margin: f64::INFINITY, ..PdHoldOptions::default() });
+        let (qvel, _) = hold_run(&model, &mut uncapped, 200);
+        assert!(qvel > 1e3, "without the cap the explicit loop diverges (max |q̇| {qvel})");
+        let mut capped = PdHold::new(&model, PdHoldOptions::default());
+        assert!(capped.stability_scale(&model).is_none(), "the built gains meet the margin already");
+        let kp_ratio = capped.loops()[0].kp / uncapped.loops()[0].kp;
+        assert!(kp_ratio < 1e-2, "kp scaled by {kp_ratio}");
+        let (qvel, errors) = hold_run(&model, &mut capped, 1000);
+        assert!(qvel < 5.0, "max |q̇| {qvel} rad/s");
+        // Still a hold: gravity would swing the links down by π/2; they stay within 3°.
+        assert!(errors.iter().all(|e| e.abs() < 0.05), "final errors {errors:?} rad");
+    }
+
+    #[test]
+    fn position_servos_get_target_positions_not_torques() {
+        let xml = r#"<mujoco><option timestep="0.002"/><worldbody>
+            <body name="a"><joint name="j1" axis="0 1 0" ref="0"/><geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" mass="1"/>
+            <body name="b" pos="0.3 0 0"><joint name="j2" axis="0 1 0"/><geom type="capsule" fromto="0 0 0 0.3 0 0" size="0.02" mass="1"/>
+            </body></body></worldbody><keyframe><key name="home" qpos="0.3 -0.2"/></keyframe><actuator>
+            <position joint="j1" kp="200" gear="2" ctrlrange="-3 3"/><motor joint="j2" ctrlrange="-50 50"/></actuator></mujoco>"#;
+        let model = Arc::new(Model::from_xml_str(xml).unwrap());
+        let mut hold = PdHold::new(&model, PdHoldOptions::default());
+        assert_eq!(hold.loops()[0].interface, Interface::Position);
+        assert_eq!(hold.loops()[1].interface, Interface::Effort);
+        let mut data = Data::new(model.clone()).unwrap();
+        data.qpos_mut().copy_from_slice(&nominal_pose(&model));
+        data.forward().unwrap();
+        hold.reset(&model, &Observation::of(&data)).unwrap();
+        let mut command = vec![0.0; 2];
+        // Away from home, the servo still gets its target (gear · 0.3 rad), not a PD torque.
+        data.qpos_mut()[0] = -0.5;
+        hold.compute(&model, &Observation::of(&data), &mut command);
+        assert!((command[0] - 0.6).abs() < 1e-12, "servo command {}", command[0]);
+        let (qvel, errors) = hold_run(&model, &mut hold, 1500);
+        assert!(qvel.is_finite());
+        // The servo (kp 200 per unit of gear · q) holds 1 kg·0.15 m of gravity within ~0.01 rad.
+        assert!(errors[0].abs() < 0.02 && errors[1].abs() < 0.02, "errors {errors:?}");
+    }
 }

@@ -90,6 +90,8 @@ pub struct StepView<'a> {
     pub actuation: Actuation,
     /// The simulation after the step (see above).
     pub data: &'a Data,
+    /// The rollout's controller (e.g. for its diagnostics, [`Controller::diagnostics`]).
+    pub controller: &'a dyn Controller,
 }
 
 /// Watches a rollout: fall and divergence detection, metrics, checks, recorders.
@@ -248,6 +250,12 @@ impl Engine {
     /// The simulation as the last rollout left it.
     pub fn data(&self) -> Option<&Data> {
         self.data.as_ref()
+    }
+
+    /// The simulation as the last rollout left it, taken out of the engine (e.g. to examine it
+    /// further; the next rollout makes a new one).
+    pub fn take_data(&mut self) -> Option<Data> {
+        self.data.take()
     }
 
     /// Runs `episode` on `model` under `controller`, with `disturbances` and `observers`, random
@@ -416,6 +424,7 @@ impl Engine {
                 saturated,
                 actuation,
                 data,
+                controller: &*controller,
             };
             let mut end = false;
             for (k, o) in observers.iter_mut().enumerate() {

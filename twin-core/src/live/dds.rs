@@ -7,8 +7,8 @@ use rustdds::bytes::Bytes;
 use rustdds::no_key::{DataReader, DataWriter, Decode, DefaultDecoder, DeserializerAdapter, SerializerAdapter};
 use rustdds::policy::{Durability, History, Reliability};
 use rustdds::{
-    DomainParticipant, DomainParticipantBuilder, Publisher, QosPolicies, QosPolicyBuilder, RepresentationIdentifier,
-    Subscriber, TopicKind,
+    DomainParticipant, DomainParticipantBuilder, GUID, Publisher, QosPolicies, QosPolicyBuilder, RTPSEntity,
+    RepresentationIdentifier, Subscriber, TopicKind,
 };
 use std::net::IpAddr;
 
@@ -114,7 +114,8 @@ impl TopicQos {
         }
     }
 
-    fn policies(self) -> QosPolicies {
+    /// The rustdds QoS.
+    pub fn policies(self) -> QosPolicies {
         // A reliable writer never blocks the simulation: with keep-last history a full queue
         // drops the oldest sample instead of waiting for a slow reader.
         let b =
@@ -147,15 +148,54 @@ pub fn dds_type(ros_type: &str) -> String {
     out
 }
 
-/// A DDS participant with one publisher and one subscriber.
+/// A DDS participant with one publisher and one subscriber, announced to the ROS 2 graph as
+/// one node ([`NODE_NAME`]): every writer and reader it creates is listed in its
+/// `ros_discovery_info` announcement, so `ros2 node list` shows `/twin` and `ros2 node info
+/// /twin` its topics and services.
 pub struct Node {
     participant: DomainParticipant,
     publisher: Publisher,
     subscriber: Subscriber,
+    discovery: RawWriter,
+    /// GUIDs of the node's readers and writers, in creation order.
+    entities: std::sync::Mutex<Entities>,
+}
+
+/// The ROS 2 node name of the bridge.
+pub const NODE_NAME: &str = "twin";
+/// The ROS 2 namespace of the bridge's node.
+pub const NODE_NAMESPACE: &str = "/";
+/// The graph-announcement topic of ROS 2's rmw layer (`rmw_dds_common`).
+pub const DISCOVERY_TOPIC: &str = "ros_discovery_info";
+/// Its DDS type: `rmw_dds_common/msg/ParticipantEntitiesInfo`.
+pub const DISCOVERY_TYPE: &str = "rmw_dds_common::msg::dds_::ParticipantEntitiesInfo_";
+
+#[derive(Default)]
+struct Entities {
+    readers: Vec<GUID>,
+    writers: Vec<GUID>,
 }
 
 fn dds_err(what: impl std::fmt::Display, e: impl std::fmt::Display) -> Error {
     Error::Live { message: format!("{what}: {e}") }
+}
+
+/// `rmw_dds_common/msg/ParticipantEntitiesInfo` with one node: the participant's GID, then
+/// the node's namespace, name, reader GIDs and writer GIDs. A GID is the entity's 16-byte
+/// DDS GUID (`rmw_dds_common/msg/Gid` is `uint8[16]` since ROS 2 Iron; Jazzy and later).
+pub fn participant_entities_info(participant: GUID, readers: &[GUID], writers: &[GUID]) -> Vec<u8> {
+    let mut w = crate::log::cdr::CdrWriter::new();
+    w.u8_fixed(&participant.to_bytes());
+    w.seq_len(1);
+    w.string(NODE_NAMESPACE);
+    w.string(NODE_NAME);
+    for gids in [readers, writers] {
+        w.seq_len(gids.len());
+        for g in gids {
+            w.u8_fixed(&g.to_bytes());
+        }
+    }
+    w.bytes().to_vec()
 }
 
 impl Node {
@@ -173,7 +213,38 @@ impl Node {
         let qos = QosPolicies::qos_none();
         let publisher = participant.create_publisher(&qos).map_err(|e| dds_err("creating a DDS publisher", e))?;
         let subscriber = participant.create_subscriber(&qos).map_err(|e| dds_err("creating a DDS subscriber", e))?;
-        Ok(Node { participant, publisher, subscriber })
+        // rmw_dds_common's QoS for the graph topic: reliable, transient-local, keep last 1.
+        let policies = TopicQos::Latched.policies();
+        let topic = participant
+            .create_topic(DISCOVERY_TOPIC.into(), DISCOVERY_TYPE.into(), &policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic {DISCOVERY_TOPIC}"), e))?;
+        let discovery = publisher
+            .create_datawriter_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
+            .map_err(|e| dds_err(format!("creating a writer of {DISCOVERY_TOPIC}"), e))?;
+        let node = Node { participant, publisher, subscriber, discovery, entities: Default::default() };
+        node.announce()?;
+        Ok(node)
+    }
+
+    /// The participant's GUID (its ROS 2 GID).
+    pub fn guid(&self) -> GUID {
+        self.participant.guid()
+    }
+
+    /// Publishes the node's entities on `ros_discovery_info` (again: after each new one).
+    fn announce(&self) -> Result<()> {
+        let cdr = {
+            let e = self.entities.lock().map_err(|_| dds_err("announcing the node", "a thread panicked"))?;
+            participant_entities_info(self.participant.guid(), &e.readers, &e.writers)
+        };
+        self.discovery.write(RawCdr(cdr), None).map_err(|e| dds_err(format!("publishing {DISCOVERY_TOPIC}"), e))
+    }
+
+    fn added(&self, guid: GUID, writer: bool) -> Result<()> {
+        if let Ok(mut e) = self.entities.lock() {
+            if writer { e.writers.push(guid) } else { e.readers.push(guid) }
+        }
+        self.announce()
     }
 
     /// A writer of `ros_topic` (type `ros_type`, e.g. `sensor_msgs/msg/JointState`).
@@ -181,14 +252,7 @@ impl Node {
     /// # Errors
     /// [`Error::Live`] from rustdds.
     pub fn writer(&self, ros_topic: &str, ros_type: &str, qos: TopicQos) -> Result<RawWriter> {
-        let policies = qos.policies();
-        let topic = self
-            .participant
-            .create_topic(dds_topic(ros_topic), dds_type(ros_type), &policies, TopicKind::NoKey)
-            .map_err(|e| dds_err(format!("creating DDS topic for {ros_topic}"), e))?;
-        self.publisher
-            .create_datawriter_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
-            .map_err(|e| dds_err(format!("creating a writer of {ros_topic}"), e))
+        self.dds_writer(&dds_topic(ros_topic), &dds_type(ros_type), qos.policies(), ros_topic)
     }
 
     /// A reader of `ros_topic`: reliable (matches rclpy/rclcpp default publishers), volatile,
@@ -197,6 +261,32 @@ impl Node {
     /// # Errors
     /// [`Error::Live`] from rustdds.
     pub fn reader(&self, ros_topic: &str, ros_type: &str, depth: i32) -> Result<RawReader> {
+        self.dds_reader(&dds_topic(ros_topic), &dds_type(ros_type), depth, ros_topic)
+    }
+
+    /// A writer of the DDS topic `topic` of DDS type `type_name` (`what` names it in errors).
+    ///
+    /// # Errors
+    /// [`Error::Live`] from rustdds.
+    pub fn dds_writer(&self, topic: &str, type_name: &str, policies: QosPolicies, what: &str) -> Result<RawWriter> {
+        let topic = self
+            .participant
+            .create_topic(topic.into(), type_name.into(), &policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic for {what}"), e))?;
+        let w = self
+            .publisher
+            .create_datawriter_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
+            .map_err(|e| dds_err(format!("creating a writer of {what}"), e))?;
+        self.added(w.guid(), true)?;
+        Ok(w)
+    }
+
+    /// A reader of the DDS topic `topic` of DDS type `type_name`: reliable, volatile, keep
+    /// last `depth` (`what` names it in errors).
+    ///
+    /// # Errors
+    /// [`Error::Live`] from rustdds.
+    pub fn dds_reader(&self, topic: &str, type_name: &str, depth: i32, what: &str) -> Result<RawReader> {
         let policies = QosPolicyBuilder::new()
             .reliability(Reliability::Reliable { max_blocking_time: rustdds::Duration::ZERO })
             .durability(Durability::Volatile)
@@ -204,11 +294,14 @@ impl Node {
             .build();
         let topic = self
             .participant
-            .create_topic(dds_topic(ros_topic), dds_type(ros_type), &policies, TopicKind::NoKey)
-            .map_err(|e| dds_err(format!("creating DDS topic for {ros_topic}"), e))?;
-        self.subscriber
+            .create_topic(topic.into(), type_name.into(), &policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic for {what}"), e))?;
+        let r = self
+            .subscriber
             .create_datareader_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
-            .map_err(|e| dds_err(format!("creating a reader of {ros_topic}"), e))
+            .map_err(|e| dds_err(format!("creating a reader of {what}"), e))?;
+        self.added(r.guid(), false)?;
+        Ok(r)
     }
 }
 

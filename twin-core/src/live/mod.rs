@@ -2,14 +2,14 @@
 //! ROS install.
 //!
 //! [`start`] gives two halves that plug into the one simulation loop ([`crate::sim::simulate`]):
-//! - a [`LiveSink`], the recording's second destination ([`crate::sim::Recording::with_sink`]):
-//!   every topic the recorder writes (`/joint_states`, the IMUs, `/odom`, `/tf`, `/tf_static`,
-//!   `/contacts/<body>`) is published with the same CDR bytes, encoded once;
+//! - a [`LiveSink`], a [`Sink`] of the recording ([`crate::sim::Recording::with_sinks`]): every
+//!   topic the recorder writes (`/joint_states`, the IMUs, `/odom`, `/tf`, `/tf_static`,
+//!   `/contacts/<body>`, a controller's diagnostics) is published as CDR;
 //! - a [`LiveController`], the [`Controller`](crate::control::Controller) of the run: it
 //!   publishes `/clock` at each control period, takes `Float64MultiArray` commands on
 //!   `/<robot>/joint_commands` and `JointTrajectory` on `/<robot>/joint_trajectory`, paces the
-//!   run (real time × factor, as fast as possible, or lockstep) and hands the commands it
-//!   received to the recording.
+//!   run (real time × factor, as fast as possible, or lockstep); `/clock` and the commands it
+//!   received are its own topics ([`Controller::topics`]), recorded byte for byte.
 //!
 //! ROS naming: topic `/x` is DDS topic `rt/x`, type `pkg/msg/T` is `pkg::msg::dds_::T_`. QoS:
 //! reliable + volatile (keep last 100; matches rclpy/rclcpp defaults and best-effort sensor
@@ -22,26 +22,40 @@
 //! control period. A rejected command counts as the period's command (the last good one is
 //! held), so the run stays deterministic.
 //!
+//! Services ([`simulation`]): pause, resume, step, reset and quit through the
+//! `simulation_interfaces` services `/twin/get_simulation_state`, `/twin/set_simulation_state`,
+//! `/twin/step_simulation` and `/twin/reset_simulation`. Requests are taken at each control
+//! period's start (after its `/clock`), and at every step while paused. While paused the
+//! simulation waits (no steps, no `/clock`); after a resume, real-time pacing starts again
+//! from the current simulated time (no catching up). A reset acts through [`LiveReset`], the
+//! run's disturbance: the state at the start comes back at the next step. In lockstep, a
+//! `StepSimulation` that crosses a control period's start waits for that period's command, as
+//! any step does.
+//!
 //! Silent controller (real-time modes): the last command is held; after
 //! [`LiveOptions::silence_timeout_secs`] of wall time without a good command, the joints hold
 //! the pose they are in (PD, the hold gains) until commands come back.
 
 pub mod command;
 pub mod dds;
+pub mod service;
+pub mod simulation;
 
 pub use command::{CommandInterface, Commander};
 
 use crate::control::{Controller, Observation};
+use crate::engine::Disturbance;
 use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
 use crate::log::{Clock, Float64MultiArray, JointTrajectory, RosMessage, RosString};
 use crate::mj::Model;
 use crate::robot::Robot;
-use crate::sim::record::{ExchangedMessage, TopicSink};
-use crate::topics::{TopicInfo, TopicKind};
+use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
+use simulation::{Call, Outcome, SimulationServices, result, scope, state};
 use std::collections::HashMap;
 use std::net::IpAddr;
+use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 
@@ -96,44 +110,62 @@ impl Default for LiveOptions {
 /// In lockstep, how often `/clock` is said again while twin waits for a command.
 const CLOCK_RESEND: Duration = Duration::from_millis(200);
 
-/// Messages exchanged by the controller half, waiting for the recording.
-type Exchanged = Arc<Mutex<Vec<ExchangedMessage>>>;
+/// A message the controller half exchanged (`/clock` sent, a command received), waiting for
+/// the recording: topic index in [`LiveController::topics`], simulation time, CDR bytes.
+struct ExchangedMessage {
+    topic: usize,
+    log_time_nanos: u64,
+    cdr: Vec<u8>,
+}
 
-/// Publishes the recorder's topics ([`TopicSink`]).
+/// Messages exchanged by the controller half, waiting for the recording.
+type Exchanged = Mutex<Vec<ExchangedMessage>>;
+
+/// The controller half's topics, in [`LiveController::topics`] order.
+const CLOCK: usize = 0;
+const COMMANDS: usize = 1;
+const TRAJECTORY: usize = 2;
+
+/// Publishes the recorder's topics (a [`Sink`]).
 pub struct LiveSink {
     node: Arc<Node>,
     writers: HashMap<String, RawWriter>,
-    exchanged: Exchanged,
+    /// Writer of each topic id.
+    by_id: Vec<Option<String>>,
+    /// Topics the bridge exchanges itself (`/clock`, its command inputs): recorded, never
+    /// published again.
+    own: Vec<String>,
+    cdr: CdrWriter,
     /// Failed writes (a reader that vanished mid-write), counted, not fatal.
     write_failures: u64,
 }
 
-impl TopicSink for LiveSink {
-    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()> {
+impl Sink for LiveSink {
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         // The recorder's own per-step command stream is not published: the bridge's
         // `/<robot>/joint_commands` is the controller's input.
-        if topic.kind == TopicKind::Commands || self.writers.contains_key(&topic.name) {
-            return Ok(());
+        if topic.kind == TopicKind::Commands || self.own.contains(&topic.name) {
+            return Ok(false);
         }
-        let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
-        self.writers.insert(topic.name.clone(), w);
-        Ok(())
+        if !self.writers.contains_key(&topic.name) {
+            let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
+            self.writers.insert(topic.name.clone(), w);
+        }
+        if self.by_id.len() <= id {
+            self.by_id.resize(id + 1, None);
+        }
+        self.by_id[id] = Some(topic.name.clone());
+        Ok(true)
     }
 
-    fn write(&mut self, topic: &str, log_time_nanos: u64, cdr: &[u8]) -> Result<()> {
-        let _ = log_time_nanos;
-        if let Some(w) = self.writers.get(topic)
-            && w.write(RawCdr(cdr.to_vec()), None).is_err()
+    fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        if let Some(Some(name)) = self.by_id.get(id)
+            && let Some(w) = self.writers.get(name)
+            && w.write(RawCdr(message.to_cdr(&mut self.cdr).to_vec()), None).is_err()
         {
             self.write_failures += 1;
         }
         Ok(())
-    }
-
-    fn take_exchanged(&mut self, out: &mut Vec<ExchangedMessage>) {
-        if let Ok(mut q) = self.exchanged.lock() {
-            out.append(&mut q);
-        }
     }
 }
 
@@ -156,6 +188,10 @@ pub struct LiveStats {
     pub jitter_micros: Vec<f64>,
     /// Lockstep: wall time from publishing `/clock` to having the command, µs.
     pub round_trip_micros: Vec<f64>,
+    /// Service calls answered.
+    pub service_calls: u64,
+    /// Resets done through `/twin/reset_simulation` (or a stop).
+    pub resets: u64,
 }
 
 impl LiveStats {
@@ -200,6 +236,39 @@ pub struct LiveController {
     qpos: Vec<f64>,
     qvel: Vec<f64>,
     clock_cdr: CdrWriter,
+    /// The `simulation_interfaces` services and what they set.
+    services: SimulationServices,
+    paused: bool,
+    /// A `StepSimulation` in progress: its request and the steps still to take.
+    stepping: Option<(usize, service::RequestId, u64)>,
+    /// Set by a reset, taken by [`LiveReset`] at the next step.
+    reset_requested: Arc<AtomicBool>,
+    /// `SetSimulationState(QUITTING)` ends the run after this step.
+    quit: bool,
+    dt_secs: f64,
+    /// Simulated time at the end of the step being taken, s.
+    step_end_secs: f64,
+}
+
+/// The run's reset (`/twin/reset_simulation`): a [`Disturbance`] that puts the state the run
+/// started from (positions, velocities, activations; not the time) back when asked.
+pub struct LiveReset {
+    requested: Arc<AtomicBool>,
+    initial: Vec<f64>,
+}
+
+impl Disturbance for LiveReset {
+    fn start(&mut self, _model: &Model, data: &crate::mj::Data) -> Result<()> {
+        self.initial = data.state(crate::mj::StateSig::PHYSICS)?;
+        Ok(())
+    }
+
+    fn apply(&mut self, data: &mut crate::mj::Data, _rng: &mut rand_chacha::ChaCha8Rng) {
+        if self.requested.swap(false, Ordering::Relaxed) {
+            // Same model, same signature: only a length mismatch could fail, and can't here.
+            let _ = data.set_state(&self.initial, crate::mj::StateSig::PHYSICS);
+        }
+    }
 }
 
 /// Topic of the commands (`/<robot>/joint_commands`).
@@ -238,13 +307,19 @@ pub fn start(
         });
     }
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
-    let exchanged: Exchanged = Arc::default();
+    let exchanged: Exchanged = Mutex::default();
     let command_topic = command_topic(robot);
     let trajectory_topic = format!("/{}/joint_trajectory", robot.name);
 
     let text = std::fs::read_to_string(&robot.path).unwrap_or_default();
-    let mut sink =
-        LiveSink { node: node.clone(), writers: HashMap::new(), exchanged: exchanged.clone(), write_failures: 0 };
+    let mut sink = LiveSink {
+        node: node.clone(),
+        writers: HashMap::new(),
+        by_id: Vec::new(),
+        own: vec!["/clock".into(), command_topic.clone(), trajectory_topic.clone()],
+        cdr: CdrWriter::new(),
+        write_failures: 0,
+    };
     if crate::urdf::is_urdf(&text) {
         let w = node.writer("/robot_description", RosString::TYPE_NAME, TopicQos::Latched)?;
         let mut cdr = CdrWriter::new();
@@ -257,13 +332,18 @@ pub fn start(
     let clock = node.writer("/clock", Clock::TYPE_NAME, TopicQos::Stream { depth: 100 })?;
     let mut commands = node.reader(&command_topic, Float64MultiArray::TYPE_NAME, 1000)?;
     let mut trajectories = node.reader(&trajectory_topic, JointTrajectory::TYPE_NAME, 10)?;
+    let mut services = SimulationServices::new(&node)?;
     let poll = rustdds::mio1::Poll::new().map_err(|e| Error::Live { message: format!("creating a poller: {e}") })?;
     {
         use rustdds::mio1::{Interest, Token};
+        let watch = |e: std::io::Error| Error::Live { message: format!("watching the command readers: {e}") };
         poll.registry()
             .register(&mut commands, Token(0), Interest::READABLE)
             .and_then(|()| poll.registry().register(&mut trajectories, Token(1), Interest::READABLE))
-            .map_err(|e| Error::Live { message: format!("watching the command readers: {e}") })?;
+            .map_err(watch)?;
+        for (k, r) in services.readers_mut().enumerate() {
+            poll.registry().register(r, Token(2 + k), Interest::READABLE).map_err(watch)?;
+        }
     }
     let model: &Model = &robot.model;
     let dt = model.timestep_secs();
@@ -290,6 +370,13 @@ pub fn start(
         qpos: vec![0.0; model.nq()],
         qvel: vec![0.0; model.nv()],
         clock_cdr: CdrWriter::new(),
+        services,
+        paused: false,
+        stepping: None,
+        reset_requested: Arc::default(),
+        quit: false,
+        dt_secs: dt,
+        step_end_secs: 0.0,
     };
     Ok((sink, controller))
 }
@@ -317,6 +404,150 @@ impl LiveController {
         &self.stats
     }
 
+    /// The run's reset disturbance: give it to the simulation loop with the others
+    /// ([`crate::sim::simulate_with`]); without it a reset only brings the command back to
+    /// holding the home pose.
+    pub fn reset_disturbance(&self) -> LiveReset {
+        LiveReset { requested: self.reset_requested.clone(), initial: Vec::new() }
+    }
+
+    /// Answers every waiting service call (see [`simulation`]).
+    fn serve(&mut self, model: &Model, t_secs: f64) {
+        while let Some(next) = self.services.next_call() {
+            let (k, id, call) = match next {
+                Ok(c) => c,
+                Err(why) => {
+                    self.warn(format!("service call refused: {why}"));
+                    continue;
+                }
+            };
+            let outcome = self.call(model, t_secs, k, id, call);
+            self.stats.service_calls += 1;
+            if let Some(outcome) = outcome {
+                let current = if self.paused { state::PAUSED } else { state::PLAYING };
+                if let Err(e) = self.services.answer(k, &id, current, &outcome) {
+                    self.warn(e.to_string());
+                }
+            }
+        }
+    }
+
+    /// Does `call`; the reply, or `None` when it comes later (a step in progress).
+    fn call(&mut self, model: &Model, t_secs: f64, k: usize, id: service::RequestId, call: Call) -> Option<Outcome> {
+        Some(match call {
+            Call::GetState => Outcome::ok(),
+            Call::SetState(target) if self.stepping.is_some() && target != state::QUITTING => Outcome::new(
+                result::INCORRECT_STATE,
+                "a StepSimulation is in progress; set the state when it has replied",
+            ),
+            Call::SetState(state::PAUSED) if self.paused => {
+                Outcome::new(result::ALREADY_IN_TARGET_STATE, "already paused")
+            }
+            Call::SetState(state::PAUSED) => {
+                self.paused = true;
+                Outcome::ok()
+            }
+            Call::SetState(state::PLAYING) if !self.paused => {
+                Outcome::new(result::ALREADY_IN_TARGET_STATE, "already playing")
+            }
+            Call::SetState(state::PLAYING) => {
+                self.resume(t_secs);
+                Outcome::ok()
+            }
+            Call::SetState(state::STOPPED) => {
+                self.paused = true;
+                self.reset(model, t_secs);
+                Outcome::ok()
+            }
+            Call::SetState(state::QUITTING) => {
+                self.quit = true;
+                Outcome::ok()
+            }
+            Call::SetState(other) => Outcome::new(
+                result::INCORRECT_TRANSITION,
+                format!("twin sets STOPPED (0), PLAYING (1), PAUSED (2) or QUITTING (3), not {other}"),
+            ),
+            Call::Step(_) if !self.paused => Outcome::new(
+                result::OPERATION_FAILED,
+                "StepSimulation needs a paused simulation: pause it first (SetSimulationState PAUSED)",
+            ),
+            Call::Step(_) if self.stepping.is_some() => {
+                Outcome::new(result::OPERATION_FAILED, "a StepSimulation is already in progress")
+            }
+            Call::Step(0) => Outcome::ok(),
+            Call::Step(n) => {
+                self.stepping = Some((k, id, n));
+                return None;
+            }
+            Call::Reset(s) if s != scope::DEFAULT && s & scope::TIME != 0 => Outcome::new(
+                result::FEATURE_UNSUPPORTED,
+                "twin does not reset simulation time (/clock and recordings stay monotonic); use SCOPE_STATE (2)",
+            ),
+            Call::Reset(s) if s == scope::DEFAULT || s & scope::STATE != 0 => {
+                self.reset(model, t_secs);
+                Outcome::ok()
+            }
+            Call::Reset(_) => Outcome::new(result::OK, "twin spawns nothing: nothing to remove"),
+        })
+    }
+
+    fn resume(&mut self, t_secs: f64) {
+        self.paused = false;
+        // Pacing goes on from now: the paused wall time is not caught up.
+        if let (Pacing::RealTime(factor), Some((_, sim0))) = (self.options.pacing, self.started) {
+            let now = Instant::now();
+            let behind = Duration::from_secs_f64(((t_secs - sim0) / factor).max(0.0));
+            self.started = Some((now.checked_sub(behind).unwrap_or(now), sim0));
+        }
+        self.last_good = Instant::now();
+    }
+
+    fn reset(&mut self, model: &Model, t_secs: f64) {
+        self.reset_requested.store(true, Ordering::Relaxed);
+        self.commander = Commander::new(model, self.options.command_interface);
+        self.stats.resets += 1;
+        self.warn(format!(
+            "reset_simulation: the robot's state goes back to its start at the next step (t = {t_secs:.3} s); \
+             holding the home pose until the next command"
+        ));
+    }
+
+    /// Waits, answering service calls, while paused (and not stepping).
+    fn wait_while_paused(&mut self, model: &Model, t_secs: f64) {
+        while self.paused && self.stepping.is_none() && !self.quit && !self.stop.load(Ordering::Relaxed) {
+            let _ = self.poll.poll(&mut self.events, Some(Duration::from_millis(20)));
+            self.serve(model, t_secs);
+        }
+    }
+
+    /// After a step: counts a `StepSimulation` down and replies when it is done, saying the
+    /// time reached on `/clock` first (real-time modes; lockstep says it each period).
+    fn stepped(&mut self) {
+        let Some((k, id, left)) = self.stepping.as_mut() else { return };
+        *left -= 1;
+        if *left > 0 {
+            return;
+        }
+        let (k, id) = (*k, *id);
+        self.stepping = None;
+        if self.options.pacing != Pacing::Lockstep {
+            let t_nanos = (self.step_end_secs * 1e9).round().max(0.0) as u64;
+            self.publish_clock(t_nanos);
+        }
+        if let Err(e) = self.services.answer(k, &id, state::PAUSED, &Outcome::ok()) {
+            self.warn(e.to_string());
+        }
+    }
+
+    /// Publishes and records `/clock` = `t_nanos`.
+    fn publish_clock(&mut self, t_nanos: u64) {
+        self.clock_cdr.reset();
+        Clock { clock_nanos: t_nanos as i64 }.encode(&mut self.clock_cdr);
+        let bytes = self.clock_cdr.bytes().to_vec();
+        let _ = self.clock.write(RawCdr(bytes.clone()), None);
+        self.record(CLOCK, t_nanos, bytes);
+    }
+
     /// Waits up to `timeout` for a subscriber on `/clock` (a peer that joined the graph).
     pub fn wait_for_subscriber(&self, timeout: Duration) -> bool {
         use rustdds::StatusEvented;
@@ -338,9 +569,9 @@ impl LiveController {
         (self.log)(&message);
     }
 
-    fn record(&self, topic: &str, type_name: &'static str, t_nanos: u64, cdr: Vec<u8>) {
+    fn record(&self, topic: usize, t_nanos: u64, cdr: Vec<u8>) {
         if let Ok(mut q) = self.exchanged.lock() {
-            q.push(ExchangedMessage { topic: topic.to_string(), type_name, log_time_nanos: t_nanos, cdr });
+            q.push(ExchangedMessage { topic, log_time_nanos: t_nanos, cdr });
         }
     }
 
@@ -351,7 +582,7 @@ impl LiveController {
             Ok(m) => self.commander.check(m),
             Err(e) => Err(format!("not a Float64MultiArray: {}", e.message)),
         };
-        self.record(&self.command_topic.clone(), Float64MultiArray::TYPE_NAME, t_nanos, raw.0);
+        self.record(COMMANDS, t_nanos, raw.0);
         match (verdict, decoded) {
             (Ok(()), Ok(m)) => {
                 self.commander.set_direct(&m);
@@ -369,7 +600,7 @@ impl LiveController {
 
     fn take_trajectory(&mut self, raw: RawCdr, t_nanos: u64) {
         let decoded = CdrReader::new(&raw.0).and_then(|mut r| JointTrajectory::decode(&mut r));
-        self.record(&self.trajectory_topic.clone(), JointTrajectory::TYPE_NAME, t_nanos, raw.0);
+        self.record(TRAJECTORY, t_nanos, raw.0);
         let now = t_nanos as f64 * 1e-9;
         let verdict = match decoded {
             Ok(t) => self.commander.set_trajectory(&t, now, &self.qpos),
@@ -470,13 +701,7 @@ impl LiveController {
             }
         }
         // /clock first: the state stamped before t is already out.
-        Clock { clock_nanos: t_nanos as i64 }.encode({
-            self.clock_cdr.reset();
-            &mut self.clock_cdr
-        });
-        let bytes = self.clock_cdr.bytes().to_vec();
-        let _ = self.clock.write(RawCdr(bytes.clone()), None);
-        self.record("/clock", Clock::TYPE_NAME, t_nanos, bytes);
+        self.publish_clock(t_nanos);
         match self.options.pacing {
             Pacing::Lockstep => self.wait_one(t_nanos)?,
             _ => {
@@ -511,13 +736,19 @@ impl Controller for LiveController {
         Ok(())
     }
 
-    fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
-        if self.step.is_multiple_of(self.steps_per_period)
+    fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        let boundary = self.step.is_multiple_of(self.steps_per_period);
+        if boundary
             && self.failure.is_none()
             && let Err(e) = self.period_start(observation)
         {
             self.failure = Some(e);
         }
+        if boundary || self.paused {
+            self.serve(model, observation.time_secs);
+            self.wait_while_paused(model, observation.time_secs);
+        }
+        self.step_end_secs = observation.time_secs + self.dt_secs;
         self.step += 1;
         self.commander.compute(observation.time_secs, observation.qpos, observation.qvel, command);
     }
@@ -526,6 +757,43 @@ impl Controller for LiveController {
         if let Some(e) = self.failure.take() {
             return Err(e);
         }
-        Ok(!self.stop.load(std::sync::atomic::Ordering::Relaxed))
+        self.stepped();
+        Ok(!self.quit && !self.stop.load(Ordering::Relaxed))
+    }
+
+    /// `/clock` as sent and the commands as received (CDR bytes as they were, rejected ones
+    /// included), for the recording.
+    fn topics(&self) -> Vec<TopicInfo> {
+        let topic = |name: &str, type_name, rate_hz, k| TopicInfo {
+            name: name.to_string(),
+            type_name,
+            rate_hz,
+            frame_id: String::new(),
+            qos: Qos::STREAM,
+            kind: TopicKind::Controller(k),
+        };
+        vec![
+            topic("/clock", Clock::TYPE_NAME, Some(self.options.control_rate_hz), CLOCK),
+            topic(&self.command_topic, Float64MultiArray::TYPE_NAME, None, COMMANDS),
+            topic(&self.trajectory_topic, JointTrajectory::TYPE_NAME, None, TRAJECTORY),
+        ]
+    }
+
+    fn diagnostics(&self, emit: &mut dyn FnMut(usize, u64, TypedMessage<'_>)) {
+        if let Ok(mut q) = self.exchanged.lock() {
+            for m in q.drain(..) {
+                emit(m.topic, m.log_time_nanos, TypedMessage::Cdr(&m.cdr));
+            }
+        }
+    }
+}
+
+impl Drop for LiveController {
+    /// A `StepSimulation` cut short by the end of the run still gets its answer.
+    fn drop(&mut self) {
+        if let Some((k, id, left)) = self.stepping.take() {
+            let why = format!("the run ended with {left} steps still to take");
+            let _ = self.services.answer(k, &id, state::PAUSED, &Outcome::new(result::OPERATION_FAILED, why));
+        }
     }
 }

@@ -223,6 +223,20 @@ impl CdrWriter {
         self.align(4);
         self.buf.extend_from_slice(&v.to_le_bytes());
     }
+    /// u64.
+    pub fn u64(&mut self, v: u64) {
+        self.align(8);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// i64.
+    pub fn i64(&mut self, v: i64) {
+        self.align(8);
+        self.buf.extend_from_slice(&v.to_le_bytes());
+    }
+    /// A fixed `uint8[N]` (no count).
+    pub fn u8_fixed(&mut self, v: &[u8]) {
+        self.buf.extend_from_slice(v);
+    }
     /// f64.
     pub fn f64(&mut self, v: f64) {
         self.align(8);

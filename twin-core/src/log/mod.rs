@@ -36,7 +36,7 @@ pub use reader::{Channel, Damage, DamageKind, RawMessage, ScanReport, Schema};
 pub use series::{JointSeries, JointStateReport, JointStateSeries};
 pub use typed::{
     Clock, Float64MultiArray, Header, Imu, JointState, JointTrajectory, JointTrajectoryPoint, MultiArrayDimension,
-    Odometry, RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
+    Odometry, PointStamped, Pose, PoseArray, RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
 };
 pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 

@@ -100,6 +100,40 @@ pub struct WrenchStamped {
     pub torque: [f64; 3],
 }
 
+/// `geometry_msgs/msg/PointStamped`: a point, e.g. a controller's reference or measured CoM,
+/// ZMP or DCM.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PointStamped {
+    /// Header (frame the point is expressed in).
+    pub header: Header,
+    /// The point, m.
+    pub point: [f64; 3],
+}
+
+/// `geometry_msgs/msg/Pose` inside a [`PoseArray`].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Pose {
+    /// Position, m.
+    pub position: [f64; 3],
+    /// Orientation x y z w.
+    pub orientation_xyzw: [f64; 4],
+}
+
+impl Default for Pose {
+    fn default() -> Self {
+        Pose { position: [0.0; 3], orientation_xyzw: [0.0, 0.0, 0.0, 1.0] }
+    }
+}
+
+/// `geometry_msgs/msg/PoseArray`: e.g. a walking controller's planned footsteps.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct PoseArray {
+    /// Header (frame of the poses).
+    pub header: Header,
+    /// The poses.
+    pub poses: Vec<Pose>,
+}
+
 /// `std_msgs/msg/MultiArrayDimension`.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct MultiArrayDimension {
@@ -379,6 +413,38 @@ impl RosMessage for WrenchStamped {
     }
 }
 
+impl RosMessage for PointStamped {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/PointStamped";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.f64_fixed(&self.point);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Self { header: header(r)?, point: vec3(r)? })
+    }
+}
+
+impl RosMessage for PoseArray {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/PoseArray";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.header(self.header.stamp_nanos, &self.header.frame_id);
+        w.seq_len(self.poses.len());
+        for p in &self.poses {
+            w.f64_fixed(&p.position);
+            w.f64_fixed(&p.orientation_xyzw);
+        }
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        let header = header(r)?;
+        let n = r.seq_len(56)?;
+        let mut poses = Vec::with_capacity(n);
+        for _ in 0..n {
+            poses.push(Pose { position: vec3(r)?, orientation_xyzw: quat(r)? });
+        }
+        Ok(Self { header, poses })
+    }
+}
+
 impl RosMessage for Float64MultiArray {
     const TYPE_NAME: &'static str = "std_msgs/msg/Float64MultiArray";
     fn encode(&self, w: &mut CdrWriter) {
@@ -523,6 +589,8 @@ const DEFINITIONS: &[(&str, &str)] = &[
     ),
     ("geometry_msgs/Wrench", "Vector3  force\nVector3  torque\n"),
     ("geometry_msgs/WrenchStamped", "std_msgs/Header header\nWrench wrench\n"),
+    ("geometry_msgs/PointStamped", "std_msgs/Header header\nPoint point\n"),
+    ("geometry_msgs/PoseArray", "std_msgs/Header header\nPose[] poses\n"),
     ("std_msgs/MultiArrayDimension", "string label\nuint32 size\nuint32 stride\n"),
     ("std_msgs/MultiArrayLayout", "MultiArrayDimension[] dim\nuint32 data_offset\n"),
     ("std_msgs/Float64MultiArray", "MultiArrayLayout  layout\nfloat64[]         data\n"),
@@ -627,6 +695,11 @@ mod tests {
             ..Default::default()
         });
         roundtrip(&WrenchStamped { header: h.clone(), force: [1.0, 2.0, 3.0], torque: [4.0, 5.0, 6.0] });
+        roundtrip(&PointStamped { header: h.clone(), point: [0.1, -0.2, 0.8] });
+        roundtrip(&PoseArray {
+            header: h.clone(),
+            poses: vec![Pose::default(), Pose { position: [0.3, -0.1, 0.0], orientation_xyzw: [0.0, 0.0, 0.6, 0.8] }],
+        });
         roundtrip(&Float64MultiArray {
             dim: vec![MultiArrayDimension { label: "joints".into(), size: 2, stride: 2 }],
             data_offset: 0,

@@ -258,6 +258,18 @@ impl Data {
         c.iter().map(|c| c.pos).collect()
     }
 
+    /// The joint-space inertia matrix `M` (`nv × nv`, row-major, dense) of the last forward
+    /// pass (`mj_fullM`).
+    pub fn full_mass_matrix(&self) -> Vec<f64> {
+        let nv = self.model.nv();
+        let mut m = vec![0.0; nv * nv];
+        // SAFETY: `m` has the nv·nv entries mj_fullM writes; it reads d->qM, which the forward
+        // pass filled (mj_makeData zero-fills it before); model and data are a live pair, only
+        // read; mj_fullM never raises.
+        unsafe { sys::mj_fullM(self.model.as_ptr(), self.ptr.as_ptr(), m.as_mut_ptr()) };
+        m
+    }
+
     /// Force and torque of active contact `i` (`mj_contactForce`), in the world frame, acting on
     /// the contact's second geom (its first geom gets the opposite), with the contact position
     /// (world, metres) the torque is taken about: `(geoms, position, force_n, torque_nm)`.

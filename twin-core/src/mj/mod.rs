@@ -8,10 +8,12 @@
 mod data;
 mod edit;
 mod model;
+mod ray;
 
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
+pub use ray::{RayFilter, RayHit, RayScene};
 
 use crate::error::{Error, Result};
 use std::ffi::{CStr, c_char, c_int};
@@ -84,6 +86,21 @@ pub(crate) mod ffi {
             err_sz: c_int,
         ) -> c_int;
         pub fn twin_bench_c_step_loop(m: *const mjModel, d: *mut mjData, n: c_long);
+        pub fn twin_multi_ray(
+            m: *const mjModel,
+            d: *mut mjData,
+            pnt: *const mjtNum,
+            vec: *const mjtNum,
+            geomgroup: *const u8,
+            flg_static: u8,
+            bodyexclude: c_int,
+            geomid: *mut c_int,
+            dist: *mut mjtNum,
+            nray: c_int,
+            cutoff: mjtNum,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
     }
 }
 

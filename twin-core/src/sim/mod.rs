@@ -17,7 +17,9 @@
 
 pub mod record;
 
-pub use record::{RecordOptions, RecordSummary, Recording, StepSample};
+#[cfg(feature = "rerun")]
+pub use record::RerunSink;
+pub use record::{McapSink, RecordOptions, RecordSummary, Recording};
 
 pub use crate::robot::Robot;
 

@@ -17,19 +17,30 @@
 //! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent (actuator
 //!   controls, or joint forces for models without actuators), at the state rate.
 //!
-//! The rerun recording gets the posed geometry at [`RecordOptions::rerun_rate_hz`] and scalars:
-//! `series/joints/<joint>`, `series/imu/<imu>/{gyro,accel}_{x,y,z}`,
-//! `series/contacts/<body>/force_{x,y,z}`.
+//! - the controller's own topics ([`crate::control::Controller::topics`]: a walking controller's
+//!   footsteps and CoM/ZMP/DCM, the live bridge's `/clock` and received commands), from their
+//!   first message on.
+//!
+//! The recorder turns `Data` into these typed messages ([`TypedMessage`]) once per step, for the
+//! topics that are due, and hands them to its [`Sink`]s: the MCAP file ([`McapSink`]), the rerun
+//! recording (`RerunSink`, with the `rerun` feature) and any given to [`Recording::with_sinks`]
+//! (the live ROS 2 bridge). Each sink encodes what it takes its own way.
+//!
+//! The rerun recording shows, at [`RecordOptions::rerun_rate_hz`], the posed geometry (from
+//! `/tf`) and scalars: `series/joints/<joint>`, `series/imu/<imu>/{gyro,accel}_{x,y,z}`,
+//! `series/contacts/<body>/force_{x,y,z}`; the controller's points and pose arrays as points at
+//! `diagnostics/<topic>`.
 
 use super::Robot;
+use crate::engine::StepView;
 use crate::error::{Error, Result};
 use crate::log::cdr::CdrWriter;
 use crate::log::{
-    Float64MultiArray, Imu, JointState, LogWriter, Odometry, RosMessage, TfMessage, Topic, WrenchStamped, WriteSummary,
-    WriterOptions,
+    Float64MultiArray, Header, Imu, JointState, LogWriter, Odometry, TfMessage, TransformStamped, WrenchStamped,
+    WriteSummary, WriterOptions,
 };
 use crate::mj::{Data, ObjType};
-use crate::topics::{TopicInfo, TopicKind, TopicRates, TopicTable};
+use crate::topics::{Sink, TopicInfo, TopicKind, TopicRates, TopicTable, TypedMessage, body_frame};
 use rand::{Rng, SeedableRng};
 use rand_distr::StandardNormal;
 use std::path::PathBuf;
@@ -54,8 +65,9 @@ pub struct RecordOptions {
     pub seed: u64,
     /// MCAP writer options (default: [`WriterOptions::default`]).
     pub writer: WriterOptions,
-    /// Only these MCAP topics, by exact name (`/contacts/*` stands for every contact topic)
-    /// (default: none given = all).
+    /// Only these topics of the table in the MCAP file and on the live bridge, by exact name
+    /// (`/contacts/*` stands for every contact topic); the rerun recording and the controller's
+    /// own topics are not filtered (default: none given = all).
     pub topics: Option<Vec<String>>,
     /// Topic of the command the controller sent each step (default: none given =
     /// `/<robot>/joint_commands`; the live bridge moves it aside, as that name is its input).
@@ -79,58 +91,11 @@ impl Default for RecordOptions {
     }
 }
 
-/// A second destination of the recorded topics besides the MCAP file (the live ROS 2 bridge):
-/// it gets every message the file gets, encoded once, plus it hands back the messages it
-/// exchanged itself (commands received, `/clock` sent) for the file to hold.
-pub trait TopicSink {
-    /// A topic of the robot's topic table appears (name, type, QoS); called before its first
-    /// message.
-    ///
-    /// # Errors
-    /// When the sink can't offer the topic.
-    fn add_topic(&mut self, topic: &TopicInfo) -> Result<()>;
-    /// One message: CDR bytes (encapsulation header included), stamped `log_time_nanos`
-    /// (simulation time).
-    ///
-    /// # Errors
-    /// When the sink fails (a slow reader is not an error: messages are dropped for it).
-    fn write(&mut self, topic: &str, log_time_nanos: u64, cdr: &[u8]) -> Result<()>;
-    /// Moves the messages the sink exchanged since the last call into `out`, to be recorded.
-    fn take_exchanged(&mut self, out: &mut Vec<ExchangedMessage>);
-}
-
-/// A message a [`TopicSink`] exchanged on its own (see [`TopicSink::take_exchanged`]).
-#[derive(Debug, Clone)]
-pub struct ExchangedMessage {
-    /// ROS topic.
-    pub topic: String,
-    /// `pkg/msg/Type` (one of the typed messages of [`crate::log`]).
-    pub type_name: &'static str,
-    /// Simulation time it belongs to, ns.
-    pub log_time_nanos: u64,
-    /// CDR bytes, encapsulation header included.
-    pub cdr: Vec<u8>,
-}
-
-/// The state of one instant, handed to [`Recording::record`] together with a `Data` whose
-/// derived quantities (body poses, sensors, contacts, actuator forces) belong to the same
-/// instant.
-#[derive(Debug, Clone, Copy)]
-pub struct StepSample<'a> {
-    /// Simulation time, seconds.
-    pub time_secs: f64,
-    /// Joint positions (len `nq`).
-    pub qpos: &'a [f64],
-    /// Joint velocities (len `nv`).
-    pub qvel: &'a [f64],
-    /// The command sent at this instant.
-    pub command: &'a [f64],
-}
-
 /// What was recorded.
 #[derive(Debug, Clone, Default)]
 pub struct RecordSummary {
-    /// Messages per topic, in the order the topics were added.
+    /// Messages per topic taken by the MCAP file or the live bridge, in the order the topics
+    /// were added.
     pub topics: Vec<(String, u64)>,
     /// The MCAP file and what was written into it.
     pub mcap: Option<(PathBuf, WriteSummary)>,
@@ -171,185 +136,357 @@ impl Schedule {
     }
 }
 
-/// One `/tf` entry: `parent_from_child` of a body.
-struct TfLink {
-    parent: Option<usize>,
-    child: usize,
-    parent_frame: String,
-    child_frame: String,
+/// The MCAP file as a [`Sink`]: one channel per topic it is offered, each message CDR-encoded.
+pub struct McapSink {
+    writer: Option<LogWriter>,
+    path: PathBuf,
+    /// Channel of each topic id.
+    channels: Vec<Option<u16>>,
+    cdr: CdrWriter,
+    summary: Option<WriteSummary>,
 }
 
-/// A recorded topic: its index in the counts, and its MCAP channel when there is a file.
-struct Stream<T> {
-    index: usize,
-    mcap: Option<Topic<T>>,
-}
+impl McapSink {
+    /// Creates the file at `path` (see [`LogWriter::create`]).
+    ///
+    /// # Errors
+    /// [`Error::Io`] / [`Error::McapWrite`] when the file can't be created.
+    pub fn create(path: &std::path::Path, options: &WriterOptions) -> Result<McapSink> {
+        let writer = LogWriter::create(path, options)?;
+        Ok(McapSink {
+            writer: Some(writer),
+            path: path.to_path_buf(),
+            channels: Vec::new(),
+            cdr: CdrWriter::new(),
+            summary: None,
+        })
+    }
 
-impl<T> Clone for Stream<T> {
-    fn clone(&self) -> Self {
-        *self
+    /// The file and what was written into it, once finished.
+    pub fn summary(&self) -> Option<(PathBuf, WriteSummary)> {
+        self.summary.clone().map(|s| (self.path.clone(), s))
+    }
+
+    fn closed(&self) -> Error {
+        Error::Options(format!("{}: the MCAP file is closed already (twin bug)", self.path.display()))
     }
 }
 
-impl<T> Copy for Stream<T> {}
+impl Sink for McapSink {
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
+        let Some(writer) = self.writer.as_mut() else { return Err(self.closed()) };
+        let channel = writer.add_topic_of_type(&topic.name, topic.type_name)?;
+        if self.channels.len() <= id {
+            self.channels.resize(id + 1, None);
+        }
+        self.channels[id] = Some(channel);
+        Ok(true)
+    }
 
-struct ImuStream {
-    topic: Option<Stream<Imu>>,
-    schedule: Schedule,
+    fn write(&mut self, id: usize, _topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        let (Some(writer), Some(&Some(channel))) = (self.writer.as_mut(), self.channels.get(id)) else {
+            return Ok(());
+        };
+        writer.write_encoded(channel, log_time_nanos, message.to_cdr(&mut self.cdr))
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        if let Some(writer) = self.writer.take() {
+            self.summary = Some(writer.finish()?);
+        }
+        Ok(())
+    }
 }
 
-/// The topic side: the MCAP file and/or a live [`TopicSink`].
-struct McapOut {
-    writer: Option<LogWriter>,
-    live: Option<Box<dyn TopicSink>>,
-    /// Encoding buffer when a message goes to both the file and the sink.
-    cdr: CdrWriter,
+/// The rerun recording (a `.rrd` file and/or a viewer) as a [`Sink`]: it takes `/joint_states`,
+/// the IMUs, `/tf` (the posed bodies), the contacts and the controller's points and pose
+/// arrays, each at most at its own rate.
+#[cfg(feature = "rerun")]
+pub struct RerunSink {
+    recorders: Vec<crate::viz::Recorder>,
+    rate_hz: f64,
+    dt_nanos: u64,
+    /// Per topic id: its schedule at the rerun rate, when taken.
+    schedules: Vec<Option<Schedule>>,
+    /// Per topic id: its scalar series or entity prefix.
+    names: Vec<String>,
+    parents: Vec<usize>,
+    xpos: Vec<[f64; 3]>,
+    xquat: Vec<[f64; 4]>,
+    points: Vec<[f64; 3]>,
+    imu_names: Vec<String>,
+}
+
+#[cfg(feature = "rerun")]
+impl RerunSink {
+    /// A sink into `recorders` (see [`crate::viz::Recorder`]) for `robot`, at `rate_hz`.
+    pub fn new(robot: &Robot, recorders: Vec<crate::viz::Recorder>, rate_hz: f64) -> RerunSink {
+        let model = &robot.model;
+        let nbody = model.nbody();
+        RerunSink {
+            recorders,
+            rate_hz,
+            dt_nanos: ((model.timestep_secs() * 1e9).round() as u64).max(1),
+            schedules: Vec::new(),
+            names: Vec::new(),
+            parents: (0..nbody).map(|b| model.body_parentid()[b] as usize).collect(),
+            xpos: vec![[0.0; 3]; nbody],
+            xquat: vec![[1.0, 0.0, 0.0, 0.0]; nbody],
+            points: Vec::new(),
+            imu_names: robot.imus.iter().map(|i| i.meta.name.clone()).collect(),
+        }
+    }
+
+    /// The `.rrd` files written, with their sizes, once finished.
+    fn files(&self) -> Vec<PathBuf> {
+        self.recorders.iter().filter_map(|r| r.path().map(std::path::Path::to_path_buf)).collect()
+    }
+}
+
+#[cfg(feature = "rerun")]
+use crate::log::RosMessage;
+
+#[cfg(feature = "rerun")]
+impl Sink for RerunSink {
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
+        let name = match topic.kind {
+            TopicKind::JointStates => "joints".to_string(),
+            TopicKind::Imu(k) => format!("imu/{}", self.imu_names.get(k).cloned().unwrap_or_default()),
+            TopicKind::Tf => String::new(),
+            TopicKind::Contacts(_) => format!("contacts/{}", topic.frame_id),
+            TopicKind::Controller(_)
+                if [
+                    <crate::log::PointStamped as RosMessage>::TYPE_NAME,
+                    <crate::log::PoseArray as RosMessage>::TYPE_NAME,
+                ]
+                .contains(&topic.type_name) =>
+            {
+                format!("diagnostics{}", topic.name)
+            }
+            _ => return Ok(false),
+        };
+        if self.schedules.len() <= id {
+            self.schedules.resize(id + 1, None);
+            self.names.resize(id + 1, String::new());
+        }
+        self.schedules[id] = Some(Schedule::new(self.rate_hz, self.dt_nanos));
+        self.names[id] = name;
+        Ok(true)
+    }
+
+    fn write(&mut self, id: usize, _topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        let Some(Some(schedule)) = self.schedules.get_mut(id) else { return Ok(()) };
+        if !schedule.due(log_time_nanos) {
+            return Ok(());
+        }
+        let t_secs = log_time_nanos as f64 * 1e-9;
+        let name = &self.names[id];
+        if let TypedMessage::Tf(tf) = message {
+            // Transform k is body k + 1 relative to its parent (see `Recording`): compose down the tree.
+            if tf.transforms.len() + 1 != self.parents.len() {
+                return Ok(());
+            }
+            for (k, t) in tf.transforms.iter().enumerate() {
+                let b = k + 1;
+                let q = [t.rotation_xyzw[3], t.rotation_xyzw[0], t.rotation_xyzw[1], t.rotation_xyzw[2]];
+                let p = self.parents[b];
+                let (pp, pq) = (self.xpos[p], self.xquat[p]);
+                let r = quat_rotate(pq, t.translation);
+                self.xpos[b] = [pp[0] + r[0], pp[1] + r[1], pp[2] + r[2]];
+                self.xquat[b] = quat_mul(pq, q);
+            }
+        }
+        self.points.clear();
+        match message {
+            TypedMessage::Point(m) => self.points.push(m.point),
+            TypedMessage::Poses(m) => self.points.extend(m.poses.iter().map(|p| p.position)),
+            _ => {}
+        }
+        for rec in &self.recorders {
+            rec.set_time_secs(t_secs);
+            match message {
+                TypedMessage::Tf(_) => rec.log_world_poses(t_secs, &self.xpos, &self.xquat)?,
+                TypedMessage::JointState(js) => {
+                    for (joint, q) in js.name.iter().zip(&js.position) {
+                        rec.scalar(&format!("{name}/{joint}"), *q)?;
+                    }
+                }
+                TypedMessage::Imu(imu) => {
+                    let v = imu.angular_velocity.iter().chain(&imu.linear_acceleration);
+                    for (axis, x) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().zip(v) {
+                        rec.scalar(&format!("{name}/{axis}"), *x)?;
+                    }
+                }
+                TypedMessage::Wrench(w) => {
+                    for (axis, f) in ["force_x", "force_y", "force_z"].iter().zip(&w.force) {
+                        rec.scalar(&format!("{name}/{axis}"), *f)?;
+                    }
+                }
+                TypedMessage::Point(_) | TypedMessage::Poses(_) => rec.points(name, &self.points)?,
+                _ => {}
+            }
+        }
+        Ok(())
+    }
+
+    fn finish(&mut self) -> Result<()> {
+        for rec in std::mem::take(&mut self.recorders) {
+            rec.finish()?;
+        }
+        Ok(())
+    }
+}
+
+/// A sink of a recording, kept by kind for its summary.
+enum SinkSlot {
+    Mcap(McapSink),
+    #[cfg(feature = "rerun")]
+    Rerun(RerunSink, Vec<PathBuf>),
+    Other(Box<dyn Sink>),
+}
+
+impl SinkSlot {
+    fn sink(&mut self) -> &mut dyn Sink {
+        match self {
+            SinkSlot::Mcap(s) => s,
+            #[cfg(feature = "rerun")]
+            SinkSlot::Rerun(s, _) => s,
+            SinkSlot::Other(s) => s.as_mut(),
+        }
+    }
+
+    /// ROS outputs (the file, the bridge) follow `--topics` and are counted; rerun is neither.
+    fn is_ros(&self) -> bool {
+        match self {
+            #[cfg(feature = "rerun")]
+            SinkSlot::Rerun(..) => false,
+            _ => true,
+        }
+    }
+}
+
+/// The sinks and which topic goes to which.
+struct Outputs {
+    sinks: Vec<SinkSlot>,
+    /// The table's topics, then the controller's.
+    topics: Vec<TopicInfo>,
+    /// Per topic id: the sinks that took it (`None`: not offered yet).
+    routes: Vec<Option<Vec<usize>>>,
+    /// Per topic id: its entry in `counts`, when a ROS sink took it.
+    count_of: Vec<Option<usize>>,
+    counts: Vec<(String, u64)>,
     /// `None`: all topics; else the topics asked for.
     wanted: Option<Vec<String>>,
-    joint_states: Option<Stream<JointState>>,
-    commands: Option<Stream<Float64MultiArray>>,
-    odom: Option<Stream<Odometry>>,
-    tf: Option<Stream<TfMessage>>,
-    imus: Vec<ImuStream>,
-    /// Per body: its `/contacts/<body>` topic once it has touched something.
-    contacts: Vec<Option<Stream<WrenchStamped>>>,
-    /// Messages per stream index.
-    counts: Vec<(String, u64)>,
-    /// The robot's topic table (names, types, QoS of what is added).
-    table: TopicTable,
-    /// Topics the sink exchanged: name, stream index, MCAP channel.
-    exchanged_topics: Vec<(String, usize, Option<u16>)>,
-    exchanged: Vec<ExchangedMessage>,
 }
 
-impl McapOut {
-    /// Encodes one message once and hands it to the file and the sink.
-    fn emit<T: RosMessage>(
-        &mut self,
-        s: Stream<T>,
-        log_time_nanos: u64,
-        encode: impl FnOnce(&mut CdrWriter),
-    ) -> Result<()> {
-        self.counts[s.index].1 += 1;
-        match self.live.as_mut() {
-            None => {
-                if let (Some(w), Some(topic)) = (self.writer.as_mut(), s.mcap) {
-                    w.write_with(topic, log_time_nanos, encode)?;
-                }
-            }
-            Some(live) => {
-                self.cdr.reset();
-                encode(&mut self.cdr);
-                if let (Some(w), Some(topic)) = (self.writer.as_mut(), s.mcap) {
-                    w.write_encoded(topic.channel_id(), log_time_nanos, self.cdr.bytes())?;
-                }
-                live.write(&self.counts[s.index].0, log_time_nanos, self.cdr.bytes())?;
-            }
-        }
-        Ok(())
-    }
-
-    /// Records what the sink exchanged on its own since the last call.
-    fn record_exchanged(&mut self) -> Result<()> {
-        let Some(live) = self.live.as_mut() else { return Ok(()) };
-        live.take_exchanged(&mut self.exchanged);
-        for m in std::mem::take(&mut self.exchanged) {
-            let (index, channel) = match self.exchanged_topics.iter().find(|(t, _, _)| *t == m.topic) {
-                Some(&(_, index, channel)) => (index, channel),
-                None => {
-                    let channel = match self.writer.as_mut() {
-                        Some(w) => Some(w.add_topic_of_type(&m.topic, m.type_name)?),
-                        None => None,
-                    };
-                    self.counts.push((m.topic.clone(), 0));
-                    self.exchanged_topics.push((m.topic.clone(), self.counts.len() - 1, channel));
-                    (self.counts.len() - 1, channel)
-                }
-            };
-            self.counts[index].1 += 1;
-            if let (Some(w), Some(channel)) = (self.writer.as_mut(), channel) {
-                w.write_encoded(channel, m.log_time_nanos, &m.cdr)?;
-            }
-        }
-        Ok(())
-    }
-
+impl Outputs {
     fn wants(&self, topic: &str) -> bool {
         self.wanted
             .as_ref()
             .is_none_or(|w| w.iter().any(|t| t == topic || (t == "/contacts/*" && topic.starts_with("/contacts/"))))
     }
 
-    /// Adds `topic` if it is wanted.
-    fn add_wanted<T: RosMessage>(&mut self, topic: &str) -> Result<Option<Stream<T>>> {
-        if self.wants(topic) { self.add(topic).map(Some) } else { Ok(None) }
-    }
-
-    fn add<T: RosMessage>(&mut self, topic: &str) -> Result<Stream<T>> {
-        let mcap = match self.writer.as_mut() {
-            Some(w) => Some(w.add_topic::<T>(topic)?),
-            None => None,
-        };
-        if let Some(live) = self.live.as_mut() {
-            match self.table.find(topic) {
-                Some(info) => live.add_topic(info)?,
-                None => {
-                    return Err(Error::Options(format!(
-                        "{topic} is not in the robot's topic table (twin bug: recorded topics come from it)"
-                    )));
-                }
+    /// Offers topic `id` to every sink (ROS sinks only when `--topics` wants it).
+    fn offer(&mut self, id: usize) -> Result<()> {
+        let topic = &self.topics[id];
+        let wanted = matches!(topic.kind, TopicKind::Controller(_)) || self.wants(&topic.name);
+        let mut route = Vec::new();
+        let mut counted = false;
+        for (k, slot) in self.sinks.iter_mut().enumerate() {
+            if slot.is_ros() && !wanted {
+                continue;
+            }
+            if slot.sink().add_topic(id, topic)? {
+                route.push(k);
+                counted |= slot.is_ros();
             }
         }
-        self.counts.push((topic.to_string(), 0));
-        Ok(Stream { index: self.counts.len() - 1, mcap })
+        if counted {
+            self.counts.push((topic.name.clone(), 0));
+            self.count_of[id] = Some(self.counts.len() - 1);
+        }
+        self.routes[id] = Some(route);
+        Ok(())
+    }
+
+    /// Whether some sink takes topic `id`.
+    fn takes(&self, id: usize) -> bool {
+        self.routes[id].as_ref().is_some_and(|r| !r.is_empty())
+    }
+
+    fn write(&mut self, id: usize, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        let Some(route) = &self.routes[id] else { return Ok(()) };
+        for &k in route {
+            self.sinks[k].sink().write(id, &self.topics[id], log_time_nanos, message)?;
+        }
+        if let Some(c) = self.count_of[id] {
+            self.counts[c].1 += 1;
+        }
+        Ok(())
+    }
+
+    /// A message on the controller's topic `k` (offered with its first message).
+    fn controller_message(&mut self, ntable: usize, k: usize, log_time_nanos: u64, m: &TypedMessage<'_>) -> Result<()> {
+        let id = ntable + k;
+        if id >= self.topics.len() {
+            return Err(Error::Options(format!(
+                "the controller emitted a message on its topic #{k}, but declares only {} topics (Controller::topics)",
+                self.topics.len() - ntable
+            )));
+        }
+        if self.routes[id].is_none() {
+            self.offer(id)?;
+        }
+        self.write(id, log_time_nanos, m)
     }
 }
 
-#[cfg(feature = "rerun")]
-struct RerunOut {
-    recorders: Vec<crate::viz::Recorder>,
-    schedule: Schedule,
-    joint_series: Vec<String>,
+/// One `/tf` entry: `parent_from_child` of a body.
+struct TfLink {
+    parent: Option<usize>,
+    child: usize,
 }
 
-/// Records a run. Create it before the loop, call [`Recording::record`] once per step with the
-/// state of that step, then [`Recording::finish`].
+/// Records a run: an [`crate::engine::Observer`] that turns each step into the due messages of
+/// the robot's topic table and the controller's topics, and hands them to its sinks. Create it
+/// before the run, let the engine call it, then [`Recording::finish`].
 pub struct Recording {
+    out: Outputs,
+    /// Number of the table's topics (the controller's follow).
+    ntable: usize,
+    controller_topics_known: bool,
     imus: Vec<crate::robot::Imu>,
     base: Option<(usize, usize)>,
     /// (qpos address, dof) of each `/joint_states` joint.
     joints: Vec<(usize, usize)>,
-    joint_names: Vec<String>,
-    body_frames: Vec<String>,
     tf_links: Vec<TfLink>,
     state: Schedule,
     tf_schedule: Schedule,
+    imu_schedules: Vec<Schedule>,
     rng: rand_chacha::ChaCha8Rng,
-    mcap: Option<McapOut>,
-    #[cfg(feature = "rerun")]
-    rerun: Option<RerunOut>,
+    /// Topic ids: `/joint_states`, `/odom`, `/tf`, the command, each IMU's, each body's contacts.
+    joint_states_id: Option<usize>,
+    odom_id: Option<usize>,
+    tf_id: Option<usize>,
+    commands_id: Option<usize>,
+    imu_ids: Vec<Option<usize>>,
+    contact_ids: Vec<Option<usize>>,
+    /// The messages, reused from step to step (nothing is allocated per step).
+    joint_state: JointState,
+    odometry: Odometry,
+    imu_messages: Vec<Imu>,
+    tf: TfMessage,
+    wrenches: Vec<WrenchStamped>,
+    command: Float64MultiArray,
     /// Net contact wrench per body this tick: force then torque, world frame, about the body
     /// origin.
     wrench: Vec<[f64; 6]>,
     touching: Vec<bool>,
-    /// IMU values this tick (for rerun): gyro and accel, with noise.
-    imu_values: Vec<[f64; 6]>,
-    /// Which IMU topics are due this tick.
-    imu_due: Vec<bool>,
-    /// `/contacts/<body>` topic of each body (from the topic table).
-    contact_topics: Vec<String>,
 }
 
 /// The error for rerun outputs in a build without the `rerun` feature.
 pub fn rerun_unavailable() -> Error {
     Error::FeatureMissing { feature: "rerun", what: "a rerun recording (.rrd file or viewer)".into() }
-}
-
-fn frame_name(robot: &Robot, body: usize) -> String {
-    match robot.model.name(ObjType::Body, body) {
-        "" => format!("body_{body}"),
-        n => n.to_string(),
-    }
 }
 
 impl Recording {
@@ -360,62 +497,34 @@ impl Recording {
     /// [`Error::Rerun`] when the `.rrd` can't be created, the viewer can't be reached, or the
     /// `rerun` feature is off.
     pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {
-        Self::with_sink(robot, options, None)
+        Self::with_sinks(robot, options, Vec::new())
     }
 
-    /// As [`Recording::new`], and every topic also goes to `sink` (the live ROS 2 bridge), which
-    /// gets the topics even when no MCAP file is asked for.
+    /// As [`Recording::new`], and every topic also goes to each of `sinks` (e.g. the live ROS 2
+    /// bridge, `crate::live::LiveSink`), which follow `--topics` like the MCAP file.
     ///
     /// # Errors
-    /// As [`Recording::new`]; errors of the sink's `add_topic`.
-    pub fn with_sink(robot: &Robot, options: &RecordOptions, sink: Option<Box<dyn TopicSink>>) -> Result<Recording> {
+    /// As [`Recording::new`]; errors of the sinks' `add_topic`.
+    pub fn with_sinks(robot: &Robot, options: &RecordOptions, sinks: Vec<Box<dyn Sink>>) -> Result<Recording> {
         let model = &robot.model;
         let dt_nanos = ((model.timestep_secs() * 1e9).round() as u64).max(1);
-        let joints: Vec<usize> = robot.joints.iter().map(|j| j.id).collect();
-        let joint_names: Vec<String> = joints.iter().map(|&j| model.name(ObjType::Joint, j).to_string()).collect();
-        let base = robot.base.map(|b| (b.body, b.dof));
-        let body_frames: Vec<String> = (0..model.nbody()).map(|b| frame_name(robot, b)).collect();
-        let root_frame = if base.is_some() { "odom" } else { "world" };
-        let tf_links = (1..model.nbody())
-            .map(|b| {
-                let p = model.body_parentid()[b] as usize;
-                TfLink {
-                    parent: (p != 0).then_some(p),
-                    child: b,
-                    parent_frame: if p == 0 { root_frame.to_string() } else { body_frames[p].clone() },
-                    child_frame: body_frames[b].clone(),
-                }
-            })
-            .collect();
-
-        let mut rec = Recording {
-            imus: robot.imus.clone(),
-            base,
-            joints: joints.iter().map(|&j| (model.jnt_qposadr()[j] as usize, model.jnt_dofadr()[j] as usize)).collect(),
-            joint_names,
-            body_frames,
-            tf_links,
-            state: Schedule::new(options.state_rate_hz, dt_nanos),
-            tf_schedule: Schedule::new(options.tf_rate_hz, dt_nanos),
-            rng: rand_chacha::ChaCha8Rng::seed_from_u64(options.seed),
-            mcap: None,
-            #[cfg(feature = "rerun")]
-            rerun: None,
-            wrench: vec![[0.0; 6]; model.nbody()],
-            touching: vec![false; model.nbody()],
-            imu_values: vec![[0.0; 6]; robot.imus.len()],
-            imu_due: Vec::new(),
-            contact_topics: Vec::new(),
-        };
-
+        // Topic names, types and QoS come from the robot's one topic table.
+        let mut table = TopicTable::new(
+            robot,
+            &TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
+        );
+        if let Some(name) = &options.command_topic
+            && let Some(t) = table.topics.iter_mut().find(|t| t.kind == TopicKind::Commands)
+        {
+            t.name.clone_from(name);
+        }
         if let (Some(path), Some(wanted)) = (&options.mcap, &options.topics) {
             // A topic twin never publishes is a typo: refuse it before creating the file.
+            let name_of = |kind: TopicKind| table.topics.iter().find(|t| t.kind == kind).map(|t| t.name.clone());
             let mut known: Vec<String> = vec!["/joint_states".into(), "/tf".into(), "/tf_static".into()];
             known.extend(robot.imus.iter().map(|i| i.topic().to_string()));
-            if base.is_some() {
-                known.push("/odom".into());
-            }
-            known.push(options.command_topic.clone().unwrap_or_else(|| format!("/{}/joint_commands", robot.name)));
+            known.extend(name_of(TopicKind::Odometry));
+            known.extend(name_of(TopicKind::Commands));
             known.push("/contacts/*".into());
             for t in wanted {
                 if !known.contains(t) && !t.starts_with("/contacts/") {
@@ -431,76 +540,11 @@ impl Recording {
                 }
             }
         }
-        if options.mcap.is_some() || sink.is_some() {
-            let writer = match &options.mcap {
-                Some(path) => Some(LogWriter::create(path, &options.writer)?),
-                None => None,
-            };
-            // Topic names, types and QoS come from the robot's one topic table.
-            let mut table = TopicTable::new(
-                robot,
-                &TopicRates { state_rate_hz: options.state_rate_hz, tf_rate_hz: options.tf_rate_hz },
-            );
-            if let Some(name) = &options.command_topic
-                && let Some(t) = table.topics.iter_mut().find(|t| t.kind == TopicKind::Commands)
-            {
-                t.name.clone_from(name);
-            }
-            let mut out = McapOut {
-                live: sink,
-                cdr: CdrWriter::new(),
-                exchanged_topics: Vec::new(),
-                exchanged: Vec::new(),
-                wanted: options.topics.clone(),
-                joint_states: None,
-                commands: None,
-                odom: None,
-                tf: None,
-                imus: Vec::new(),
-                contacts: vec![None; model.nbody()],
-                counts: Vec::new(),
-                writer,
-                table,
-            };
-            let name = |kind| out.table.of_kind(kind).map(|t| t.name.clone());
-            let (js, odom, tf, commands, tf_static) = (
-                name(TopicKind::JointStates).unwrap_or_default(),
-                name(TopicKind::Odometry),
-                name(TopicKind::Tf).unwrap_or_default(),
-                name(TopicKind::Commands).unwrap_or_default(),
-                name(TopicKind::TfStatic),
-            );
-            rec.contact_topics = (0..model.nbody()).map(|b| name(TopicKind::Contacts(b)).unwrap_or_default()).collect();
-            out.joint_states = out.add_wanted(&js)?;
-            for imu in &robot.imus {
-                let rate = imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz);
-                let topic = out.add_wanted(imu.topic())?;
-                out.imus.push(ImuStream { topic, schedule: Schedule::new(rate, dt_nanos) });
-            }
-            if let Some(odom) = odom {
-                out.odom = out.add_wanted(&odom)?;
-            }
-            out.tf = out.add_wanted(&tf)?;
-            out.commands = out.add_wanted(&commands)?;
-            // IMU frames that are no body: a static transform from their body.
-            let statics: Vec<&crate::robot::Imu> =
-                robot.imus.iter().filter(|i| !rec.body_frames.contains(&i.meta.frame_id)).collect();
-            if let Some(tf_static) = tf_static.filter(|t| out.wants(t)) {
-                let topic: Stream<TfMessage> = out.add(&tf_static)?;
-                let body_frames = &rec.body_frames;
-                out.emit(topic, 0, |w| {
-                    w.seq_len(statics.len());
-                    for imu in &statics {
-                        w.header(0, &body_frames[imu.body]);
-                        w.string(&imu.meta.frame_id);
-                        w.f64_fixed(&imu.body_from_imu.0);
-                        w.f64_fixed(&xyzw(imu.body_from_imu.1));
-                    }
-                })?;
-            }
-            rec.mcap = Some(out);
-        }
 
+        let mut slots = Vec::new();
+        if let Some(path) = &options.mcap {
+            slots.push(SinkSlot::Mcap(McapSink::create(path, &options.writer)?));
+        }
         if options.rrd.is_some() || options.connect.is_some() {
             #[cfg(not(feature = "rerun"))]
             return Err(rerun_unavailable());
@@ -513,189 +557,251 @@ impl Recording {
                 if let Some(url) = &options.connect {
                     recorders.push(crate::viz::Recorder::to_viewer(model, "twin", url)?);
                 }
-                rec.rerun = Some(RerunOut {
-                    recorders,
-                    schedule: Schedule::new(options.rerun_rate_hz, dt_nanos),
-                    joint_series: rec.joint_names.iter().map(|n| format!("joints/{n}")).collect(),
-                });
+                let sink = RerunSink::new(robot, recorders, options.rerun_rate_hz);
+                let files = sink.files();
+                slots.push(SinkSlot::Rerun(sink, files));
+            }
+        }
+        slots.extend(sinks.into_iter().map(SinkSlot::Other));
+
+        let ntopics = table.topics.len();
+        let id_of = |kind: TopicKind| table.topics.iter().position(|t| t.kind == kind);
+        let base = robot.base.map(|b| (b.body, b.dof));
+        let body_frames: Vec<String> = (0..model.nbody()).map(|b| body_frame(robot, b)).collect();
+        let root_frame = if base.is_some() { "odom" } else { "world" };
+        let mut tf_links = Vec::new();
+        let mut transforms = Vec::new();
+        for b in 1..model.nbody() {
+            let p = model.body_parentid()[b] as usize;
+            tf_links.push(TfLink { parent: (p != 0).then_some(p), child: b });
+            transforms.push(TransformStamped {
+                header: Header {
+                    stamp_nanos: 0,
+                    frame_id: if p == 0 { root_frame.to_string() } else { body_frames[p].clone() },
+                },
+                child_frame_id: body_frames[b].clone(),
+                translation: [0.0; 3],
+                rotation_xyzw: [0.0, 0.0, 0.0, 1.0],
+            });
+        }
+        let joints: Vec<usize> = robot.joints.iter().map(|j| j.id).collect();
+        let imu_messages = robot
+            .imus
+            .iter()
+            .map(|imu| {
+                let (g2, a2) = (imu.meta.gyro_noise_std.powi(2), imu.meta.accel_noise_std.powi(2));
+                Imu {
+                    header: Header { stamp_nanos: 0, frame_id: imu.meta.frame_id.clone() },
+                    angular_velocity_covariance: [g2, 0.0, 0.0, 0.0, g2, 0.0, 0.0, 0.0, g2],
+                    linear_acceleration_covariance: [a2, 0.0, 0.0, 0.0, a2, 0.0, 0.0, 0.0, a2],
+                    ..Imu::default()
+                }
+            })
+            .collect();
+        let mut rec = Recording {
+            out: Outputs {
+                sinks: slots,
+                topics: table.topics.clone(),
+                routes: vec![None; ntopics],
+                count_of: vec![None; ntopics],
+                counts: Vec::new(),
+                wanted: options.topics.clone(),
+            },
+            ntable: ntopics,
+            controller_topics_known: false,
+            imus: robot.imus.clone(),
+            base,
+            joints: joints.iter().map(|&j| (model.jnt_qposadr()[j] as usize, model.jnt_dofadr()[j] as usize)).collect(),
+            tf_links,
+            state: Schedule::new(options.state_rate_hz, dt_nanos),
+            tf_schedule: Schedule::new(options.tf_rate_hz, dt_nanos),
+            imu_schedules: robot
+                .imus
+                .iter()
+                .map(|imu| Schedule::new(imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz), dt_nanos))
+                .collect(),
+            rng: rand_chacha::ChaCha8Rng::seed_from_u64(options.seed),
+            joint_states_id: id_of(TopicKind::JointStates),
+            odom_id: id_of(TopicKind::Odometry),
+            tf_id: id_of(TopicKind::Tf),
+            commands_id: id_of(TopicKind::Commands),
+            imu_ids: (0..robot.imus.len()).map(|k| id_of(TopicKind::Imu(k))).collect(),
+            contact_ids: (0..model.nbody()).map(|b| id_of(TopicKind::Contacts(b))).collect(),
+            joint_state: JointState {
+                name: joints.iter().map(|&j| model.name(ObjType::Joint, j).to_string()).collect(),
+                ..JointState::default()
+            },
+            odometry: Odometry {
+                header: Header { stamp_nanos: 0, frame_id: "odom".into() },
+                child_frame_id: base.map(|(b, _)| body_frames[b].clone()).unwrap_or_default(),
+                ..Odometry::default()
+            },
+            imu_messages,
+            tf: TfMessage { transforms },
+            wrenches: body_frames
+                .iter()
+                .map(|f| WrenchStamped { header: Header { stamp_nanos: 0, frame_id: f.clone() }, ..Default::default() })
+                .collect(),
+            command: Float64MultiArray::default(),
+            wrench: vec![[0.0; 6]; model.nbody()],
+            touching: vec![false; model.nbody()],
+        };
+
+        // Every topic but the contacts (which appear with a body's first contact) now, in table
+        // order; `/tf_static` is written once, here.
+        for id in 0..ntopics {
+            match rec.out.topics[id].kind {
+                TopicKind::Contacts(_) => {}
+                TopicKind::TfStatic => {
+                    rec.out.offer(id)?;
+                    if rec.out.takes(id) {
+                        let statics = robot.imus.iter().filter(|i| !body_frames.contains(&i.meta.frame_id));
+                        let tf_static = TfMessage {
+                            transforms: statics
+                                .map(|imu| TransformStamped {
+                                    header: Header { stamp_nanos: 0, frame_id: body_frames[imu.body].clone() },
+                                    child_frame_id: imu.meta.frame_id.clone(),
+                                    translation: imu.body_from_imu.0,
+                                    rotation_xyzw: xyzw(imu.body_from_imu.1),
+                                })
+                                .collect(),
+                        };
+                        rec.out.write(id, 0, &TypedMessage::Tf(&tf_static))?;
+                    }
+                }
+                _ => rec.out.offer(id)?,
             }
         }
         Ok(rec)
     }
 
-    /// Records the instant `sample` (see [`StepSample`]): writes every stream that is due.
+    /// Records the step `step`: the controller's messages, then every table topic that is due
+    /// at the step's start time t (state, body poses, sensors, contacts and actuator forces of
+    /// the same instant; see [`StepView`]).
     ///
     /// # Errors
-    /// Write errors of the MCAP or rerun outputs.
-    pub fn record(&mut self, sample: &StepSample<'_>, data: &Data) -> Result<()> {
-        let t_nanos = (sample.time_secs * 1e9).round().max(0.0) as u64;
+    /// Errors of the sinks; a controller message on a topic it did not declare.
+    pub fn record(&mut self, step: &StepView<'_>) -> Result<()> {
+        let data = step.data;
+        let t_nanos = (step.time_secs * 1e9).round().max(0.0) as u64;
         let stamp = t_nanos as i64;
+
+        // The controller's own topics first: what it exchanged or planned for this instant.
+        if !self.controller_topics_known {
+            self.controller_topics_known = true;
+            for (k, mut t) in step.controller.topics().into_iter().enumerate() {
+                t.kind = TopicKind::Controller(k);
+                self.out.topics.push(t);
+                self.out.routes.push(None);
+                self.out.count_of.push(None);
+            }
+        }
+        if self.out.topics.len() > self.ntable {
+            let mut failed = None;
+            let (out, ntable) = (&mut self.out, self.ntable);
+            step.controller.diagnostics(&mut |k, log_time_nanos, message| {
+                if failed.is_none()
+                    && let Err(e) = out.controller_message(ntable, k, log_time_nanos, &message)
+                {
+                    failed = Some(e);
+                }
+            });
+            if let Some(e) = failed {
+                return Err(e);
+            }
+        }
+
         let state_due = self.state.due(t_nanos);
         let tf_due = self.tf_schedule.due(t_nanos);
-        #[cfg(feature = "rerun")]
-        let rerun_due = self.rerun.as_mut().is_some_and(|r| r.schedule.due(t_nanos));
-        #[cfg(not(feature = "rerun"))]
-        let rerun_due = false;
-
-        if state_due || rerun_due {
+        if state_due {
             self.accumulate_contacts(data);
         }
-        // Reused buffer: nothing is allocated per step.
-        let mut imu_due = std::mem::take(&mut self.imu_due);
-        imu_due.clear();
-        imu_due.resize(self.imus.len(), false);
-        if let Some(out) = self.mcap.as_mut() {
-            out.record_exchanged()?;
-            for (k, s) in out.imus.iter_mut().enumerate() {
-                imu_due[k] = s.schedule.due(t_nanos);
-            }
-        }
-        for (k, imu) in self.imus.iter().enumerate() {
-            if imu_due[k] || rerun_due {
-                let s = data.sensordata();
-                let mut v = [0.0; 6];
-                for i in 0..3 {
-                    v[i] = s[imu.gyro_adr + i] + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                    v[3 + i] =
-                        s[imu.accel_adr + i] + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                }
-                self.imu_values[k] = v;
-            }
-        }
-
-        if let Some(out) = self.mcap.as_mut() {
-            if state_due {
-                let (joints, names) = (&self.joints, &self.joint_names);
-                let (qpos, qvel) = (sample.qpos, sample.qvel);
+        let (qpos, qvel) = (step.qpos, step.qvel);
+        if state_due {
+            if let Some(id) = self.joint_states_id.filter(|&id| self.out.takes(id)) {
                 let (actuator, applied) = (data.qfrc_actuator(), data.qfrc_applied());
-                if let Some(topic) = out.joint_states {
-                    out.emit(topic, t_nanos, |w| {
-                        w.header(stamp, "");
-                        w.seq_len(names.len());
-                        for n in names {
-                            w.string(n);
-                        }
-                        let n = joints.len();
-                        w.f64_seq_iter(n, joints.iter().map(|&(adr, _)| qpos[adr]));
-                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| qvel[dof]));
-                        w.f64_seq_iter(n, joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
-                    })?;
-                }
-
-                if let (Some(topic), Some((body, dof))) = (out.odom, self.base) {
-                    let child = &self.body_frames[body];
-                    let m = data.xmat()[body];
-                    let v_world = [qvel[dof], qvel[dof + 1], qvel[dof + 2]];
-                    let linear_body = rotate_t(&m, v_world);
-                    let angular_body = [qvel[dof + 3], qvel[dof + 4], qvel[dof + 5]];
-                    let (p, q) = (data.xpos()[body], data.xquat()[body]);
-                    out.emit(topic, t_nanos, |w| {
-                        w.header(stamp, "odom");
-                        w.string(child);
-                        w.f64_fixed(&p);
-                        w.f64_fixed(&xyzw(q));
-                        w.f64_fixed(&[0.0; 36]);
-                        w.f64_fixed(&linear_body);
-                        w.f64_fixed(&angular_body);
-                        w.f64_fixed(&[0.0; 36]);
-                    })?;
-                }
-
-                for b in 1..self.touching.len() {
-                    if self.touching[b] && out.contacts[b].is_none() && out.wants("/contacts/*") {
-                        out.contacts[b] = Some(out.add(&self.contact_topics[b])?);
-                    }
-                    let Some(topic) = out.contacts[b] else { continue };
-                    let m = data.xmat()[b];
-                    let wr = self.wrench[b];
-                    let force = rotate_t(&m, [wr[0], wr[1], wr[2]]);
-                    let torque = rotate_t(&m, [wr[3], wr[4], wr[5]]);
-                    let frame = &self.body_frames[b];
-                    out.emit(topic, t_nanos, |w| {
-                        w.header(stamp, frame);
-                        w.f64_fixed(&force);
-                        w.f64_fixed(&torque);
-                    })?;
-                }
-
-                let command = sample.command;
-                if let Some(topic) = out.commands {
-                    out.emit(topic, t_nanos, |w| {
-                        w.seq_len(0);
-                        w.u32(0);
-                        w.f64_seq(command);
-                    })?;
-                }
+                let js = &mut self.joint_state;
+                js.header.stamp_nanos = stamp;
+                js.position.clear();
+                js.position.extend(self.joints.iter().map(|&(adr, _)| qpos[adr]));
+                js.velocity.clear();
+                js.velocity.extend(self.joints.iter().map(|&(_, dof)| qvel[dof]));
+                js.effort.clear();
+                js.effort.extend(self.joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
+                self.out.write(id, t_nanos, &TypedMessage::JointState(&self.joint_state))?;
             }
 
-            for (k, imu) in self.imus.iter().enumerate() {
-                if !imu_due[k] {
+            if let (Some(id), Some((body, dof))) = (self.odom_id.filter(|&id| self.out.takes(id)), self.base) {
+                let m = data.xmat()[body];
+                let o = &mut self.odometry;
+                o.header.stamp_nanos = stamp;
+                o.position = data.xpos()[body];
+                o.orientation_xyzw = xyzw(data.xquat()[body]);
+                o.linear_velocity = rotate_t(&m, [qvel[dof], qvel[dof + 1], qvel[dof + 2]]);
+                o.angular_velocity = [qvel[dof + 3], qvel[dof + 4], qvel[dof + 5]];
+                self.out.write(id, t_nanos, &TypedMessage::Odometry(&self.odometry))?;
+            }
+
+            for b in 1..self.touching.len() {
+                let Some(id) = self.contact_ids[b] else { continue };
+                if self.touching[b] && self.out.routes[id].is_none() {
+                    self.out.offer(id)?;
+                }
+                if !self.out.takes(id) {
                     continue;
                 }
-                let s = data.sensordata();
-                let q = match imu.quat_adr {
-                    Some(a) => [s[a], s[a + 1], s[a + 2], s[a + 3]],
-                    None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
-                };
-                let v = self.imu_values[k];
-                let (g2, a2) = (imu.meta.gyro_noise_std.powi(2), imu.meta.accel_noise_std.powi(2));
-                let Some(topic) = out.imus[k].topic else { continue };
-                out.emit(topic, t_nanos, |w| {
-                    w.header(stamp, &imu.meta.frame_id);
-                    w.f64_fixed(&xyzw(q));
-                    w.f64_fixed(&[0.0; 9]);
-                    w.f64_fixed(&v[..3]);
-                    w.f64_fixed(&[g2, 0.0, 0.0, 0.0, g2, 0.0, 0.0, 0.0, g2]);
-                    w.f64_fixed(&v[3..]);
-                    w.f64_fixed(&[a2, 0.0, 0.0, 0.0, a2, 0.0, 0.0, 0.0, a2]);
-                })?;
+                let m = data.xmat()[b];
+                let wr = self.wrench[b];
+                let w = &mut self.wrenches[b];
+                w.header.stamp_nanos = stamp;
+                w.force = rotate_t(&m, [wr[0], wr[1], wr[2]]);
+                w.torque = rotate_t(&m, [wr[3], wr[4], wr[5]]);
+                self.out.write(id, t_nanos, &TypedMessage::Wrench(&self.wrenches[b]))?;
             }
 
-            if let (true, Some(tf)) = (tf_due, out.tf) {
-                let (xpos, xquat) = (data.xpos(), data.xquat());
-                let links = &self.tf_links;
-                out.emit(tf, t_nanos, |w| {
-                    w.seq_len(links.len());
-                    for l in links {
-                        let (p, q) = match l.parent {
-                            None => (xpos[l.child], xquat[l.child]),
-                            Some(parent) => relative(xpos[parent], xquat[parent], xpos[l.child], xquat[l.child]),
-                        };
-                        w.header(stamp, &l.parent_frame);
-                        w.string(&l.child_frame);
-                        w.f64_fixed(&p);
-                        w.f64_fixed(&xyzw(q));
-                    }
-                })?;
+            if let Some(id) = self.commands_id.filter(|&id| self.out.takes(id)) {
+                self.command.data.clear();
+                self.command.data.extend_from_slice(step.command);
+                self.out.write(id, t_nanos, &TypedMessage::Float64MultiArray(&self.command))?;
             }
         }
 
-        self.imu_due = imu_due;
-
-        #[cfg(feature = "rerun")]
-        if rerun_due && let Some(r) = self.rerun.as_ref() {
-            for rec in &r.recorders {
-                rec.log_poses_at(sample.time_secs, data)?;
-                for (&(adr, _), series) in self.joints.iter().zip(&r.joint_series) {
-                    rec.scalar(series, sample.qpos[adr])?;
-                }
-                for (imu, v) in self.imus.iter().zip(&self.imu_values) {
-                    for (i, axis) in ["gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"].iter().enumerate()
-                    {
-                        rec.scalar(&format!("imu/{}/{axis}", imu.meta.name), v[i])?;
-                    }
-                }
-                for b in 1..self.touching.len() {
-                    if self.touching[b] {
-                        let m = data.xmat()[b];
-                        let wr = self.wrench[b];
-                        let f = rotate_t(&m, [wr[0], wr[1], wr[2]]);
-                        for (i, axis) in ["force_x", "force_y", "force_z"].iter().enumerate() {
-                            rec.scalar(&format!("contacts/{}/{axis}", self.body_frames[b]), f[i])?;
-                        }
-                    }
-                }
+        for (k, imu) in self.imus.iter().enumerate() {
+            if !self.imu_schedules[k].due(t_nanos) {
+                continue;
             }
+            // Noise is drawn whether or not a sink takes the topic: one IMU's values don't
+            // depend on which others are recorded.
+            let s = data.sensordata();
+            let msg = &mut self.imu_messages[k];
+            for i in 0..3 {
+                msg.angular_velocity[i] =
+                    s[imu.gyro_adr + i] + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                msg.linear_acceleration[i] =
+                    s[imu.accel_adr + i] + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+            }
+            let Some(id) = self.imu_ids[k].filter(|&id| self.out.takes(id)) else { continue };
+            let q = match imu.quat_adr {
+                Some(a) => [s[a], s[a + 1], s[a + 2], s[a + 3]],
+                None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
+            };
+            msg.header.stamp_nanos = stamp;
+            msg.orientation_xyzw = xyzw(q);
+            self.out.write(id, t_nanos, &TypedMessage::Imu(&self.imu_messages[k]))?;
+        }
+
+        if let (true, Some(id)) = (tf_due, self.tf_id.filter(|&id| self.out.takes(id))) {
+            let (xpos, xquat) = (data.xpos(), data.xquat());
+            for (l, t) in self.tf_links.iter().zip(&mut self.tf.transforms) {
+                let (p, q) = match l.parent {
+                    None => (xpos[l.child], xquat[l.child]),
+                    Some(parent) => relative(xpos[parent], xquat[parent], xpos[l.child], xquat[l.child]),
+                };
+                t.header.stamp_nanos = stamp;
+                t.translation = p;
+                t.rotation_xyzw = xyzw(q);
+            }
+            self.out.write(id, t_nanos, &TypedMessage::Tf(&self.tf))?;
         }
         Ok(())
     }
@@ -736,27 +842,21 @@ impl Recording {
     /// Closes the outputs.
     ///
     /// # Errors
-    /// Write errors of the MCAP or rerun outputs.
+    /// Errors of the sinks (write errors of the MCAP or rerun outputs).
     pub fn finish(self) -> Result<RecordSummary> {
-        let mut summary = RecordSummary::default();
-        if let Some(mut out) = self.mcap {
-            out.record_exchanged()?;
-            summary.topics = out.counts;
-            if let Some(writer) = out.writer {
-                let path = writer.path().to_path_buf();
-                let written = writer.finish()?;
-                summary.mcap = Some((path, written));
-            }
-        }
-        #[cfg(feature = "rerun")]
-        if let Some(r) = self.rerun {
-            for rec in r.recorders {
-                let path = rec.path().map(std::path::Path::to_path_buf);
-                rec.finish()?;
-                if let Some(path) = path {
-                    let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
-                    summary.rrd = Some((path, bytes));
+        let mut summary = RecordSummary { topics: self.out.counts, ..RecordSummary::default() };
+        for mut slot in self.out.sinks {
+            slot.sink().finish()?;
+            match slot {
+                SinkSlot::Mcap(s) => summary.mcap = s.summary(),
+                #[cfg(feature = "rerun")]
+                SinkSlot::Rerun(_, files) => {
+                    if let Some(path) = files.into_iter().next() {
+                        let bytes = std::fs::metadata(&path).map(|m| m.len()).unwrap_or(0);
+                        summary.rrd = Some((path, bytes));
+                    }
                 }
+                SinkSlot::Other(_) => {}
             }
         }
         Ok(summary)
@@ -766,9 +866,8 @@ impl Recording {
 /// A recording is the engine's recorder: it records each step's instant t (see
 /// [`crate::engine::StepView`]).
 impl crate::engine::Observer for Recording {
-    fn observe(&mut self, step: &crate::engine::StepView<'_>) -> Result<crate::engine::Flow> {
-        let sample = StepSample { time_secs: step.time_secs, qpos: step.qpos, qvel: step.qvel, command: step.command };
-        self.record(&sample, step.data)?;
+    fn observe(&mut self, step: &StepView<'_>) -> Result<crate::engine::Flow> {
+        self.record(step)?;
         Ok(crate::engine::Flow::Continue)
     }
 }

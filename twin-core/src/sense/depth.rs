@@ -1,0 +1,537 @@
+//! A depth camera by ray casting ([`crate::mj::RayScene`], no OpenGL): one ray through each
+//! pixel centre of a pinhole camera, depth in metres along the optical axis (REP 118), NaN
+//! where nothing is hit within range, in the ROS optical frame (REP 103/105: z forward, x
+//! right, y down).
+//!
+//! ```no_run
+//! use std::sync::Arc;
+//! use twin_core::mj::{Data, Model};
+//! use twin_core::sense::depth::{DepthCamera, DepthCameraOptions};
+//!
+//! let model = Arc::new(Model::from_file("scene.xml")?);
+//! let mut data = Data::new(model.clone())?;
+//! data.forward()?;
+//! let mut camera = DepthCamera::new(&model, "head_depth", DepthCameraOptions::default())?;
+//! let frame = camera.render(&model, &data)?;
+//! println!("{} points", frame.points_world().len());
+//! # Ok::<(), twin_core::Error>(())
+//! ```
+
+use crate::error::{Error, Result};
+use crate::mj::{Data, Model, ObjType, RayFilter, RayHit, RayScene};
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use rand::{Rng, SeedableRng};
+use rand_distr::StandardNormal;
+
+/// Pinhole intrinsics in pixels, ROS convention: pixel `(u, v)` (column, row) has its centre
+/// at integer coordinates, so a centred camera has `cx = (width − 1) / 2`.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Intrinsics {
+    /// Image width, pixels.
+    pub width: u32,
+    /// Image height, pixels.
+    pub height: u32,
+    /// Focal length along x, pixels.
+    pub fx: f64,
+    /// Focal length along y, pixels.
+    pub fy: f64,
+    /// Principal point, x, pixels.
+    pub cx: f64,
+    /// Principal point, y, pixels.
+    pub cy: f64,
+}
+
+impl Intrinsics {
+    /// A centred camera with square pixels and vertical field of view `fovy_rad`:
+    /// `f = (height / 2) / tan(fovy / 2)`.
+    pub fn from_fovy(width: u32, height: u32, fovy_rad: f64) -> Intrinsics {
+        let f = f64::from(height) / 2.0 / (fovy_rad / 2.0).tan();
+        Intrinsics::centred(width, height, f)
+    }
+
+    /// A centred camera with square pixels and horizontal field of view `hfov_rad`
+    /// (Gazebo's `<horizontal_fov>`): `f = (width / 2) / tan(hfov / 2)`.
+    pub fn from_hfov(width: u32, height: u32, hfov_rad: f64) -> Intrinsics {
+        let f = f64::from(width) / 2.0 / (hfov_rad / 2.0).tan();
+        Intrinsics::centred(width, height, f)
+    }
+
+    fn centred(width: u32, height: u32, f: f64) -> Intrinsics {
+        Intrinsics {
+            width,
+            height,
+            fx: f,
+            fy: f,
+            cx: (f64::from(width) - 1.0) / 2.0,
+            cy: (f64::from(height) - 1.0) / 2.0,
+        }
+    }
+
+    /// The camera matrix K, row-major.
+    pub fn k(&self) -> [f64; 9] {
+        [self.fx, 0.0, self.cx, 0.0, self.fy, self.cy, 0.0, 0.0, 1.0]
+    }
+
+    /// The projection matrix P (3×4, row-major) of a monocular camera: `[K | 0]`.
+    pub fn p(&self) -> [f64; 12] {
+        [self.fx, 0.0, self.cx, 0.0, 0.0, self.fy, self.cy, 0.0, 0.0, 0.0, 1.0, 0.0]
+    }
+
+    /// Direction through the centre of pixel `(u, v)` in the optical frame, with z = 1 (so a
+    /// point at depth z is `z` times it).
+    pub fn ray_optical(&self, u: u32, v: u32) -> Vector3<f64> {
+        Vector3::new((f64::from(u) - self.cx) / self.fx, (f64::from(v) - self.cy) / self.fy, 1.0)
+    }
+
+    /// Number of pixels.
+    pub fn len(&self) -> usize {
+        self.width as usize * self.height as usize
+    }
+
+    /// Whether the image has no pixels.
+    pub fn is_empty(&self) -> bool {
+        self.len() == 0
+    }
+}
+
+/// One depth image.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthFrame {
+    /// Simulation time of the state it shows, ns.
+    pub stamp_nanos: u64,
+    /// The camera's intrinsics.
+    pub intrinsics: Intrinsics,
+    /// Row-major depth, metres along the optical axis (REP 118); NaN: no return (nothing hit
+    /// within range).
+    pub depth_m: Vec<f32>,
+    /// Pose of the optical frame (z forward, x right, y down) in the world.
+    pub world_from_optical: Isometry3<f64>,
+    /// The optical frame's name (`frame_id` of its messages).
+    pub frame_id: String,
+}
+
+impl DepthFrame {
+    /// Depth of pixel `(u, v)`, metres (NaN: no return).
+    pub fn depth_at(&self, u: u32, v: u32) -> f32 {
+        self.depth_m[v as usize * self.intrinsics.width as usize + u as usize]
+    }
+
+    /// The point seen at pixel `(u, v)` in the optical frame, `None` without a return.
+    pub fn point_optical(&self, u: u32, v: u32) -> Option<Point3<f64>> {
+        let z = f64::from(self.depth_at(u, v));
+        z.is_finite().then(|| Point3::from(self.intrinsics.ray_optical(u, v) * z))
+    }
+
+    /// Every return as a point in the optical frame, metres, row-major order (pixels without a
+    /// return are left out).
+    pub fn points_optical(&self) -> Vec<Point3<f64>> {
+        let w = self.intrinsics.width;
+        self.depth_m
+            .iter()
+            .enumerate()
+            .filter(|(_, z)| z.is_finite())
+            .map(|(i, &z)| {
+                let (u, v) = (i as u32 % w, i as u32 / w);
+                Point3::from(self.intrinsics.ray_optical(u, v) * f64::from(z))
+            })
+            .collect()
+    }
+
+    /// Every return as a point in the world frame, metres, row-major order.
+    pub fn points_world(&self) -> Vec<Point3<f64>> {
+        self.points_optical().into_iter().map(|p| self.world_from_optical * p).collect()
+    }
+}
+
+/// How a [`DepthCamera`] images.
+#[derive(Debug, Clone, PartialEq)]
+pub struct DepthCameraOptions {
+    /// Image width, pixels. (default: 320)
+    pub width: u32,
+    /// Image height, pixels. (default: 240)
+    pub height: u32,
+    /// Horizontal field of view, radians; `None`: the model camera's `fovy` (vertical) with
+    /// square pixels. (default: `None`)
+    pub hfov_rad: Option<f64>,
+    /// Nearest depth measured, metres; nearer returns read NaN, as a real sensor's do.
+    /// (default: 0.05)
+    pub min_range_m: f64,
+    /// Farthest depth measured, metres; farther returns read NaN. (default: 10.0)
+    pub max_range_m: f64,
+    /// Standard deviation of the Gaussian noise added to each valid depth, metres (0: none).
+    /// (default: 0.0)
+    pub noise_std_m: f64,
+    /// Seed of the noise; frame `k` draws from stream `k` of it, so a run is reproducible.
+    /// (default: 0)
+    pub seed: u64,
+    /// Frames per second when the camera is published on a schedule, Hz. (default: 15.0)
+    pub rate_hz: f64,
+    /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
+    /// builds a pool of that many for this camera. The image is the same for any count.
+    /// (default: 0)
+    pub threads: usize,
+    /// Which geoms the camera sees. (default: [`RayFilter::default`]: groups 0–2, i.e. MJCF
+    /// geoms and URDF visuals)
+    pub filter: RayFilter,
+}
+
+impl Default for DepthCameraOptions {
+    fn default() -> Self {
+        DepthCameraOptions {
+            width: 320,
+            height: 240,
+            hfov_rad: None,
+            min_range_m: 0.05,
+            max_range_m: 10.0,
+            noise_std_m: 0.0,
+            seed: 0,
+            rate_hz: 15.0,
+            threads: 0,
+            filter: RayFilter::default(),
+        }
+    }
+}
+
+/// Pixels per tile side: the rays of a tile are culled against the geoms together.
+const TILE: u32 = 8;
+
+/// A depth camera on a named MuJoCo camera.
+pub struct DepthCamera {
+    camera: usize,
+    name: String,
+    intrinsics: Intrinsics,
+    options: DepthCameraOptions,
+    frame_id: String,
+    /// `mujoco_camera_from_optical`: a half turn about x.
+    cam_from_optical: Rotation3<f64>,
+    /// Unit ray directions in the optical frame, in tile order.
+    rays_optical: Vec<Vector3<f64>>,
+    /// z component of each unnormalised ray (depth = distance × this).
+    depth_per_dist: Vec<f64>,
+    /// Pixel index of each ray.
+    pixel: Vec<u32>,
+    pool: Option<rayon::ThreadPool>,
+    frames: u64,
+    dirs_world: Vec<[f64; 3]>,
+    hits: Vec<Option<RayHit>>,
+}
+
+impl std::fmt::Debug for DepthCamera {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("DepthCamera")
+            .field("name", &self.name)
+            .field("intrinsics", &self.intrinsics)
+            .field("options", &self.options)
+            .finish()
+    }
+}
+
+impl DepthCamera {
+    /// A depth camera at MuJoCo camera `camera_name` of `model` (an MJCF `<camera>`, or one the
+    /// converter made from a Gazebo `camera`/`depth` sensor).
+    ///
+    /// # Errors
+    /// [`Error::NotFound`] when the model has no such camera; [`Error::OutOfRange`] for an
+    /// empty image, a field of view outside (0, π), or a range that is not
+    /// 0 ≤ min < max; [`Error::Options`] when the thread pool can't be built.
+    pub fn new(model: &Model, camera_name: &str, opts: DepthCameraOptions) -> Result<DepthCamera> {
+        let camera = model.require_id(ObjType::Camera, camera_name)?;
+        let what = || format!("depth camera \"{camera_name}\"");
+        if opts.width == 0 || opts.height == 0 {
+            return Err(Error::OutOfRange {
+                what: what(),
+                message: format!("image of {}×{} pixels: give a width and height ≥ 1", opts.width, opts.height),
+            });
+        }
+        let intrinsics = match opts.hfov_rad {
+            Some(h) => Intrinsics::from_hfov(opts.width, opts.height, h),
+            None => Intrinsics::from_fovy(opts.width, opts.height, model.cam_fovy_rad()[camera]),
+        };
+        let fov_x = 2.0 * (f64::from(opts.width) / 2.0 / intrinsics.fx).atan();
+        let fov_y = 2.0 * (f64::from(opts.height) / 2.0 / intrinsics.fy).atan();
+        if !(fov_x.is_finite() && fov_y.is_finite() && fov_x > 0.0 && fov_y > 0.0 && intrinsics.fx > 0.0) {
+            return Err(Error::OutOfRange {
+                what: what(),
+                message: format!(
+                    "field of view {:.1}° × {:.1}°: give a horizontal field of view in (0, π) rad",
+                    fov_x.to_degrees(),
+                    fov_y.to_degrees()
+                ),
+            });
+        }
+        if !(opts.min_range_m >= 0.0 && opts.max_range_m > opts.min_range_m && opts.max_range_m.is_finite()) {
+            return Err(Error::OutOfRange {
+                what: what(),
+                message: format!(
+                    "range {} … {} m: give 0 ≤ min < max, both finite",
+                    opts.min_range_m, opts.max_range_m
+                ),
+            });
+        }
+        if !(opts.noise_std_m >= 0.0 && opts.noise_std_m.is_finite()) {
+            return Err(Error::OutOfRange {
+                what: what(),
+                message: format!("depth noise {} m: give a standard deviation ≥ 0", opts.noise_std_m),
+            });
+        }
+        let pool = match opts.threads {
+            0 | 1 => None,
+            n => Some(
+                rayon::ThreadPoolBuilder::new()
+                    .num_threads(n)
+                    .build()
+                    .map_err(|e| Error::Options(format!("{}: can't start {n} ray threads: {e}", what())))?,
+            ),
+        };
+        // Rays in tile order: TILE×TILE blocks, row-major within and between blocks.
+        let (w, h) = (opts.width, opts.height);
+        let mut rays_optical = Vec::with_capacity(intrinsics.len());
+        let mut depth_per_dist = Vec::with_capacity(intrinsics.len());
+        let mut pixel = Vec::with_capacity(intrinsics.len());
+        for tv in (0..h).step_by(TILE as usize) {
+            for tu in (0..w).step_by(TILE as usize) {
+                for v in tv..(tv + TILE).min(h) {
+                    for u in tu..(tu + TILE).min(w) {
+                        let r = intrinsics.ray_optical(u, v);
+                        let n = r.norm();
+                        rays_optical.push(r / n);
+                        depth_per_dist.push(1.0 / n);
+                        pixel.push(v * w + u);
+                    }
+                }
+            }
+        }
+        Ok(DepthCamera {
+            camera,
+            name: camera_name.to_string(),
+            intrinsics,
+            frame_id: format!("{camera_name}_optical_frame"),
+            options: opts,
+            cam_from_optical: Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+            rays_optical,
+            depth_per_dist,
+            pixel,
+            pool,
+            frames: 0,
+            dirs_world: Vec::new(),
+            hits: Vec::new(),
+        })
+    }
+
+    /// Sets the `frame_id` of the frames (default: `<camera>_optical_frame`).
+    pub fn with_frame_id(mut self, frame_id: impl Into<String>) -> DepthCamera {
+        self.frame_id = frame_id.into();
+        self
+    }
+
+    /// The intrinsics.
+    pub fn intrinsics(&self) -> &Intrinsics {
+        &self.intrinsics
+    }
+
+    /// The options it was made with.
+    pub fn options(&self) -> &DepthCameraOptions {
+        &self.options
+    }
+
+    /// The MuJoCo camera's name.
+    pub fn name(&self) -> &str {
+        &self.name
+    }
+
+    /// Pose of the optical frame in the world at `data`'s last forward pass.
+    pub fn world_from_optical(&self, data: &Data) -> Isometry3<f64> {
+        let p = data.cam_xpos()[self.camera];
+        let m = data.cam_xmat()[self.camera];
+        let world_from_cam = Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(&m));
+        let rot = UnitQuaternion::from_rotation_matrix(&(world_from_cam * self.cam_from_optical));
+        Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), rot)
+    }
+
+    /// Images the state of `data` (its last forward pass: `geom_xpos`, `cam_xpos`), stamped
+    /// with its time.
+    ///
+    /// # Errors
+    /// [`Error::Size`] when `data` belongs to a model with fewer cameras than `model`
+    /// (`model` must be `data`'s model or an edited copy of it).
+    pub fn render(&mut self, model: &Model, data: &Data) -> Result<DepthFrame> {
+        if data.model().ncam() != model.ncam() || self.camera >= model.ncam() {
+            return Err(Error::Size {
+                what: "cameras of the data's model",
+                expected: model.ncam(),
+                got: data.model().ncam(),
+            });
+        }
+        let world_from_optical = self.world_from_optical(data);
+        let origin = world_from_optical.translation.vector;
+        let rot = world_from_optical.rotation;
+        self.dirs_world.clear();
+        self.dirs_world.extend(self.rays_optical.iter().map(|r| {
+            let d = rot * r;
+            [d.x, d.y, d.z]
+        }));
+        self.hits.clear();
+        self.hits.resize(self.dirs_world.len(), None);
+        let scene = RayScene::new(data, &self.options.filter);
+        let (min_z, max_z) = (self.options.min_range_m, self.options.max_range_m);
+        // The farthest distance along any ray that can still be within max depth.
+        let max_dist = max_z / self.depth_per_dist.iter().copied().fold(1.0f64, f64::min);
+        let bundle = (TILE * TILE) as usize;
+        let origin = [origin.x, origin.y, origin.z];
+        let (dirs, hits) = (&self.dirs_world, &mut self.hits);
+        match (&self.pool, self.options.threads) {
+            (Some(pool), _) => pool.install(|| scene.cast_bundles(origin, dirs, bundle, max_dist, true, hits))?,
+            (None, 1) => scene.cast_bundles(origin, dirs, bundle, max_dist, false, hits)?,
+            (None, _) => scene.cast_bundles(origin, dirs, bundle, max_dist, true, hits)?,
+        }
+        let mut depth_m = vec![f32::NAN; self.intrinsics.len()];
+        let noise = self.options.noise_std_m;
+        let mut rng = {
+            let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed);
+            r.set_stream(self.frames);
+            r
+        };
+        // Pixel order, so the noise of a pixel does not depend on the tiling.
+        let mut by_pixel = vec![f64::NAN; self.intrinsics.len()];
+        for ((hit, &k), &s) in self.hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
+            if let Some(h) = hit {
+                by_pixel[k as usize] = h.dist_m * s;
+            }
+        }
+        for (out, z) in depth_m.iter_mut().zip(by_pixel) {
+            if z.is_finite() && z >= min_z && z <= max_z {
+                let z = if noise > 0.0 { z + noise * rng.sample::<f64, _>(StandardNormal) } else { z };
+                *out = z as f32;
+            }
+        }
+        self.frames += 1;
+        Ok(DepthFrame {
+            stamp_nanos: (data.time_secs() * 1e9).round().max(0.0) as u64,
+            intrinsics: self.intrinsics,
+            depth_m,
+            world_from_optical,
+            frame_id: self.frame_id.clone(),
+        })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use std::sync::Arc;
+
+    /// A camera 1 m above the floor looking straight down at a 0.2 m cube resting on it.
+    const BOX_SCENE: &str = r#"<mujoco><worldbody><geom type="plane" size="3 3 0.1"/>
+        <geom name="cube" type="box" pos="0.1 -0.05 0.1" size="0.1 0.1 0.1"/>
+        <camera name="down" pos="0 0 1" fovy="60"/></worldbody></mujoco>"#;
+
+    fn setup(xml: &str) -> (Arc<Model>, Data) {
+        let model = Arc::new(Model::from_xml_str(xml).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        data.forward().unwrap();
+        (model, data)
+    }
+
+    #[test]
+    fn depth_of_a_box_and_floor_is_analytic() {
+        let (model, data) = setup(BOX_SCENE);
+        let opts = DepthCameraOptions { width: 64, height: 48, ..DepthCameraOptions::default() };
+        let mut cam = DepthCamera::new(&model, "down", opts).unwrap();
+        let frame = cam.render(&model, &data).unwrap();
+        // MuJoCo's camera looks along −z with y up; the optical frame looks along −z_world,
+        // x along world x, y along −world y.
+        let t = frame.world_from_optical;
+        assert!((t * Point3::origin() - Point3::new(0.0, 0.0, 1.0)).norm() < 1e-12);
+        assert!((t.rotation * Vector3::z() - Vector3::new(0.0, 0.0, -1.0)).norm() < 1e-12);
+        assert!((t.rotation * Vector3::y() - Vector3::new(0.0, -1.0, 0.0)).norm() < 1e-12);
+        let k = frame.intrinsics;
+        let mut on_box = 0;
+        let mut on_floor = 0;
+        for v in 0..k.height {
+            for u in 0..k.width {
+                let r = k.ray_optical(u, v);
+                // Where the ray meets the cube's top (z = 0.2, depth 0.8) in world x/y.
+                let (x, y) = (0.8 * r.x, -0.8 * r.y);
+                let inside = (x - 0.1).abs() < 0.1 - 1e-6 && (y + 0.05).abs() < 0.1 - 1e-6;
+                let edge = (x - 0.1).abs() < 0.1 + 0.02 && (y + 0.05).abs() < 0.1 + 0.02;
+                let expected = if inside { 0.8 } else { 1.0 };
+                if !inside && edge {
+                    continue; // the cube's sides: seen at depths between the two
+                }
+                let got = f64::from(frame.depth_at(u, v));
+                // Depth along the optical axis, not ray length: equal at the corners too.
+                assert!((got - expected).abs() < 1e-3, "pixel ({u}, {v}): depth {got}, expected {expected}");
+                if inside { on_box += 1 } else { on_floor += 1 }
+            }
+        }
+        assert!(on_box > 100 && on_floor > 1000, "{on_box} box pixels, {on_floor} floor pixels");
+        // The corner pixel's ray is long (1 m depth, √(1 + x² + y²) along the ray).
+        let r = k.ray_optical(0, 0);
+        assert!(r.norm() > 1.2);
+        // Points land on the surfaces they came from.
+        let p = frame.point_optical(0, 0).unwrap();
+        assert!(((t * p).z).abs() < 1e-3);
+        for p in frame.points_world() {
+            assert!(
+                p.z.abs() < 1e-3
+                    || (p.z - 0.2).abs() < 1e-3
+                    || (p.x - 0.2).abs() < 1e-3
+                    || (p.y - 0.05).abs() < 1e-3
+                    || (p.y + 0.15).abs() < 1e-3
+                    || p.x.abs() < 1e-3,
+                "{p}"
+            );
+        }
+    }
+
+    #[test]
+    fn range_limits_noise_and_threads() {
+        let (model, data) = setup(BOX_SCENE);
+        let base = DepthCameraOptions { width: 32, height: 24, ..DepthCameraOptions::default() };
+        // Beyond max range: NaN.
+        let far = DepthCamera::new(&model, "down", DepthCameraOptions { max_range_m: 0.9, ..base.clone() })
+            .unwrap()
+            .render(&model, &data)
+            .unwrap();
+        assert!(far.depth_at(0, 0).is_nan());
+        assert!((far.depth_at(16, 12) - 0.8).abs() < 1e-6);
+        // Nearer than min range: NaN.
+        let near = DepthCamera::new(&model, "down", DepthCameraOptions { min_range_m: 0.9, ..base.clone() })
+            .unwrap()
+            .render(&model, &data)
+            .unwrap();
+        assert!(near.depth_at(16, 12).is_nan() && (near.depth_at(0, 0) - 1.0).abs() < 1e-6);
+        // Noise: seeded, about the asked deviation, independent of the thread count.
+        let noisy = |threads| {
+            let o = DepthCameraOptions { noise_std_m: 0.01, seed: 7, threads, width: 160, height: 120, ..base.clone() };
+            DepthCamera::new(&model, "down", o).unwrap().render(&model, &data).unwrap()
+        };
+        let (a, b, c) = (noisy(1), noisy(3), noisy(0));
+        assert_eq!(
+            a.depth_m.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            b.depth_m.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+        assert_eq!(
+            a.depth_m.iter().map(|x| x.to_bits()).collect::<Vec<_>>(),
+            c.depth_m.iter().map(|x| x.to_bits()).collect::<Vec<_>>()
+        );
+        let clean = DepthCamera::new(&model, "down", DepthCameraOptions { width: 160, height: 120, ..base.clone() })
+            .unwrap()
+            .render(&model, &data)
+            .unwrap();
+        let diffs: Vec<f64> = a
+            .depth_m
+            .iter()
+            .zip(&clean.depth_m)
+            .filter(|(x, y)| x.is_finite() && y.is_finite())
+            .map(|(x, y)| f64::from(x - y))
+            .collect();
+        let std = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len() as f64).sqrt();
+        assert!((std - 0.01).abs() < 0.0005, "noise std {std}");
+        // Bad options are refused with the camera's name.
+        let err =
+            DepthCamera::new(&model, "down", DepthCameraOptions { min_range_m: 20.0, ..base.clone() }).unwrap_err();
+        assert!(err.to_string().contains("\"down\""), "{err}");
+        assert!(DepthCamera::new(&model, "nope", base).unwrap_err().to_string().contains("camera named \"nope\""));
+    }
+}
