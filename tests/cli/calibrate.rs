@@ -274,7 +274,18 @@ fn calibrated_noise_tags_make_the_simulated_imu_reproduce_the_allan_deviation() 
     }
     let out = twin(
         d,
-        &["sim", "imu.urdf", "--duration", "3600", "--record", "sim.mcap", "--topics", "/block/imu/data", "--seed", "4"],
+        &[
+            "sim",
+            "imu.urdf",
+            "--duration",
+            "3600",
+            "--record",
+            "sim.mcap",
+            "--topics",
+            "/block/imu/data",
+            "--seed",
+            "4",
+        ],
     );
     assert!(out.status.success(), "{}", stderr(&out));
     let (logs, _) = sysid::noise::read_imus(&d.join("sim.mcap"), None).unwrap();
@@ -291,8 +302,8 @@ fn calibrated_noise_tags_make_the_simulated_imu_reproduce_the_allan_deviation() 
         let floor = sysid::allan::BIAS_INSTABILITY_FLOOR * truth.bias_instability;
         for p in sysid::allan::overlapping_adev(x, rate_hz, &ms) {
             let tau = p.tau_secs;
-            let want = (truth.white_density.powi(2) / tau + floor * floor + truth.bias_random_walk.powi(2) * tau / 3.0)
-                .sqrt();
+            let want =
+                (truth.white_density.powi(2) / tau + floor * floor + truth.bias_random_walk.powi(2) * tau / 3.0).sqrt();
             ratios.push((tau, p.adev / want));
         }
     }
@@ -301,7 +312,9 @@ fn calibrated_noise_tags_make_the_simulated_imu_reproduce_the_allan_deviation() 
     let floor = sysid::allan::BIAS_INSTABILITY_FLOOR * b;
     let (tau_white, tau_walk, tau_min) = ((n / floor).powi(2), 3.0 * (floor / k).powi(2), 3f64.sqrt() * n / k);
     for (what, lo, hi) in [
-        ("white noise", 0.01, tau_white / 3.0),
+        // Below τ₁/5: the Gauss–Markov peak that stands for the floor has faded there, and
+        // the original's flat floor still adds a few % to its white line.
+        ("white noise", 0.01, tau_white / 5.0),
         ("bias instability", tau_min / 2.0, tau_min * 2.0),
         ("random walk", tau_walk * 3.0, seconds / 30.0),
     ] {
@@ -311,4 +324,54 @@ fn calibrated_noise_tags_make_the_simulated_imu_reproduce_the_allan_deviation() 
         eprintln!("{what} ({lo:.3}–{hi:.1} s): simulated / original Allan deviation = {mean:.3}");
         assert!((mean - 1.0).abs() < 0.10, "{what} ({lo:.3}–{hi:.1} s): simulated/original = {mean:.3}");
     }
+}
+
+/// The twin's IMU bias model term by term: Gazebo's turn-on bias (`bias_mean`, random sign,
+/// constant) and its first-order Gauss–Markov dynamic bias, whose stationary deviation is
+/// σ_b·√(τ/2) and whose autocorrelation at lag L is e^(−L/τ); same seed, same samples.
+#[test]
+fn sim_imu_turn_on_and_gauss_markov_bias_have_gazebos_statistics() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let noise = |inner: &str| format!("<x>{inner}</x><y>{inner}</y><z>{inner}</z>");
+    let imu = format!(
+        "<imu><angular_velocity>{}</angular_velocity><linear_acceleration>{}</linear_acceleration></imu>",
+        noise("<noise type=\"gaussian\"><stddev>0</stddev><bias_mean>0.5</bias_mean></noise>"),
+        noise(
+            "<noise type=\"gaussian\"><stddev>0</stddev><dynamic_bias_stddev>0.2</dynamic_bias_stddev>\
+             <dynamic_bias_correlation_time>2</dynamic_bias_correlation_time></noise>"
+        ),
+    );
+    let urdf =
+        IMU_BLOCK_URDF.replace("<update_rate>100</update_rate>", &format!("<update_rate>100</update_rate>{imu}"));
+    std::fs::write(d.join("imu.urdf"), urdf).unwrap();
+    for (file, seed) in [("a.mcap", "1"), ("b.mcap", "1"), ("c.mcap", "2")] {
+        let out = twin(
+            d,
+            &["sim", "imu.urdf", "--duration", "1200", "--record", file, "--topics", "/block/imu/data", "--seed", seed],
+        );
+        assert!(out.status.success(), "{}", stderr(&out));
+    }
+    let read = |f: &str| sysid::noise::read_imus(&d.join(f), None).unwrap().0.remove(0);
+    let (a, b, c) = (read("a.mcap"), read("b.mcap"), read("c.mcap"));
+    assert_eq!(a.gyro, b.gyro);
+    assert_eq!(a.accel, b.accel);
+    assert_ne!(a.accel, c.accel);
+    // Turn-on bias: ±0.5 rad/s on each axis, constant.
+    for x in &a.gyro {
+        assert!(x.iter().all(|v| (v.abs() - 0.5).abs() < 1e-9 && v.signum() == x[0].signum()), "{:?}", &x[..3]);
+    }
+    // Gauss–Markov: stationary σ = 0.2·√(2/2) = 0.2, lag-1 s autocorrelation e^(−1/2).
+    let (mut var, mut cov, mut count) = (0.0, 0.0, 0.0);
+    for x in &a.accel {
+        let mean = x.iter().sum::<f64>() / x.len() as f64;
+        let y: Vec<f64> = x.iter().map(|v| v - mean).collect();
+        var += y.iter().map(|v| v * v).sum::<f64>();
+        cov += y.iter().zip(&y[100..]).map(|(p, q)| p * q).sum::<f64>();
+        count += y.len() as f64;
+    }
+    let sigma = (var / count).sqrt();
+    let rho = cov / var;
+    assert!((sigma / 0.2 - 1.0).abs() < 0.1, "stationary σ {sigma}");
+    assert!((rho - (-0.5f64).exp()).abs() < 0.06, "lag-1 s autocorrelation {rho}");
 }
