@@ -527,7 +527,7 @@ pub struct AxisNoiseUpdate {
     pub dynamic_bias_stddev: Option<f64>,
     /// `<dynamic_bias_correlation_time>` τc, s.
     pub dynamic_bias_correlation_time: Option<f64>,
-    /// `<bias_random_walk>` = `K` (`None`: not resolved, left as is).
+    /// `<bias_random_walk>` = `K` (`None`: not resolved with the floor, left as is).
     pub bias_random_walk: Option<f64>,
 }
 
@@ -539,8 +539,8 @@ pub const GAUSS_MARKOV_PEAK_TAU: f64 = 1.8926;
 
 impl AxisNoiseUpdate {
     /// The Gazebo noise of an axis fitted `fit`, sampled at `rate_hz`. The bias instability
-    /// needs the random walk to place its Gauss–Markov peak (the curve's minimum `√3·N/K`);
-    /// with no resolved random walk it is left unresolved.
+    /// needs the random walk to place its Gauss–Markov peak (the curve's minimum `√3·N/K`):
+    /// the bias terms are written when both are resolved, else left as they are.
     pub fn from_fit(fit: &NoiseFit, rate_hz: f64) -> AxisNoiseUpdate {
         let (n, b, k) = (fit.white_density, fit.bias_instability, fit.bias_random_walk);
         let stddev = n * rate_hz.sqrt();
@@ -555,7 +555,9 @@ impl AxisNoiseUpdate {
             stddev,
             dynamic_bias_stddev: dyn_std,
             dynamic_bias_correlation_time: corr,
-            bias_random_walk: (k > 0.0).then_some(k),
+            // Only with the floor resolved too: a white-noise log's fit can show a spurious
+            // slope at its last few τ, which is no reason to add a bias to the URDF.
+            bias_random_walk: dyn_std.map(|_| k),
         }
     }
 }
