@@ -262,7 +262,7 @@ fn calibrated_noise_tags_make_the_simulated_imu_reproduce_the_allan_deviation() 
     let (rate_hz, seconds) = (100.0, 3600.0);
     let imu = synth_imu("/block/imu/data", "imu_link", gyro, accel, rate_hz, seconds, 11);
     let mut w =
-        twin_core::log::LogWriter::create(&d.join("still.mcap"), &twin_core::log::WriterOptions::default()).unwrap();
+        twin_core::log::LogWriter::create(d.join("still.mcap"), &twin_core::log::WriterOptions::default()).unwrap();
     imu.write_to(&mut w).unwrap();
     w.finish().unwrap();
 
