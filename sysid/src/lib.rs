@@ -50,6 +50,14 @@
 //! 6. **Report** ([`report`]): table and JSON; torque NRMSE before/after on the log and on a
 //!    held-out log ([`validate`]).
 
+//! ## Around identification
+//! - [`excite`] (`twin excite`): designs the trajectory to log, a finite Fourier series per
+//!   joint optimized for this regressor's condition number within the robot's limits.
+//! - [`gap`] (`twin gap`): the reality gap, the logged efforts replayed on the twin open loop,
+//!   before and after identification.
+//! - [`friction`] (`twin sysid friction`) and [`noise`] (`twin calibrate noise`): friction
+//!   curves from velocity sweeps, sensor noise from a still log.
+
 //! ## Floating base (`Base::Floating`, `twin sysid --base floating`)
 //! Without `--base floating` the base is fixed (bolted down or on a gantry) and the output
 //! says "fixed base". With it, the robot is loaded with a free joint between the world and

@@ -13,10 +13,14 @@
 //!
 //! Results go into the URDF's Gazebo IMU `<noise>` tags ([`imu_noise_updates`] →
 //! [`crate::writeback::rewrite_imu_noise`]): `stddev = N·√f` (f: the sensor's `<update_rate>`,
-//! else the log's rate), `dynamic_bias_stddev = K` and `dynamic_bias_correlation_time
-//! = 2·(1.074·B)²/K²`, the first-order Gauss–Markov bias whose short-τ random walk is `K` and
-//! whose Allan peak (0.618 of its stationary deviation `K·√(τc/2)`) equals the bias-instability
-//! floor `0.664·B`. They also go into a `twin randomize` spec fragment ([`spec_fragment`]).
+//! else the log's rate); the bias instability as Gazebo's first-order Gauss–Markov bias
+//! (`dynamic_bias_stddev` σ_b, `dynamic_bias_correlation_time` τc) whose Allan peak (0.618 of
+//! its stationary deviation `σ_b·√(τc/2)`, at τ ≈ 1.89·τc) equals the floor `0.664·B` at the
+//! τ where the fitted curve bottoms out (`√3·N/K`, between the white and random-walk lines);
+//! and the bias random walk `K` as `<bias_random_walk>` (a twin extension Gazebo ignores: one
+//! Gauss–Markov process cannot give both a flat floor and the +½ slope past it). `twin sim`
+//! simulates all three ([`twin_core::convert::ImuBias`]), so its IMU reproduces the Allan
+//! curve. They also go into a `twin randomize` spec fragment ([`NoiseReport::spec_fragment`]).
 
 use crate::allan::{self, AllanPoint, NoiseFit};
 use crate::error::{Error, Result};
@@ -518,25 +522,43 @@ fn quantization_step(values: &[f64]) -> Option<f64> {
 pub struct AxisNoiseUpdate {
     /// `<stddev>`: white noise per sample, `N·√f`.
     pub stddev: f64,
-    /// `<dynamic_bias_stddev>` = `K` (`None`: bias not resolved, left as is).
+    /// `<dynamic_bias_stddev>` σ_b of the bias-instability Gauss–Markov process (`None`: not
+    /// resolved, left as is).
     pub dynamic_bias_stddev: Option<f64>,
-    /// `<dynamic_bias_correlation_time>`, s.
+    /// `<dynamic_bias_correlation_time>` τc, s.
     pub dynamic_bias_correlation_time: Option<f64>,
+    /// `<bias_random_walk>` = `K` (`None`: not resolved with the floor, left as is).
+    pub bias_random_walk: Option<f64>,
 }
 
+/// Allan deviation peak of a first-order Gauss–Markov process over its stationary deviation,
+/// reached at τ ≈ [`GAUSS_MARKOV_PEAK_TAU`]·τc.
+pub const GAUSS_MARKOV_PEAK: f64 = 0.6174;
+/// Where the Gauss–Markov Allan deviation peaks, in correlation times.
+pub const GAUSS_MARKOV_PEAK_TAU: f64 = 1.8926;
+
 impl AxisNoiseUpdate {
-    /// The Gazebo noise of an axis fitted `fit`, sampled at `rate_hz`.
+    /// The Gazebo noise of an axis fitted `fit`, sampled at `rate_hz`. The bias instability
+    /// needs the random walk to place its Gauss–Markov peak (the curve's minimum `√3·N/K`):
+    /// the bias terms are written when both are resolved, else left as they are.
     pub fn from_fit(fit: &NoiseFit, rate_hz: f64) -> AxisNoiseUpdate {
-        let stddev = fit.white_density * rate_hz.sqrt();
-        let (k, b) = (fit.bias_random_walk, fit.bias_instability);
-        let (dyn_std, corr) = if k > 0.0 && b > 0.0 {
-            // Gauss–Markov peak 0.618·s at τ ≈ 1.9·τc equals the floor 0.664·B.
-            let s = allan::BIAS_INSTABILITY_FLOOR * b / 0.618;
-            (Some(k), Some(2.0 * s * s / (k * k)))
+        let (n, b, k) = (fit.white_density, fit.bias_instability, fit.bias_random_walk);
+        let stddev = n * rate_hz.sqrt();
+        let (dyn_std, corr) = if k > 0.0 && b > 0.0 && n > 0.0 {
+            let tau_c = 3f64.sqrt() * n / k / GAUSS_MARKOV_PEAK_TAU;
+            let stationary = allan::BIAS_INSTABILITY_FLOOR * b / GAUSS_MARKOV_PEAK;
+            (Some(stationary / (tau_c / 2.0).sqrt()), Some(tau_c))
         } else {
             (None, None)
         };
-        AxisNoiseUpdate { stddev, dynamic_bias_stddev: dyn_std, dynamic_bias_correlation_time: corr }
+        AxisNoiseUpdate {
+            stddev,
+            dynamic_bias_stddev: dyn_std,
+            dynamic_bias_correlation_time: corr,
+            // Only with the floor resolved too: a white-noise log's fit can show a spurious
+            // slope at its last few τ, which is no reason to add a bias to the URDF.
+            bias_random_walk: dyn_std.map(|_| k),
+        }
     }
 }
 

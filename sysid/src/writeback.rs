@@ -307,7 +307,8 @@ pub fn rewrite_urdf(path: &Path, text: &str, links: &[LinkUpdate], joints: &[Joi
 
 /// Returns `text` (the URDF at `path`) with the Gazebo IMU sensors' `<noise>` of each update
 /// rewritten: per axis of `<angular_velocity>` and `<linear_acceleration>`, `<stddev>` and,
-/// when resolved, `<dynamic_bias_stddev>` and `<dynamic_bias_correlation_time>`; a missing
+/// when resolved, `<dynamic_bias_stddev>` and `<dynamic_bias_correlation_time>` (the bias
+/// instability) and `<bias_random_walk>` (the random walk, a twin extension); a missing
 /// `<noise type="gaussian">`, axis, or `<angular_velocity>`/`<linear_acceleration>` is inserted.
 /// Everything else stays byte for byte.
 ///
@@ -372,6 +373,9 @@ pub fn rewrite_imu_noise(path: &Path, text: &str, updates: &[crate::noise::ImuNo
                     ed.set_child_text(noise, "dynamic_bias_stddev", s)?;
                     ed.set_child_text(noise, "dynamic_bias_correlation_time", t)?;
                 }
+                if let Some(k) = n.bias_random_walk {
+                    ed.set_child_text(noise, "bias_random_walk", k)?;
+                }
             }
         }
     }
@@ -386,6 +390,9 @@ fn noise_xml(n: &crate::noise::AxisNoiseUpdate) -> String {
             format_number(s),
             format_number(t)
         ));
+    }
+    if let Some(k) = n.bias_random_walk {
+        xml.push_str(&format!("<bias_random_walk>{}</bias_random_walk>", format_number(k)));
     }
     xml.push_str("</noise>");
     xml

@@ -170,10 +170,10 @@ fn imu_noise_is_written_into_the_gazebo_noise_tags_byte_preservingly() {
     assert_eq!(updates[0].rate_hz, 200.0);
     let out = sysid::writeback::rewrite_imu_noise(path, &urdf, &updates).unwrap();
     let diff = sysid::writeback::unified_diff(path, &urdf, &out);
-    // Six stddev lines changed, two bias lines added on gyro x; nothing else.
+    // Six stddev lines changed, three bias lines added on gyro x; nothing else.
     let added = diff.lines().filter(|l| l.starts_with('+') && !l.starts_with("+++")).count();
     let removed = diff.lines().filter(|l| l.starts_with('-') && !l.starts_with("---")).count();
-    assert_eq!((added, removed), (8, 6), "{diff}");
+    assert_eq!((added, removed), (9, 6), "{diff}");
     let doc = roxmltree::Document::parse(&out).unwrap();
     let stddevs: Vec<f64> =
         doc.descendants().filter(|n| n.has_tag_name("stddev")).map(|n| n.text().unwrap().parse().unwrap()).collect();
@@ -191,8 +191,20 @@ fn imu_noise_is_written_into_the_gazebo_noise_tags_byte_preservingly() {
         .unwrap()
         .parse()
         .unwrap();
-    let s = 0.664_282_948_4 * 2e-4 / 0.618;
-    check_within("correlation time", corr, 2.0 * s * s / 4e-10, 1e-6);
+    let num = |tag: &str| -> f64 {
+        doc.descendants().find(|n| n.has_tag_name(tag)).and_then(|n| n.text()).unwrap().parse().unwrap()
+    };
+    // The Gauss–Markov peak (at 1.89·τc, 0.617 of σ_b·√(τc/2)) sits at the fitted curve's
+    // minimum √3·N/K with the floor's height 0.664·B; the random walk is K.
+    let n = noise.axes[0].fit.white_density;
+    check_within("correlation time", corr * 1.8926, 3f64.sqrt() * n / 2e-5, 1e-3);
+    check_within(
+        "Gauss–Markov peak",
+        0.6174 * num("dynamic_bias_stddev") * (corr / 2.0).sqrt(),
+        0.664_283 * 2e-4,
+        1e-3,
+    );
+    check_within("random walk", num("bias_random_walk"), 2e-5, 1e-9);
     // Rewriting with the same values changes nothing.
     assert_eq!(sysid::writeback::rewrite_imu_noise(path, &out, &updates).unwrap(), out);
     // An IMU whose frame the URDF lacks, with two IMUs measured: a clear error.

@@ -376,6 +376,8 @@ fn find_imus(model: &Model, robot_name: &str, meta: &[ImuMeta]) -> Vec<Imu> {
             update_rate_hz: None,
             gyro_noise_std: model.sensor_noise()[s],
             accel_noise_std: model.sensor_noise()[accel],
+            gyro_bias: Default::default(),
+            accel_bias: Default::default(),
             topic: None,
             frame_id: model.name(ObjType::Body, body).to_string(),
         });

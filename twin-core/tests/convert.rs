@@ -580,3 +580,36 @@ fn check_names_the_cause_when_a_robot_falls_forward() {
     assert!(!physics.passed);
     assert!(physics.cause.as_deref().unwrap().contains("falls forward"), "{:?}", physics.cause);
 }
+
+#[test]
+fn imu_bias_tags_reach_the_metadata_and_survive_the_mjcf_round_trip() {
+    // What `twin calibrate noise` writes (per axis, SDF 1.5+ form) plus Gazebo's turn-on bias;
+    // the largest value over the axes is kept, an unparsable one is ignored like Gazebo does.
+    let urdf = r#"<robot name="b">
+  <link name="world"/>
+  <link name="block"><inertial><mass value="0.1"/><inertia ixx="1e-4" iyy="1e-4" izz="1e-4"/></inertial></link>
+  <joint name="mount" type="fixed"><parent link="world"/><child link="block"/></joint>
+  <gazebo reference="block"><sensor name="imu" type="imu"><update_rate>100</update_rate><imu>
+    <angular_velocity>
+      <x><noise type="gaussian"><stddev>0.003</stddev><bias_mean>0.001</bias_mean><bias_stddev>0.0005</bias_stddev>
+        <dynamic_bias_stddev>2e-4</dynamic_bias_stddev><dynamic_bias_correlation_time>0.7</dynamic_bias_correlation_time>
+        <bias_random_walk>3e-5</bias_random_walk></noise></x>
+      <y><noise type="gaussian"><stddev>0.002</stddev><dynamic_bias_stddev>1e-4</dynamic_bias_stddev>
+        <dynamic_bias_correlation_time>oops</dynamic_bias_correlation_time></noise></y>
+    </angular_velocity>
+    <linear_acceleration><z><noise type="gaussian"><stddev>0.02</stddev><bias_random_walk>4e-3</bias_random_walk></noise></z></linear_acceleration>
+  </imu></sensor></gazebo>
+</robot>"#;
+    let c = convert_urdf_str(Path::new("b.urdf"), urdf, &ConvertOptions::default()).unwrap();
+    let imu = &c.imus[0];
+    let g = imu.gyro_bias;
+    assert_eq!(
+        (g.mean, g.stddev, g.dynamic_stddev, g.dynamic_correlation_time_secs, g.random_walk),
+        (0.001, 0.0005, 2e-4, 0.7, 3e-5)
+    );
+    let a = imu.accel_bias;
+    assert_eq!((a.random_walk, a.dynamic_stddev, a.mean), (4e-3, 0.0, 0.0));
+    let model = Model::from_xml_str(&c.mjcf).unwrap();
+    let meta = twin_core::convert::RobotMeta::from_model(&model).unwrap();
+    assert_eq!(meta.imus[0], *imu);
+}

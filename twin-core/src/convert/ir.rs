@@ -148,6 +148,9 @@ pub(crate) struct SensorIr {
     /// IMU gyroscope / accelerometer white-noise standard deviations (0 when none).
     pub gyro_noise_std: f64,
     pub accel_noise_std: f64,
+    /// IMU gyroscope / accelerometer bias terms.
+    pub gyro_bias: super::ImuBias,
+    pub accel_bias: super::ImuBias,
     /// `<camera>` children.
     pub cameras: Vec<CameraIr>,
     /// `<ray>` / `<lidar>` scan.
@@ -929,6 +932,7 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
         None => None,
     };
     let (gyro_noise_std, accel_noise_std) = imu_noise(s);
+    let (gyro_bias, accel_bias) = imu_bias(s);
     let frame_name = child(s, "plugin")
         .and_then(|p| child_text(p, "frame_name").or_else(|| child_text(p, "frameName")))
         .map(str::to_string);
@@ -978,6 +982,8 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
         frame_name,
         gyro_noise_std,
         accel_noise_std,
+        gyro_bias,
+        accel_bias,
         cameras,
         ray,
     })
@@ -1005,6 +1011,41 @@ fn imu_noise(sensor: Node<'_, '_>) -> (f64, f64) {
         accel = accel.max(stddev_under(child(n, "accel")));
     }
     (gyro, accel)
+}
+
+/// Gazebo IMU bias tags (`bias_mean`, `bias_stddev`, `dynamic_bias_stddev`,
+/// `dynamic_bias_correlation_time`, and twin's `bias_random_walk`) of the gyroscope and the
+/// accelerometer, the largest over the axes; leniently like Gazebo: an unparsable or negative
+/// value counts as absent.
+fn imu_bias(sensor: Node<'_, '_>) -> (super::ImuBias, super::ImuBias) {
+    let Some(imu) = child(sensor, "imu") else {
+        return Default::default();
+    };
+    let under = |groups: &[Option<Node<'_, '_>>]| -> super::ImuBias {
+        let max = |tag: &str| -> f64 {
+            groups
+                .iter()
+                .flatten()
+                .flat_map(|n| n.descendants())
+                .filter(|d| d.has_tag_name(tag))
+                .filter_map(|d| d.text().and_then(parse_num))
+                .map(f64::abs)
+                .fold(0.0, f64::max)
+        };
+        super::ImuBias {
+            mean: max("bias_mean"),
+            stddev: max("bias_stddev"),
+            dynamic_stddev: max("dynamic_bias_stddev"),
+            dynamic_correlation_time_secs: max("dynamic_bias_correlation_time"),
+            random_walk: max("bias_random_walk"),
+        }
+    };
+    // Gazebo classic's older form: <imu><noise><rate>, <accel>.
+    let old = child(imu, "noise");
+    (
+        under(&[child(imu, "angular_velocity"), old.and_then(|n| child(n, "rate"))]),
+        under(&[child(imu, "linear_acceleration"), old.and_then(|n| child(n, "accel"))]),
+    )
 }
 
 /// ROS topic of a Gazebo sensor from its plugin: ROS 2 `<ros><namespace>` + `<remapping>`

@@ -6,7 +6,7 @@
 //! Each record is one text element named `twin:<kind>:<index>` whose data is
 //! `key=value;key=value`, with `%`, `;`, `=` and `,` percent-encoded in values.
 
-use super::{DifferentialMeta, ImuMeta, Interface, JointMeta, ScanMeta, SensorMeta};
+use super::{DifferentialMeta, ImuBias, ImuMeta, Interface, JointMeta, ScanMeta, SensorMeta};
 use crate::mj::Model;
 use std::collections::HashMap;
 
@@ -55,6 +55,30 @@ fn dec(s: &str) -> String {
         }
     }
     String::from_utf8_lossy(&out).into_owned()
+}
+
+/// An IMU bias as `mean,stddev,dynamic_stddev,dynamic_correlation_time,random_walk` (shortest
+/// round-trip decimals); empty when zero, so models without bias keep their metadata short.
+fn bias_fields(b: &ImuBias) -> Vec<String> {
+    if b.is_zero() {
+        return Vec::new();
+    }
+    [b.mean, b.stddev, b.dynamic_stddev, b.dynamic_correlation_time_secs, b.random_walk]
+        .iter()
+        .map(|x| format!("{x}"))
+        .collect()
+}
+
+/// The inverse of [`bias_fields`]; missing or unparsable entries are 0.
+fn bias_from_fields(items: &[String]) -> ImuBias {
+    let at = |k: usize| items.get(k).and_then(|x| x.parse::<f64>().ok()).filter(|x| x.is_finite()).unwrap_or(0.0);
+    ImuBias {
+        mean: at(0),
+        stddev: at(1),
+        dynamic_stddev: at(2),
+        dynamic_correlation_time_secs: at(3),
+        random_walk: at(4),
+    }
 }
 
 fn opt_num(x: Option<f64>) -> String {
@@ -143,6 +167,8 @@ impl RobotMeta {
                     .put("rate_hz", opt_num(i.update_rate_hz))
                     .put("gyro_noise_std", format!("{}", i.gyro_noise_std))
                     .put("accel_noise_std", format!("{}", i.accel_noise_std))
+                    .put_list("gyro_bias", &bias_fields(&i.gyro_bias))
+                    .put_list("accel_bias", &bias_fields(&i.accel_bias))
                     .put("topic", i.topic.clone().unwrap_or_default())
                     .put("frame_id", &i.frame_id),
             ));
@@ -242,6 +268,8 @@ impl RobotMeta {
                     update_rate_hz: f.num("rate_hz"),
                     gyro_noise_std: f.num("gyro_noise_std").unwrap_or(0.0),
                     accel_noise_std: f.num("accel_noise_std").unwrap_or(0.0),
+                    gyro_bias: bias_from_fields(&f.list("gyro_bias")),
+                    accel_bias: bias_from_fields(&f.list("accel_bias")),
                     topic: f.opt_s("topic"),
                     frame_id: f.s("frame_id"),
                 }),

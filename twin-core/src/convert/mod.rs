@@ -122,10 +122,40 @@ pub struct ImuMeta {
     pub gyro_noise_std: f64,
     /// Accelerometer white-noise standard deviation, m/s² (0 when none).
     pub accel_noise_std: f64,
+    /// Gyroscope bias terms, rad/s.
+    pub gyro_bias: ImuBias,
+    /// Accelerometer bias terms, m/s².
+    pub accel_bias: ImuBias,
     /// ROS topic resolved from the plugin's namespace and remapping (e.g. `/humanoid/imu/data`).
     pub topic: Option<String>,
     /// `frame_id` of the messages (the plugin's `frame_name`, else the link).
     pub frame_id: String,
+}
+
+/// Bias terms of one IMU group (gyroscope or accelerometer) from Gazebo's `<noise>` tags, the
+/// largest over its axes (like the white-noise stddev); all 0 when none. Units of the group.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ImuBias {
+    /// `<bias_mean>`: constant turn-on bias magnitude (its sign drawn per axis, as Gazebo does).
+    pub mean: f64,
+    /// `<bias_stddev>`: spread of the constant turn-on bias, drawn once per axis.
+    pub stddev: f64,
+    /// `<dynamic_bias_stddev>` σ_b: drive of the first-order Gauss–Markov bias, per √s
+    /// (Gazebo's convention: stationary deviation σ_b·√(τ/2), short-τ random walk σ_b).
+    pub dynamic_stddev: f64,
+    /// `<dynamic_bias_correlation_time>` τ, s; 0 (absent) makes the dynamic bias a pure random
+    /// walk of density σ_b (the τ → ∞ limit) rather than Gazebo's "no dynamic bias".
+    pub dynamic_correlation_time_secs: f64,
+    /// `<bias_random_walk>` K (a twin extension Gazebo ignores), per √s: a second, pure random
+    /// walk bias, so that a Gauss–Markov bias instability and a random walk can both be given.
+    pub random_walk: f64,
+}
+
+impl ImuBias {
+    /// Whether any bias term is set.
+    pub fn is_zero(&self) -> bool {
+        *self == ImuBias::default()
+    }
 }
 
 /// A non-IMU sensor (camera, rangefinder, force/torque, contact).

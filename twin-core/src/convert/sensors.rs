@@ -62,6 +62,8 @@ impl Converter<'_> {
                         update_rate_hz: s.update_rate_hz,
                         gyro_noise_std: gyro,
                         accel_noise_std: accel,
+                        gyro_bias: s.gyro_bias,
+                        accel_bias: s.accel_bias,
                         topic: topic.clone(),
                         frame_id,
                     });

@@ -115,6 +115,97 @@ impl RecordSummary {
     }
 }
 
+/// Bias of one IMU group (gyroscope or accelerometer), per axis: Gazebo's constant turn-on
+/// bias, its first-order Gauss–Markov dynamic bias (or a random walk when no correlation time
+/// is given), and twin's extra random walk ([`crate::convert::ImuBias`]).
+#[derive(Debug, Clone)]
+struct BiasState {
+    model: crate::convert::ImuBias,
+    turn_on: [f64; 3],
+    markov: [f64; 3],
+    walk: [f64; 3],
+}
+
+impl BiasState {
+    fn new(model: crate::convert::ImuBias, rng: &mut rand_chacha::ChaCha8Rng) -> BiasState {
+        let mut turn_on = [0.0; 3];
+        if model.mean != 0.0 || model.stddev != 0.0 {
+            for b in &mut turn_on {
+                // Gazebo: mean + stddev·w, added or subtracted with equal probability.
+                let magnitude = model.mean + model.stddev * rng.sample::<f64, _>(StandardNormal);
+                *b = if rng.random_bool(0.5) { magnitude } else { -magnitude };
+            }
+        }
+        let mut markov = [0.0; 3];
+        let tau = model.dynamic_correlation_time_secs;
+        if model.dynamic_stddev > 0.0 && tau > 0.0 {
+            // Started in its stationary distribution (σ_b·√(τ/2)), so statistics hold from t = 0.
+            for b in &mut markov {
+                *b = model.dynamic_stddev * (tau / 2.0).sqrt() * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+        BiasState { model, turn_on, markov, walk: [0.0; 3] }
+    }
+
+    /// Advances the processes by `dt_secs`, exactly (no Euler error at any rate).
+    fn advance(&mut self, dt_secs: f64, rng: &mut rand_chacha::ChaCha8Rng) {
+        let (sigma, tau) = (self.model.dynamic_stddev, self.model.dynamic_correlation_time_secs);
+        if sigma > 0.0 {
+            if tau > 0.0 {
+                // b' = φ·b + σ_b·√(τ/2·(1 − φ²))·w, φ = e^(−Δt/τ).
+                let phi = (-dt_secs / tau).exp();
+                let drive = sigma * (tau / 2.0 * -(-2.0 * dt_secs / tau).exp_m1()).sqrt();
+                for b in &mut self.markov {
+                    *b = phi * *b + drive * rng.sample::<f64, _>(StandardNormal);
+                }
+            } else {
+                for b in &mut self.markov {
+                    *b += sigma * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
+                }
+            }
+        }
+        if self.model.random_walk > 0.0 {
+            for b in &mut self.walk {
+                *b += self.model.random_walk * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+    }
+
+    fn value(&self) -> [f64; 3] {
+        std::array::from_fn(|i| self.turn_on[i] + self.markov[i] + self.walk[i])
+    }
+}
+
+/// The bias part of one IMU's sensor model (the white noise is drawn with the sample).
+#[derive(Debug, Clone)]
+struct ImuNoise {
+    gyro: BiasState,
+    accel: BiasState,
+    /// Time of the previous sample, ns of simulation time.
+    last_nanos: Option<u64>,
+}
+
+impl ImuNoise {
+    fn new(meta: &crate::convert::ImuMeta, rng: &mut rand_chacha::ChaCha8Rng) -> ImuNoise {
+        ImuNoise {
+            gyro: BiasState::new(meta.gyro_bias, rng),
+            accel: BiasState::new(meta.accel_bias, rng),
+            last_nanos: None,
+        }
+    }
+
+    /// The (gyroscope, accelerometer) bias at the sample at `t_nanos`.
+    fn advance(&mut self, t_nanos: u64, rng: &mut rand_chacha::ChaCha8Rng) -> ([f64; 3], [f64; 3]) {
+        if let Some(last) = self.last_nanos {
+            let dt_secs = t_nanos.saturating_sub(last) as f64 * 1e-9;
+            self.gyro.advance(dt_secs, rng);
+            self.accel.advance(dt_secs, rng);
+        }
+        self.last_nanos = Some(t_nanos);
+        (self.gyro.value(), self.accel.value())
+    }
+}
+
 /// Publication times on a fixed period, in integer nanoseconds of simulation time.
 #[derive(Debug, Clone, Copy)]
 struct Schedule {
@@ -468,6 +559,8 @@ pub struct Recording {
     state: Schedule,
     tf_schedule: Schedule,
     imu_schedules: Vec<Schedule>,
+    /// Bias state of each IMU.
+    imu_noise: Vec<ImuNoise>,
     rng: rand_chacha::ChaCha8Rng,
     /// Topic ids: `/joint_states`, `/odom`, `/tf`, the command, each IMU's, each body's contacts.
     joint_states_id: Option<usize>,
@@ -617,6 +710,8 @@ impl Recording {
                 }
             })
             .collect();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(options.seed);
+        let imu_noise = robot.imus.iter().map(|imu| ImuNoise::new(&imu.meta, &mut rng)).collect();
         let mut rec = Recording {
             out: Outputs {
                 sinks: slots,
@@ -639,7 +734,8 @@ impl Recording {
                 .iter()
                 .map(|imu| Schedule::new(imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz), dt_nanos))
                 .collect(),
-            rng: rand_chacha::ChaCha8Rng::seed_from_u64(options.seed),
+            imu_noise,
+            rng,
             joint_states_id: id_of(TopicKind::JointStates),
             odom_id: id_of(TopicKind::Odometry),
             tf_id: id_of(TopicKind::Tf),
@@ -827,11 +923,14 @@ impl Recording {
             // depend on which others are recorded.
             let s = data.sensordata();
             let msg = &mut self.imu_messages[k];
+            let (gyro_bias, accel_bias) = self.imu_noise[k].advance(t_nanos, &mut self.rng);
             for i in 0..3 {
-                msg.angular_velocity[i] =
-                    s[imu.gyro_adr + i] + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                msg.linear_acceleration[i] =
-                    s[imu.accel_adr + i] + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                msg.angular_velocity[i] = s[imu.gyro_adr + i]
+                    + gyro_bias[i]
+                    + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
+                msg.linear_acceleration[i] = s[imu.accel_adr + i]
+                    + accel_bias[i]
+                    + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
             }
             let Some(id) = self.imu_ids[k].filter(|&id| self.out.takes(id)) else { continue };
             let q = match imu.quat_adr {
