@@ -633,19 +633,10 @@ impl Walker {
         let mut loops = Vec::new();
         match actuation {
             Actuation::Ctrl => {
-                for (u, &lim) in limits.iter().enumerate() {
-                    if model.actuator_trntype()[u] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
-                        continue;
-                    }
-                    let joint = model.actuator_trnid()[u][0] as usize;
-                    if !matches!(model.joint_type(joint), JointType::Hinge | JointType::Slide) {
-                        continue;
-                    }
-                    let gear = model.actuator_gear()[u][0];
-                    if gear == 0.0 {
-                        continue;
-                    }
-                    push(u, joint, gear, lim, &mut loops);
+                // The one actuator finder (joint transmissions on hinges and slides).
+                for a in crate::robot::actuators_of(model, &[]) {
+                    let Some(joint) = a.joint.filter(|_| a.gear != 0.0) else { continue };
+                    push(a.id, joint, a.gear, limits[a.id], &mut loops);
                 }
             }
             Actuation::Qfrc => {
