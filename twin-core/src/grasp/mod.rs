@@ -261,14 +261,15 @@ fn smooth(a: f64) -> f64 {
 }
 
 impl Grasper {
-    /// A grasper for `model`: `options` for the arms, `walk` for the legs' balance.
+    /// A grasper for `model`: `options` for the arms, `walk` for the legs' balance (with
+    /// [`WalkOptions::double_support_ankle`] off: the reaching arm moves the commanded ZMP).
     ///
     /// # Errors
     /// [`Error::Grasp`] for an option out of range or a model without grippers or camera; as
     /// [`Walker::new`].
     pub fn new(model: &Model, options: GraspOptions, walk: WalkOptions) -> Result<Grasper> {
         options.validate().map_err(|(key, m)| Error::Grasp { message: format!("option `{key}` {m}") })?;
-        let walker = Walker::new(model, walk)?;
+        let walker = Walker::new(model, WalkOptions { double_support_ankle: false, ..walk })?;
         let mut g = Grasper {
             options,
             walker,

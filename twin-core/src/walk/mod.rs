@@ -101,6 +101,12 @@ pub struct WalkOptions {
     /// A standing walker steps when its DCM comes closer than this to the edge of the feet's
     /// support region (or leaves it), m; inside, the ankles and hips hold it (default: 0.02).
     pub recovery_margin: f64,
+    /// In double support, the part of the commanded ZMP that the weight split between the feet
+    /// cannot reach (fore-aft) is given by the ankles, moving each foot's planned force within
+    /// its sole (default: true: it holds fore-aft pushes in place). A controller that moves
+    /// the arms while the legs balance (`grasp`) turns it off: the reaching arm shifts the
+    /// commanded ZMP forward and the ankles then tip the torso into the table.
+    pub double_support_ankle: bool,
     /// Torso tilt feedback: pelvis counter-rotation per radian of tilt (default: 0.5).
     pub tilt_gain: f64,
     /// Torso rate feedback: pelvis counter-rotation per rad/s of tilt rate, s (default: 0.05).
@@ -147,6 +153,7 @@ impl Default for WalkOptions {
             recovery_swing_secs: 0.35,
             recovery_double_support_secs: 0.05,
             recovery_margin: 0.02,
+            double_support_ankle: true,
             tilt_gain: 0.5,
             tilt_rate_gain: 0.05,
             leg_saturation_error: 0.1,
@@ -1073,7 +1080,7 @@ impl Controller for Walker {
                 let alpha = ((zmp_cmd - a).dot(&ab) / ab.norm_squared().max(1e-9)).clamp(0.0, 1.0);
                 // What the weight split can't reach (fore-aft, or beyond a foot) the ankles
                 // give: each foot's force moves by it within its sole.
-                let residual = zmp_cmd - (a + ab * alpha);
+                let residual = if o.double_support_ankle { zmp_cmd - (a + ab * alpha) } else { Vector2::zeros() };
                 for (k, (leg, w)) in [(0usize, 1.0 - alpha), (1usize, alpha)].into_iter().enumerate() {
                     let p = clamp_to_sole(leg, feet[leg].pos + residual);
                     forces[k] = (self.body.legs[leg].foot, Vector3::new(p.x, p.y, self.sole_z), weight * w);
