@@ -92,23 +92,18 @@ fn noise(args: NoiseArgs) -> anyhow::Result<()> {
         eprintln!("warning: {w}");
     }
     print!("{}", report.table());
-    let write = |path: &PathBuf, text: &str, what: &str| -> anyhow::Result<()> {
-        twin_core::fsio::write_atomic(path, text.as_bytes(), twin_core::fsio::Backup::None)?;
-        eprintln!("{what} written to {}", path.display());
-        Ok(())
-    };
     if let Some(p) = &args.report {
-        write(p, &report.to_json(), "report")?;
+        super::write_output(p, &report.to_json(), "report")?;
     }
     if let Some(p) = &args.plot {
-        write(p, &report.svg(), "Allan deviation plot")?;
+        super::write_output(p, &report.svg(), "Allan deviation plot")?;
     }
     if let Some(p) = &args.rerun {
         write_allan_rrd(p, &report)?;
         eprintln!("Allan deviation recording written to {}", p.display());
     }
     if let Some(p) = &args.spec {
-        write(p, &report.spec_fragment(), "randomization spec fragment")?;
+        super::write_output(p, &report.spec_fragment(), "randomization spec fragment")?;
     }
     let Some(urdf) = &args.update else { return Ok(()) };
     if report.imus.is_empty() {

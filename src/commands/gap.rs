@@ -40,16 +40,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let report = measure_gap(&args.urdf, &log, &opts)
         .with_context(|| format!("no gap measured for {} on {}", args.urdf.display(), args.log.display()))?;
     print!("{}", report.table());
-    let write = |path: &PathBuf, text: &str, what: &str| -> anyhow::Result<()> {
-        twin_core::fsio::write_atomic(path, text.as_bytes(), twin_core::fsio::Backup::None)?;
-        eprintln!("{what} written to {}", path.display());
-        Ok(())
-    };
     if let Some(p) = &args.report {
-        write(p, &report.to_json(), "report")?;
+        super::write_output(p, &report.to_json(), "report")?;
     }
     if let Some(p) = &args.plot {
-        write(p, &report.svg(), "plot")?;
+        super::write_output(p, &report.svg(), "plot")?;
     }
     Ok(())
 }

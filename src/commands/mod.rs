@@ -78,3 +78,11 @@ pub fn default_model() -> PathBuf {
     let local = PathBuf::from("models/humanoid.urdf");
     if local.is_file() { local } else { PathBuf::from(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf")) }
 }
+
+/// Writes a text output a command produced (a report, a plot) atomically, without a backup
+/// (it is the command's own output, not a file the user edits), and says where it went.
+pub fn write_output(path: &std::path::Path, text: &str, what: &str) -> anyhow::Result<()> {
+    twin_core::fsio::write_atomic(path, text.as_bytes(), twin_core::fsio::Backup::None)?;
+    eprintln!("{what} written to {}", path.display());
+    Ok(())
+}

@@ -123,8 +123,7 @@ fn friction(args: FrictionArgs) -> anyhow::Result<()> {
     })?;
     print!("{}", report.table());
     if let Some(path) = &args.report {
-        twin_core::fsio::write_atomic(path, report.to_json().as_bytes(), twin_core::fsio::Backup::None)?;
-        eprintln!("report written to {}", path.display());
+        super::write_output(path, &report.to_json(), "report")?;
     }
     if let Some(path) = &args.plot {
         twin_core::fsio::write_atomic(path, report.svg().as_bytes(), twin_core::fsio::Backup::None)?;
