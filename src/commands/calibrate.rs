@@ -82,6 +82,17 @@ fn noise(args: NoiseArgs) -> anyhow::Result<()> {
         encoder_motion: args.encoder_motion,
         ..Default::default()
     };
+    let mut inputs = vec![args.log.as_path()];
+    inputs.extend(args.update.as_deref());
+    twin_core::fsio::check_outputs(
+        &[
+            ("--report", args.report.as_deref()),
+            ("--plot", args.plot.as_deref()),
+            ("--rerun", args.rerun.as_deref()),
+            ("--spec", args.spec.as_deref()),
+        ],
+        &inputs,
+    )?;
     let fail = || match &args.update {
         Some(u) => format!("noise calibration failed; {} was not changed", u.display()),
         None => "noise calibration failed".to_string(),

@@ -35,6 +35,10 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     super::check_range("--resync", args.resync, 1e-3, super::MAX_SIM_SECS, "s")?;
     super::check_range("--armature", args.armature, 0.0, 1e6, "kg·m²")?;
+    twin_core::fsio::check_outputs(
+        &[("--report", args.report.as_deref()), ("--plot", args.plot.as_deref())],
+        &[args.urdf.as_path(), args.log.as_path()],
+    )?;
     let log = super::sysid::read_log(&args.log, args.topic.as_deref(), None)?;
     let opts = GapOptions { resync_secs: args.resync, armature: args.armature };
     let report = measure_gap(&args.urdf, &log, &opts)

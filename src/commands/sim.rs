@@ -170,14 +170,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut inputs = vec![model_path.as_path()];
     inputs.extend(args.trajectory.as_deref());
     inputs.extend(args.scenario.as_deref());
-    for out in [&args.record, &args.rerun].into_iter().flatten() {
-        twin_core::fsio::check_output(out, &inputs)?;
-    }
-    if let (Some(a), Some(b)) = (&args.record, &args.rerun)
-        && twin_core::fsio::check_output(a, &[b.as_path()]).is_err()
-    {
-        bail!("--record and --rerun name the same file {}", a.display());
-    }
+    twin_core::fsio::check_outputs(
+        &[("--record", args.record.as_deref()), ("--rerun", args.rerun.as_deref())],
+        &inputs,
+    )?;
     if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
         return Err(twin_core::sim::record::rerun_unavailable().into());
     }

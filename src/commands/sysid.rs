@@ -116,6 +116,9 @@ fn friction(args: FrictionArgs) -> anyhow::Result<()> {
         joints: args.joints.clone(),
         ..Default::default()
     };
+    let mut inputs = vec![args.log.as_path()];
+    inputs.extend(args.update.as_deref());
+    fsio::check_outputs(&[("--report", args.report.as_deref()), ("--plot", args.plot.as_deref())], &inputs)?;
     let log = read_log(&args.log, args.topic.as_deref(), None)?;
     let report = sysid::friction::identify_friction(&log, &opts).with_context(|| match &args.update {
         Some(u) => format!("friction identification failed; {} was not changed", u.display()),
@@ -126,8 +129,7 @@ fn friction(args: FrictionArgs) -> anyhow::Result<()> {
         super::write_output(path, &report.to_json(), "report")?;
     }
     if let Some(path) = &args.plot {
-        twin_core::fsio::write_atomic(path, report.svg().as_bytes(), twin_core::fsio::Backup::None)?;
-        eprintln!("friction curves plotted in {}", path.display());
+        super::write_output(path, &report.svg(), "friction curves plot")?;
     }
     if let Some(urdf) = &args.update {
         let joints = report.joint_updates();
@@ -220,13 +222,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let urdf_target = fsio::check_output(&update, &inputs)?;
     inputs.push(update.as_path());
-    let report_target = args.report.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
-    let mjcf_target = args.mjcf.as_deref().map(|p| fsio::check_output(p, &inputs)).transpose()?;
-    if let (Some(r), Some(m)) = (&args.report, &args.mjcf)
-        && fsio::check_output(r, &[m.as_path()]).is_err()
-    {
-        bail!("--report and --mjcf name the same file {}", r.display());
-    }
+    let mut targets =
+        fsio::check_outputs(&[("--report", args.report.as_deref()), ("--mjcf", args.mjcf.as_deref())], &inputs)?
+            .into_iter();
+    let (report_target, mjcf_target) = (targets.next().flatten(), targets.next().flatten());
     let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
     let robot = match opts.base {
         Base::Fixed => RobotModel::from_urdf(&update),

@@ -304,6 +304,38 @@ fn randomize_merge_never_overwrites_a_shard() {
 
 /// A folder with `arm6.urdf` (the shipped arm perturbed: the "CAD" to correct) and `train.csv`,
 /// a synthetic log of the true arm.
+#[test]
+fn two_outputs_naming_one_file_are_refused_before_any_work() {
+    let dir = sysid_setup();
+    let d = dir.path();
+    let h = humanoid();
+    let h = h.to_str().unwrap();
+    // `./` spells the same file differently; a symlink reaches an existing one.
+    std::fs::write(d.join("old.json"), "keep").unwrap();
+    std::os::unix::fs::symlink("old.json", d.join("link.svg")).unwrap();
+    for (args, names) in [
+        (vec!["sim", h, "--duration", "0.01", "--record", "o.mcap", "--rerun", "./o.mcap"], ["--record", "--rerun"]),
+        (
+            vec!["sysid", "--log", "train.csv", "--update", "arm6.urdf", "--report", "r", "--mjcf", "./r"],
+            ["--report", "--mjcf"],
+        ),
+        (
+            vec!["sysid", "friction", "--log", "train.csv", "--report", "old.json", "--plot", "link.svg"],
+            ["--report", "--plot"],
+        ),
+        (vec!["gap", "arm6.urdf", "--log", "train.csv", "--report", "g", "--plot", "./g"], ["--report", "--plot"]),
+        (vec!["calibrate", "noise", "--log", "train.csv", "--report", "n", "--spec", "./n"], ["--report", "--spec"]),
+    ] {
+        let (ok, _, err) = run_in(d, &args, QUICK);
+        assert!(!ok, "{args:?} succeeded");
+        assert!(err.contains(names[0]) && err.contains(names[1]) && err.contains("its own file"), "{args:?}: {err}");
+    }
+    assert_eq!(std::fs::read_to_string(d.join("old.json")).unwrap(), "keep");
+    for f in ["o.mcap", "r", "g", "n"] {
+        assert!(!d.join(f).exists(), "{f} was written");
+    }
+}
+
 fn sysid_setup() -> tempfile::TempDir {
     let dir = tempfile::tempdir().unwrap();
     let truth = repo_root().join("models/arm6.urdf");

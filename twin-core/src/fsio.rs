@@ -230,6 +230,41 @@ pub fn check_output(path: &Path, inputs: &[&Path]) -> Result<OutputTarget> {
     Ok(OutputTarget { requested: path.to_path_buf(), resolved, existing })
 }
 
+/// [`check_output`] for every output a command writes, each checked against the `inputs` and
+/// against the other outputs (two options naming one file would leave only the last write).
+/// `outputs` pairs each optional path with the option that names it, for the message; the
+/// targets come back in the same order, `None` where the option was not given.
+///
+/// # Errors
+/// [`Error::BadPath`] as [`check_output`], or naming the two options that share a file.
+pub fn check_outputs(outputs: &[(&str, Option<&Path>)], inputs: &[&Path]) -> Result<Vec<Option<OutputTarget>>> {
+    let targets =
+        outputs.iter().map(|(_, p)| p.map(|p| check_output(p, inputs)).transpose()).collect::<Result<Vec<_>>>()?;
+    for (i, a) in targets.iter().enumerate() {
+        for (j, b) in targets.iter().enumerate().skip(i + 1) {
+            if let (Some(a), Some(b)) = (a, b)
+                && same_target(a, b)
+            {
+                return Err(bad(
+                    &a.requested,
+                    format!("is named by both {} and {}: give each output its own file", outputs[i].0, outputs[j].0),
+                ));
+            }
+        }
+    }
+    Ok(targets)
+}
+
+/// Whether two checked outputs write the same file: same inode when both exist, else the same
+/// file name in the same folder.
+fn same_target(a: &OutputTarget, b: &OutputTarget) -> bool {
+    if let (Some(ma), Some(mb)) = (&a.existing, &b.existing) {
+        return same_file(ma, mb);
+    }
+    let folder = |t: &OutputTarget| std::fs::canonicalize(parent_dir(&t.resolved)).ok();
+    a.resolved.file_name() == b.resolved.file_name() && folder(a).is_some() && folder(a) == folder(b)
+}
+
 /// Checks an output *folder* before any work: it is a folder or does not exist yet (its parent
 /// is then created when written), and it is none of `inputs`.
 ///
@@ -618,6 +653,28 @@ mod tests {
         let e = check_output(Path::new("/nonexistent/x.xml"), &[]).unwrap_err().to_string();
         assert!(e.contains("does not exist"), "{e}");
         assert_eq!(std::fs::read(&input).unwrap(), b"x");
+    }
+
+    #[test]
+    fn two_outputs_naming_one_file_are_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let a = dir.path().join("out.json");
+        let sub = dir.path().join("sub");
+        std::fs::create_dir(&sub).unwrap();
+        // New file reached by two spellings of one folder.
+        let b = sub.join("..").join("out.json");
+        let e = check_outputs(&[("--report", Some(&a)), ("--plot", Some(&b))], &[]).unwrap_err().to_string();
+        assert!(e.contains("--report") && e.contains("--plot"), "{e}");
+        // Existing file and a symlink to it.
+        std::fs::write(&a, "x").unwrap();
+        let link = dir.path().join("link.svg");
+        std::os::unix::fs::symlink(&a, &link).unwrap();
+        assert!(check_outputs(&[("--report", Some(&a)), ("--plot", Some(&link))], &[]).is_err());
+        // Distinct files pass, in order.
+        let c = dir.path().join("plot.svg");
+        let t = check_outputs(&[("--report", Some(&a)), ("--rerun", None), ("--plot", Some(&c))], &[]).unwrap();
+        assert!(t[1].is_none());
+        assert_eq!(t[2].as_ref().unwrap().requested, c);
     }
 
     #[test]
