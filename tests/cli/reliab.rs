@@ -45,6 +45,13 @@ fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) 
 
 const QUICK: Duration = Duration::from_secs(60);
 
+/// Runs `twin args` in `dir` (bounded by [`QUICK`]), asserts it failed and returns its stderr.
+fn refused(dir: &Path, args: &[&str]) -> String {
+    let (ok, _, err) = run_in(dir, args, QUICK);
+    assert!(!ok, "{args:?} succeeded");
+    err
+}
+
 fn humanoid() -> PathBuf {
     repo_root().join("models/humanoid.urdf")
 }
@@ -81,8 +88,7 @@ fn fifos_as_inputs_are_refused_without_blocking() {
         vec!["sysid", "--log", "log.csv", "--update", "m.urdf"],
     ];
     for args in cases {
-        let (ok, _, err) = run_in(d, &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d, &args);
         assert!(err.contains("FIFO"), "{args:?}: {err}");
     }
 }
@@ -135,8 +141,7 @@ fn absurd_numeric_options_are_refused_with_the_range() {
         (vec!["randomize", "--duration", "inf", "--episodes", "1"], "--duration"),
     ];
     for (args, option) in cases {
-        let (ok, _, err) = run_in(d.path(), &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d.path(), &args);
         assert!(err.contains(option), "{args:?}: {err}");
         assert!(err.contains(" to "), "the range is in the message: {err}");
     }
@@ -204,8 +209,7 @@ fn sim_and_view_refuse_folders_devices_and_inputs_as_outputs() {
         vec!["sim", h, "--duration", "0.01", "--record", "/dev/null"],
         vec!["sim", h, "--duration", "0.01", "--record", h],
     ] {
-        let (ok, _, err) = run_in(d, &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d, &args);
         assert!(err.contains("twin writes only regular files") || err.contains("is the input"), "{args:?}: {err}");
     }
     assert!(d.join("SOMEDIR").is_dir());
@@ -244,8 +248,7 @@ fn a_urdf_with_a_dtd_is_refused_the_same_way_everywhere() {
         vec!["sim", "dtd.urdf", "--duration", "0.01"],
         vec!["randomize", "dtd.urdf", "--episodes", "1", "--duration", "0.01"],
     ] {
-        let (ok, _, err) = run_in(d, &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d, &args);
         assert!(err.contains("DOCTYPE"), "{args:?}: {err}");
     }
 }
@@ -326,8 +329,7 @@ fn two_outputs_naming_one_file_are_refused_before_any_work() {
         (vec!["gap", "arm6.urdf", "--log", "train.csv", "--report", "g", "--plot", "./g"], ["--report", "--plot"]),
         (vec!["calibrate", "noise", "--log", "train.csv", "--report", "n", "--spec", "./n"], ["--report", "--spec"]),
     ] {
-        let (ok, _, err) = run_in(d, &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d, &args);
         assert!(err.contains(names[0]) && err.contains(names[1]) && err.contains("its own file"), "{args:?}: {err}");
     }
     assert_eq!(std::fs::read_to_string(d.join("old.json")).unwrap(), "keep");
@@ -491,8 +493,7 @@ fn time_jumps_in_a_log_are_reported_not_rendered() {
         vec!["view", "jump.mcap", "--model", a, "-o", "jump.rrd"],
         vec!["sim", a, "--controller", "replay", "--trajectory", "jump.mcap", "--duration", "0.1"],
     ] {
-        let (ok, _, err) = run_in(d, &args, QUICK);
-        assert!(!ok, "{args:?} succeeded");
+        let err = refused(d, &args);
         // Samples are ordered by time, so the year-late one comes last: the jump is named there.
         assert!(err.contains("clock is broken") && err.contains("31536000."), "{args:?}: {err}");
     }
