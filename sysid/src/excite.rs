@@ -985,6 +985,12 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     if !(opts.position_margin >= 0.0 && opts.position_margin.is_finite()) {
         return Err(option_error("position_margin", format!("{}: must be ≥ 0", opts.position_margin)));
     }
+    if opts.starts == 0 || opts.max_iterations == 0 {
+        return Err(option_error("starts", "at least 1 search of at least 1 iteration".into()));
+    }
+    if let Some(b) = opts.smoothing.iter().find(|b| !(**b > 0.0 && b.is_finite())) {
+        return Err(option_error("smoothing", format!("{b}: each sharpness must be positive")));
+    }
     if opts.samples < 10 || opts.random_candidates == 0 {
         return Err(option_error("samples", "at least 10 grid samples and 1 random candidate".into()));
     }
