@@ -62,6 +62,12 @@ pub struct Args {
     /// What to minimize.
     #[arg(long, value_enum, default_value_t = CriterionArg::Cond)]
     pub criterion: CriterionArg,
+    /// Searches started from the best random trajectories (fewer: a quicker design).
+    #[arg(long, default_value_t = 3, value_name = "N")]
+    pub starts: usize,
+    /// Quasi-Newton iterations per search stage.
+    #[arg(long, default_value_t = 60, value_name = "N")]
+    pub iterations: usize,
     /// Seed of the random trajectories the search starts from.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -87,6 +93,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             CriterionArg::Logdet => Criterion::LogDet,
         },
         seed: args.seed,
+        starts: args.starts,
+        max_iterations: args.iterations,
         ..ExciteOptions::default()
     };
     let report =

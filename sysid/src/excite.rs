@@ -30,14 +30,21 @@
 //! torque is the model's inverse dynamics `Y·π_URDF`, friction included) and self-collision
 //! (MuJoCo contacts between the robot's own links; pairs already touching at the rest pose,
 //! and each link with its grandparent, whose shapes overlap around the joint between them in
-//! most URDFs, excepted). Limits enter the optimization as a penalty; the result is then scaled per
-//! joint to use its position, velocity and acceleration room and shrunk until every limit
-//! holds on a 4× finer grid.
+//! most URDFs, excepted). Position, velocity and acceleration are met by construction: each
+//! joint's deviation from its rest is shrunk, on a 4× finer grid, where it would leave its box.
+//! Torque and collisions enter the search as a penalty; the result is then shrunk (all joints,
+//! or only those involved in a violation) until every limit holds on the fine grid.
 //!
 //! ## Search
-//! 20 random 5-harmonic trajectories (scaled to the same limits) are generated; the best is
-//! the starting point of a quasi-Newton search (BFGS, forward-difference gradients,
-//! backtracking line search). Deterministic for a given seed.
+//! 20 random 5-harmonic trajectories are drawn and shrunk as a whole to the limits: the best is
+//! the comparison figure. A global stage then draws 100 more (rest anywhere in the range, so
+//! that offsets keeping links apart are tried) and scales each of the 120 per joint to touch
+//! its binding position, velocity or acceleration limit; from the best 3, quasi-Newton
+//! searches (BFGS, forward-difference gradients, backtracking line search) minimize smooth
+//! surrogates of `ln cond` (soft maximum minus soft minimum of `ln σᵢ`, sharpness 4 then 16:
+//! the condition number is not differentiable where singular values cross, and at its optimum
+//! many of them do), and the best is polished on `ln cond` itself. Deterministic for a given
+//! seed.
 
 use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
@@ -91,8 +98,17 @@ pub struct ExciteOptions {
     /// Random trajectories tried first; the best is the search's start and the comparison
     /// figure (default: 20).
     pub random_candidates: usize,
-    /// Quasi-Newton iterations (default: 60).
+    /// Quasi-Newton iterations per stage (default: 60).
     pub max_iterations: usize,
+    /// Further random trajectories (rest anywhere in the range) drawn for the global stage
+    /// (default: 100).
+    pub global_candidates: usize,
+    /// Searches started from the best of all random trajectories, each scaled to touch its
+    /// limits (default: 3).
+    pub starts: usize,
+    /// Sharpness of the smooth surrogates of `ln cond` each search goes through before the
+    /// polish on `ln cond` itself (default: `[4, 16]`).
+    pub smoothing: Vec<f64>,
     /// Grid points per period for the criterion and the penalty (default: 100; limits are
     /// checked at the end on a 4× finer grid).
     pub samples: usize,
@@ -119,6 +135,9 @@ impl Default for ExciteOptions {
             criterion: Criterion::Condition,
             random_candidates: 20,
             max_iterations: 60,
+            global_candidates: 100,
+            starts: 3,
+            smoothing: vec![4.0, 16.0],
             samples: 100,
             seed: 1,
             velocity_deadzone: 0.05,
@@ -395,6 +414,11 @@ struct Problem<'a> {
     body_joints: Vec<Vec<usize>>,
     /// Per excited joint: involved in a violation of the last [`Problem::assess`].
     involved: Vec<bool>,
+    /// Smoothing of the condition criterion (soft max/min of ln σ with this sharpness), or
+    /// `None` for the condition number itself.
+    beta: Option<f64>,
+    /// Inside the search: [`Eval::scaled_condition`] is not computed.
+    searching: bool,
 }
 
 /// Free variables per joint: `c`, `a₂…a_H`, `b₂…b_H`.
@@ -560,7 +584,7 @@ impl<'a> Problem<'a> {
                 for (j, joint) in self.robot.joints.iter().enumerate() {
                     data.qpos_mut()[joint.qpos_adr] = q[j];
                 }
-                data.forward()?;
+                data.kinematics_collision()?;
                 let model = data.model().clone();
                 for (dist, geoms) in data.contacts() {
                     let bodies = [
@@ -596,18 +620,32 @@ impl<'a> Problem<'a> {
     fn evaluate(&mut self, joints: &[FourierJoint]) -> Result<Eval> {
         self.evaluations += 1;
         let (rz, penalty, _) = self.assess(joints, self.opts.samples, self.opts.self_collision)?;
-        let (condition, scaled_condition, crit) =
-            match (singular_values(&rz, &self.base_cols, false), singular_values(&rz, &self.base_cols, true)) {
-                (Some(sv), Some(scaled)) => {
-                    let crit = match self.opts.criterion {
-                        Criterion::Condition => ratio(&sv).ln(),
-                        // Log-determinant of the column-scaled matrix: invariant to units.
-                        Criterion::LogDet => -2.0 * scaled.iter().map(|s| s.ln()).sum::<f64>() / scaled.len() as f64,
-                    };
-                    (ratio(&sv), ratio(&scaled), crit)
-                }
-                _ => (f64::INFINITY, f64::INFINITY, 100.0),
-            };
+        // The column-scaled figure is only reported (and the log-determinant's): the search
+        // under the condition criterion skips its SVD.
+        let want_scaled = self.opts.criterion == Criterion::LogDet || !self.searching;
+        let scaled = if want_scaled { singular_values(&rz, &self.base_cols, true) } else { Some(Vec::new()) };
+        let (condition, scaled_condition, crit) = match (singular_values(&rz, &self.base_cols, false), scaled) {
+            (Some(sv), Some(scaled)) => {
+                let crit = match self.opts.criterion {
+                    Criterion::Condition => match self.beta {
+                        // Soft maximum of ln σ minus soft minimum: smooth where singular
+                        // values cross, an upper bound on ln cond.
+                        Some(beta) => {
+                            let lse = |sign: f64| {
+                                let m = sv.iter().map(|s| sign * s.ln()).fold(f64::NEG_INFINITY, f64::max);
+                                m + sv.iter().map(|s| (beta * (sign * s.ln() - m)).exp()).sum::<f64>().ln() / beta
+                            };
+                            lse(1.0) + lse(-1.0)
+                        }
+                        None => ratio(&sv).ln(),
+                    },
+                    // Log-determinant of the column-scaled matrix: invariant to units.
+                    Criterion::LogDet => -2.0 * scaled.iter().map(|s| s.ln()).sum::<f64>() / scaled.len() as f64,
+                };
+                (ratio(&sv), if want_scaled { ratio(&scaled) } else { f64::NAN }, crit)
+            }
+            _ => (f64::INFINITY, f64::INFINITY, 100.0),
+        };
         Ok(Eval { cost: crit + 100.0 * penalty, condition, scaled_condition, penalty })
     }
 
@@ -712,6 +750,48 @@ impl<'a> Problem<'a> {
         Ok(Ok((chosen, worst)))
     }
 
+    /// Each joint's rest clamped into its range and its deviation from rest scaled to its
+    /// position, velocity and acceleration room on the fine grid: to touch the binding one
+    /// with `touch`, else only shrunk where it exceeds one.
+    fn box_fit(&self, joints: &[FourierJoint], touch: bool) -> Vec<FourierJoint> {
+        let n = 4 * self.opts.samples;
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        joints
+            .iter()
+            .zip(&self.limits)
+            .map(|(f, lim)| {
+                let mut f = f.clone();
+                f.rest = f.rest.clamp(lim.lower, lim.upper);
+                let (mut up, mut down, mut v, mut a) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+                for k in 0..n {
+                    let (q, qd, qdd) = f.sample(omega, k as f64 * period / n as f64);
+                    up = up.max(q - f.rest);
+                    down = down.max(f.rest - q);
+                    v = v.max(qd.abs());
+                    a = a.max(qdd.abs());
+                }
+                let mut s = f64::INFINITY;
+                for (room, need) in
+                    [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
+                {
+                    if need > 1e-12 {
+                        s = s.min(0.999 * room / need);
+                    }
+                }
+                let s = if !s.is_finite() {
+                    1.0
+                } else if touch {
+                    s
+                } else {
+                    s.min(1.0)
+                };
+                f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+                f
+            })
+            .collect()
+    }
+
     fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {
         let n = 4 * self.opts.samples;
         let omega = self.omega();
@@ -774,6 +854,21 @@ fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rn
         }
     }
     joints_from_vars(&x, h, template)
+}
+
+/// As [`random_joints`], the rest position uniform over the whole range (the global stage's
+/// draw: offsets that keep links apart are part of the search).
+fn random_joints_anywhere(
+    template: &[FourierJoint],
+    limits: &[JointLimits],
+    h: usize,
+    rng: &mut Rng,
+) -> Vec<FourierJoint> {
+    let mut js = random_joints(template, limits, h, rng);
+    for (f, lim) in js.iter_mut().zip(limits) {
+        f.rest = lim.lower + (lim.upper - lim.lower) * rng.uniform();
+    }
+    js
 }
 
 /// The starting inverse Hessian of [`bfgs`]: the step scales squared (variables of different
@@ -889,6 +984,12 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     }
     if !(opts.position_margin >= 0.0 && opts.position_margin.is_finite()) {
         return Err(option_error("position_margin", format!("{}: must be ≥ 0", opts.position_margin)));
+    }
+    if opts.starts == 0 || opts.max_iterations == 0 {
+        return Err(option_error("starts", "at least 1 search of at least 1 iteration".into()));
+    }
+    if let Some(b) = opts.smoothing.iter().find(|b| !(**b > 0.0 && b.is_finite())) {
+        return Err(option_error("smoothing", format!("{b}: each sharpness must be positive")));
     }
     if opts.samples < 10 || opts.random_candidates == 0 {
         return Err(option_error("samples", "at least 10 grid samples and 1 random candidate".into()));
@@ -1043,6 +1144,8 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         evaluations: 0,
         body_joints,
         involved: Vec::new(),
+        beta: None,
+        searching: false,
     };
     let template: Vec<FourierJoint> = selected
         .iter()
@@ -1088,6 +1191,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     }
     let mut random_conditions = Vec::new();
     let mut best: Option<(f64, Eval, Vec<FourierJoint>)> = None;
+    let kept = candidates.clone();
     for js in candidates {
         let e = problem.evaluate(&js)?;
         random_conditions.push(e.condition);
@@ -1098,9 +1202,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let (_, best_eval, best_random) = best.expect("at least one candidate");
     let best_random_condition = best_eval.condition;
 
-    // Quasi-Newton searches from the best random trajectory as drawn and with each joint
-    // scaled to its room (better where nothing collides; on a collision boundary the
-    // penalty's kinks can stall the search there): the better result is kept.
+    // Global stage: more random trajectories (the same draw, but the rest position anywhere in
+    // the range) and the 20 above, each scaled per joint to touch its position, velocity or
+    // acceleration room; the best few start quasi-Newton searches on a smooth surrogate of the
+    // condition number, and the best result is polished on the condition number itself.
     let steps: Vec<f64> = problem
         .limits
         .iter()
@@ -1110,34 +1215,75 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             s
         })
         .collect();
-    let mut starts = vec![best_random.clone()];
-    if let Ok((js, _)) = problem.fit_to_limits(&best_random, true)? {
-        starts.push(js);
+    problem.searching = true;
+    let mut pool: Vec<(f64, Vec<FourierJoint>)> = Vec::new();
+    for js in &kept {
+        let t = problem.box_fit(js, true);
+        pool.push((problem.evaluate(&t)?.cost, t));
     }
+    for _ in 0..opts.global_candidates {
+        let raw = random_joints_anywhere(&template, &problem.limits, h, &mut rng);
+        let t = problem.box_fit(&raw, true);
+        pool.push((problem.evaluate(&t)?.cost, t));
+    }
+    pool.sort_by(|a, b| a.0.total_cmp(&b.0));
     let (mut joints, mut condition, mut scaled_condition, mut cost) =
         (best_random.clone(), best_random_condition, best_eval.scaled_condition, best_eval.cost);
     let mut binding_note = None;
-    for start in starts {
+    let mut results: Vec<(f64, Vec<f64>)> = Vec::new();
+    for (_, start) in pool.iter().take(opts.starts) {
+        let mut x = vars_from_joints(start, h);
+        for &beta in &opts.smoothing {
+            problem.beta = Some(beta);
+            x = bfgs(
+                |x| {
+                    let js = problem.box_fit(&joints_from_vars(x, h, &template), false);
+                    Ok(problem.evaluate(&js)?.cost)
+                },
+                &x,
+                &steps,
+                opts.max_iterations,
+            )?;
+        }
+        problem.beta = None;
+        let js = problem.box_fit(&joints_from_vars(&x, h, &template), false);
+        results.push((problem.evaluate(&js)?.cost, x));
+    }
+    results.sort_by(|a, b| a.0.total_cmp(&b.0));
+    if let Some((_, x0)) = results.first() {
         let x = bfgs(
             |x| {
-                let js = joints_from_vars(x, h, &template);
+                let js = problem.box_fit(&joints_from_vars(x, h, &template), false);
                 Ok(problem.evaluate(&js)?.cost)
             },
-            &vars_from_joints(&start, h),
+            x0,
             &steps,
             opts.max_iterations,
         )?;
-        let designed = joints_from_vars(&x, h, &template);
-        if let Ok((fitted, binding)) = problem.fit_to_limits(&designed, true)? {
+        problem.searching = false;
+        let designed = problem.box_fit(&joints_from_vars(&x, h, &template), false);
+        let mut options = Vec::new();
+        let (_, pen, _) = problem.assess(&designed, 4 * opts.samples, opts.self_collision)?;
+        if pen == 0.0 {
+            options.push((designed.clone(), None));
+        } else {
+            for per_joint in [false, true] {
+                if let Ok(fitted) = problem.fit_to_limits(&designed, per_joint)? {
+                    options.push(fitted);
+                }
+            }
+        }
+        for (fitted, binding) in options {
             let e = problem.evaluate(&fitted)?;
             if e.penalty == 0.0 && e.cost < cost {
                 (joints, condition, scaled_condition, cost) = (fitted, e.condition, e.scaled_condition, e.cost);
-                binding_note = binding.map(|b| {
+                binding_note = binding.map(|b: Violation| {
                     format!("the designed trajectory was shrunk to fit the limits; the binding one: {}", b.what)
                 });
             }
         }
     }
+    problem.searching = false;
     notes.extend(binding_note);
     if condition >= best_random_condition {
         notes.push("the search found nothing better than the best random trajectory".into());

@@ -1,6 +1,6 @@
 //! `twin excite`'s design: on the shipped 6-DOF arm and on the humanoid's left leg, the designed
 //! trajectory's regressor is better conditioned than the best of 20 random 5-harmonic
-//! trajectories within the same limits (≥ 5×), respects every limit, starts and ends at rest,
+//! trajectories within the same limits (≥ 10× on the leg, ≥ 3.3× on the arm), respects every limit, starts and ends at rest,
 //! and identification along it predicts a held-out log better.
 
 use std::f64::consts::PI;
@@ -59,18 +59,16 @@ fn held_out_nrmse(truth: &Path, start: &Path, traj: &Excitation, held_out: &sysi
     idx.iter().map(|&j| nrmse[0][j]).sum::<f64>() / idx.len() as f64
 }
 
-fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions) {
+fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions, min_ratio: f64) {
     let truth = models_dir().join(urdf);
     let joints: Vec<String> = joints.iter().map(|s| s.to_string()).collect();
     let opts = ExciteOptions { joints: joints.clone(), ..Default::default() };
     let report = design(&truth, &opts).unwrap();
     eprintln!("{}", report.table());
     assert_eq!(report.random_conditions.len(), 20, "{:?}", report.notes);
-    // Measured: 1.5–1.6× on the arm (random trajectories scaled to the same limits already
-    // reach ≈ 1e2; the issue asked for 5×, which the search does not reach).
     assert!(
-        report.condition * 1.4 <= report.best_random_condition,
-        "designed condition {:.3e} is not 1.4× below the best random {:.3e}",
+        report.condition * min_ratio <= report.best_random_condition,
+        "designed condition {:.3e} is not {min_ratio}× below the best random {:.3e}",
         report.condition,
         report.best_random_condition
     );
@@ -90,12 +88,18 @@ fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions) {
     );
 }
 
+// Each design costs 70 s (arm) and 20 s (leg) of CPU in the dev profile: run by
+// `cargo test --release` (what CI runs).
 #[test]
+#[cfg_attr(debug_assertions, ignore = "slow in the dev profile: cargo test --release")]
 fn arm6_designed_trajectory_beats_random() {
-    check_design("arm6.urdf", &[], SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() });
+    // Measured: 3.7× (32.7 against 119.6); the issue's 5× is not reached on the arm (see
+    // BENCHMARKS.md: viscous/Coulomb pairs against gravity columns).
+    check_design("arm6.urdf", &[], SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 3.3);
 }
 
 #[test]
+#[cfg_attr(debug_assertions, ignore = "slow in the dev profile: cargo test --release")]
 fn humanoid_leg_designed_trajectory_beats_random() {
     let leg = [
         "left_hip_yaw_joint",
@@ -105,7 +109,8 @@ fn humanoid_leg_designed_trajectory_beats_random() {
         "left_ankle_pitch_joint",
         "left_ankle_roll_joint",
     ];
-    check_design("humanoid.urdf", &leg, SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() });
+    // Measured: 15.6× (761 against 1.19e4).
+    check_design("humanoid.urdf", &leg, SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 10.0);
 }
 
 #[test]

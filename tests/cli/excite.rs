@@ -17,7 +17,12 @@ fn twin(dir: &Path, args: &[&str]) -> Output {
 fn excite_writes_a_trajectory_that_replay_plays_on_the_twin() {
     let dir = tempfile::tempdir().unwrap();
     let urdf = arm_urdf();
-    let out = twin(dir.path(), &["excite", urdf.to_str().unwrap(), "--report", "excite.json"]);
+    // One search of 20 iterations a stage: the full default design is the release-profile
+    // test in sysid/tests/excite.rs.
+    let out = twin(
+        dir.path(),
+        &["excite", urdf.to_str().unwrap(), "--report", "excite.json", "--starts", "1", "--iterations", "20"],
+    );
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(out.status.success(), "{stderr}");
     let stdout = String::from_utf8_lossy(&out.stdout);

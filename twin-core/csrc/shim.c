@@ -184,6 +184,12 @@ int twin_kinematics_vel(const mjModel* m, mjData* d, char* err, int err_sz) {
   TWIN_GUARD(mj_kinematics(m, d); mj_comPos(m, d); mj_comVel(m, d), reset_stack(d))
 }
 
+// Positions and contacts only (mj_kinematics, mj_collision): self-collision checks along a
+// planned path without the dynamics and the constraint solver of a forward pass.
+int twin_kinematics_collision(const mjModel* m, mjData* d, char* err, int err_sz) {
+  TWIN_GUARD(mj_kinematics(m, d); mj_collision(m, d), reset_stack(d))
+}
+
 // Jacobian of a body frame's origin and its time derivative (each 3 x nv, row-major).
 int twin_jac_body_dot(const mjModel* m, mjData* d, int body, mjtNum* jacp, mjtNum* jacr,
                       mjtNum* jacp_dot, mjtNum* jacr_dot, char* err, int err_sz) {

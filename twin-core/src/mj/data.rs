@@ -407,6 +407,17 @@ impl Data {
         guarded("mj_kinematics", |e, n| unsafe { ffi::twin_kinematics_vel(m, d, e, n) })
     }
 
+    /// Body poses and contacts only (`mj_kinematics`, `mj_collision`): [`Data::contacts`] at
+    /// the current `qpos` without the dynamics and constraint solver of [`Data::forward`].
+    ///
+    /// # Errors
+    /// As [`Data::step`].
+    pub fn kinematics_collision(&mut self) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: as in step.
+        guarded("mj_collision", |e, n| unsafe { ffi::twin_kinematics_collision(m, d, e, n) })
+    }
+
     /// Jacobian of body `body`'s frame origin and its time derivative (`mj_jacBody`,
     /// `mj_jacDot`), world frame, each row-major 3 × nv: translational `jacp`, rotational
     /// `jacr`, then their derivatives. Needs [`Data::kinematics_with_velocity`] (or a forward

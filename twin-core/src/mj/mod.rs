@@ -74,6 +74,7 @@ pub(crate) mod ffi {
             err_sz: c_int,
         ) -> c_int;
         pub fn twin_kinematics_vel(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
+        pub fn twin_kinematics_collision(m: *const mjModel, d: *mut mjData, err: *mut c_char, err_sz: c_int) -> c_int;
         pub fn twin_jac_body_dot(
             m: *const mjModel,
             d: *mut mjData,
