@@ -97,6 +97,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         max_iterations: args.iterations,
         ..ExciteOptions::default()
     };
+    twin_core::fsio::check_outputs(
+        &[
+            ("--csv", Some(args.csv.as_path())),
+            ("--bag", Some(args.bag.as_path())),
+            ("--report", args.report.as_deref()),
+        ],
+        &[args.urdf.as_path()],
+    )?;
     let report =
         design(&args.urdf, &opts).with_context(|| format!("no excitation trajectory for {}", args.urdf.display()))?;
     print!("{}", report.table());
@@ -104,7 +112,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     twin_core::fsio::write_atomic(&args.csv, traj.to_csv(args.rate).as_bytes(), twin_core::fsio::Backup::None)?;
     traj.write_mcap(&args.bag, &args.topic, args.rate)?;
     if let Some(p) = &args.report {
-        twin_core::fsio::write_atomic(p, report.to_json().as_bytes(), twin_core::fsio::Backup::None)?;
+        super::write_output(p, &report.to_json(), "report")?;
     }
     eprintln!(
         "trajectory written to {} and {} (topic {}); play it on the twin with\n  twin sim {} --controller replay \

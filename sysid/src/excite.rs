@@ -252,17 +252,19 @@ impl Excitation {
         }
     }
 
-    /// Writes [`Excitation::to_message`] to an MCAP file on `topic` (atomically).
+    /// Writes [`Excitation::to_message`] to an MCAP file on `topic` (an existing file is kept as
+    /// a numbered backup).
     ///
     /// # Errors
     /// [`Error::Core`] if the file can't be written.
     pub fn write_mcap(&self, path: &Path, topic: &str, rate_hz: f64) -> Result<()> {
-        let tmp = path.with_extension("mcap.tmp");
-        let mut writer = twin_core::log::LogWriter::create(&tmp, &twin_core::log::WriterOptions::default())?;
+        // The log writer checks the path and keeps an existing file as a numbered backup, as
+        // every bag twin writes.
+        let mut writer = twin_core::log::LogWriter::create(path, &twin_core::log::WriterOptions::default())?;
         let t = writer.add_topic::<twin_core::log::JointTrajectory>(topic)?;
         writer.write(t, 0, &self.to_message(rate_hz))?;
         writer.finish()?;
-        std::fs::rename(&tmp, path).map_err(|source| Error::Io { path: path.to_path_buf(), source })
+        Ok(())
     }
 }
 
