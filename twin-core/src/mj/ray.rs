@@ -286,13 +286,23 @@ impl<'a> RayScene<'a> {
         seen
     }
 
-    /// The indices in `seen` of the geoms whose bounding sphere meets the cone of unit axis
-    /// `axis` and half-angle `half_angle_rad` (apex at the origin of `seen`), nearest first:
-    /// every ray inside the cone can only hit these.
-    fn cull(seen: &[Seen], axis: [f64; 3], half_angle_rad: f64, pyramid: Option<&[[f64; 3]; 4]>, out: &mut Vec<u32>) {
+    /// The indices `from` (in `seen`, nearest first) of the geoms the rays `dirs` (unit, from
+    /// the origin of `seen`) may hit: whose bounding sphere meets the narrowest cone holding
+    /// the rays and whose box is not wholly outside the pyramid holding them. Every ray of
+    /// `dirs` can only hit these.
+    fn cull(
+        seen: &[Seen],
+        from: impl Iterator<Item = u32>,
+        dirs: &[[f64; 3]],
+        out: &mut Vec<u32>,
+    ) {
         out.clear();
+        let (axis, half_angle_rad) = bundle_cone(dirs);
+        let pyramid = bundle_pyramid(dirs, axis, half_angle_rad);
+        let pyramid = pyramid.as_ref();
         let (sin_a, cos_a) = half_angle_rad.min(std::f64::consts::PI).sin_cos();
-        for (i, s) in seen.iter().enumerate() {
+        for i in from {
+            let s = &seen[i as usize];
             // The sphere meets the cone when the angle between the axis and its centre is at
             // most the half-angle plus its angular radius β = asin(r/d): cos θ ≥ cos(α + β).
             let meets = s.always
@@ -304,7 +314,7 @@ impl<'a> RayScene<'a> {
                 _ => false,
             };
             if meets && !outside() {
-                out.push(i as u32);
+                out.push(i);
             }
         }
     }
@@ -377,7 +387,7 @@ impl<'a> RayScene<'a> {
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64) -> Option<RayHit> {
         let seen = self.seen_from(origin, max_dist_m);
         let mut candidates = Vec::new();
-        Self::cull(&seen, dir, 0.0, None, &mut candidates);
+        Self::cull(&seen, 0..seen.len() as u32, &[dir], &mut candidates);
         self.nearest(&seen, &origin, &dir, max_dist_m, &candidates, None, &mut RayStats::default()).map(|(h, _)| h)
     }
 
@@ -432,9 +442,10 @@ impl<'a> RayScene<'a> {
 
     /// Casts the rays from `origin` along the unit vectors `dirs`, writing each nearest hit
     /// within `max_dist_m` into `out` (same length). Consecutive rays are taken in bundles of
-    /// `bundle` and culled together, so rays close in direction should be next to each other
-    /// (an image tile, a stretch of a scan). Bundles run in parallel on the current rayon
-    /// pool when `parallel`; the result does not depend on it. Returns what the cast cost.
+    /// `bundle` and culled together, and runs of 16 bundles as a group before that, so rays
+    /// close in direction should be next to each other (an image tile, 4×4 tiles, a stretch
+    /// of a scan). Groups run in parallel on the current rayon pool when `parallel`; the
+    /// result does not depend on it. Returns what the cast cost.
     ///
     /// # Errors
     /// [`Error::Size`] when `out` and `dirs` differ in length.
@@ -452,39 +463,48 @@ impl<'a> RayScene<'a> {
         }
         let bundle = bundle.max(1);
         let seen = self.seen_from(origin, max_dist_m);
-        let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), candidates: &mut Vec<u32>| {
+        // Bundles are culled in groups first (an image's 4×4 tiles), then each bundle from
+        // its group's candidates: most geoms are dropped once per group, not once per bundle.
+        let group = bundle * GROUP_BUNDLES;
+        let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), lists: &mut (Vec<u32>, Vec<u32>)| {
+            let (in_group, candidates) = lists;
             let mut stats = RayStats { rays: dirs.len() as u64, ..RayStats::default() };
-            let (axis, half_angle) = bundle_cone(dirs);
-            let pyramid = bundle_pyramid(dirs, axis, half_angle);
-            Self::cull(&seen, axis, half_angle, pyramid.as_ref(), candidates);
-            let mut hint = None;
-            for (d, o) in dirs.iter().zip(out.iter_mut()) {
-                let best = self.nearest(&seen, &origin, d, max_dist_m, candidates, hint, &mut stats);
-                hint = best.map(|(_, k)| k).or(hint);
-                *o = best.map(|(h, _)| h);
+            Self::cull(&seen, 0..seen.len() as u32, dirs, in_group);
+            for (dirs, out) in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
+                Self::cull(&seen, in_group.iter().copied(), dirs, candidates);
+                let mut hint = None;
+                for (d, o) in dirs.iter().zip(out.iter_mut()) {
+                    let best = self.nearest(&seen, &origin, d, max_dist_m, candidates, hint, &mut stats);
+                    hint = best.map(|(_, k)| k).or(hint);
+                    *o = best.map(|(h, _)| h);
+                }
             }
             stats
         };
         let stats = if parallel {
             use rayon::prelude::*;
-            dirs.par_chunks(bundle).zip(out.par_chunks_mut(bundle)).map_init(Vec::new, |c, chunk| run(chunk, c)).reduce(
-                RayStats::default,
-                |mut a, b| {
+            dirs.par_chunks(group)
+                .zip(out.par_chunks_mut(group))
+                .map_init(<(Vec<u32>, Vec<u32>)>::default, |c, chunk| run(chunk, c))
+                .reduce(RayStats::default, |mut a, b| {
                     a += b;
                     a
-                },
-            )
+                })
         } else {
-            let mut candidates = Vec::new();
+            let mut lists = <(Vec<u32>, Vec<u32>)>::default();
             let mut stats = RayStats::default();
-            for chunk in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
-                stats += run(chunk, &mut candidates);
+            for chunk in dirs.chunks(group).zip(out.chunks_mut(group)) {
+                stats += run(chunk, &mut lists);
             }
             stats
         };
         Ok(stats)
     }
 }
+
+/// Bundles culled together as a group before each is culled on its own (see
+/// [`RayScene::cast_bundles`]).
+const GROUP_BUNDLES: usize = 16;
 
 /// Half-sizes of a box about the geom's centre, in its frame, that holds it; `None` for an
 /// infinite plane.
@@ -523,8 +543,8 @@ fn bundle_pyramid(dirs: &[[f64; 3]], axis: [f64; 3], half_angle_rad: f64) -> Opt
     let (mut x_lo, mut x_hi, mut y_lo, mut y_hi) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
     for d in dirs {
         // Within the cone the ray points forward along the axis (cos ≥ 0.5).
-        let z = dot(*d, axis);
-        let (x, y) = (dot(*d, u) / z, dot(*d, w) / z);
+        let inv_z = 1.0 / dot(*d, axis);
+        let (x, y) = (dot(*d, u) * inv_z, dot(*d, w) * inv_z);
         x_lo = x_lo.min(x);
         x_hi = x_hi.max(x);
         y_lo = y_lo.min(y);

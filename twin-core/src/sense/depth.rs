@@ -330,20 +330,26 @@ impl DepthCamera {
                 message: format!("depth noise {} m: give a standard deviation ≥ 0", opts.noise_std_m),
             });
         }
-        // Rays in tile order: TILE×TILE blocks, row-major within and between blocks.
+        // Rays in tile order: TILE×TILE blocks (the caster's bundles), 4×4 of them in a
+        // super-tile (its groups), row-major within and between blocks.
         let (w, h) = (opts.width, opts.height);
         let mut rays_optical = Vec::with_capacity(intrinsics.len());
         let mut depth_per_dist = Vec::with_capacity(intrinsics.len());
         let mut pixel = Vec::with_capacity(intrinsics.len());
-        for tv in (0..h).step_by(TILE as usize) {
-            for tu in (0..w).step_by(TILE as usize) {
-                for v in tv..(tv + TILE).min(h) {
-                    for u in tu..(tu + TILE).min(w) {
-                        let r = intrinsics.ray_optical(u, v);
-                        let n = r.norm();
-                        rays_optical.push(r / n);
-                        depth_per_dist.push(1.0 / n);
-                        pixel.push(v * w + u);
+        let superb = 4 * TILE;
+        for sv in (0..h).step_by(superb as usize) {
+            for su in (0..w).step_by(superb as usize) {
+                for tv in (sv..(sv + superb).min(h)).step_by(TILE as usize) {
+                    for tu in (su..(su + superb).min(w)).step_by(TILE as usize) {
+                        for v in tv..(tv + TILE).min(h) {
+                            for u in tu..(tu + TILE).min(w) {
+                                let r = intrinsics.ray_optical(u, v);
+                                let n = r.norm();
+                                rays_optical.push(r / n);
+                                depth_per_dist.push(1.0 / n);
+                                pixel.push(v * w + u);
+                            }
+                        }
                     }
                 }
             }
