@@ -218,7 +218,7 @@ impl<'a> RayScene<'a> {
                 Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r })
             })
             .collect();
-        RayScene { model, data, geoms }
+        RayScene { model, data, geoms: without_twins(geoms) }
     }
 
     /// Number of geoms rays can hit.
@@ -288,17 +288,12 @@ impl<'a> RayScene<'a> {
 
     /// The indices `from` (in `seen`, nearest first) of the geoms the rays `dirs` (unit, from
     /// the origin of `seen`) may hit: whose bounding sphere meets the narrowest cone holding
-    /// the rays and whose box is not wholly outside the pyramid holding them. Every ray of
-    /// `dirs` can only hit these.
-    fn cull(
-        seen: &[Seen],
-        from: impl Iterator<Item = u32>,
-        dirs: &[[f64; 3]],
-        out: &mut Vec<u32>,
-    ) {
+    /// the rays and, `with_pyramid`, whose box is not wholly outside the pyramid holding them.
+    /// Every ray of `dirs` can only hit these.
+    fn cull(seen: &[Seen], from: impl Iterator<Item = u32>, dirs: &[[f64; 3]], with_pyramid: bool, out: &mut Vec<u32>) {
         out.clear();
         let (axis, half_angle_rad) = bundle_cone(dirs);
-        let pyramid = bundle_pyramid(dirs, axis, half_angle_rad);
+        let pyramid = if with_pyramid { bundle_pyramid(dirs, axis, half_angle_rad) } else { None };
         let pyramid = pyramid.as_ref();
         let (sin_a, cos_a) = half_angle_rad.min(std::f64::consts::PI).sin_cos();
         for i in from {
@@ -387,7 +382,7 @@ impl<'a> RayScene<'a> {
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64) -> Option<RayHit> {
         let seen = self.seen_from(origin, max_dist_m);
         let mut candidates = Vec::new();
-        Self::cull(&seen, 0..seen.len() as u32, &[dir], &mut candidates);
+        Self::cull(&seen, 0..seen.len() as u32, &[dir], false, &mut candidates);
         self.nearest(&seen, &origin, &dir, max_dist_m, &candidates, None, &mut RayStats::default()).map(|(h, _)| h)
     }
 
@@ -396,7 +391,7 @@ impl<'a> RayScene<'a> {
     /// same geom, and its distance then skips every candidate known to be farther). The answer
     /// does not depend on the hint. Returns the hit and its index in `seen`.
     #[allow(clippy::too_many_arguments)]
-    #[inline]
+    #[inline(always)]
     fn nearest(
         &self,
         seen: &[Seen],
@@ -469,9 +464,11 @@ impl<'a> RayScene<'a> {
         let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), lists: &mut (Vec<u32>, Vec<u32>)| {
             let (in_group, candidates) = lists;
             let mut stats = RayStats { rays: dirs.len() as u64, ..RayStats::default() };
-            Self::cull(&seen, 0..seen.len() as u32, dirs, in_group);
+            // The group by its cone only: the pyramid costs a pass over the rays, and pays off
+            // on the bundles' smaller ones.
+            Self::cull(&seen, 0..seen.len() as u32, dirs, false, in_group);
             for (dirs, out) in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
-                Self::cull(&seen, in_group.iter().copied(), dirs, candidates);
+                Self::cull(&seen, in_group.iter().copied(), dirs, true, candidates);
                 let mut hint = None;
                 for (d, o) in dirs.iter().zip(out.iter_mut()) {
                     let best = self.nearest(&seen, &origin, d, max_dist_m, candidates, hint, &mut stats);
@@ -505,6 +502,21 @@ impl<'a> RayScene<'a> {
 /// Bundles culled together as a group before each is culled on its own (see
 /// [`RayScene::cast_bundles`]).
 const GROUP_BUNDLES: usize = 16;
+
+/// `geoms` (in id order) without any primitive that has the same shape, pose and size as an
+/// earlier one (a world's collision and visual geoms often coincide): a ray hits both at the
+/// same distance, and the lower id wins the tie, so the answer is unchanged.
+fn without_twins(geoms: Vec<SceneGeom>) -> Vec<SceneGeom> {
+    let mut kept: Vec<SceneGeom> = Vec::with_capacity(geoms.len());
+    for g in geoms {
+        let twin = matches!(g.kind, Kind::Primitive(_))
+            && kept.iter().any(|k| k.kind == g.kind && k.pos == g.pos && k.mat == g.mat);
+        if !twin {
+            kept.push(g);
+        }
+    }
+    kept
+}
 
 /// Half-sizes of a box about the geom's centre, in its frame, that holds it; `None` for an
 /// infinite plane.
