@@ -707,10 +707,11 @@ mod tests {
     use std::sync::Arc;
 
     /// A scene of every primitive, a mesh and a floor, with some geoms of a body that is
-    /// excluded and one invisible geom.
+    /// excluded, one invisible geom, and a box twice (as a world's collision and visual geoms).
     const SCENE: &str = r#"<mujoco><asset><mesh name="tet" vertex="0 0 0 0.3 0 0 0 0.3 0 0 0 0.3"/></asset>
       <worldbody><geom type="plane" size="5 5 0.1"/>
         <geom type="box" pos="1 0 0.3" size="0.1 0.2 0.3" euler="0 0 20"/>
+        <geom type="box" pos="1 0 0.3" size="0.1 0.2 0.3" euler="0 0 20" group="1"/>
         <geom type="sphere" pos="1 0.8 0.4" size="0.15"/>
         <geom type="capsule" pos="1 -0.8 0.4" size="0.05 0.2" euler="30 0 0"/>
         <geom type="cylinder" pos="1.5 0.4 0.5" size="0.1 0.2"/>
@@ -837,8 +838,10 @@ mod tests {
                 _ => panic!("ray {k}: mj_multiRay {a:?}, RayScene {b:?}"),
             }
         }
-        // Every visible geom but the invisible one and the robot's was hit by some ray.
-        assert_eq!(hits.into_iter().collect::<Vec<_>>(), vec![0, 1, 2, 3, 4, 5, 6]);
+        // Every visible geom but the invisible one, the robot's and the box's twin (geom 2: the
+        // lower id wins a tie, in MuJoCo as here) was hit by some ray.
+        assert_eq!(hits.into_iter().collect::<Vec<_>>(), vec![0, 1, 3, 4, 5, 6, 7]);
+        assert_eq!(scene.len(), 7, "the box's twin is left out of the scene");
         // Serial and parallel casts agree bit for bit.
         let mut serial = vec![None; dirs.len()];
         scene.cast_bundles(origin, &dirs, 7, 50.0, false, &mut serial).unwrap();
