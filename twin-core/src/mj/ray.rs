@@ -435,8 +435,10 @@ impl<'a> RayScene<'a> {
         best
     }
 
-    /// Casts the rays from `origin` along the unit vectors `dirs`, writing each nearest hit
-    /// within `max_dist_m` into `out` (same length). Consecutive rays are taken in bundles of
+    /// Casts the rays from `origin` along the unit vectors `dirs` of a sensor's frame turned
+    /// into the world by `world_from_sensor` (row-major rotation), writing each nearest hit
+    /// within `max_dist_m` into `out` (same length). Rays are turned a group at a time (no
+    /// per-frame array of world directions). Consecutive rays are taken in bundles of
     /// `bundle` and culled together, and runs of 16 bundles as a group before that, so rays
     /// close in direction should be next to each other (an image tile, 4×4 tiles, a stretch
     /// of a scan). Groups run in parallel on the current rayon pool when `parallel`; the
@@ -444,9 +446,11 @@ impl<'a> RayScene<'a> {
     ///
     /// # Errors
     /// [`Error::Size`] when `out` and `dirs` differ in length.
+    #[allow(clippy::too_many_arguments)]
     pub fn cast_bundles(
         &self,
         origin: [f64; 3],
+        world_from_sensor: &[f64; 9],
         dirs: &[[f64; 3]],
         bundle: usize,
         max_dist_m: f64,
@@ -461,8 +465,18 @@ impl<'a> RayScene<'a> {
         // Bundles are culled in groups first (an image's 4×4 tiles), then each bundle from
         // its group's candidates: most geoms are dropped once per group, not once per bundle.
         let group = bundle * GROUP_BUNDLES;
-        let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), lists: &mut (Vec<u32>, Vec<u32>)| {
-            let (in_group, candidates) = lists;
+        let m = world_from_sensor;
+        let run = |(dirs_sensor, out): (&[[f64; 3]], &mut [Option<RayHit>]), scratch: &mut Scratch| {
+            let Scratch { in_group, candidates, dirs } = scratch;
+            dirs.clear();
+            dirs.extend(dirs_sensor.iter().map(|d| {
+                [
+                    m[0] * d[0] + m[1] * d[1] + m[2] * d[2],
+                    m[3] * d[0] + m[4] * d[1] + m[5] * d[2],
+                    m[6] * d[0] + m[7] * d[1] + m[8] * d[2],
+                ]
+            }));
+            let dirs = &dirs[..];
             let mut stats = RayStats { rays: dirs.len() as u64, ..RayStats::default() };
             // The group by its cone only: the pyramid costs a pass over the rays, and pays off
             // on the bundles' smaller ones.
@@ -482,21 +496,29 @@ impl<'a> RayScene<'a> {
             use rayon::prelude::*;
             dirs.par_chunks(group)
                 .zip(out.par_chunks_mut(group))
-                .map_init(<(Vec<u32>, Vec<u32>)>::default, |c, chunk| run(chunk, c))
+                .map_init(Scratch::default, |c, chunk| run(chunk, c))
                 .reduce(RayStats::default, |mut a, b| {
                     a += b;
                     a
                 })
         } else {
-            let mut lists = <(Vec<u32>, Vec<u32>)>::default();
+            let mut scratch = Scratch::default();
             let mut stats = RayStats::default();
             for chunk in dirs.chunks(group).zip(out.chunks_mut(group)) {
-                stats += run(chunk, &mut lists);
+                stats += run(chunk, &mut scratch);
             }
             stats
         };
         Ok(stats)
     }
+}
+
+/// Per-thread lists of one group's cast: its candidates, a bundle's, its rays in the world.
+#[derive(Default)]
+struct Scratch {
+    in_group: Vec<u32>,
+    candidates: Vec<u32>,
+    dirs: Vec<[f64; 3]>,
 }
 
 /// Bundles culled together as a group before each is culled on its own (see
@@ -804,6 +826,8 @@ mod tests {
         }
     }
 
+    const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+
     #[test]
     fn scene_matches_mj_multi_ray() {
         let model = Arc::new(Model::from_xml_str(SCENE).unwrap());
@@ -825,7 +849,7 @@ mod tests {
             RayFilter { groups: [true; 6], exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
         let scene = RayScene::new(&data, &filter);
         let mut out = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &dirs, 16, 50.0, true, &mut out).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, true, &mut out).unwrap();
         let mut hits = std::collections::BTreeSet::new();
         for (k, (a, b)) in reference.iter().zip(&out).enumerate() {
             match (a, b) {
@@ -844,7 +868,7 @@ mod tests {
         assert_eq!(scene.len(), 7, "the box's twin is left out of the scene");
         // Serial and parallel casts agree bit for bit.
         let mut serial = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &dirs, 7, 50.0, false, &mut serial).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 7, 50.0, false, &mut serial).unwrap();
         assert_eq!(serial, out);
     }
 }

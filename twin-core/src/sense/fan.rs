@@ -1,5 +1,5 @@
 //! The ray setup depth cameras and LiDARs share: a fixed fan of unit rays in the sensor's
-//! frame, turned into the world at each reading and cast by bundles ([`RayScene`]) on the
+//! frame, turned into the world at each reading (a group of rays at a time) and cast by bundles ([`RayScene`]) on the
 //! calling thread, rayon's global pool or a pool of its own; and the seeded noise stream of
 //! reading `k`.
 
@@ -11,12 +11,11 @@ use rand::SeedableRng;
 /// A sensor's rays: unit directions in its frame, ordered so that each run of `bundle`
 /// consecutive rays is close in direction (an image tile, a stretch of a ring).
 pub(crate) struct RayFan {
-    dirs_sensor: Vec<Vector3<f64>>,
+    dirs_sensor: Vec<[f64; 3]>,
     bundle: usize,
     /// 0: rayon's global pool; 1: the calling thread; more: `pool`.
     threads: usize,
     pool: Option<rayon::ThreadPool>,
-    dirs_world: Vec<[f64; 3]>,
     hits: Vec<Option<RayHit>>,
     stats: RayStats,
 }
@@ -49,11 +48,10 @@ impl RayFan {
             ),
         };
         Ok(RayFan {
-            dirs_sensor,
+            dirs_sensor: dirs_sensor.iter().map(|d| [d.x, d.y, d.z]).collect(),
             bundle,
             threads,
             pool,
-            dirs_world: Vec::new(),
             hits: Vec::new(),
             stats: RayStats::default(),
         })
@@ -75,19 +73,19 @@ impl RayFan {
         world_from_sensor: &Rotation3<f64>,
         max_dist_m: f64,
     ) -> Result<&[Option<RayHit>]> {
-        self.dirs_world.clear();
-        self.dirs_world.extend(self.dirs_sensor.iter().map(|r| {
-            let d = world_from_sensor * r;
-            [d.x, d.y, d.z]
-        }));
         self.hits.clear();
-        self.hits.resize(self.dirs_world.len(), None);
+        self.hits.resize(self.dirs_sensor.len(), None);
         let scene = RayScene::new(data, filter);
-        let (dirs, hits, bundle) = (&self.dirs_world, &mut self.hits, self.bundle);
+        let m = world_from_sensor.matrix();
+        let rot: [f64; 9] = std::array::from_fn(|i| m[(i / 3, i % 3)]);
+        let (dirs, hits, bundle) = (&self.dirs_sensor, &mut self.hits, self.bundle);
+        let cast = |parallel, hits: &mut [Option<RayHit>]| {
+            scene.cast_bundles(origin, &rot, dirs, bundle, max_dist_m, parallel, hits)
+        };
         self.stats = match (&self.pool, self.threads) {
-            (Some(pool), _) => pool.install(|| scene.cast_bundles(origin, dirs, bundle, max_dist_m, true, hits))?,
-            (None, 1) => scene.cast_bundles(origin, dirs, bundle, max_dist_m, false, hits)?,
-            (None, _) => scene.cast_bundles(origin, dirs, bundle, max_dist_m, true, hits)?,
+            (Some(pool), _) => pool.install(|| cast(true, hits))?,
+            (None, 1) => cast(false, hits)?,
+            (None, _) => cast(true, hits)?,
         };
         Ok(&self.hits)
     }
