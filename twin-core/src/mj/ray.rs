@@ -265,6 +265,8 @@ impl<'a> RayScene<'a> {
                     mat: g.mat,
                     kind: g.kind,
                     corners: box_half(g).map(|h| {
+                        // A hair larger, so that rounding never culls a geom a ray touches.
+                        let h = h.map(|x| x * (1.0 + 1e-9) + 1e-12);
                         std::array::from_fn(|c| {
                             let l = [
                                 if c & 1 == 0 { -h[0] } else { h[0] },
