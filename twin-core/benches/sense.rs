@@ -6,21 +6,25 @@
 //!
 //! (`TWIN_ROOT=DIR` runs the built binary against the repository at DIR.)
 //!
-//! 1. One 320×240 frame (76,800 rays), one thread and all threads: median of N renders.
-//! 2. The simulation's wall and thread CPU time (PD hold, S simulated seconds) without the
-//!    camera, with it rendering at 15 Hz on the simulation's thread, and pipelined
-//!    ([`twin_core::sense::Pipelined`], as `twin sim --record` does), alternated R times.
+//! 1. One 320×240 frame (76,800 rays), one thread and all threads: median wall time of N
+//!    renders, the thread's mean CPU time over them, and the ray–geom tests per ray; then the
+//!    same on the grasp scenario's own head camera.
+//! 2. `scenarios/grasp.toml` as `twin sim --scenario` runs it (grasp controller with its own
+//!    camera frames, checks; S simulated seconds, default the scenario's 10 s): wall and
+//!    simulation-thread CPU time without an added camera, with the head camera rendering at
+//!    15 Hz on the simulation's thread, and pipelined ([`twin_core::sense::Pipelined`], as
+//!    `twin sim --record` does), alternated R times.
 
 use nalgebra::Vector3;
-use rand::SeedableRng;
 use std::sync::Arc;
 use std::time::Instant;
-use twin_core::control::{PdHold, PdHoldOptions};
 use twin_core::convert::{ConvertOptions, convert_urdf};
-use twin_core::engine::{Engine, Episode, Flow, Observer, StepView};
-use twin_core::mj::{Data, Model};
-use twin_core::robot::Robot;
+use twin_core::engine::{Flow, Observer, StepView};
+use twin_core::grasp::Grasper;
+use twin_core::mj::{Data, Model, RayFilter};
+use twin_core::scenario::Scenario;
 use twin_core::sense::{DepthCamera, DepthCameraOptions, Device, Pipelined, Reading};
+use twin_core::sim::{self, SimOptions};
 
 /// CPU time of the calling thread, seconds (Linux): not inflated by waiting for a core on a
 /// busy machine, unlike wall time.
@@ -34,10 +38,14 @@ fn median(mut v: Vec<f64>) -> f64 {
     v[v.len() / 2]
 }
 
+/// The repository: `TWIN_ROOT` when the binary runs elsewhere (another machine).
+fn repo_root() -> String {
+    std::env::var("TWIN_ROOT").unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/..").to_string())
+}
+
 /// The humanoid at the table with a fixed camera at head height looking at the cup.
 fn grasp_scene() -> Arc<Model> {
-    // TWIN_ROOT: the repository when the binary runs elsewhere (another machine).
-    let root = std::env::var("TWIN_ROOT").unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/..").to_string());
+    let root = repo_root();
     let opts = ConvertOptions { world: Some(format!("{root}/models/table_cup.world").into()), ..Default::default() };
     let converted = convert_urdf(std::path::Path::new(&format!("{root}/models/humanoid.urdf")), &opts)
         .unwrap_or_else(|e| panic!("{e}"));
@@ -87,12 +95,12 @@ impl Observer for CameraTicks {
 }
 
 fn main() {
-    let (mut frames, mut secs, mut reps) = (20usize, 2.0f64, 5usize);
+    let (mut frames, mut secs, mut reps) = (200usize, None::<f64>, 3usize);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--frames" => frames = args.next().and_then(|v| v.parse().ok()).expect("--frames N"),
-            "--secs" => secs = args.next().and_then(|v| v.parse().ok()).expect("--secs S"),
+            "--secs" => secs = Some(args.next().and_then(|v| v.parse().ok()).expect("--secs S")),
             "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
             _ => {}
         }
@@ -102,59 +110,125 @@ fn main() {
     twin_core::control::reset_to_home(&mut data).unwrap();
     println!("scene: humanoid + table_cup.world, {} geoms, {} bodies", model.ngeom(), model.nbody());
 
-    println!("| frame | threads | median wall ms/frame | median CPU ms/frame (1 thread) | valid pixels |");
-    println!("|---|---|---|---|---|");
+    println!(
+        "| frame | threads | median wall ms/frame | mean CPU ms/frame (1 thread) | valid pixels | bounding-sphere tests per ray | exact tests per ray |"
+    );
+    println!("|---|---|---|---|---|---|---|");
     for threads in [1usize, 0] {
         let opts = DepthCameraOptions { threads, ..DepthCameraOptions::default() };
         let mut camera = DepthCamera::new(&model, "bench_head", opts).unwrap();
         let first = camera.render(&model, &data).unwrap();
         let valid = first.depth_m.iter().filter(|z| z.is_finite()).count();
-        let (times, cpu): (Vec<f64>, Vec<f64>) = (0..frames)
+        // The thread's CPU time advances in scheduler ticks (4 ms) when it is not switched
+        // out: measured over all the frames, not frame by frame.
+        let cpu_start = thread_cpu_secs();
+        let times: Vec<f64> = (0..frames)
             .map(|_| {
-                let (t, c) = (Instant::now(), thread_cpu_secs());
+                let t = Instant::now();
                 std::hint::black_box(camera.render(&model, &data).unwrap());
-                (t.elapsed().as_secs_f64() * 1e3, (thread_cpu_secs() - c) * 1e3)
+                t.elapsed().as_secs_f64() * 1e3
             })
-            .unzip();
+            .collect();
+        let cpu_ms = (thread_cpu_secs() - cpu_start) * 1e3 / frames as f64;
         let (label, cpu) = if threads == 1 {
-            ("1".to_string(), format!("{:.2}", median(cpu)))
+            ("1".to_string(), format!("{cpu_ms:.2}"))
         } else {
             (format!("all ({})", rayon::current_num_threads()), "–".to_string())
         };
-        println!("| 320×240 | {label} | {:.2} | {cpu} | {valid} |", median(times));
+        let st = camera.last_ray_stats();
+        let per_ray = |n: u64| n as f64 / st.rays as f64;
+        println!(
+            "| 320×240 | {label} | {:.2} | {cpu} | {valid} | {:.2} | {:.2} |",
+            median(times),
+            per_ray(st.sphere_tests),
+            per_ray(st.exact_tests)
+        );
     }
 
-    let robot = Robot::from_model(model.clone(), "humanoid", std::path::Path::new("humanoid.urdf")).unwrap();
-    let steps = (secs / model.timestep_secs()).round() as u64;
-    let episode = Episode { steps, ..Episode::default() };
-    let mut engine = Engine::new();
-    // 0: no camera, 1: on the simulation's thread, 2: pipelined.
-    let mut run = |mode: u8| -> (f64, f64, usize) {
-        let mut controller = PdHold::new(&robot.model, PdHoldOptions::default());
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(0);
-        let opts = DepthCameraOptions { threads: 1, ..DepthCameraOptions::default() };
+    // The grasp scenario's own head camera, on its robot at the start.
+    let root = repo_root();
+    let scenario = Scenario::load(format!("{root}/scenarios/grasp.toml")).unwrap_or_else(|e| panic!("{e}"));
+    let robot = scenario.robot(std::path::Path::new(&format!("{root}/models/humanoid_gripper.urdf"))).unwrap();
+    let gmodel = robot.model.clone();
+    let cam_name = scenario.grasp.camera.clone();
+    // As the grasp controller's eye: the camera's housing and the head it sits on not in view.
+    let head_options = |threads: usize| {
+        let cam = gmodel.id(twin_core::mj::ObjType::Camera, &cam_name).expect("the scenario's camera");
+        let body = gmodel.cam_bodyid()[cam] as usize;
+        let exclude_bodies = vec![body, gmodel.body_parentid()[body] as usize];
+        DepthCameraOptions {
+            threads,
+            filter: RayFilter { exclude_bodies, ..RayFilter::default() },
+            ..Default::default()
+        }
+    };
+    {
+        let mut gdata = Data::new(gmodel.clone()).unwrap();
+        twin_core::control::reset_to_home(&mut gdata).unwrap();
+        let mut camera = DepthCamera::new(&gmodel, &cam_name, head_options(1)).unwrap();
+        let cpu_start = thread_cpu_secs();
+        let times: Vec<f64> = (0..frames)
+            .map(|_| {
+                let t = Instant::now();
+                std::hint::black_box(camera.render(&gmodel, &gdata).unwrap());
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        let cpu_ms = (thread_cpu_secs() - cpu_start) * 1e3 / frames as f64;
+        let frame = camera.render(&gmodel, &gdata).unwrap();
+        let st = camera.last_ray_stats();
+        println!(
+            "| 320×240, grasp scenario's `{cam_name}` ({} geoms) | 1 | {:.2} | {cpu_ms:.2} | {} | {:.2} | {:.2} |",
+            gmodel.ngeom(),
+            median(times),
+            frame.depth_m.iter().filter(|z| z.is_finite()).count(),
+            st.sphere_tests as f64 / st.rays as f64,
+            st.exact_tests as f64 / st.rays as f64
+        );
+    }
+
+    // The grasp scenario as `twin sim --scenario` runs it (controller and checks), with
+    // the head camera added at 15 Hz: 0 none, 1 on the simulation's thread, 2 pipelined.
+    let duration = secs.unwrap_or(scenario.duration_secs);
+    let run = |mode: u8| -> (f64, f64, usize) {
+        let mut grasper = Grasper::new(&gmodel, scenario.grasp.clone(), scenario.walk.clone()).unwrap();
+        let mut check = scenario.check(&gmodel).unwrap();
         let pipe = (mode == 2).then(|| {
-            let cam = DepthCamera::new(&model, "bench_head", DepthCameraOptions::default()).unwrap();
-            Pipelined::new(Device::Depth(cam), model.clone()).unwrap()
+            let cam = DepthCamera::new(&gmodel, &cam_name, head_options(0)).unwrap();
+            Pipelined::new(Device::Depth(cam), gmodel.clone()).unwrap()
         });
         let mut ticks = CameraTicks {
-            camera: DepthCamera::new(&model, "bench_head", opts).unwrap(),
+            camera: DepthCamera::new(&gmodel, &cam_name, head_options(1)).unwrap(),
             pipe,
             period_nanos: (1e9 / 15.0f64).round() as u64,
             next_nanos: 0,
             frames: 0,
             valid: 0,
         };
-        let (t, c) = (Instant::now(), thread_cpu_secs());
-        if mode > 0 {
-            engine.run(&robot.model, &episode, &mut controller, &mut [], &mut [&mut ticks], &mut rng).unwrap();
+        let options = SimOptions { duration_secs: duration };
+        let report = if mode > 0 {
+            let r = sim::simulate_with(
+                &robot,
+                &mut grasper,
+                &options,
+                None,
+                &mut |_| {},
+                &mut [],
+                &mut [&mut check, &mut ticks],
+            )
+            .unwrap();
             if let Some(pipe) = ticks.pipe.as_mut() {
                 pipe.finish().unwrap();
             }
+            r
         } else {
-            engine.run(&robot.model, &episode, &mut controller, &mut [], &mut [], &mut rng).unwrap();
+            sim::simulate_with(&robot, &mut grasper, &options, None, &mut |_| {}, &mut [], &mut [&mut check]).unwrap()
+        };
+        // The whole scenario must succeed, or the figures are not those of a grasp.
+        if secs.is_none() {
+            assert!(check.verdicts().iter().all(|v| v.passed), "the grasp failed: {:?}", check.verdicts());
         }
-        (t.elapsed().as_secs_f64(), thread_cpu_secs() - c, ticks.frames)
+        (report.wall_secs, report.loop_cpu_secs.unwrap_or(f64::NAN), ticks.frames)
     };
     let (mut without, mut with, mut without_cpu, mut with_cpu) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     let (mut piped, mut piped_cpu) = (Vec::new(), Vec::new());
@@ -171,29 +245,30 @@ fn main() {
         piped.push(w);
         piped_cpu.push(c);
     }
+    let steps = (duration / gmodel.timestep_secs()).round();
     let (a, b, p) = (median(without), median(with), median(piped));
     let (ac, bc, pc) = (median(without_cpu), median(with_cpu), median(piped_cpu));
     println!();
     println!(
-        "| simulation ({secs} s, {steps} steps, PD hold) | median wall s | median CPU s | real-time factor (wall) |"
+        "| grasp scenario ({duration} s, {steps} steps, controller and checks; median of {reps}) | wall s | simulation thread CPU s | µs per step (wall) |"
     );
     println!("|---|---|---|---|");
-    println!("| without camera | {a:.3} | {ac:.3} | {:.1} |", secs / a);
-    println!("| with camera at 15 Hz, 1 thread ({frames_per_run} frames) | {b:.3} | {bc:.3} | {:.1} |", secs / b);
+    println!("| without the added camera | {a:.3} | {ac:.3} | {:.0} |", a / steps * 1e6);
     println!(
-        "| with camera at 15 Hz, pipelined on {} pool threads | {p:.3} | {pc:.3} (simulation thread) | {:.1} |",
+        "| with the camera at 15 Hz on the simulation's thread ({frames_per_run} frames) | {b:.3} | {bc:.3} | {:.0} |",
+        b / steps * 1e6
+    );
+    println!(
+        "| with the camera at 15 Hz pipelined on rayon's pool ({} threads) | {p:.3} | {pc:.3} | {:.0} |",
         rayon::current_num_threads(),
-        secs / p
+        p / steps * 1e6
     );
     println!(
-        "pipelined: adds {:.1} % to the wall time, {:.1} % to the simulation thread's CPU",
-        (p / a - 1.0) * 100.0,
-        (pc / ac - 1.0) * 100.0
-    );
-    println!(
-        "on the simulation's thread: camera adds {:.1} % to the wall time ({:.1} % CPU); its cost per simulated second: {:.1} ms CPU",
+        "camera at 15 Hz on the simulation's thread: +{:.1} % wall, +{:.1} % CPU ({:.2} ms CPU a frame); pipelined: +{:.1} % wall, +{:.1} % simulation-thread CPU",
         (b / a - 1.0) * 100.0,
         (bc / ac - 1.0) * 100.0,
-        (bc - ac) / secs * 1e3
+        (bc - ac) / frames_per_run as f64 * 1e3,
+        (p / a - 1.0) * 100.0,
+        (pc / ac - 1.0) * 100.0
     );
 }

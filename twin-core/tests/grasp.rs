@@ -174,3 +174,18 @@ fn cup_out_of_reach_is_refused_before_moving() {
     assert!(!all_pass(&r));
     assert!(!r.fell);
 }
+
+/// Grasping turns the walker's double-support ankle torques off, and says so when the
+/// scenario's `[walk]` asked for them.
+#[test]
+fn the_ankle_override_is_reported() {
+    let scenario = nominal();
+    let robot = scenario.robot(&scenarios().join("../models/humanoid_gripper.urdf")).unwrap();
+    let said = |ankle: bool| {
+        let walk = twin_core::walk::WalkOptions { double_support_ankle: ankle, ..scenario.walk.clone() };
+        let grasper = Grasper::new(&robot.model, scenario.grasp.clone(), walk).unwrap();
+        grasper.report().iter().any(|l| l.contains("double_support_ankle = true overridden"))
+    };
+    assert!(said(true));
+    assert!(!said(false));
+}

@@ -242,6 +242,8 @@ pub struct Grasper {
     q_des: Vec<Vec<f64>>,
     refusal: Option<String>,
     fault: Option<String>,
+    /// The legs' options asked for the double-support ankle torques, which grasping turns off.
+    ankle_overridden: bool,
 }
 
 impl std::fmt::Debug for Grasper {
@@ -269,6 +271,7 @@ impl Grasper {
     /// [`Walker::new`].
     pub fn new(model: &Model, options: GraspOptions, walk: WalkOptions) -> Result<Grasper> {
         options.validate().map_err(|(key, m)| Error::Grasp { message: format!("option `{key}` {m}") })?;
+        let ankle_overridden = walk.double_support_ankle;
         let walker = Walker::new(model, WalkOptions { double_support_ankle: false, ..walk })?;
         let mut g = Grasper {
             options,
@@ -287,6 +290,7 @@ impl Grasper {
             q_des: Vec::new(),
             refusal: None,
             fault: None,
+            ankle_overridden,
         };
         g.bind(model)?;
         Ok(g)
@@ -722,6 +726,13 @@ impl Controller for Grasper {
         }
         if let Some(f) = &self.fault {
             out.push(format!("grasp: fault: {f}"));
+        }
+        if self.ankle_overridden {
+            out.push(
+                "grasp: [walk] double_support_ankle = true overridden: the legs balance without the \
+                 double-support ankle torques while the arm reaches (they tip the torso forward)"
+                    .into(),
+            );
         }
         out
     }

@@ -9,11 +9,12 @@ mod data;
 mod edit;
 mod model;
 mod ray;
+mod ray_shape;
 
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
-pub use ray::{RayFilter, RayHit, RayScene};
+pub use ray::{RayFilter, RayHit, RayScene, RayStats};
 
 use crate::error::{Error, Result};
 use std::ffi::{CStr, c_char, c_int};

@@ -3,12 +3,15 @@
 //! threads at once (depth cameras, LiDARs).
 //!
 //! [`RayScene`] tests each ray only against the geoms whose bounding sphere meets the cone of
-//! its bundle, nearest first, with MuJoCo's exact per-geom intersections (`mju_rayGeom`,
-//! `mj_rayMesh`, `mj_rayHfield`). It sees the geoms `mj_ray` sees for the same filter
+//! its bundle, nearest first, with exact per-geom intersections: primitives in Rust
+//! (`ray_shape`, MuJoCo's `mju_rayGeom` conventions, with the ray origin mapped into each
+//! geom's frame once per cast), meshes and height fields with MuJoCo's `mj_rayMesh` and
+//! `mj_rayHfield`. It sees the geoms `mj_ray` sees for the same filter
 //! (visible groups, alpha > 0, static bodies), minus any set of bodies; flexes, skins and SDF
 //! geoms are not seen.
 
 use super::model::raw_slice;
+use super::ray_shape::Shape;
 use super::{Data, Model, ffi, guarded};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
@@ -81,11 +84,13 @@ pub struct RayHit {
     pub geom: usize,
 }
 
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq)]
 enum Kind {
-    /// A primitive `mju_rayGeom` handles (plane, sphere, capsule, ellipsoid, cylinder, box).
-    Primitive(c_int),
+    /// A primitive, intersected in Rust ([`Shape::hit`]).
+    Primitive(Shape),
+    /// A mesh: MuJoCo's `mj_rayMesh` (its BVH).
     Mesh,
+    /// A height field: MuJoCo's `mj_rayHfield`.
     Hfield,
 }
 
@@ -95,13 +100,14 @@ struct SceneGeom {
     id: usize,
     kind: Kind,
     pos: [f64; 3],
+    /// Row-major `world_from_geom` rotation.
     mat: [f64; 9],
-    size: [f64; 3],
     /// Bounding-sphere radius about `pos`; infinite for planes.
     rbound: f64,
 }
 
-/// A geom as seen from one ray origin (see [`RayScene::seen_from`]).
+/// A geom as seen from one ray origin (see [`RayScene::seen_from`]): what a ray test needs,
+/// computed once per origin rather than once per ray.
 #[derive(Debug, Clone, Copy)]
 struct Seen {
     /// Index in the scene.
@@ -117,6 +123,16 @@ struct Seen {
     sin_b: f64,
     cos_b: f64,
     beta: f64,
+    /// Squared bounding radius (infinite for planes).
+    r2: f64,
+    /// The origin in the geom's frame.
+    local_origin: [f64; 3],
+    /// Row-major `world_from_geom` rotation and the geom's kind, copied for locality.
+    mat: [f64; 9],
+    kind: Kind,
+    /// The corners of a box holding the geom, relative to the origin (`None`: unbounded, an
+    /// infinite plane): tighter than the bounding sphere for long or flat geoms.
+    corners: Option<[[f64; 3]; 8]>,
 }
 
 /// The seen geoms of one simulation instant, for casting many rays, from many threads.
@@ -142,12 +158,44 @@ impl std::fmt::Debug for RayScene<'_> {
     }
 }
 
+#[inline]
 fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
     a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
 }
 
+#[inline]
 fn sub(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
     [a[0] - b[0], a[1] - b[1], a[2] - b[2]]
+}
+
+/// `mat' · x` for a row-major 3×3 `mat`: a world vector in the geom's frame.
+#[inline]
+fn to_local(mat: &[f64; 9], x: [f64; 3]) -> [f64; 3] {
+    [
+        mat[0] * x[0] + mat[3] * x[1] + mat[6] * x[2],
+        mat[1] * x[0] + mat[4] * x[1] + mat[7] * x[2],
+        mat[2] * x[0] + mat[5] * x[1] + mat[8] * x[2],
+    ]
+}
+
+/// Rays cast by one call, and the exact geom tests they needed (for benchmarks and for
+/// checking that culling works).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct RayStats {
+    /// Rays cast.
+    pub rays: u64,
+    /// Exact ray–geom tests run (after the bounding-sphere test passed).
+    pub exact_tests: u64,
+    /// Bounding-sphere tests run.
+    pub sphere_tests: u64,
+}
+
+impl std::ops::AddAssign for RayStats {
+    fn add_assign(&mut self, o: RayStats) {
+        self.rays += o.rays;
+        self.exact_tests += o.exact_tests;
+        self.sphere_tests += o.sphere_tests;
+    }
 }
 
 impl<'a> RayScene<'a> {
@@ -164,19 +212,13 @@ impl<'a> RayScene<'a> {
                 let kind = match ty {
                     sys::mjtGeom_mjGEOM_MESH => Kind::Mesh,
                     sys::mjtGeom_mjGEOM_HFIELD => Kind::Hfield,
-                    sys::mjtGeom_mjGEOM_PLANE
-                    | sys::mjtGeom_mjGEOM_SPHERE
-                    | sys::mjtGeom_mjGEOM_CAPSULE
-                    | sys::mjtGeom_mjGEOM_ELLIPSOID
-                    | sys::mjtGeom_mjGEOM_CYLINDER
-                    | sys::mjtGeom_mjGEOM_BOX => Kind::Primitive(ty as c_int),
-                    _ => return None,
+                    _ => Kind::Primitive(Shape::of(ty, sizes[g])?),
                 };
                 let r = if ty == sys::mjtGeom_mjGEOM_PLANE { f64::INFINITY } else { rbound[g] };
-                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], size: sizes[g], rbound: r })
+                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r })
             })
             .collect();
-        RayScene { model, data, geoms }
+        RayScene { model, data, geoms: without_twins(geoms) }
     }
 
     /// Number of geoms rays can hit.
@@ -218,6 +260,27 @@ impl<'a> RayScene<'a> {
                     sin_b,
                     cos_b: (1.0 - sin_b * sin_b).max(0.0).sqrt(),
                     beta: sin_b.min(1.0).asin(),
+                    r2: g.rbound * g.rbound,
+                    local_origin: to_local(&g.mat, sub(origin, g.pos)),
+                    mat: g.mat,
+                    kind: g.kind,
+                    corners: box_half(g).map(|h| {
+                        // A hair larger, so that rounding never culls a geom a ray touches.
+                        let h = h.map(|x| x * (1.0 + 1e-9) + 1e-12);
+                        std::array::from_fn(|c| {
+                            let l = [
+                                if c & 1 == 0 { -h[0] } else { h[0] },
+                                if c & 2 == 0 { -h[1] } else { h[1] },
+                                if c & 4 == 0 { -h[2] } else { h[2] },
+                            ];
+                            let m = &g.mat;
+                            [
+                                v[0] + m[0] * l[0] + m[1] * l[1] + m[2] * l[2],
+                                v[1] + m[3] * l[0] + m[4] * l[1] + m[5] * l[2],
+                                v[2] + m[6] * l[0] + m[7] * l[1] + m[8] * l[2],
+                            ]
+                        })
+                    }),
                 })
             })
             .collect();
@@ -225,57 +288,78 @@ impl<'a> RayScene<'a> {
         seen
     }
 
-    /// The geoms of `seen` whose bounding sphere meets the cone of unit axis `axis` and
-    /// half-angle `half_angle_rad` (apex at the origin of `seen`), nearest first: every ray
-    /// inside the cone can only hit these.
-    fn cull(seen: &[Seen], axis: [f64; 3], half_angle_rad: f64, out: &mut Vec<(f64, u32)>) {
+    /// The indices `from` (in `seen`, nearest first) of the geoms the rays `dirs` (unit, from
+    /// the origin of `seen`) may hit: whose bounding sphere meets the narrowest cone holding
+    /// the rays and, `with_pyramid`, whose box is not wholly outside the pyramid holding them.
+    /// Every ray of `dirs` can only hit these.
+    fn cull(seen: &[Seen], from: impl Iterator<Item = u32>, dirs: &[[f64; 3]], with_pyramid: bool, out: &mut Vec<u32>) {
         out.clear();
+        let (axis, half_angle_rad) = bundle_cone(dirs);
+        let pyramid = if with_pyramid { bundle_pyramid(dirs, axis, half_angle_rad) } else { None };
+        let pyramid = pyramid.as_ref();
         let (sin_a, cos_a) = half_angle_rad.min(std::f64::consts::PI).sin_cos();
-        for s in seen {
+        for i in from {
+            let s = &seen[i as usize];
             // The sphere meets the cone when the angle between the axis and its centre is at
             // most the half-angle plus its angular radius β = asin(r/d): cos θ ≥ cos(α + β).
             let meets = s.always
                 || half_angle_rad + s.beta >= std::f64::consts::PI
                 || dot(s.v, axis) >= s.d * (cos_a * s.cos_b - sin_a * s.sin_b) - 1e-12;
-            if meets {
-                out.push((s.near, s.k));
+            // And its box is not wholly outside one side of the bundle's pyramid.
+            let outside = || match (pyramid, &s.corners) {
+                (Some(planes), Some(corners)) => planes.iter().any(|n| corners.iter().all(|c| dot(*c, *n) > 0.0)),
+                _ => false,
+            };
+            if meets && !outside() {
+                out.push(i);
             }
         }
     }
 
-    /// Distance along the unit direction `dir` from `origin` to geom `g`, if it is hit.
-    fn hit(&self, g: &SceneGeom, origin: [f64; 3], dir: [f64; 3]) -> Option<f64> {
-        if g.rbound.is_finite() {
-            // Bounding sphere first: cheaper than MuJoCo's exact test.
-            let v = sub(g.pos, origin);
-            let t = dot(v, dir);
-            let perp2 = dot(v, v) - t * t;
-            if perp2 > g.rbound * g.rbound || t < -g.rbound {
+    /// Distance along the unit direction `dir` from `origin` (the origin `s` was seen from) to
+    /// geom `s`, if it is hit no farther than `limit_m`.
+    #[inline(always)]
+    fn hit(&self, s: &Seen, origin: &[f64; 3], dir: &[f64; 3], limit_m: f64, stats: &mut RayStats) -> Option<f64> {
+        // By reference: the rays stay where they are (copies made per test stalled on
+        // store forwarding).
+        let dir_v = *dir;
+        if s.r2.is_finite() {
+            // Bounding sphere first, cheaper than the exact test: missed, or entered beyond
+            // the nearest hit so far (with a margin for rounding: a sphere geom is its own
+            // bounding sphere).
+            stats.sphere_tests += 1;
+            let t = dot(s.v, dir_v);
+            let perp2 = s.d * s.d - t * t;
+            // Entered beyond the limit: t − √(r² − perp²) > limit, without the square root.
+            let beyond = t - (limit_m + 1e-9);
+            if perp2 > s.r2 || (t < 0.0 && t * t > s.r2) || (beyond > 0.0 && beyond * beyond > s.r2 - perp2) {
                 return None;
             }
         }
-        let d = match g.kind {
-            // SAFETY: pos, mat, size, origin and dir are arrays of the lengths mju_rayGeom reads
-            // (3, 9, 3, 3, 3); the type is one of the primitives it handles, so it does not
-            // raise; the normal is optional (null).
-            Kind::Primitive(ty) => unsafe {
-                sys::mju_rayGeom(
-                    g.pos.as_ptr(),
-                    g.mat.as_ptr(),
-                    g.size.as_ptr(),
-                    origin.as_ptr(),
-                    dir.as_ptr(),
-                    ty,
-                    std::ptr::null_mut(),
-                )
-            },
+        stats.exact_tests += 1;
+        let d = match s.kind {
+            Kind::Primitive(shape) => shape.hit(s.local_origin, to_local(&s.mat, dir_v)),
+            Kind::Mesh | Kind::Hfield => self.hit_mujoco(s, origin, dir),
+        };
+        (d >= 0.0).then_some(d)
+    }
+
+    /// MuJoCo's intersection of a mesh or height field geom (−1: none). Out of line, so the
+    /// primitives' hot path keeps the ray in registers rather than in memory for the call.
+    #[cold]
+    #[inline(never)]
+    fn hit_mujoco(&self, s: &Seen, origin: &[f64; 3], dir: &[f64; 3]) -> f64 {
+        let id = self.geoms[s.k as usize].id as c_int;
+        match s.kind {
+            Kind::Primitive(_) => -1.0,
             // SAFETY: the geom is a mesh of this live model; mj_rayMesh only reads the model and
-            // the (borrowed, unmodified) data and raises only for non-mesh geoms.
+            // the (borrowed, unmodified) data and raises only for non-mesh geoms; origin and
+            // dir hold 3 values each; the normal is optional (null).
             Kind::Mesh => unsafe {
                 sys::mj_rayMesh(
                     self.model.as_ptr(),
                     self.data.raw(),
-                    g.id as c_int,
+                    id,
                     origin.as_ptr(),
                     dir.as_ptr(),
                     std::ptr::null_mut(),
@@ -286,107 +370,227 @@ impl<'a> RayScene<'a> {
                 sys::mj_rayHfield(
                     self.model.as_ptr(),
                     self.data.raw(),
-                    g.id as c_int,
+                    id,
                     origin.as_ptr(),
                     dir.as_ptr(),
                     std::ptr::null_mut(),
                 )
             },
-        };
-        (d >= 0.0).then_some(d)
+        }
     }
 
     /// The nearest hit of the ray from `origin` along the unit vector `dir` within
     /// `max_dist_m`.
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64) -> Option<RayHit> {
+        let seen = self.seen_from(origin, max_dist_m);
         let mut candidates = Vec::new();
-        Self::cull(&self.seen_from(origin, max_dist_m), dir, 0.0, &mut candidates);
-        self.nearest(origin, dir, max_dist_m, &candidates, None).map(|(h, _)| h)
+        Self::cull(&seen, 0..seen.len() as u32, &[dir], false, &mut candidates);
+        self.nearest(&seen, &origin, &dir, max_dist_m, &candidates, None, &mut RayStats::default()).map(|(h, _)| h)
     }
 
-    /// The nearest hit among `candidates` (nearest-first), trying scene geom `hint` first (the
-    /// geom the previous ray of the bundle hit: neighbouring rays mostly hit the same geom, and
-    /// its distance then skips every candidate known to be farther). The answer does not
-    /// depend on the hint. Returns the hit and its scene index.
+    /// The nearest hit among `candidates` (indices in `seen`, nearest-first), trying `hint`
+    /// first (the geom the previous ray of the bundle hit: neighbouring rays mostly hit the
+    /// same geom, and its distance then skips every candidate known to be farther). The answer
+    /// does not depend on the hint. Returns the hit and its index in `seen`.
+    #[allow(clippy::too_many_arguments)]
+    #[inline(always)]
     fn nearest(
         &self,
-        origin: [f64; 3],
-        dir: [f64; 3],
+        seen: &[Seen],
+        origin: &[f64; 3],
+        dir: &[f64; 3],
         max_dist_m: f64,
-        candidates: &[(f64, u32)],
+        candidates: &[u32],
         hint: Option<u32>,
+        stats: &mut RayStats,
     ) -> Option<(RayHit, u32)> {
+        // Counted locally: kept in registers in the hot loop.
+        let mut st = RayStats::default();
         let mut best: Option<(RayHit, u32)> = None;
-        if let Some(k) = hint {
-            let g = &self.geoms[k as usize];
-            if let Some(d) = self.hit(g, origin, dir)
+        if let Some(i) = hint {
+            let s = &seen[i as usize];
+            if let Some(d) = self.hit(s, origin, dir, max_dist_m, &mut st)
                 && d <= max_dist_m
             {
-                best = Some((RayHit { dist_m: d, geom: g.id }, k));
+                best = Some((RayHit { dist_m: d, geom: self.geoms[s.k as usize].id }, i));
             }
         }
-        for &(near, k) in candidates {
+        for &i in candidates {
+            let s = &seen[i as usize];
             let limit = best.map_or(max_dist_m, |b| b.0.dist_m);
-            if near > limit {
+            if s.near > limit {
                 break;
             }
-            if Some(k) == hint {
+            if Some(i) == hint {
                 continue;
             }
-            let g = &self.geoms[k as usize];
-            if let Some(d) = self.hit(g, origin, dir)
+            if let Some(d) = self.hit(s, origin, dir, limit, &mut st)
                 && d <= limit
-                && best.is_none_or(|(b, _)| d < b.dist_m || (d == b.dist_m && g.id < b.geom))
             {
-                best = Some((RayHit { dist_m: d, geom: g.id }, k));
+                let id = self.geoms[s.k as usize].id;
+                if best.is_none_or(|(b, _)| d < b.dist_m || (d == b.dist_m && id < b.geom)) {
+                    best = Some((RayHit { dist_m: d, geom: id }, i));
+                }
             }
         }
+        *stats += st;
         best
     }
 
-    /// Casts the rays from `origin` along the unit vectors `dirs`, writing each nearest hit
-    /// within `max_dist_m` into `out` (same length). Consecutive rays are taken in bundles of
-    /// `bundle` and culled together, so rays close in direction should be next to each other
-    /// (an image tile, a stretch of a scan). Bundles run in parallel on the current rayon
-    /// pool when `parallel`; the result does not depend on it.
+    /// Casts the rays from `origin` along the unit vectors `dirs` of a sensor's frame turned
+    /// into the world by `world_from_sensor` (row-major rotation), writing each nearest hit
+    /// within `max_dist_m` into `out` (same length). Rays are turned a group at a time (no
+    /// per-frame array of world directions). Consecutive rays are taken in bundles of
+    /// `bundle` and culled together, and runs of 16 bundles as a group before that, so rays
+    /// close in direction should be next to each other (an image tile, 4×4 tiles, a stretch
+    /// of a scan). Groups run in parallel on the current rayon pool when `parallel`; the
+    /// result does not depend on it. Returns what the cast cost.
     ///
     /// # Errors
     /// [`Error::Size`] when `out` and `dirs` differ in length.
+    #[allow(clippy::too_many_arguments)]
     pub fn cast_bundles(
         &self,
         origin: [f64; 3],
+        world_from_sensor: &[f64; 9],
         dirs: &[[f64; 3]],
         bundle: usize,
         max_dist_m: f64,
         parallel: bool,
         out: &mut [Option<RayHit>],
-    ) -> Result<()> {
+    ) -> Result<RayStats> {
         if out.len() != dirs.len() {
             return Err(Error::Size { what: "ray output length", expected: dirs.len(), got: out.len() });
         }
         let bundle = bundle.max(1);
         let seen = self.seen_from(origin, max_dist_m);
-        let run = |(dirs, out): (&[[f64; 3]], &mut [Option<RayHit>]), candidates: &mut Vec<(f64, u32)>| {
-            let (axis, half_angle) = bundle_cone(dirs);
-            Self::cull(&seen, axis, half_angle, candidates);
-            let mut hint = None;
-            for (d, o) in dirs.iter().zip(out.iter_mut()) {
-                let best = self.nearest(origin, *d, max_dist_m, candidates, hint);
-                hint = best.map(|(_, k)| k).or(hint);
-                *o = best.map(|(h, _)| h);
+        // Bundles are culled in groups first (an image's 4×4 tiles), then each bundle from
+        // its group's candidates: most geoms are dropped once per group, not once per bundle.
+        let group = bundle * GROUP_BUNDLES;
+        let m = world_from_sensor;
+        let run = |(dirs_sensor, out): (&[[f64; 3]], &mut [Option<RayHit>]), scratch: &mut Scratch| {
+            let Scratch { in_group, candidates, dirs } = scratch;
+            dirs.clear();
+            dirs.extend(dirs_sensor.iter().map(|d| {
+                [
+                    m[0] * d[0] + m[1] * d[1] + m[2] * d[2],
+                    m[3] * d[0] + m[4] * d[1] + m[5] * d[2],
+                    m[6] * d[0] + m[7] * d[1] + m[8] * d[2],
+                ]
+            }));
+            let dirs = &dirs[..];
+            let mut stats = RayStats { rays: dirs.len() as u64, ..RayStats::default() };
+            // The group by its cone only: the pyramid costs a pass over the rays, and pays off
+            // on the bundles' smaller ones.
+            Self::cull(&seen, 0..seen.len() as u32, dirs, false, in_group);
+            for (dirs, out) in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
+                Self::cull(&seen, in_group.iter().copied(), dirs, true, candidates);
+                let mut hint = None;
+                for (d, o) in dirs.iter().zip(out.iter_mut()) {
+                    let best = self.nearest(&seen, &origin, d, max_dist_m, candidates, hint, &mut stats);
+                    hint = best.map(|(_, k)| k).or(hint);
+                    *o = best.map(|(h, _)| h);
+                }
             }
+            stats
         };
-        if parallel {
+        let stats = if parallel {
             use rayon::prelude::*;
-            dirs.par_chunks(bundle).zip(out.par_chunks_mut(bundle)).for_each_init(Vec::new, |c, chunk| run(chunk, c));
+            dirs.par_chunks(group)
+                .zip(out.par_chunks_mut(group))
+                .map_init(Scratch::default, |c, chunk| run(chunk, c))
+                .reduce(RayStats::default, |mut a, b| {
+                    a += b;
+                    a
+                })
         } else {
-            let mut candidates = Vec::new();
-            for chunk in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
-                run(chunk, &mut candidates);
+            let mut scratch = Scratch::default();
+            let mut stats = RayStats::default();
+            for chunk in dirs.chunks(group).zip(out.chunks_mut(group)) {
+                stats += run(chunk, &mut scratch);
             }
-        }
-        Ok(())
+            stats
+        };
+        Ok(stats)
     }
+}
+
+/// Per-thread lists of one group's cast: its candidates, a bundle's, its rays in the world.
+#[derive(Default)]
+struct Scratch {
+    in_group: Vec<u32>,
+    candidates: Vec<u32>,
+    dirs: Vec<[f64; 3]>,
+}
+
+/// Bundles culled together as a group before each is culled on its own (see
+/// [`RayScene::cast_bundles`]).
+const GROUP_BUNDLES: usize = 16;
+
+/// `geoms` (in id order) without any primitive that has the same shape, pose and size as an
+/// earlier one (a world's collision and visual geoms often coincide): a ray hits both at the
+/// same distance, and the lower id wins the tie, so the answer is unchanged.
+fn without_twins(geoms: Vec<SceneGeom>) -> Vec<SceneGeom> {
+    let mut kept: Vec<SceneGeom> = Vec::with_capacity(geoms.len());
+    for g in geoms {
+        let twin = matches!(g.kind, Kind::Primitive(_))
+            && kept.iter().any(|k| k.kind == g.kind && k.pos == g.pos && k.mat == g.mat);
+        if !twin {
+            kept.push(g);
+        }
+    }
+    kept
+}
+
+/// Half-sizes of a box about the geom's centre, in its frame, that holds it; `None` for an
+/// infinite plane.
+fn box_half(g: &SceneGeom) -> Option<[f64; 3]> {
+    let r = g.rbound;
+    match g.kind {
+        Kind::Primitive(Shape::Plane { half }) => (half[0] > 0.0 && half[1] > 0.0).then_some([half[0], half[1], 0.0]),
+        Kind::Primitive(Shape::Sphere { radius }) => Some([radius; 3]),
+        Kind::Primitive(Shape::Capsule { radius, half_len }) => Some([radius, radius, half_len + radius]),
+        Kind::Primitive(Shape::Ellipsoid { inv_sq }) => Some(inv_sq.map(|s| 1.0 / s.sqrt())),
+        Kind::Primitive(Shape::Cylinder { radius, half_len }) => Some([radius, radius, half_len]),
+        Kind::Primitive(Shape::Box { half }) => Some(half),
+        // The cube about the bounding sphere.
+        Kind::Mesh | Kind::Hfield => r.is_finite().then_some([r; 3]),
+    }
+}
+
+/// The four side planes (outward normals through the origin) of a pyramid about `axis` that
+/// holds every ray of `dirs` (`axis` and `half_angle_rad` from [`bundle_cone`]), a little
+/// wider for rounding; `None` for a bundle too wide for one (half-angle ≥ 60°). A geom whose
+/// box lies wholly outside one plane can't be hit by the bundle: a tighter test than the
+/// cone's for long or flat geoms.
+fn bundle_pyramid(dirs: &[[f64; 3]], axis: [f64; 3], half_angle_rad: f64) -> Option<[[f64; 3]; 4]> {
+    if half_angle_rad >= std::f64::consts::FRAC_PI_3 {
+        return None;
+    }
+    // u, w: a basis of the plane across the axis.
+    let pick = if axis[0].abs() < 0.6 { [1.0, 0.0, 0.0] } else { [0.0, 1.0, 0.0] };
+    let u = {
+        let c = dot(pick, axis);
+        let x = [pick[0] - c * axis[0], pick[1] - c * axis[1], pick[2] - c * axis[2]];
+        let n = dot(x, x).sqrt();
+        x.map(|e| e / n)
+    };
+    let w = [axis[1] * u[2] - axis[2] * u[1], axis[2] * u[0] - axis[0] * u[2], axis[0] * u[1] - axis[1] * u[0]];
+    let (mut x_lo, mut x_hi, mut y_lo, mut y_hi) = (f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY);
+    for d in dirs {
+        // Within the cone the ray points forward along the axis (cos ≥ 0.5).
+        let inv_z = 1.0 / dot(*d, axis);
+        let (x, y) = (dot(*d, u) * inv_z, dot(*d, w) * inv_z);
+        x_lo = x_lo.min(x);
+        x_hi = x_hi.max(x);
+        y_lo = y_lo.min(y);
+        y_hi = y_hi.max(y);
+    }
+    let m = 1e-9;
+    let (x_lo, x_hi, y_lo, y_hi) = (x_lo - m, x_hi + m, y_lo - m, y_hi + m);
+    // p·u ≤ x_hi p·a, i.e. (u − x_hi a)·p ≤ 0; and so on.
+    let plane = |s: f64, e: [f64; 3], k: f64| std::array::from_fn(|i| s * e[i] - s * k * axis[i]);
+    Some([plane(1.0, u, x_hi), plane(-1.0, u, x_lo), plane(1.0, w, y_hi), plane(-1.0, w, y_lo)])
 }
 
 /// The narrowest cone about the mean direction that holds every unit vector of `dirs`: its
@@ -527,10 +731,11 @@ mod tests {
     use std::sync::Arc;
 
     /// A scene of every primitive, a mesh and a floor, with some geoms of a body that is
-    /// excluded and one invisible geom.
+    /// excluded, one invisible geom, and a box twice (as a world's collision and visual geoms).
     const SCENE: &str = r#"<mujoco><asset><mesh name="tet" vertex="0 0 0 0.3 0 0 0 0.3 0 0 0 0.3"/></asset>
       <worldbody><geom type="plane" size="5 5 0.1"/>
         <geom type="box" pos="1 0 0.3" size="0.1 0.2 0.3" euler="0 0 20"/>
+        <geom type="box" pos="1 0 0.3" size="0.1 0.2 0.3" euler="0 0 20" group="1"/>
         <geom type="sphere" pos="1 0.8 0.4" size="0.15"/>
         <geom type="capsule" pos="1 -0.8 0.4" size="0.05 0.2" euler="30 0 0"/>
         <geom type="cylinder" pos="1.5 0.4 0.5" size="0.1 0.2"/>
@@ -539,6 +744,91 @@ mod tests {
         <geom type="sphere" pos="0.6 0 0.5" size="0.05" rgba="1 1 1 0"/>
         <body name="robot" pos="0 0 0.5"><freejoint/><geom type="sphere" size="0.1"/></body>
       </worldbody></mujoco>"#;
+
+    /// MuJoCo's own intersection of one ray with one primitive (−1: none).
+    fn mujoco_ray_geom(ty: u32, pos: [f64; 3], mat: [f64; 9], size: [f64; 3], pnt: [f64; 3], vec: [f64; 3]) -> f64 {
+        // SAFETY: every pointer is to an array of the length mju_rayGeom reads (3, 9, 3, 3, 3);
+        // the type is a primitive it handles; the normal is optional (null).
+        unsafe {
+            sys::mju_rayGeom(
+                pos.as_ptr(),
+                mat.as_ptr(),
+                size.as_ptr(),
+                pnt.as_ptr(),
+                vec.as_ptr(),
+                ty as c_int,
+                std::ptr::null_mut(),
+            )
+        }
+    }
+
+    #[test]
+    fn primitives_match_mju_ray_geom() {
+        use nalgebra::{UnitQuaternion, Vector3};
+        use rand::{Rng, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(13);
+        let types = [
+            ("plane", sys::mjtGeom_mjGEOM_PLANE),
+            ("sphere", sys::mjtGeom_mjGEOM_SPHERE),
+            ("capsule", sys::mjtGeom_mjGEOM_CAPSULE),
+            ("ellipsoid", sys::mjtGeom_mjGEOM_ELLIPSOID),
+            ("cylinder", sys::mjtGeom_mjGEOM_CYLINDER),
+            ("box", sys::mjtGeom_mjGEOM_BOX),
+        ];
+        for (name, ty) in types {
+            let (mut hits, mut inside_hits, mut worst) = (0, 0, 0.0f64);
+            for k in 0..20_000 {
+                let pos = [rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0), rng.random_range(-1.0..1.0)];
+                let q = UnitQuaternion::from_euler_angles(
+                    rng.random_range(-3.2..3.2),
+                    rng.random_range(-1.6..1.6),
+                    rng.random_range(-3.2..3.2),
+                );
+                let m = q.to_rotation_matrix();
+                let mat: [f64; 9] = std::array::from_fn(|i| m[(i / 3, i % 3)]);
+                // Planes: a finite rectangle half the time, infinite otherwise.
+                let size: [f64; 3] = if ty == sys::mjtGeom_mjGEOM_PLANE && k % 2 == 0 {
+                    [0.0, 0.0, 0.1]
+                } else {
+                    std::array::from_fn(|_| rng.random_range(0.05..0.5))
+                };
+                // Origins near and inside the geom; directions at it (most hit) or anywhere,
+                // not unit length, as MuJoCo allows.
+                // Every fifth origin lies within 2 cm of the centre: inside every solid (sizes
+                // ≥ 5 cm), so its ray must hit where it leaves.
+                let from_inside = k % 5 == 1 && ty != sys::mjtGeom_mjGEOM_PLANE;
+                let spread = if from_inside { 0.02 } else { 1.5 };
+                let pnt: [f64; 3] = std::array::from_fn(|i| pos[i] + rng.random_range(-spread..spread));
+                let target = Vector3::from(pos) + Vector3::from_fn(|_, _| rng.random_range(-0.4..0.4));
+                let mut dir = if k % 4 == 0 {
+                    Vector3::from_fn(|_, _| rng.random_range(-1.0..1.0))
+                } else {
+                    target - Vector3::from(pnt)
+                };
+                dir *= rng.random_range(0.3..2.0);
+                let vec = [dir.x, dir.y, dir.z];
+                let expected = mujoco_ray_geom(ty, pos, mat, size, pnt, vec);
+                let shape = Shape::of(ty, size).unwrap();
+                let got = shape.hit(to_local(&mat, sub(pnt, pos)), to_local(&mat, vec));
+                assert_eq!(got >= 0.0, expected >= 0.0, "{name} ray {k}: ours {got}, MuJoCo {expected}");
+                if expected >= 0.0 {
+                    worst = worst.max((got - expected).abs());
+                    hits += 1;
+                    inside_hits += usize::from(from_inside);
+                } else {
+                    assert!(!from_inside, "{name} ray {k} from inside missed");
+                }
+            }
+            assert!(worst < 1e-9, "{name}: worst difference {worst} m");
+            // Planes are seen from their front only: about half the origins are behind.
+            assert!(hits > 4_000, "{name}: only {hits} of 20000 rays hit");
+            if ty != sys::mjtGeom_mjGEOM_PLANE {
+                assert_eq!(inside_hits, 4_000, "{name}: rays from inside that hit");
+            }
+        }
+    }
+
+    const IDENTITY: [f64; 9] = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
 
     #[test]
     fn scene_matches_mj_multi_ray() {
@@ -561,7 +851,7 @@ mod tests {
             RayFilter { groups: [true; 6], exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
         let scene = RayScene::new(&data, &filter);
         let mut out = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &dirs, 16, 50.0, true, &mut out).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, true, &mut out).unwrap();
         let mut hits = std::collections::BTreeSet::new();
         for (k, (a, b)) in reference.iter().zip(&out).enumerate() {
             match (a, b) {
@@ -574,11 +864,13 @@ mod tests {
                 _ => panic!("ray {k}: mj_multiRay {a:?}, RayScene {b:?}"),
             }
         }
-        // Every visible geom but the invisible one and the robot's was hit by some ray.
-        assert_eq!(hits.into_iter().collect::<Vec<_>>(), vec![0, 1, 2, 3, 4, 5, 6]);
+        // Every visible geom but the invisible one, the robot's and the box's twin (geom 2: the
+        // lower id wins a tie, in MuJoCo as here) was hit by some ray.
+        assert_eq!(hits.into_iter().collect::<Vec<_>>(), vec![0, 1, 3, 4, 5, 6, 7]);
+        assert_eq!(scene.len(), 7, "the box's twin is left out of the scene");
         // Serial and parallel casts agree bit for bit.
         let mut serial = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &dirs, 7, 50.0, false, &mut serial).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 7, 50.0, false, &mut serial).unwrap();
         assert_eq!(serial, out);
     }
 }

@@ -1,4 +1,5 @@
-//! A depth camera by ray casting ([`crate::mj::RayScene`], no OpenGL): one ray through each
+//! A depth camera by ray casting ([`crate::mj::RayScene`], no OpenGL; the ray setup it shares
+//! with [`super::lidar`] is `sense::fan`): one ray through each
 //! pixel centre of a pinhole camera, depth in metres along the optical axis (REP 118), NaN
 //! where nothing is hit within range, in the ROS optical frame (REP 103/105: z forward, x
 //! right, y down).
@@ -17,11 +18,12 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
+use super::fan::{RayFan, noise_rng};
 use crate::error::{Error, Result};
 use crate::log::{CameraInfo, Header, Image, PointCloud2, RegionOfInterest};
-use crate::mj::{Data, Model, ObjType, RayFilter, RayHit, RayScene};
+use crate::mj::{Data, Model, ObjType, RayFilter, RayStats};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_distr::StandardNormal;
 
 /// Pinhole intrinsics in pixels, ROS convention: pixel `(u, v)` (column, row) has its centre
@@ -261,16 +263,13 @@ pub struct DepthCamera {
     frame_id: String,
     /// `mujoco_camera_from_optical`: a half turn about x.
     cam_from_optical: Rotation3<f64>,
-    /// Unit ray directions in the optical frame, in tile order.
-    rays_optical: Vec<Vector3<f64>>,
-    /// z component of each unnormalised ray (depth = distance × this).
+    /// The rays through the pixel centres (unit, optical frame), in tile order.
+    fan: RayFan,
+    /// z component of each unnormalised ray (depth = distance × this), in tile order.
     depth_per_dist: Vec<f64>,
     /// Pixel index of each ray.
     pixel: Vec<u32>,
-    pool: Option<rayon::ThreadPool>,
     frames: u64,
-    dirs_world: Vec<[f64; 3]>,
-    hits: Vec<Option<RayHit>>,
 }
 
 impl std::fmt::Debug for DepthCamera {
@@ -331,33 +330,31 @@ impl DepthCamera {
                 message: format!("depth noise {} m: give a standard deviation ≥ 0", opts.noise_std_m),
             });
         }
-        let pool = match opts.threads {
-            0 | 1 => None,
-            n => Some(
-                rayon::ThreadPoolBuilder::new()
-                    .num_threads(n)
-                    .build()
-                    .map_err(|e| Error::Options(format!("{}: can't start {n} ray threads: {e}", what())))?,
-            ),
-        };
-        // Rays in tile order: TILE×TILE blocks, row-major within and between blocks.
+        // Rays in tile order: TILE×TILE blocks (the caster's bundles), 4×4 of them in a
+        // super-tile (its groups), row-major within and between blocks.
         let (w, h) = (opts.width, opts.height);
         let mut rays_optical = Vec::with_capacity(intrinsics.len());
         let mut depth_per_dist = Vec::with_capacity(intrinsics.len());
         let mut pixel = Vec::with_capacity(intrinsics.len());
-        for tv in (0..h).step_by(TILE as usize) {
-            for tu in (0..w).step_by(TILE as usize) {
-                for v in tv..(tv + TILE).min(h) {
-                    for u in tu..(tu + TILE).min(w) {
-                        let r = intrinsics.ray_optical(u, v);
-                        let n = r.norm();
-                        rays_optical.push(r / n);
-                        depth_per_dist.push(1.0 / n);
-                        pixel.push(v * w + u);
+        let superb = 4 * TILE;
+        for sv in (0..h).step_by(superb as usize) {
+            for su in (0..w).step_by(superb as usize) {
+                for tv in (sv..(sv + superb).min(h)).step_by(TILE as usize) {
+                    for tu in (su..(su + superb).min(w)).step_by(TILE as usize) {
+                        for v in tv..(tv + TILE).min(h) {
+                            for u in tu..(tu + TILE).min(w) {
+                                let r = intrinsics.ray_optical(u, v);
+                                let n = r.norm();
+                                rays_optical.push(r / n);
+                                depth_per_dist.push(1.0 / n);
+                                pixel.push(v * w + u);
+                            }
+                        }
                     }
                 }
             }
         }
+        let fan = RayFan::new(rays_optical, (TILE * TILE) as usize, opts.threads, &what())?;
         Ok(DepthCamera {
             camera,
             name: camera_name.to_string(),
@@ -365,13 +362,10 @@ impl DepthCamera {
             frame_id: format!("{camera_name}_optical_frame"),
             options: opts,
             cam_from_optical: Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
-            rays_optical,
+            fan,
             depth_per_dist,
             pixel,
-            pool,
             frames: 0,
-            dirs_world: Vec::new(),
-            hits: Vec::new(),
         })
     }
 
@@ -394,6 +388,11 @@ impl DepthCamera {
     /// The MuJoCo camera's name.
     pub fn name(&self) -> &str {
         &self.name
+    }
+
+    /// What the last [`DepthCamera::render`] cost in ray–geom tests.
+    pub fn last_ray_stats(&self) -> RayStats {
+        self.fan.last_stats()
     }
 
     /// Pose of the optical frame in the world at `data`'s last forward pass.
@@ -421,44 +420,27 @@ impl DepthCamera {
         }
         let world_from_optical = self.world_from_optical(data);
         let origin = world_from_optical.translation.vector;
-        let rot = world_from_optical.rotation;
-        self.dirs_world.clear();
-        self.dirs_world.extend(self.rays_optical.iter().map(|r| {
-            let d = rot * r;
-            [d.x, d.y, d.z]
-        }));
-        self.hits.clear();
-        self.hits.resize(self.dirs_world.len(), None);
-        let scene = RayScene::new(data, &self.options.filter);
         let (min_z, max_z) = (self.options.min_range_m, self.options.max_range_m);
         // The farthest distance along any ray that can still be within max depth.
         let max_dist = max_z / self.depth_per_dist.iter().copied().fold(1.0f64, f64::min);
-        let bundle = (TILE * TILE) as usize;
-        let origin = [origin.x, origin.y, origin.z];
-        let (dirs, hits) = (&self.dirs_world, &mut self.hits);
-        match (&self.pool, self.options.threads) {
-            (Some(pool), _) => pool.install(|| scene.cast_bundles(origin, dirs, bundle, max_dist, true, hits))?,
-            (None, 1) => scene.cast_bundles(origin, dirs, bundle, max_dist, false, hits)?,
-            (None, _) => scene.cast_bundles(origin, dirs, bundle, max_dist, true, hits)?,
-        }
+        let rot = world_from_optical.rotation.to_rotation_matrix();
+        let hits = self.fan.cast(data, &self.options.filter, [origin.x, origin.y, origin.z], &rot, max_dist)?;
+        // Depth along the optical axis, in pixel order; NaN outside the range.
         let mut depth_m = vec![f32::NAN; self.intrinsics.len()];
-        let noise = self.options.noise_std_m;
-        let mut rng = {
-            let mut r = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed);
-            r.set_stream(self.frames);
-            r
-        };
-        // Pixel order, so the noise of a pixel does not depend on the tiling.
-        let mut by_pixel = vec![f64::NAN; self.intrinsics.len()];
-        for ((hit, &k), &s) in self.hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
+        for ((hit, &k), &s) in hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
             if let Some(h) = hit {
-                by_pixel[k as usize] = h.dist_m * s;
+                let z = h.dist_m * s;
+                if z >= min_z && z <= max_z {
+                    depth_m[k as usize] = z as f32;
+                }
             }
         }
-        for (out, z) in depth_m.iter_mut().zip(by_pixel) {
-            if z.is_finite() && z >= min_z && z <= max_z {
-                let z = if noise > 0.0 { z + noise * rng.sample::<f64, _>(StandardNormal) } else { z };
-                *out = z as f32;
+        let noise = self.options.noise_std_m;
+        if noise > 0.0 {
+            // Drawn in pixel order, so the noise of a pixel does not depend on the tiling.
+            let mut rng = noise_rng(self.options.seed, self.frames);
+            for z in depth_m.iter_mut().filter(|z| z.is_finite()) {
+                *z = (f64::from(*z) + noise * rng.sample::<f64, _>(StandardNormal)) as f32;
             }
         }
         self.frames += 1;

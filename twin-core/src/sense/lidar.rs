@@ -1,5 +1,5 @@
 //! A scanning range finder (Gazebo `ray`/`gpu_ray`/`lidar`) by ray casting
-//! ([`crate::mj::RayScene`]): every beam of its scan pattern at full resolution, cast in
+//! ([`crate::mj::RayScene`], the ray setup shared with [`super::depth`]): every beam of its scan pattern at full resolution, cast in
 //! parallel on scan ticks only, with its range limits and Gaussian range noise.
 //!
 //! Beams follow Gazebo's convention in the sensor frame (x forward, z up): horizontal angle
@@ -7,11 +7,12 @@
 //! `(cos v cos h, cos v sin h, sin v)`. Ranges are along the beam; REP 117: `+Inf` for no
 //! return within range, `−Inf` for a return nearer than the minimum range.
 
+use super::fan::{RayFan, noise_rng};
 use crate::error::{Error, Result};
 use crate::log::{Header, LaserScan, PointCloud2};
-use crate::mj::{Data, Model, ObjType, RayFilter, RayHit, RayScene};
+use crate::mj::{Data, Model, ObjType, RayFilter, RayStats};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
-use rand::{Rng, SeedableRng};
+use rand::Rng;
 use rand_distr::StandardNormal;
 
 /// Beam angles of a scan: `samples` evenly from `min_rad` to `max_rad` (both included).
@@ -58,7 +59,8 @@ pub struct LidarOptions {
     pub seed: u64,
     /// Scans per second when published on a schedule, Hz. (default: 10.0)
     pub rate_hz: f64,
-    /// Threads: 0 rayon's global pool, 1 the calling thread (the scan is the same for any).
+    /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
+    /// builds a pool of that many for this scanner. The scan is the same for any count.
     /// (default: 0)
     pub threads: usize,
     /// Which geoms the beams see. (default: [`RayFilter::default`])
@@ -172,10 +174,9 @@ pub struct Lidar {
     site: usize,
     options: LidarOptions,
     frame_id: String,
-    dirs_sensor: Vec<Vector3<f64>>,
+    /// The beams (unit, sensor frame), ring-major.
+    fan: RayFan,
     scans: u64,
-    dirs_world: Vec<[f64; 3]>,
-    hits: Vec<Option<RayHit>>,
 }
 
 impl Lidar {
@@ -184,7 +185,7 @@ impl Lidar {
     ///
     /// # Errors
     /// [`Error::NotFound`] without such a site; [`Error::OutOfRange`] for no beams or a range
-    /// that is not 0 ≤ min < max.
+    /// that is not 0 ≤ min < max; [`Error::Options`] when the thread pool can't be built.
     pub fn new(model: &Model, site_name: &str, options: LidarOptions) -> Result<Lidar> {
         let site = model.require_id(ObjType::Site, site_name)?;
         let what = || format!("LiDAR \"{site_name}\"");
@@ -216,15 +217,8 @@ impl Lidar {
                 dirs_sensor.push(beam_direction(options.horizontal.angle(h), options.vertical.angle(v)));
             }
         }
-        Ok(Lidar {
-            site,
-            frame_id: site_name.to_string(),
-            options,
-            dirs_sensor,
-            scans: 0,
-            dirs_world: Vec::new(),
-            hits: Vec::new(),
-        })
+        let fan = RayFan::new(dirs_sensor, BUNDLE, options.threads, &what())?;
+        Ok(Lidar { site, frame_id: site_name.to_string(), options, fan, scans: 0 })
     }
 
     /// Sets the `frame_id` of the scans (default: the site's name).
@@ -236,6 +230,11 @@ impl Lidar {
     /// The options it was made with.
     pub fn options(&self) -> &LidarOptions {
         &self.options
+    }
+
+    /// What the last [`Lidar::scan`] cost in ray–geom tests.
+    pub fn last_ray_stats(&self) -> RayStats {
+        self.fan.last_stats()
     }
 
     /// Scans the state of `data` (its last forward pass), stamped with its time.
@@ -256,21 +255,11 @@ impl Lidar {
         let rot = Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(&m));
         let world_from_sensor =
             Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), UnitQuaternion::from_rotation_matrix(&rot));
-        self.dirs_world.clear();
-        self.dirs_world.extend(self.dirs_sensor.iter().map(|d| {
-            let w = rot * d;
-            [w.x, w.y, w.z]
-        }));
-        self.hits.clear();
-        self.hits.resize(self.dirs_world.len(), None);
-        let scene = RayScene::new(data, &self.options.filter);
         let (lo, hi) = (self.options.min_range_m, self.options.max_range_m);
-        scene.cast_bundles(p, &self.dirs_world, BUNDLE, hi, self.options.threads != 1, &mut self.hits)?;
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(self.options.seed);
-        rng.set_stream(self.scans);
+        let hits = self.fan.cast(data, &self.options.filter, p, &rot, hi)?;
+        let mut rng = noise_rng(self.options.seed, self.scans);
         let noise = self.options.noise_std_m;
-        let ranges_m = self
-            .hits
+        let ranges_m = hits
             .iter()
             .map(|h| match h {
                 None => f32::INFINITY,

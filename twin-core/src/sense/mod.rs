@@ -4,6 +4,7 @@
 
 pub mod cup;
 pub mod depth;
+mod fan;
 pub mod lidar;
 pub mod rig;
 
