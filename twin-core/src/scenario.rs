@@ -109,37 +109,39 @@ pub struct Checks {
     pub max_step_length_error: Option<f64>,
     /// Largest cost of transport.
     pub max_cost_of_transport: Option<f64>,
-    /// Grasp: least clearance of the arms (and no forbidden contact), m.
+    /// Grasp: least clearance between the arms and the rest of the robot, and no robot contact
+    /// with the world other than feet and gripper–cup, m (0: touching fails).
     pub min_clearance_m: Option<f64>,
-    /// Grasp: largest normal force of one finger on the cup, N.
+    /// Grasp: largest finger–cup normal force of one finger, N.
     pub max_grip_force_n: Option<f64>,
-    /// Grasp: least mean normal force of each finger while the cup is up, N.
+    /// Grasp: least mean finger–cup normal force of each finger while the cup is held up, N.
     pub min_grip_force_n: Option<f64>,
-    /// Grasp: largest cup displacement in the grasp frame after the lift started, m.
+    /// Grasp: largest cup displacement in the grasp frame after the lift started (the grasp
+    /// frame, once at the cup, rose 1 cm), m.
     pub max_slip_m: Option<f64>,
     /// Grasp: largest cup tilt in the grasp frame after the lift started, degrees.
     pub max_tilt_deg: Option<f64>,
-    /// Grasp: least CoM margin inside the support polygon, m.
+    /// Grasp: least margin of the CoM's ground projection inside the support polygon, m.
     pub min_com_margin_m: Option<f64>,
-    /// Grasp: least cup height above its start at the end, m.
+    /// Grasp: least cup height above its start, held for `min_hold_secs` at the end of the
+    /// run, m.
     pub min_lift_m: Option<f64>,
-    /// Grasp: how long the cup stays lifted at the end, s.
+    /// Grasp: how long the cup must stay lifted at the end of the run, s (default with
+    /// `min_lift_m`: 2).
     pub min_hold_secs: Option<f64>,
 }
 
 impl Checks {
-    /// The grasp thresholds among these checks.
-    pub fn grasp(&self) -> crate::grasp::GraspChecks {
-        crate::grasp::GraspChecks {
-            min_clearance_m: self.min_clearance_m,
-            max_grip_force_n: self.max_grip_force_n,
-            min_grip_force_n: self.min_grip_force_n,
-            max_slip_m: self.max_slip_m,
-            max_tilt_deg: self.max_tilt_deg,
-            min_com_margin_m: self.min_com_margin_m,
-            min_lift_m: self.min_lift_m,
-            min_hold_secs: self.min_hold_secs,
-        }
+    /// Whether any grasp threshold is set (a [`crate::grasp::GraspCheck`] then runs).
+    pub fn has_grasp(&self) -> bool {
+        self.min_clearance_m.is_some()
+            || self.max_grip_force_n.is_some()
+            || self.min_grip_force_n.is_some()
+            || self.max_slip_m.is_some()
+            || self.max_tilt_deg.is_some()
+            || self.min_com_margin_m.is_some()
+            || self.min_lift_m.is_some()
+            || self.min_hold_secs.is_some()
     }
 }
 
@@ -485,9 +487,9 @@ impl Scenario {
     /// # Errors
     /// As [`GaitMetrics::for_model`].
     pub fn check(&self, model: &Model) -> Result<ScenarioCheck> {
-        let grasp = self.checks.grasp().any().then(|| {
+        let grasp = self.checks.has_grasp().then(|| {
             crate::grasp::GraspCheck::new(
-                self.checks.grasp(),
+                self.checks.clone(),
                 &self.cup.as_ref().map_or_else(default_cup, |c| c.body.clone()),
                 self.grasp.grasp_bodies.clone(),
             )
@@ -663,7 +665,7 @@ mod tests {
         assert_eq!(s.randomize.as_deref(), Some(Path::new("r.toml")));
         assert_eq!(s.cup.as_ref().map(|c| (c.body.as_str(), c.position)), Some(("cup", [0.3, -0.1])));
         assert_eq!(s.grasp.grip_force_n, 6.0);
-        assert!(s.checks.grasp().any());
+        assert!(s.checks.has_grasp());
         let e = parse("duration = 5\n[grasp]\n\ngrip_force_n = -1.0\n").unwrap_err().to_string();
         assert!(e.starts_with("s.toml:4: `grasp.grip_force_n`") && e.contains("non-negative"), "{e}");
         let e = parse("duration = 5\n[grasp]\ngrip = 1.0\n").unwrap_err().to_string();

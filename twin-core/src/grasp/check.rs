@@ -6,45 +6,8 @@ use super::arm::below;
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
+use crate::scenario::Checks;
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
-
-/// Thresholds of the grasp checks; each one present is a PASS/FAIL line (scenario `[checks]`).
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct GraspChecks {
-    /// Least clearance between the arms and the rest of the robot, and no robot contact with
-    /// the world other than feet and gripper–cup, m (0: touching fails).
-    pub min_clearance_m: Option<f64>,
-    /// Largest finger–cup normal force of one finger, N.
-    pub max_grip_force_n: Option<f64>,
-    /// Least mean finger–cup normal force of each finger while the cup is held up, N.
-    pub min_grip_force_n: Option<f64>,
-    /// Largest cup displacement in the grasp frame after the lift started (the grasp frame,
-    /// once at the cup, rose 1 cm), m.
-    pub max_slip_m: Option<f64>,
-    /// Largest cup tilt in the grasp frame after the lift started, degrees.
-    pub max_tilt_deg: Option<f64>,
-    /// Least margin of the CoM's ground projection inside the support polygon, m.
-    pub min_com_margin_m: Option<f64>,
-    /// Least cup height above its start, held for `min_hold_secs` at the end of the run, m.
-    pub min_lift_m: Option<f64>,
-    /// How long the cup must stay lifted at the end of the run, s (default with `min_lift_m`:
-    /// 2).
-    pub min_hold_secs: Option<f64>,
-}
-
-impl GraspChecks {
-    /// Whether any threshold is set.
-    pub fn any(&self) -> bool {
-        self.min_clearance_m.is_some()
-            || self.max_grip_force_n.is_some()
-            || self.min_grip_force_n.is_some()
-            || self.max_slip_m.is_some()
-            || self.max_tilt_deg.is_some()
-            || self.min_com_margin_m.is_some()
-            || self.min_lift_m.is_some()
-            || self.min_hold_secs.is_some()
-    }
-}
 
 /// What a grasp check measured.
 #[derive(Debug, Clone, Default, PartialEq)]
@@ -81,10 +44,11 @@ struct GripperSet {
     arm_bodies: Vec<usize>,
 }
 
-/// Observes a rollout and checks the grasp against [`GraspChecks`] (`Check` name `grasp`).
+/// Observes a rollout and checks the grasp against the grasp thresholds of a scenario's
+/// [`Checks`] (`Check` name `grasp`).
 #[derive(Debug, Clone)]
 pub struct GraspCheck {
-    checks: GraspChecks,
+    checks: Checks,
     cup_name: String,
     grasp_names: [String; 2],
     cup_body: usize,
@@ -116,7 +80,7 @@ fn geoms_of(model: &Model, bodies: &[usize]) -> Vec<usize> {
 impl GraspCheck {
     /// A check of the grasp of body `cup` by the grippers whose grasp frames are
     /// `grasp_bodies`.
-    pub fn new(checks: GraspChecks, cup: &str, grasp_bodies: [String; 2]) -> GraspCheck {
+    pub fn new(checks: Checks, cup: &str, grasp_bodies: [String; 2]) -> GraspCheck {
         GraspCheck {
             checks,
             cup_name: cup.to_string(),

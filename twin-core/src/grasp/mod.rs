@@ -26,7 +26,7 @@ pub mod check;
 pub mod perceive;
 
 pub use arm::{ArmSide, IkResult, Target};
-pub use check::{GraspCheck, GraspChecks, GraspMeasure};
+pub use check::{GraspCheck, GraspMeasure};
 pub use perceive::{CupSighting, Eye};
 
 use crate::control::{Controller, Observation};
