@@ -16,6 +16,14 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
+/// Rotation by `angle` (radians) about the unit vector `axis`: one `sin_cos`, where
+/// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
+/// unit vectors already).
+fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
+    let (s, c) = (0.5 * angle).sin_cos();
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
+}
+
 /// One joint as forward kinematics needs it.
 #[derive(Debug, Clone)]
 struct Joint {
@@ -77,7 +85,7 @@ impl Tree {
                     kind: model.joint_type(j),
                     qpos_adr,
                     qpos0: model.qpos0()[qpos_adr],
-                    axis: Vector3::from(model.jnt_axis()[j]),
+                    axis: Vector3::from(model.jnt_axis()[j]).normalize(),
                     pos: Vector3::from(model.jnt_pos()[j]),
                 }
             })
@@ -142,7 +150,7 @@ impl Tree {
                     JointType::Hinge => {
                         let anchor = pos + rot * jt.pos;
                         let axis = rot * jt.axis;
-                        rot *= UnitQuaternion::from_scaled_axis(jt.axis * (qpos[a] - jt.qpos0));
+                        rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
                         pos = anchor - rot * jt.pos;
                         out.anchor[j] = anchor;
                         out.axis[j] = axis;
@@ -570,7 +578,7 @@ impl LegIk {
                 .collect(),
             chain,
             qpos0: leg.joints.iter().map(|&j| model.qpos0()[model.jnt_qposadr()[j] as usize]).collect(),
-            axis: leg.joints.iter().map(|&j| Vector3::from(model.jnt_axis()[j])).collect(),
+            axis: leg.joints.iter().map(|&j| Vector3::from(model.jnt_axis()[j]).normalize()).collect(),
             pos: leg.joints.iter().map(|&j| Vector3::from(model.jnt_pos()[j])).collect(),
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
@@ -632,7 +640,7 @@ impl LegIk {
                 let anchor = pos + rot * self.pos[k];
                 axes[k] = rot * self.axis[k];
                 anchors[k] = anchor;
-                rot *= UnitQuaternion::from_scaled_axis(self.axis[k] * (q[k] - self.qpos0[k]));
+                rot *= hinge_rotation(&self.axis[k], q[k] - self.qpos0[k]);
                 pos = anchor - rot * self.pos[k];
             }
         }
