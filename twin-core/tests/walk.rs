@@ -270,3 +270,21 @@ fn stand_scenario_catches_a_sideways_kick_the_default_timing_does_not() {
     });
     assert!(s.fell, "the default timing fell in the lab: {s:?}");
 }
+
+/// The walker reads the IMU the robot loader finds (`Robot::imus`, the one IMU finder): the same
+/// gyro and orientation sensors, and a named override that is not an IMU is refused by name.
+#[test]
+fn walker_reads_the_robots_imu() {
+    use twin_core::walk::kin::{Body, BodyNames, Tree};
+    let robot = twin_core::robot::Robot::load(humanoid()).unwrap();
+    let imu = robot.imus.first().expect("the shipped humanoid has an IMU");
+    let tree = Tree::new(&robot.model);
+    let home = twin_core::control::nominal_pose(&robot.model);
+    let body = Body::find(&robot.model, &tree, &home, &BodyNames::default()).unwrap();
+    let found = body.imu.expect("the walker found no IMU");
+    assert_eq!((found.gyro_adr, found.quat_adr), (imu.gyro_adr, imu.quat_adr));
+    assert_eq!(found.name, format!("{}_gyro", imu.meta.name));
+    let names = BodyNames { imu_gyro: Some("no_such_gyro".into()), ..BodyNames::default() };
+    let err = Body::find(&robot.model, &tree, &home, &names).unwrap_err().to_string();
+    assert!(err.contains("no_such_gyro"), "{err}");
+}

@@ -339,7 +339,8 @@ pub struct BodyNames {
     pub left_foot: Option<String>,
     /// Right foot body (default: the lowest collision body on the −y side).
     pub right_foot: Option<String>,
-    /// Gyro sensor of the IMU (default: the first gyro; none: the base orientation is used).
+    /// Gyro sensor (`<name>_gyro`) of the IMU the walker reads (default: the first IMU of
+    /// [`crate::robot::imus_of`]; none: the base orientation is used).
     pub imu_gyro: Option<String>,
 }
 
@@ -462,30 +463,23 @@ impl Body {
         };
         let legs = [leg(Side::Left, left)?, leg(Side::Right, right)?];
 
-        let gyro = match &names.imu_gyro {
-            Some(n) => {
-                Some(model.id(ObjType::Sensor, n).ok_or_else(|| walk_err(format!("the model has no sensor \"{n}\"")))?)
-            }
-            None => (0..model.nsensor()).find(|&s| model.sensor_type()[s] as u32 == mujoco_sys::mjtSensor_mjSENS_GYRO),
+        // The one IMU finder (`<name>_gyro` + `<name>_accel` on a site, `<name>_quat` when
+        // present), as the recorder and the ROS bridge see them.
+        let imus = crate::robot::imus_of(model);
+        let found = match &names.imu_gyro {
+            Some(n) => Some(imus.iter().find(|i| format!("{}_gyro", i.meta.name) == *n).ok_or_else(|| {
+                walk_err(format!(
+                    "the model has no IMU with the gyro sensor \"{n}\" (an IMU is a `<name>_gyro` + \
+                     `<name>_accel` sensor pair on one site)"
+                ))
+            })?),
+            None => imus.first(),
         };
-        let imu = gyro.and_then(|s| {
-            if model.sensor_objtype()[s] as u32 != mujoco_sys::mjtObj_mjOBJ_SITE {
-                return None;
-            }
-            let site = model.sensor_objid()[s] as usize;
-            let quat_adr = (0..model.nsensor())
-                .find(|&q| {
-                    model.sensor_type()[q] as u32 == mujoco_sys::mjtSensor_mjSENS_FRAMEQUAT
-                        && model.sensor_objtype()[q] as u32 == mujoco_sys::mjtObj_mjOBJ_SITE
-                        && model.sensor_objid()[q] as usize == site
-                })
-                .map(|q| model.sensor_adr()[q] as usize);
-            Some(Imu {
-                name: model.name(ObjType::Sensor, s).to_string(),
-                quat_adr,
-                gyro_adr: model.sensor_adr()[s] as usize,
-                site_rot: quat(model.site_quat()[site]),
-            })
+        let imu = found.map(|i| Imu {
+            name: format!("{}_gyro", i.meta.name),
+            quat_adr: i.quat_adr,
+            gyro_adr: i.gyro_adr,
+            site_rot: quat(i.body_from_imu.1),
         });
         Ok(Body {
             pelvis,
