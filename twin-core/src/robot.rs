@@ -353,6 +353,12 @@ fn interface_of(model: &Model, a: usize) -> Interface {
     }
 }
 
+/// The IMUs of a compiled `model` as [`Robot::imus`] finds them, without the file's metadata
+/// (topics `/robot/<name>`, noise from the sensors): for controllers, which see only the model.
+pub fn imus_of(model: &Model) -> Vec<Imu> {
+    find_imus(model, "robot", &[])
+}
+
 /// IMUs: `<name>_gyro` (a gyro) + `<name>_accel` sensor pairs on one site, with `<name>_quat`
 /// when present. `meta` (from the file) gives topics, rates and noise; otherwise the topic is
 /// `/<robot>/<name>`, the `frame_id` the body, the noise the sensors' `noise`.

@@ -242,3 +242,49 @@ fn diagnostics_are_recorded() {
     assert!(plan.poses.len() >= 3, "{plan:?}");
     assert!(plan.poses[2].position[0] > plan.poses[0].position[0] + 0.1, "{plan:?}");
 }
+
+/// Recovery stepping of `stand.toml` (step as soon as the DCM leaves the feet, a 0.25-s swing
+/// with no double support before it): a sideways kick of 0.6 m/s of the whole robot (capture
+/// point 0.15 m out, past the outer sole edge at 0.135 m) is caught by stepping; with the
+/// walker's default recovery timing (margin 0.02 m, 0.05 s double support + 0.35 s swing) the
+/// robot falls without a step.
+#[test]
+fn stand_scenario_catches_a_sideways_kick_the_default_timing_does_not() {
+    // 0.6 m/s × 35.7 kg in 0.05 s on the pelvis, to the left, 2 s after the crouch.
+    let kick = |sc: &mut Scenario| {
+        sc.pushes.clear();
+        sc.duration_secs = 6.0;
+        sc.checks.max_distance = None;
+        sc.pushes.push(Push { time: 3.0, duration: 0.05, force: [0.0, 428.4, 0.0], body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("stand.toml")).unwrap();
+    let (s, _, _) = run_scenario(shipped.clone(), kick);
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.steps >= 1, "recovered by stepping: {} steps", s.steps);
+    let (s, _, _) = run_scenario(shipped, |sc| {
+        kick(sc);
+        let d = WalkOptions::default();
+        sc.walk.recovery_margin = d.recovery_margin;
+        sc.walk.recovery_swing_secs = d.recovery_swing_secs;
+        sc.walk.recovery_double_support_secs = d.recovery_double_support_secs;
+    });
+    assert!(s.fell, "the default timing fell in the lab: {s:?}");
+}
+
+/// The walker reads the IMU the robot loader finds (`Robot::imus`, the one IMU finder): the same
+/// gyro and orientation sensors, and a named override that is not an IMU is refused by name.
+#[test]
+fn walker_reads_the_robots_imu() {
+    use twin_core::walk::kin::{Body, BodyNames, Tree};
+    let robot = twin_core::robot::Robot::load(humanoid()).unwrap();
+    let imu = robot.imus.first().expect("the shipped humanoid has an IMU");
+    let tree = Tree::new(&robot.model);
+    let home = twin_core::control::nominal_pose(&robot.model);
+    let body = Body::find(&robot.model, &tree, &home, &BodyNames::default()).unwrap();
+    let found = body.imu.expect("the walker found no IMU");
+    assert_eq!((found.gyro_adr, found.quat_adr), (imu.gyro_adr, imu.quat_adr));
+    assert_eq!(found.name, format!("{}_gyro", imu.meta.name));
+    let names = BodyNames { imu_gyro: Some("no_such_gyro".into()), ..BodyNames::default() };
+    let err = Body::find(&robot.model, &tree, &home, &names).unwrap_err().to_string();
+    assert!(err.contains("no_such_gyro"), "{err}");
+}

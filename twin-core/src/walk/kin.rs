@@ -16,6 +16,14 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
+/// Rotation by `angle` (radians) about the unit vector `axis`: one `sin_cos`, where
+/// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
+/// unit vectors already).
+fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
+    let (s, c) = (0.5 * angle).sin_cos();
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
+}
+
 /// One joint as forward kinematics needs it.
 #[derive(Debug, Clone)]
 struct Joint {
@@ -77,7 +85,7 @@ impl Tree {
                     kind: model.joint_type(j),
                     qpos_adr,
                     qpos0: model.qpos0()[qpos_adr],
-                    axis: Vector3::from(model.jnt_axis()[j]),
+                    axis: Vector3::from(model.jnt_axis()[j]).normalize(),
                     pos: Vector3::from(model.jnt_pos()[j]),
                 }
             })
@@ -142,7 +150,7 @@ impl Tree {
                     JointType::Hinge => {
                         let anchor = pos + rot * jt.pos;
                         let axis = rot * jt.axis;
-                        rot *= UnitQuaternion::from_scaled_axis(jt.axis * (qpos[a] - jt.qpos0));
+                        rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
                         pos = anchor - rot * jt.pos;
                         out.anchor[j] = anchor;
                         out.axis[j] = axis;
@@ -331,7 +339,8 @@ pub struct BodyNames {
     pub left_foot: Option<String>,
     /// Right foot body (default: the lowest collision body on the −y side).
     pub right_foot: Option<String>,
-    /// Gyro sensor of the IMU (default: the first gyro; none: the base orientation is used).
+    /// Gyro sensor (`<name>_gyro`) of the IMU the walker reads (default: the first IMU of
+    /// [`crate::robot::imus_of`]; none: the base orientation is used).
     pub imu_gyro: Option<String>,
 }
 
@@ -454,30 +463,23 @@ impl Body {
         };
         let legs = [leg(Side::Left, left)?, leg(Side::Right, right)?];
 
-        let gyro = match &names.imu_gyro {
-            Some(n) => {
-                Some(model.id(ObjType::Sensor, n).ok_or_else(|| walk_err(format!("the model has no sensor \"{n}\"")))?)
-            }
-            None => (0..model.nsensor()).find(|&s| model.sensor_type()[s] as u32 == mujoco_sys::mjtSensor_mjSENS_GYRO),
+        // The one IMU finder (`<name>_gyro` + `<name>_accel` on a site, `<name>_quat` when
+        // present), as the recorder and the ROS bridge see them.
+        let imus = crate::robot::imus_of(model);
+        let found = match &names.imu_gyro {
+            Some(n) => Some(imus.iter().find(|i| format!("{}_gyro", i.meta.name) == *n).ok_or_else(|| {
+                walk_err(format!(
+                    "the model has no IMU with the gyro sensor \"{n}\" (an IMU is a `<name>_gyro` + \
+                     `<name>_accel` sensor pair on one site)"
+                ))
+            })?),
+            None => imus.first(),
         };
-        let imu = gyro.and_then(|s| {
-            if model.sensor_objtype()[s] as u32 != mujoco_sys::mjtObj_mjOBJ_SITE {
-                return None;
-            }
-            let site = model.sensor_objid()[s] as usize;
-            let quat_adr = (0..model.nsensor())
-                .find(|&q| {
-                    model.sensor_type()[q] as u32 == mujoco_sys::mjtSensor_mjSENS_FRAMEQUAT
-                        && model.sensor_objtype()[q] as u32 == mujoco_sys::mjtObj_mjOBJ_SITE
-                        && model.sensor_objid()[q] as usize == site
-                })
-                .map(|q| model.sensor_adr()[q] as usize);
-            Some(Imu {
-                name: model.name(ObjType::Sensor, s).to_string(),
-                quat_adr,
-                gyro_adr: model.sensor_adr()[s] as usize,
-                site_rot: quat(model.site_quat()[site]),
-            })
+        let imu = found.map(|i| Imu {
+            name: format!("{}_gyro", i.meta.name),
+            quat_adr: i.quat_adr,
+            gyro_adr: i.gyro_adr,
+            site_rot: quat(i.body_from_imu.1),
         });
         Ok(Body {
             pelvis,
@@ -570,7 +572,7 @@ impl LegIk {
                 .collect(),
             chain,
             qpos0: leg.joints.iter().map(|&j| model.qpos0()[model.jnt_qposadr()[j] as usize]).collect(),
-            axis: leg.joints.iter().map(|&j| Vector3::from(model.jnt_axis()[j])).collect(),
+            axis: leg.joints.iter().map(|&j| Vector3::from(model.jnt_axis()[j]).normalize()).collect(),
             pos: leg.joints.iter().map(|&j| Vector3::from(model.jnt_pos()[j])).collect(),
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
@@ -632,7 +634,7 @@ impl LegIk {
                 let anchor = pos + rot * self.pos[k];
                 axes[k] = rot * self.axis[k];
                 anchors[k] = anchor;
-                rot *= UnitQuaternion::from_scaled_axis(self.axis[k] * (q[k] - self.qpos0[k]));
+                rot *= hinge_rotation(&self.axis[k], q[k] - self.qpos0[k]);
                 pos = anchor - rot * self.pos[k];
             }
         }

@@ -121,7 +121,9 @@ pub struct WalkOptions {
     /// 0.3).
     pub swing_stiffness: f64,
     /// Damped-least-squares iterations of the leg IK per tick, warm-started from the last
-    /// tick's solution (default: 2: a third one changes the 36-s walk of `walk.toml` by 2 mm).
+    /// tick's solution (default: 1: the targets move by millimetres per tick and the residual
+    /// is taken up at the next one; randomized `stand.toml`/`walk.toml` on 2 × 200 episodes
+    /// each: 352 and 124 successes with 1, 353 and 121 with 2).
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
     pub bodies: BodyNames,
@@ -160,7 +162,7 @@ impl Default for WalkOptions {
             saturation_error: 0.25,
             damping_ratio: 1.0,
             swing_stiffness: 0.3,
-            ik_iterations: 2,
+            ik_iterations: 1,
             bodies: BodyNames::default(),
         }
     }
