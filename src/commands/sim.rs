@@ -87,7 +87,8 @@ pub struct Args {
     /// Compress and write the MCAP on the simulation thread instead of a writer thread.
     #[arg(long)]
     pub inline_writer: bool,
-    /// Record only these topics (comma-separated; `/contacts/*` for every contact topic).
+    /// Record only these topics (comma-separated; `/contacts/*` for every contact topic). The
+    /// controller's own topics (the walker's `/walk/*`) may be named and are always recorded.
     #[arg(long, value_delimiter = ',', value_name = "TOPIC,...")]
     pub topics: Option<Vec<String>>,
     /// Join the ROS 2 graph (domain `ROS_DOMAIN_ID`): publish /clock, /joint_states, the IMUs,
@@ -219,6 +220,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             ..WriterOptions::default()
         },
         topics: args.topics.clone(),
+        controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
         ..RecordOptions::default()
     };
     // From here on, Ctrl-C (or SIGTERM) ends the run after the current step: recordings are
@@ -237,7 +239,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     #[cfg(feature = "ros")]
     let (mut recording, mut live_controller) = match live {
         Some((sink, controller)) => {
-            let options = RecordOptions { command_topic: Some(twin_core::live::actuator_topic(&robot)), ..options };
+            let options = RecordOptions {
+                command_topic: Some(twin_core::live::actuator_topic(&robot)),
+                controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
+                ..options
+            };
             (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
         }
         None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),

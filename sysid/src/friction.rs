@@ -485,35 +485,51 @@ pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<Frict
             })
             .collect::<Result<_>>()?
     };
+    // Joints are independent: fitted in parallel, reported in the log's order.
+    use rayon::prelude::*;
+    let fitted: Vec<Result<std::result::Result<JointFriction, String>>> = joints
+        .into_par_iter()
+        .map(|j| {
+            let name = &log.joint_names[j];
+            if log.effort[j].iter().all(|e| !e.is_finite()) {
+                return Err(log.bad(format!("joint \"{name}\" has no effort: friction needs the joint torque")));
+            }
+            let v = joint_velocity(log, j, opts.smooth_secs);
+            let segments = find_segments(&log.t_nanos, &v, opts);
+            if segments.is_empty() {
+                return Ok(Err(format!(
+                    "joint \"{name}\": no constant-velocity segment (≥ {} s within ±{} %)",
+                    opts.min_segment_secs,
+                    100.0 * opts.rel_tol
+                )));
+            }
+            let points = pair_segments(log, j, &segments, opts);
+            if points.is_empty() {
+                return Ok(Err(format!(
+                    "joint \"{name}\": {} constant-velocity segment(s) but no +v/−v pair of the same speed over common positions",
+                    segments.len()
+                )));
+            }
+            let (fit, ci95, rms) = fit_stribeck(&points).map_err(|e| {
+                log.bad(format!("joint \"{name}\": {e}; sweep more speeds (log-spaced across the Stribeck region)"))
+            })?;
+            Ok(Ok(JointFriction {
+                joint: name.clone(),
+                fit,
+                ci95,
+                rms_residual: rms,
+                points,
+                segments: segments.len(),
+            }))
+        })
+        .collect();
     let mut out = Vec::new();
     let mut skipped = Vec::new();
-    for j in joints {
-        let name = &log.joint_names[j];
-        if log.effort[j].iter().all(|e| !e.is_finite()) {
-            return Err(log.bad(format!("joint \"{name}\" has no effort: friction needs the joint torque")));
+    for f in fitted {
+        match f? {
+            Ok(joint) => out.push(joint),
+            Err(why) => skipped.push(why),
         }
-        let v = joint_velocity(log, j, opts.smooth_secs);
-        let segments = find_segments(&log.t_nanos, &v, opts);
-        if segments.is_empty() {
-            skipped.push(format!(
-                "joint \"{name}\": no constant-velocity segment (≥ {} s within ±{} %)",
-                opts.min_segment_secs,
-                100.0 * opts.rel_tol
-            ));
-            continue;
-        }
-        let points = pair_segments(log, j, &segments, opts);
-        if points.is_empty() {
-            skipped.push(format!(
-                "joint \"{name}\": {} constant-velocity segment(s) but no +v/−v pair of the same speed over common positions",
-                segments.len()
-            ));
-            continue;
-        }
-        let (fit, ci95, rms) = fit_stribeck(&points).map_err(|e| {
-            log.bad(format!("joint \"{name}\": {e}; sweep more speeds (log-spaced across the Stribeck region)"))
-        })?;
-        out.push(JointFriction { joint: name.clone(), fit, ci95, rms_residual: rms, points, segments: segments.len() });
     }
     if out.is_empty() {
         return Err(log.bad(format!(

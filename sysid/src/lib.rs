@@ -84,7 +84,7 @@
 //! its own residual noise from the first, unweighted pass, so the base rows, whose noise comes
 //! from the odometry's differentiated twist rather than torque sensors, neither dominate nor
 //! vanish. The report gives the base rows' RMS residual before/after.
-//! The synthetic check ([`synth::simulate_floating`], `tests/floating.rs`): the humanoid in free
+//! The synthetic check ([`synth::simulate_floating`], `tests/it/floating.rs`): the humanoid in free
 //! fall (for its joints and base rows the same as floating in zero gravity), joints driven by
 //! the exciting trajectory, known wrenches on both feet, odometry with 0.1 mm / 1e-4 rad pose
 //! and 0.002 m/s, rad/s twist noise, starting URDF off by 20–40 %: held-out torque NRMSE

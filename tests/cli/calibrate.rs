@@ -169,7 +169,7 @@ fn sysid_friction_fits_sweeps_and_writes_the_dynamics() {
         let friction: f64 = dynamics.attribute("friction").unwrap().parse().unwrap();
         let damping: f64 = dynamics.attribute("damping").unwrap().parse().unwrap();
         // Within 10 % here (200 Hz, light wrist friction against 0.05 N·m effort noise); the 5 %
-        // figures are sysid/tests/friction.rs's.
+        // figures are sysid/tests/it/friction.rs's.
         assert!((friction / t.coulomb - 1.0).abs() < 0.1, "joint {j}: friction {friction} vs {}", t.coulomb);
         assert!((damping / t.viscous - 1.0).abs() < 0.1, "joint {j}: damping {damping} vs {}", t.viscous);
         // What is written is what the report says.

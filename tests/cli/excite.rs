@@ -18,7 +18,7 @@ fn excite_writes_a_trajectory_that_replay_plays_on_the_twin() {
     let dir = tempfile::tempdir().unwrap();
     let urdf = arm_urdf();
     // One search of 20 iterations a stage: the full default design is the release-profile
-    // test in sysid/tests/excite.rs.
+    // test in sysid/tests/it/excite.rs.
     let out = twin(
         dir.path(),
         &["excite", urdf.to_str().unwrap(), "--report", "excite.json", "--starts", "1", "--iterations", "20"],

@@ -85,3 +85,29 @@ fn randomize_scenario_checks_decide_success() {
     assert!(ok, "{err}");
     assert!(out.contains("success: 0/2") && out.contains("fell 2"), "{out}");
 }
+
+/// `--topics` may name the walker's own topics (`/walk/*`): they are its diagnostics, recorded
+/// whatever `--topics` says; a topic neither the table nor the controller has is still refused.
+#[test]
+fn sim_topics_accepts_the_controllers_topics() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = super::common::repo_root().join("models/humanoid.urdf");
+    let m = model.to_str().unwrap();
+    let mcap = dir.path().join("w.mcap");
+    let mcap = mcap.to_str().unwrap();
+    let args = ["sim", m, "--controller", "walk", "--duration", "0.2", "--record", mcap, "--topics"];
+    let (ok, out, err) = run(&[&args[..], &["/walk/com,/joint_states"]].concat());
+    assert!(ok, "{out}\n{err}");
+    let (ok, info, err) = run(&["log", "info", mcap]);
+    assert!(ok, "{err}");
+    let count = |topic: &str| -> u64 {
+        let line = info.lines().find(|l| l.trim_start().starts_with(&format!("{topic} "))).unwrap_or("");
+        line.split_whitespace().nth(3).and_then(|n| n.parse().ok()).unwrap_or(0)
+    };
+    // 100 Hz diagnostics and 500 Hz joint states over 0.2 s; nothing of the table's other topics.
+    assert!((19..=21).contains(&count("/walk/com")), "{info}");
+    assert!((99..=101).contains(&count("/joint_states")), "{info}");
+    assert_eq!(count("/tf"), 0, "{info}");
+    let (ok, _, err) = run(&[&args[..], &["/walk/nope"]].concat());
+    assert!(!ok && err.contains("/walk/nope") && err.contains("/walk/com"), "{err}");
+}

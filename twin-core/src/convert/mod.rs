@@ -80,7 +80,7 @@
 //! ## Corpus
 //! Every URDF of PyPI's `example-robot-data` 6.0.0 converts without flags, loads, weighs what
 //! the URDF says and holds its home pose: see `corpus.md` next to this file (the table printed
-//! by `cargo test -p twin-core --test corpus -- --nocapture`).
+//! by `cargo test -p twin-core --test it corpus:: -- --nocapture`).
 
 pub(crate) mod inertia;
 mod ir;

@@ -77,6 +77,9 @@ pub struct RecordOptions {
     /// Topic of the command the controller sent each step (default: none given =
     /// `/<robot>/joint_commands`; the live bridge moves it aside, as that name is its input).
     pub command_topic: Option<String>,
+    /// Names of the topics the run's controller declares ([`crate::control::Controller::topics`]),
+    /// which `topics` may name too (default: none).
+    pub controller_topics: Vec<String>,
 }
 
 impl Default for RecordOptions {
@@ -92,6 +95,7 @@ impl Default for RecordOptions {
             writer: WriterOptions::default(),
             topics: None,
             command_topic: None,
+            controller_topics: Vec::new(),
         }
     }
 }
@@ -635,6 +639,7 @@ impl Recording {
             known.extend(name_of(TopicKind::Odometry));
             known.extend(name_of(TopicKind::Commands));
             known.push("/contacts/*".into());
+            known.extend(options.controller_topics.iter().cloned());
             known.extend(
                 crate::sense::ray_sensors(robot).into_iter().flat_map(|s| s.topics.into_iter().map(|(n, _)| n)),
             );

@@ -1,0 +1,11 @@
+//! twin-core's integration tests, one test binary (each file a module: one link instead of one per file).
+
+mod convert;
+mod corpus;
+mod errors;
+mod grasp;
+mod log_interop;
+mod physics;
+mod sense;
+mod sinks;
+mod walk;
