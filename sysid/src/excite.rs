@@ -161,6 +161,11 @@ pub struct FourierJoint {
 }
 
 impl FourierJoint {
+    /// Scales the motion about the rest position by `s` (the coefficients; rest unchanged).
+    fn scale(&mut self, s: f64) {
+        self.a.iter_mut().chain(self.b.iter_mut()).for_each(|x| *x *= s);
+    }
+
     /// `(q, q̇, q̈)` at `t` for fundamental `omega` (rad/s).
     pub fn sample(&self, omega: f64, t: f64) -> (f64, f64, f64) {
         let (mut q, mut qd, mut qdd) = (self.rest, 0.0, 0.0);
@@ -658,43 +663,24 @@ impl<'a> Problem<'a> {
     /// as drawn, made feasible).
     fn fit_to_limits(&mut self, joints: &[FourierJoint], per_joint: bool) -> Result<Fitted> {
         let n = 4 * self.opts.samples;
-        let omega = self.omega();
-        let period = 1.0 / self.opts.base_frequency_hz;
         let mut scaled: Vec<FourierJoint> = Vec::with_capacity(joints.len());
         for (f, lim) in joints.iter().zip(&self.limits) {
-            let mut f = f.clone();
-            f.rest = f.rest.clamp(lim.lower, lim.upper);
-            let (mut up, mut down, mut v, mut a) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-            for k in 0..n {
-                let (q, qd, qdd) = f.sample(omega, k as f64 * period / n as f64);
-                up = up.max(q - f.rest);
-                down = down.max(f.rest - q);
-                v = v.max(qd.abs());
-                a = a.max(qdd.abs());
-            }
-            let mut s = f64::INFINITY;
-            for (room, need) in
-                [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
-            {
-                if need > 1e-12 {
-                    s = s.min(room / need);
-                }
-            }
-            let s = if !s.is_finite() {
+            let (mut f, room) = self.room(f, lim);
+            let s = if !room.is_finite() {
                 0.0
             } else if per_joint {
-                0.999 * s
+                0.999 * room
             } else {
-                s.min(1.0)
+                room.min(1.0)
             };
-            f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+            f.scale(s);
             scaled.push(f);
         }
         let shrink = |js: &[FourierJoint], s: f64| -> Vec<FourierJoint> {
             js.iter()
                 .map(|f| {
                     let mut f = f.clone();
-                    f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+                    f.scale(s);
                     f
                 })
                 .collect()
@@ -719,9 +705,9 @@ impl<'a> Problem<'a> {
                     selective = Some(current);
                     break;
                 }
-                for (f, &inv) in current.iter_mut().zip(&self.involved.clone()) {
+                for (f, &inv) in current.iter_mut().zip(&self.involved) {
                     if inv {
-                        f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= 0.85);
+                        f.scale(0.85);
                     }
                 }
             }
@@ -756,42 +742,50 @@ impl<'a> Problem<'a> {
     /// position, velocity and acceleration room on the fine grid: to touch the binding one
     /// with `touch`, else only shrunk where it exceeds one.
     fn box_fit(&self, joints: &[FourierJoint], touch: bool) -> Vec<FourierJoint> {
-        let n = 4 * self.opts.samples;
-        let omega = self.omega();
-        let period = 1.0 / self.opts.base_frequency_hz;
         joints
             .iter()
             .zip(&self.limits)
             .map(|(f, lim)| {
-                let mut f = f.clone();
-                f.rest = f.rest.clamp(lim.lower, lim.upper);
-                let (mut up, mut down, mut v, mut a) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
-                for k in 0..n {
-                    let (q, qd, qdd) = f.sample(omega, k as f64 * period / n as f64);
-                    up = up.max(q - f.rest);
-                    down = down.max(f.rest - q);
-                    v = v.max(qd.abs());
-                    a = a.max(qdd.abs());
-                }
-                let mut s = f64::INFINITY;
-                for (room, need) in
-                    [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
-                {
-                    if need > 1e-12 {
-                        s = s.min(0.999 * room / need);
-                    }
-                }
-                let s = if !s.is_finite() {
+                let (mut f, room) = self.room(f, lim);
+                let s = if !room.is_finite() {
                     1.0
                 } else if touch {
-                    s
+                    0.999 * room
                 } else {
-                    s.min(1.0)
+                    (0.999 * room).min(1.0)
                 };
-                f.a.iter_mut().chain(f.b.iter_mut()).for_each(|x| *x *= s);
+                f.scale(s);
                 f
             })
             .collect()
+    }
+
+    /// One joint with its rest clamped into its range, and by how much its deviation from rest
+    /// can be scaled before it touches its binding position, velocity or acceleration limit on
+    /// the fine grid (infinite for a joint that does not move).
+    fn room(&self, f: &FourierJoint, lim: &JointLimits) -> (FourierJoint, f64) {
+        let n = 4 * self.opts.samples;
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        let mut f = f.clone();
+        f.rest = f.rest.clamp(lim.lower, lim.upper);
+        let (mut up, mut down, mut v, mut a) = (0.0f64, 0.0f64, 0.0f64, 0.0f64);
+        for k in 0..n {
+            let (q, qd, qdd) = f.sample(omega, k as f64 * period / n as f64);
+            up = up.max(q - f.rest);
+            down = down.max(f.rest - q);
+            v = v.max(qd.abs());
+            a = a.max(qdd.abs());
+        }
+        let mut room = f64::INFINITY;
+        for (limit, need) in
+            [(lim.upper - f.rest, up), (f.rest - lim.lower, down), (lim.velocity, v), (lim.acceleration, a)]
+        {
+            if need > 1e-12 {
+                room = room.min(limit / need);
+            }
+        }
+        (f, room)
     }
 
     fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {

@@ -257,6 +257,17 @@ fn identify_with_one_glitch(field: fn(&mut JointLog) -> &mut Vec<Vec<f64>>, part
     }
 }
 
+impl GlitchOutcome {
+    /// The elbow's warning that contains `kind`, after checking it names the glitch's time.
+    fn warning_at_the_glitch(&self, kind: &str) -> &str {
+        let warning = self.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains(kind));
+        let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", self.warnings));
+        let at = number_after(warning, "at t = ");
+        assert!((at - self.glitch_secs).abs() < 1e-3, "{warning} (glitch at {:.3} s)", self.glitch_secs);
+        warning
+    }
+}
+
 /// The number after `key` in a warning.
 fn number_after(warning: &str, key: &str) -> f64 {
     warning.split(key).nth(1).unwrap().split(' ').next().unwrap().parse().unwrap()
@@ -270,11 +281,8 @@ fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
     let o = identify_with_one_glitch(|l| &mut l.position, 2, 0.125);
     eprintln!("glitch: worst shift of an identifiable parameter {:.2}σ", o.worst_shift_sigma);
     assert!(o.worst_shift_sigma < 3.0, "one glitched sample moved a parameter by {:.1}σ", o.worst_shift_sigma);
-    let warning = o.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains("Hampel"));
-    let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", o.warnings));
     // The glitched sample itself, by how much it was off its neighbours.
-    let at = number_after(warning, "at t = ");
-    assert!((at - o.glitch_secs).abs() < 1e-3, "{warning} (glitch at {:.3} s)", o.glitch_secs);
+    let warning = o.warning_at_the_glitch("Hampel");
     assert!(warning.contains("+0.12"), "{warning}");
     assert!(!o.clean_warnings.iter().any(|w| w.contains("Hampel")), "{:?}", o.clean_warnings);
 }
@@ -288,11 +296,8 @@ fn one_glitched_torque_sample_is_reported_and_does_not_move_the_fit() {
     let o = identify_with_one_glitch(|l| &mut l.effort, 3, 200.0);
     eprintln!("torque glitch: worst shift of an identifiable parameter {:.2}σ", o.worst_shift_sigma);
     assert!(o.worst_shift_sigma < 1.0, "one glitched torque sample moved a parameter by {:.1}σ", o.worst_shift_sigma);
-    let warning = o.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains("effort"));
-    let warning = warning.unwrap_or_else(|| panic!("no outlier warning: {:?}", o.warnings));
+    let warning = o.warning_at_the_glitch("effort");
     assert!(warning.contains("1 effort sample(s)"), "{warning}");
-    let at = number_after(warning, "at t = ");
-    assert!((at - o.glitch_secs).abs() < 1e-3, "{warning} (glitch at {:.3} s)", o.glitch_secs);
     // By how much it was off its neighbours: the glitch, up to the torque's change over 3 ms.
     let off = number_after(warning, "worst ");
     assert!((off - 200.0).abs() < 1.0, "{warning}");

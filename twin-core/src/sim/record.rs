@@ -439,18 +439,19 @@ impl Sink for RerunSink {
 
 /// A sink of a recording, kept by kind for its summary.
 enum SinkSlot {
-    Mcap(McapSink),
+    // Both boxed: either is the one large variant, depending on the rerun feature.
+    Mcap(Box<McapSink>),
     #[cfg(feature = "rerun")]
-    Rerun(RerunSink, Vec<PathBuf>),
+    Rerun(Box<RerunSink>, Vec<PathBuf>),
     Other(Box<dyn Sink>),
 }
 
 impl SinkSlot {
     fn sink(&mut self) -> &mut dyn Sink {
         match self {
-            SinkSlot::Mcap(s) => s,
+            SinkSlot::Mcap(s) => s.as_mut(),
             #[cfg(feature = "rerun")]
-            SinkSlot::Rerun(s, _) => s,
+            SinkSlot::Rerun(s, _) => s.as_mut(),
             SinkSlot::Other(s) => s.as_mut(),
         }
     }
@@ -660,7 +661,7 @@ impl Recording {
 
         let mut slots = Vec::new();
         if let Some(path) = &options.mcap {
-            slots.push(SinkSlot::Mcap(McapSink::create(path, &options.writer)?));
+            slots.push(SinkSlot::Mcap(Box::new(McapSink::create(path, &options.writer)?)));
         }
         if options.rrd.is_some() || options.connect.is_some() {
             #[cfg(not(feature = "rerun"))]
@@ -676,7 +677,7 @@ impl Recording {
                 }
                 let sink = RerunSink::new(robot, recorders, options.rerun_rate_hz);
                 let files = sink.files();
-                slots.push(SinkSlot::Rerun(sink, files));
+                slots.push(SinkSlot::Rerun(Box::new(sink), files));
             }
         }
         slots.extend(sinks.into_iter().map(SinkSlot::Other));
