@@ -35,9 +35,13 @@ pub struct Args {
     /// Sample rate of the written trajectory, Hz.
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     pub rate: f64,
-    /// Harmonics per joint.
-    #[arg(long, default_value_t = 5, value_name = "N")]
+    /// Harmonics per joint of the designed trajectory.
+    #[arg(long, default_value_t = 10, value_name = "N")]
     pub harmonics: usize,
+    /// Harmonics per joint of the 20 random trajectories the design starts from and is compared
+    /// with (at most --harmonics).
+    #[arg(long, default_value_t = 5, value_name = "N")]
+    pub baseline_harmonics: usize,
     /// Fundamental frequency, Hz (the trajectory's period is its inverse).
     #[arg(long, default_value_t = 0.1, value_name = "HZ")]
     pub base_frequency: f64,
@@ -81,6 +85,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let opts = ExciteOptions {
         joints: args.joints.clone(),
         harmonics: args.harmonics,
+        baseline_harmonics: args.baseline_harmonics,
         base_frequency_hz: args.base_frequency,
         position_margin: args.margin,
         velocity_fraction: args.velocity_fraction,

@@ -36,9 +36,12 @@
 //! or only those involved in a violation) until every limit holds on the fine grid.
 //!
 //! ## Search
-//! 20 random 5-harmonic trajectories are drawn and shrunk as a whole to the limits: the best is
-//! the comparison figure. A global stage then draws 100 more (rest anywhere in the range, so
-//! that offsets keeping links apart are tried) and scales each of the 120 per joint to touch
+//! 20 random 5-harmonic trajectories (`baseline_harmonics`) are drawn and shrunk as a whole to
+//! the limits: the best is the comparison figure. The design has 10 harmonics by default (its
+//! higher ones zero in those 20): on the arm the binding columns are each joint's viscous and
+//! Coulomb pair, which only a velocity that rests near zero and then bursts to the limit tells
+//! apart, a shape 5 harmonics can't make. A global stage then draws 100 more (all harmonics,
+//! rest anywhere in the range, so that offsets keeping links apart are tried) and scales each of the 120 per joint to touch
 //! its binding position, velocity or acceleration limit; from the best 3, quasi-Newton
 //! searches (BFGS, forward-difference gradients, backtracking line search) minimize smooth
 //! surrogates of `ln cond` (soft maximum minus soft minimum of `ln σᵢ`, sharpness 4 then 16:
@@ -75,8 +78,14 @@ pub struct ExciteOptions {
     /// Joints to excite, by name (default: empty: every revolute and prismatic joint). The
     /// others hold their rest position (0 clamped into their range).
     pub joints: Vec<String>,
-    /// Harmonics per joint (default: 5).
+    /// Harmonics per joint of the designed trajectory (default: 10: up to 1 Hz at the default
+    /// 10-s period; more harmonics let a joint's velocity rest near zero and then burst, which
+    /// separates its viscous and Coulomb columns, at the cost of a faster trajectory to track).
     pub harmonics: usize,
+    /// Harmonics per joint of the random trajectories the design is compared with and starts
+    /// from (default: 5, Swevers's choice). At most [`ExciteOptions::harmonics`]: a random
+    /// trajectory is a designed one whose higher harmonics are zero.
+    pub baseline_harmonics: usize,
     /// Fundamental frequency `f₀`, Hz; the trajectory's period is `1/f₀` (default: 0.1: 10 s).
     pub base_frequency_hz: f64,
     /// Kept away from each end of a joint's range, rad or m (default: 0.05).
@@ -124,7 +133,8 @@ impl Default for ExciteOptions {
     fn default() -> Self {
         ExciteOptions {
             joints: Vec::new(),
-            harmonics: 5,
+            harmonics: 10,
+            baseline_harmonics: 5,
             base_frequency_hz: 0.1,
             position_margin: 0.05,
             velocity_fraction: 0.8,
@@ -323,6 +333,8 @@ pub struct ExciteReport {
     pub random_conditions: Vec<f64>,
     /// The best of them.
     pub best_random_condition: f64,
+    /// Harmonics per joint of the random trajectories.
+    pub baseline_harmonics: usize,
     /// The best random trajectory (the search's start).
     pub best_random: Excitation,
     /// Base parameters (columns of the base regressor).
@@ -344,7 +356,7 @@ impl ExciteReport {
     pub fn table(&self) -> String {
         let mut s = format!(
             "excitation: {} joints, {} harmonics, period {:.2} s, {} base parameters\n\
-             condition number of the base regressor: designed {:.3e}, best of {} random {:.3e} ({:.1}× lower)\n\
+             condition number of the base regressor: designed {:.3e}, best of {} random {}-harmonic {:.3e} ({:.1}× lower)\n\
              column-scaled (as twin sysid reports it): designed {:.2}, best random {:.2}\n\
              design time {:.2} s ({} evaluations)\n",
             self.trajectory.joints.len(),
@@ -353,6 +365,7 @@ impl ExciteReport {
             self.base_parameters,
             self.condition,
             self.random_conditions.len(),
+            self.baseline_harmonics,
             self.best_random_condition,
             self.best_random_condition / self.condition,
             self.scaled_condition,
@@ -838,6 +851,8 @@ fn option_error(name: &'static str, message: String) -> Error {
 /// uniform in `±v_max/H` (so that the velocity reaches about its limit), as drawn in practice
 /// (Gaz et al. 2019); [`Problem::fit_to_limits`] then shrinks it as a whole where it exceeds a
 /// limit.
+/// A random `h`-harmonic trajectory (each velocity coefficient uniform in ±v_max/h, the rest in
+/// the middle half of the range), its harmonics above `h` zero up to the template's.
 fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut Rng) -> Vec<FourierJoint> {
     let nv = vars_per_joint(h);
     let mut x = Vec::with_capacity(template.len() * nv);
@@ -849,7 +864,12 @@ fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rn
             x.push(lim.velocity / h as f64 * (2.0 * rng.uniform() - 1.0));
         }
     }
-    joints_from_vars(&x, h, template)
+    let mut js = joints_from_vars(&x, h, template);
+    for (f, t) in js.iter_mut().zip(template) {
+        f.a.resize(t.a.len(), 0.0);
+        f.b.resize(t.b.len(), 0.0);
+    }
+    js
 }
 
 /// As [`random_joints`], the rest position uniform over the whole range (the global stage's
@@ -962,6 +982,13 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let h = opts.harmonics;
     if !(1..=20).contains(&h) {
         return Err(option_error("harmonics", format!("{h}: must be 1 to 20")));
+    }
+    let hb = opts.baseline_harmonics;
+    if !(1..=h).contains(&hb) {
+        return Err(option_error(
+            "baseline_harmonics",
+            format!("{hb}: must be 1 to the designed trajectory's {h} harmonics"),
+        ));
     }
     if !(opts.base_frequency_hz > 0.0 && opts.base_frequency_hz <= 10.0) {
         return Err(option_error(
@@ -1159,7 +1186,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let mut candidates = Vec::new();
     let mut last_violation = None;
     for _ in 0..opts.random_candidates {
-        let raw = random_joints(&template, &problem.limits, h, &mut rng);
+        let raw = random_joints(&template, &problem.limits, hb, &mut rng);
         match problem.fit_to_limits(&raw, false)? {
             Ok((js, _)) => candidates.push(js),
             Err(v) => last_violation = Some(v),
@@ -1293,6 +1320,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         best_random_scaled_condition: best_eval.scaled_condition,
         random_conditions,
         best_random_condition,
+        baseline_harmonics: hb,
         best_random: problem.excitation(best_random),
         base_parameters: problem.base_cols.len(),
         limits: problem.limits.clone(),
