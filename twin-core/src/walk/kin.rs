@@ -46,6 +46,9 @@ pub struct Tree {
     joints: Vec<Vec<usize>>,
     joint: Vec<Joint>,
     jnt_body: Vec<usize>,
+    /// Per body, the last body of its subtree when the bodies are numbered depth first (each
+    /// subtree one run of ids, as MuJoCo's compiler numbers them); empty otherwise.
+    subtree_last: Vec<usize>,
     /// Total mass, kg.
     pub total_mass_kg: f64,
 }
@@ -97,8 +100,10 @@ impl Tree {
                 if adr < 0 { Vec::new() } else { (adr as usize..(adr + n) as usize).collect() }
             })
             .collect();
+        let parent: Vec<usize> = model.body_parentid().iter().map(|&p| p as usize).collect();
         Tree {
-            parent: model.body_parentid().iter().map(|&p| p as usize).collect(),
+            subtree_last: depth_first_runs(&parent),
+            parent,
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
             body_ipos: model.body_ipos().iter().map(|&p| Vector3::from(p)).collect(),
@@ -191,6 +196,9 @@ impl Tree {
 
     /// Whether body `b` is `ancestor` or below it.
     pub fn is_below(&self, mut b: usize, ancestor: usize) -> bool {
+        if let Some(&last) = self.subtree_last.get(ancestor) {
+            return (ancestor..=last).contains(&b);
+        }
         loop {
             if b == ancestor {
                 return true;
@@ -247,6 +255,22 @@ impl Tree {
         }
         inertia
     }
+}
+
+/// Per body, the last body of its subtree, when each subtree is one run of ids (bodies
+/// numbered depth first, parents before children); empty when not.
+fn depth_first_runs(parent: &[usize]) -> Vec<usize> {
+    let n = parent.len();
+    let (mut last, mut size) = ((0..n).collect::<Vec<usize>>(), vec![1usize; n]);
+    for b in (1..n).rev() {
+        let p = parent[b];
+        if p >= b {
+            return Vec::new();
+        }
+        last[p] = last[p].max(last[b]);
+        size[p] += size[b];
+    }
+    if (0..n).all(|b| last[b] - b + 1 == size[b]) { last } else { Vec::new() }
 }
 
 /// Which side a leg is on.
@@ -534,6 +558,9 @@ pub struct LegIk {
     /// The knee: the chain joint farthest from both ends of the leg, and the sign of its
     /// larger range side (the way it bends).
     knee: (usize, f64),
+    /// Closed-form solution, for legs of the usual shape (see [`ClosedForm`]); the others use
+    /// damped least squares only.
+    closed_form: Option<ClosedForm>,
 }
 
 /// Result of [`LegIk::solve`].
@@ -576,6 +603,7 @@ impl LegIk {
             pos: leg.joints.iter().map(|&j| Vector3::from(model.jnt_pos()[j])).collect(),
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
+            closed_form: None,
         };
         let n = ik.len();
         let (mut anchors, mut axes) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
@@ -592,7 +620,14 @@ impl LegIk {
             let [lo, hi] = ik.range[knee];
             ik.knee = (knee, if hi.abs() >= lo.abs() { 1.0 } else { -1.0 });
         }
+        ik.closed_form = ClosedForm::new(&ik);
         ik
+    }
+
+    /// Whether this leg is solved in closed form (three hip axes meeting in a point, a knee,
+    /// two ankle axes meeting in a point); otherwise by damped least squares only.
+    pub fn is_closed_form(&self) -> bool {
+        self.closed_form.is_some()
     }
 
     /// Bends a (nearly) straight knee in the guess `q`: straight legs are singular for IK.
@@ -648,9 +683,41 @@ impl LegIk {
         self.fk(q, &mut a, &mut x)
     }
 
-    /// Damped-least-squares IK: updates `q` (the chain's angles, warm start) toward the foot
-    /// pose `target` in the pelvis frame, within the joint ranges.
+    /// Updates `q` (the chain's angles, warm start) toward the foot pose `target` in the pelvis
+    /// frame, within the joint ranges. A leg of the usual shape ([`LegIk::is_closed_form`]) is
+    /// solved in closed form, on the branches (knee bend, ankle and hip) nearest `q`: exactly,
+    /// or out of reach with the leg stretched toward the target and the foot turned as asked.
+    /// When that needs a joint beyond its range, and for other legs, `iterations` steps of
+    /// damped least squares (`damping`) follow from there (the clamped solution).
     pub fn solve(
+        &self,
+        target: (Vector3<f64>, UnitQuaternion<f64>),
+        q: &mut [f64],
+        iterations: usize,
+        damping: f64,
+    ) -> IkResult {
+        if let Some(cf) = &self.closed_form {
+            let mut warm = [0.0; 6];
+            for (k, w) in warm.iter_mut().enumerate() {
+                *w = q[k] - self.qpos0[k];
+            }
+            let (theta, sc, _) = cf.solve(&target, &warm);
+            let mut within = true;
+            for k in 0..6 {
+                let v = self.qpos0[k] + theta[k];
+                q[k] = v.clamp(self.range[k][0], self.range[k][1]);
+                within &= q[k] == v;
+            }
+            if within {
+                return cf.error(&target, &sc);
+            }
+        }
+        self.solve_dls(target, q, iterations, damping)
+    }
+
+    /// Damped-least-squares IK: `iterations` steps of `q` toward `target`; the error returned
+    /// is the one before the last step.
+    fn solve_dls(
         &self,
         target: (Vector3<f64>, UnitQuaternion<f64>),
         q: &mut [f64],
@@ -686,5 +753,425 @@ impl LegIk {
             }
         }
         result
+    }
+}
+
+/// Closed-form IK of the usual humanoid leg: six hinges, the first three (hip) with axes
+/// meeting in one point, the last two (ankle) with axes meeting in another, the fourth (knee)
+/// between; any order of yaw/roll/pitch, any axis directions and offsets otherwise. Legs not
+/// of this shape (within [`ClosedForm::MEET_M`]) are solved by damped least squares only.
+///
+/// With θ = q − qpos0 the foot pose is the product of exponentials
+/// `T(θ) = e^{ξ₁θ₁} ⋯ e^{ξ₆θ₆} T(0)` of the joints' screws at qpos0 (Murray, Li & Sastry,
+/// *A Mathematical Introduction to Robotic Manipulation*, §3.3), solved by Paden–Kahan
+/// subproblems: the knee from the hip–ankle distance (hip and ankle rotations keep it), the
+/// ankle from where the hip centre lies seen from the foot, the hip from what rotation is left.
+/// The damped-least-squares step it replaces took a Jacobian, a 6×6 Cholesky and a
+/// kinematics pass per iteration, and left the error of one Gauss–Newton step.
+#[derive(Debug, Clone)]
+struct ClosedForm {
+    /// Joint axes (unit), pelvis frame, at qpos0.
+    axis: [Vector3<f64>; 6],
+    /// A point on each joint axis, pelvis frame, at qpos0.
+    point: [Vector3<f64>; 6],
+    /// Where the hip axes meet, pelvis frame.
+    hip: Vector3<f64>,
+    /// Where the ankle axes meet, pelvis frame at qpos0.
+    ankle: Vector3<f64>,
+    /// A unit vector normal to the third hip axis: its angle is read from how this turns.
+    normal: Vector3<f64>,
+    /// Foot pose at qpos0, pelvis frame.
+    foot0: (Vector3<f64>, UnitQuaternion<f64>),
+}
+
+impl ClosedForm {
+    /// How close axes must pass to count as meeting, metres (rounding of the model's
+    /// constants is far below; an offset hip or ankle is far above).
+    const MEET_M: f64 = 1e-9;
+    /// Least sine between the axes of one subproblem: nearly parallel axes would make it
+    /// ill-conditioned.
+    const MIN_SINE: f64 = 0.1;
+    /// Least distance of the knee axis from the hip and ankle centres, metres: a knee through
+    /// either would not change the leg's length.
+    const MIN_KNEE_ARM_M: f64 = 1e-3;
+
+    /// The closed form of `ik`'s leg, if it has the shape.
+    fn new(ik: &LegIk) -> Option<ClosedForm> {
+        if ik.len() != 6 {
+            return None;
+        }
+        let (mut point, mut axis) = ([Vector3::zeros(); 6], [Vector3::zeros(); 6]);
+        let foot0 = ik.fk(&ik.qpos0, &mut point, &mut axis);
+        let apart = |i: usize, j: usize| axis[i].cross(&axis[j]).norm() >= Self::MIN_SINE;
+        if !(apart(0, 1) && apart(0, 2) && apart(1, 2) && apart(4, 5)) {
+            return None;
+        }
+        let (hip, hip_gap) = closest_point(&point[0], &axis[0], &point[1], &axis[1]);
+        let (ankle, ankle_gap) = closest_point(&point[4], &axis[4], &point[5], &axis[5]);
+        if hip_gap > Self::MEET_M
+            || line_distance(&hip, &point[2], &axis[2]) > Self::MEET_M
+            || ankle_gap > Self::MEET_M
+            || line_distance(&hip, &point[3], &axis[3]) < Self::MIN_KNEE_ARM_M
+            || line_distance(&ankle, &point[3], &axis[3]) < Self::MIN_KNEE_ARM_M
+        {
+            return None;
+        }
+        let normal = axis[2].cross(&axis[0]).normalize();
+        Some(ClosedForm { axis, point, hip, ankle, normal, foot0 })
+    }
+
+    /// Rotates point `x` about joint `k`'s axis by the angle of sine and cosine `sc`.
+    fn turn(&self, k: usize, sc: (f64, f64), x: &Vector3<f64>) -> Vector3<f64> {
+        self.point[k] + rotate(&self.axis[k], sc, &(x - self.point[k]))
+    }
+
+    /// Joint angles θ (from qpos0) putting the foot at `target` (pelvis frame), on the branches
+    /// nearest `warm` (θ too); their sines and cosines; whether the target is reached (else
+    /// the nearest pose).
+    fn solve(
+        &self,
+        target: &(Vector3<f64>, UnitQuaternion<f64>),
+        warm: &[f64; 6],
+    ) -> ([f64; 6], [(f64, f64); 6], bool) {
+        // G = T_target T(0)⁻¹: θ solves e^{ξ₁θ₁} ⋯ e^{ξ₆θ₆} = G.
+        let g_rot = (target.1 * self.foot0.1.inverse()).to_rotation_matrix().into_inner();
+        let g_pos = target.0 - g_rot * self.foot0.0;
+        let mut theta = [0.0; 6];
+        let mut sc = [(0.0, 1.0); 6];
+        let inverse = |(s, c): (f64, f64)| (-s, c);
+        // Knee: hip rotations fix the hip centre and ankle rotations the ankle centre, so
+        // |e^{ξ₄θ₄} a − h| = |G a − h|.
+        let distance = (g_rot * self.ankle + g_pos - self.hip).norm();
+        let (knee, knee_exact) = subproblem3(&self.axis[3], &self.point[3], &self.ankle, &self.hip, distance, warm[3]);
+        (theta[3], sc[3]) = knee;
+        // Ankle: e^{ξ₅θ₅} e^{ξ₆θ₆} G⁻¹ h = e^{−ξ₄θ₄} h, as directions from the ankle centre (the
+        // same when the knee reaches; out of reach, the foot points the leg at the target).
+        let from = g_rot.transpose() * (self.hip - g_pos) - self.ankle;
+        let to = self.turn(3, inverse(sc[3]), &self.hip) - self.ankle;
+        let (ankle, ankle_exact) = subproblem2(&self.axis[4], &self.axis[5], &from, &to, warm[5]);
+        for j in 0..2 {
+            (theta[4 + j], sc[4 + j]) = (near(ankle[j].0, warm[4 + j]), ankle[j].1);
+        }
+        // Hip: the rotation left, R₁R₂R₃ = R_G R₆ᵀ R₅ᵀ R₄ᵀ (its axes meet, so rotations are all
+        // of it): the third axis's direction gives θ₁ θ₂, a normal to it θ₃.
+        let lower = [inverse(sc[3]), inverse(sc[4]), inverse(sc[5])];
+        let left = |v: &Vector3<f64>| {
+            let v = rotate(&self.axis[3], lower[0], v);
+            let v = rotate(&self.axis[4], lower[1], &v);
+            g_rot * rotate(&self.axis[5], lower[2], &v)
+        };
+        let (hip, hip_exact) = subproblem2(&self.axis[0], &self.axis[1], &self.axis[2], &left(&self.axis[2]), warm[1]);
+        for j in 0..2 {
+            (theta[j], sc[j]) = (near(hip[j].0, warm[j]), hip[j].1);
+        }
+        let to = rotate(&self.axis[1], inverse(sc[1]), &rotate(&self.axis[0], inverse(sc[0]), &left(&self.normal)));
+        let (angle, angle_sc) = subproblem1(&self.axis[2], &self.normal, &to);
+        (theta[2], sc[2]) = (near(angle, warm[2]), angle_sc);
+        (theta, sc, knee_exact && ankle_exact && hip_exact)
+    }
+
+    /// Foot pose error from `target` at the angles of sines and cosines `sc`: the product of
+    /// exponentials with the solution's own `sin_cos` (a second kinematics pass would take
+    /// them again).
+    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), sc: &[(f64, f64); 6]) -> IkResult {
+        let mut pos = self.foot0.0;
+        let mut rot = self.foot0.1.to_rotation_matrix().into_inner();
+        for k in (0..6).rev() {
+            let (s, c) = sc[k];
+            let a = &self.axis[k];
+            // Rodrigues: R = c I + s [a]ₓ + (1 − c) a aᵀ.
+            let turn = Matrix3::from_diagonal_element(c) + a.cross_matrix() * s + a * a.transpose() * (1.0 - c);
+            pos = self.point[k] + turn * (pos - self.point[k]);
+            rot = turn * rot;
+        }
+        // Angle of R_targetᵀ R from its sine (skew part) and cosine (trace): exact near zero,
+        // where the trace alone is not.
+        let m = target.1.to_rotation_matrix().into_inner().transpose() * rot;
+        let sine = Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]).norm() / 2.0;
+        let cosine = (m.trace() - 1.0) / 2.0;
+        IkResult { position_error_m: (target.0 - pos).norm(), rotation_error_rad: sine.atan2(cosine) }
+    }
+}
+
+/// `v` rotated about the unit `axis` by the angle of sine and cosine `(s, c)` (Rodrigues).
+fn rotate(axis: &Vector3<f64>, (s, c): (f64, f64), v: &Vector3<f64>) -> Vector3<f64> {
+    v * c + axis.cross(v) * s + axis * (axis.dot(v) * (1.0 - c))
+}
+
+/// `angle` plus the multiple of 2π that brings it nearest `reference` (a loop: the angles are
+/// from `atan2`, the references joint angles, a turn or two apart at most).
+fn near(mut angle: f64, reference: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    while angle - reference > PI {
+        angle -= TAU;
+    }
+    while angle - reference < -PI {
+        angle += TAU;
+    }
+    angle
+}
+
+/// The point midway between the closest points of two lines (point, unit direction), and
+/// their distance.
+fn closest_point(p1: &Vector3<f64>, d1: &Vector3<f64>, p2: &Vector3<f64>, d2: &Vector3<f64>) -> (Vector3<f64>, f64) {
+    let w = p1 - p2;
+    let (b, d, e) = (d1.dot(d2), d1.dot(&w), d2.dot(&w));
+    let den = 1.0 - b * b;
+    let (s, t) = ((b * e - d) / den, (e - b * d) / den);
+    let (c1, c2) = (p1 + d1 * s, p2 + d2 * t);
+    ((c1 + c2) / 2.0, (c1 - c2).norm())
+}
+
+/// Distance of `x` from the line through `p` along the unit `d`.
+fn line_distance(x: &Vector3<f64>, p: &Vector3<f64>, d: &Vector3<f64>) -> f64 {
+    let r = x - p;
+    (r - d * d.dot(&r)).norm()
+}
+
+/// Paden–Kahan subproblem 1: the angle turning `u` toward `v` about the unit `axis` (both
+/// relative to a point on it), with its sine and cosine (from the same `atan2` arguments).
+fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> (f64, (f64, f64)) {
+    let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
+    let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
+    let r = y.hypot(x);
+    (y.atan2(x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
+}
+
+/// Paden–Kahan subproblem 2 on directions: angles `θ₁`, `θ₂` (with sines and cosines) for
+/// `R₁(θ₁) R₂(θ₂) û = v̂` about the unit axes `a1`, `a2` (`û`, `v̂`: `u`, `v` normalized), and
+/// whether it is exact (else the nearest direction reachable). Of the two branches, the one on
+/// the side of the `a1`–`a2` plane where `θ₂ = warm2` puts `û` (one `sin_cos`, where comparing
+/// both branches' angles would take four `atan2`).
+fn subproblem2(
+    a1: &Vector3<f64>,
+    a2: &Vector3<f64>,
+    u: &Vector3<f64>,
+    v: &Vector3<f64>,
+    warm2: f64,
+) -> ([(f64, (f64, f64)); 2], bool) {
+    let (u, v) = (u.normalize(), v.normalize());
+    // z = R₂ û = R₁ᵀ v̂ keeps û's component along a2 and v̂'s along a1.
+    let w = a1.dot(a2);
+    let den = 1.0 - w * w;
+    let alpha = (a1.dot(&v) - w * a2.dot(&u)) / den;
+    let beta = (a2.dot(&u) - w * a1.dot(&v)) / den;
+    let n = a1.cross(a2);
+    let gamma2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * w) / n.norm_squared();
+    // Rounding leaves a touching solution slightly negative.
+    let exact = gamma2 >= -1e-12;
+    let side = if n.dot(&rotate(a2, warm2.sin_cos(), &u)) < 0.0 { -1.0 } else { 1.0 };
+    let z = a1 * alpha + a2 * beta + n * (side * gamma2.max(0.0).sqrt());
+    ([subproblem1(a1, &z, &v), subproblem1(a2, &u, &z)], exact)
+}
+
+/// Paden–Kahan subproblem 3: the angle θ (with its sine and cosine), nearest `warm`, turning
+/// `p` about the unit `axis` through `point` to `distance` from `centre`, and whether it is
+/// exact (else the nearest distance reachable).
+fn subproblem3(
+    axis: &Vector3<f64>,
+    point: &Vector3<f64>,
+    p: &Vector3<f64>,
+    centre: &Vector3<f64>,
+    distance: f64,
+    warm: f64,
+) -> ((f64, (f64, f64)), bool) {
+    let (u, v) = (p - point, centre - point);
+    let (ua, va) = (axis.dot(&u), axis.dot(&v));
+    let (up, vp) = (u - axis * ua, v - axis * va);
+    let planar2 = distance * distance - (ua - va) * (ua - va);
+    let (theta0, (s0, c0)) = subproblem1(axis, &up, &vp);
+    let (nu, nv) = (up.norm(), vp.norm());
+    let c = (nu * nu + nv * nv - planar2) / (2.0 * nu * nv);
+    // Rounding can put a reachable straight or folded knee just past ±1.
+    let exact = c.abs() <= 1.0 + 1e-12;
+    let c = c.clamp(-1.0, 1.0);
+    let (phi, s) = (c.acos(), (1.0 - c * c).sqrt());
+    let (plus, minus) = (near(theta0 + phi, warm), near(theta0 - phi, warm));
+    let solution = if (minus - warm).abs() < (plus - warm).abs() {
+        (minus, (s0 * c - c0 * s, c0 * c + s0 * s))
+    } else {
+        (plus, (s0 * c + c0 * s, c0 * c - s0 * s))
+    };
+    (solution, exact)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A leg of the usual shape but nothing lined up with the pelvis: tilted hip and ankle
+    /// axes (each set meeting in a point, not at right angles), a knee off the hip–ankle line
+    /// and skewed, body frames rotated. `hip_offset_m` moves the third hip axis off the others.
+    fn skewed_leg(hip_offset_m: f64) -> (Model, Leg) {
+        let xml = format!(
+            r#"<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="pelvis" pos="0 0 1">
+      <freejoint/>
+      <geom type="sphere" size="0.1"/>
+      <body name="hip_a" pos="0.01 0.08 -0.05" quat="0.98 0.1 0.05 0.1">
+        <joint name="hip_a" axis="0.1 0.2 1" range="-2 2"/>
+        <geom type="sphere" size="0.02"/>
+        <body name="hip_b" quat="0.95 0 0.2 0.1">
+          <joint name="hip_b" axis="1 0.3 0" range="-2 2"/>
+          <geom type="sphere" size="0.02"/>
+          <body name="thigh" pos="0 {hip_offset_m} 0">
+            <joint name="hip_c" axis="0.2 1 -0.1" range="-2 2"/>
+            <geom type="capsule" fromto="0 0 0 0.02 0.03 -0.3" size="0.03"/>
+            <body name="shin" pos="0.02 0.03 -0.3" quat="0.99 0.05 0 0">
+              <joint name="knee" axis="0.1 1 0.05" range="-0.1 2.5"/>
+              <geom type="capsule" fromto="0 0 0 -0.01 -0.02 -0.3" size="0.03"/>
+              <body name="ankle" pos="-0.01 -0.02 -0.3">
+                <joint name="ankle_a" axis="0 1 0.2" range="-2 2"/>
+                <geom type="sphere" size="0.02"/>
+                <body name="foot" quat="0.97 0.1 -0.1 0.2">
+                  <joint name="ankle_b" axis="1 0 0.3" range="-2 2"/>
+                  <geom type="box" pos="0.03 0 -0.04" size="0.1 0.05 0.01"/>
+                </body>
+              </body>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"#
+        );
+        let model = Model::from_xml_str(&xml).unwrap();
+        let body = |n: &str| model.id(ObjType::Body, n).unwrap();
+        let bodies: Vec<usize> = ["hip_a", "hip_b", "thigh", "shin", "ankle", "foot"].iter().map(|n| body(n)).collect();
+        let joints = ["hip_a", "hip_b", "hip_c", "knee", "ankle_a", "ankle_b"]
+            .iter()
+            .map(|n| model.id(ObjType::Joint, n).unwrap())
+            .collect();
+        let leg = Leg {
+            side: Side::Left,
+            foot: body("foot"),
+            joints,
+            bodies,
+            sole_in_foot: Vector3::zeros(),
+            sole_half: [0.1, 0.05],
+            foot_rot_home: UnitQuaternion::identity(),
+        };
+        (model, leg)
+    }
+
+    fn humanoid_legs() -> (Model, [Leg; 2]) {
+        let model = Model::from_file(concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf")).unwrap();
+        let tree = Tree::new(&model);
+        let body = Body::find(&model, &tree, model.qpos0(), &BodyNames::default()).unwrap();
+        (model, body.legs)
+    }
+
+    /// Random reachable targets (the foot pose of random angles within the ranges, knee bent)
+    /// solved from a warm start 0.1 rad away: the closed form lands on them and on those
+    /// angles.
+    fn closed_form_matches_kinematics(ik: &LegIk, seed: u64) {
+        assert!(ik.is_closed_form());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (knee, sign) = ik.knee;
+        for _ in 0..200 {
+            let want: Vec<f64> = (0..6)
+                .map(|k| {
+                    if k == knee {
+                        sign * rng.random_range(0.2..1.8)
+                    } else {
+                        let [lo, hi] = ik.range[k];
+                        rng.random_range((lo + 0.01).max(ik.qpos0[k] - 0.5)..(hi - 0.01).min(ik.qpos0[k] + 0.5))
+                    }
+                })
+                .collect();
+            let target = ik.foot_pose(&want);
+            let mut q: Vec<f64> = want.iter().map(|&v| v + rng.random_range(-0.1..0.1)).collect();
+            let r = ik.solve(target, &mut q, 1, 1e-3);
+            let (p, rot) = ik.foot_pose(&q);
+            assert!((p - target.0).norm() < 1e-9, "{p} {}", target.0);
+            assert!((rot * target.1.inverse()).angle() < 1e-9);
+            assert!(r.position_error_m < 1e-9 && r.rotation_error_rad < 1e-9, "{r:?}");
+            for k in 0..6 {
+                assert!((q[k] - want[k]).abs() < 1e-7, "joint {k}: {q:?} {want:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn subtree_runs_agree_with_the_parent_chain() {
+        let (model, _) = humanoid_legs();
+        let tree = Tree::new(&model);
+        assert_eq!(tree.subtree_last.len(), model.nbody(), "MuJoCo numbers bodies depth first");
+        let walk_up = |mut b: usize, ancestor: usize| loop {
+            if b == ancestor {
+                return true;
+            }
+            if b == 0 {
+                return false;
+            }
+            b = tree.parent[b];
+        };
+        for a in 0..model.nbody() {
+            for b in 0..model.nbody() {
+                assert_eq!(tree.is_below(b, a), walk_up(b, a), "body {b} below {a}");
+            }
+        }
+        // Not depth first: no runs (the parent chain is walked instead).
+        assert!(depth_first_runs(&[0, 0, 0, 1]).is_empty());
+        assert_eq!(depth_first_runs(&[0, 0, 1, 0]), vec![3, 2, 2, 3]);
+    }
+
+    #[test]
+    fn closed_form_ik_of_the_humanoid_matches_forward_kinematics() {
+        let (model, legs) = humanoid_legs();
+        for (seed, leg) in legs.iter().enumerate() {
+            closed_form_matches_kinematics(&LegIk::new(&model, leg), seed as u64);
+        }
+    }
+
+    #[test]
+    fn closed_form_ik_of_a_skewed_leg_matches_forward_kinematics() {
+        let (model, leg) = skewed_leg(0.0);
+        closed_form_matches_kinematics(&LegIk::new(&model, &leg), 3);
+    }
+
+    #[test]
+    fn leg_with_offset_hip_axes_is_solved_by_least_squares() {
+        let (model, leg) = skewed_leg(0.02);
+        let ik = LegIk::new(&model, &leg);
+        assert!(!ik.is_closed_form(), "the third hip axis passes 2 cm from the others");
+        let want = [0.1, -0.1, 0.2, 0.8, -0.3, 0.1];
+        let target = ik.foot_pose(&want);
+        let mut q = [0.0, 0.0, 0.0, 0.5, 0.0, 0.0];
+        let r = ik.solve(target, &mut q, 100, 1e-4);
+        assert!(r.position_error_m < 1e-6 && r.rotation_error_rad < 1e-5, "{r:?}");
+    }
+
+    /// Out of reach (1 m below the foot): the leg straight and pointed at the target, the
+    /// foot turned as asked, the remaining distance reported.
+    #[test]
+    fn unreachable_target_stretches_the_leg_toward_it() {
+        let (model, legs) = humanoid_legs();
+        let ik = LegIk::new(&model, &legs[0]);
+        let cf = ik.closed_form.clone().unwrap();
+        // The humanoid's foot frame is at its ankle centre.
+        assert!((cf.foot0.0 - cf.ankle).norm() < 1e-12);
+        let mut q: Vec<f64> = ik.qpos0.clone();
+        ik.bend_knee(&mut q, 0.5);
+        let (home_pos, home_rot) = ik.foot_pose(&q);
+        let target = (home_pos + Vector3::new(0.0, 0.0, -1.0), home_rot);
+        let warm: [f64; 6] = std::array::from_fn(|k| q[k] - ik.qpos0[k]);
+        assert!(!cf.solve(&target, &warm).2, "out of reach");
+        let r = ik.solve(target, &mut q, 1, 1e-3);
+        let (p, rot) = ik.foot_pose(&q);
+        assert!((r.position_error_m - (target.0 - p).norm()).abs() < 1e-12, "{r:?}");
+        assert!(r.rotation_error_rad < 1e-9 && (rot * target.1.inverse()).angle() < 1e-9, "{r:?}");
+        let (leg, aim) = (p - cf.hip, target.0 - cf.hip);
+        assert!(leg.cross(&aim).norm() / aim.norm() < 1e-9, "pointed at the target: {leg} {aim}");
+        // Straight: the leg as long as its thigh and shin (0.28 m each).
+        assert!((leg.norm() - 0.56).abs() < 1e-9, "{}", leg.norm());
+        assert!((r.position_error_m - (aim.norm() - 0.56)).abs() < 1e-9, "{r:?}");
+        for k in 0..6 {
+            assert!((ik.range[k][0]..=ik.range[k][1]).contains(&q[k]), "joint {k}: {q:?}");
+        }
     }
 }
