@@ -33,6 +33,41 @@ struct Joint {
     qpos0: f64,
     axis: Vector3<f64>,
     pos: Vector3<f64>,
+    /// `pos` is zero: the anchor is the body's origin (URDF joints).
+    at_origin: bool,
+    /// `axis` is ± a frame axis (index, sign), as URDF axes mostly are: then its rotation is
+    /// a product with two nonzero terms per component, its world axis a matrix column.
+    frame_axis: Option<(usize, f64)>,
+}
+
+/// `axis` as ± a frame axis (index, sign), if it is one exactly.
+fn frame_axis(axis: &Vector3<f64>) -> Option<(usize, f64)> {
+    (0..3).find_map(|i| {
+        let others_zero = (0..3).all(|k| k == i || axis[k] == 0.0);
+        (others_zero && axis[i].abs() == 1.0).then_some((i, axis[i]))
+    })
+}
+
+/// Column `i` of `q`'s rotation matrix: `q` applied to frame axis `i`.
+fn rotated_frame_axis(q: &UnitQuaternion<f64>, i: usize) -> Vector3<f64> {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    match i {
+        0 => Vector3::new(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
+        1 => Vector3::new(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),
+        _ => Vector3::new(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
+    }
+}
+
+/// `q` times the rotation `(c, s·eᵢ)` about frame axis `i` (the hinge quaternion with its zero
+/// terms left out: 8 products where the general one takes 16).
+fn times_frame_rotation(q: &UnitQuaternion<f64>, i: usize, s: f64, c: f64) -> UnitQuaternion<f64> {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    let (w, x, y, z) = match i {
+        0 => (w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s),
+        1 => (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s),
+        _ => (w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s),
+    };
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, x, y, z))
 }
 
 /// The kinematic tree of a model.
@@ -41,8 +76,12 @@ pub struct Tree {
     parent: Vec<usize>,
     body_pos: Vec<Vector3<f64>>,
     body_rot: Vec<UnitQuaternion<f64>>,
+    /// `body_rot` is the identity (URDF links without `rpy`): no product.
+    body_rot_identity: Vec<bool>,
     body_ipos: Vec<Vector3<f64>>,
     mass: Vec<f64>,
+    /// Subtree masses, kg (constants of the model).
+    subtree_mass: Vec<f64>,
     joints: Vec<Vec<usize>>,
     joint: Vec<Joint>,
     jnt_body: Vec<usize>,
@@ -84,12 +123,16 @@ impl Tree {
         let joint = (0..model.njnt())
             .map(|j| {
                 let qpos_adr = model.jnt_qposadr()[j] as usize;
+                let axis = Vector3::from(model.jnt_axis()[j]).normalize();
+                let pos = Vector3::from(model.jnt_pos()[j]);
                 Joint {
                     kind: model.joint_type(j),
                     qpos_adr,
                     qpos0: model.qpos0()[qpos_adr],
-                    axis: Vector3::from(model.jnt_axis()[j]).normalize(),
-                    pos: Vector3::from(model.jnt_pos()[j]),
+                    axis,
+                    pos,
+                    at_origin: pos == Vector3::zeros(),
+                    frame_axis: frame_axis(&axis),
                 }
             })
             .collect();
@@ -101,7 +144,13 @@ impl Tree {
             })
             .collect();
         let parent: Vec<usize> = model.body_parentid().iter().map(|&p| p as usize).collect();
+        let mut subtree_mass = model.body_mass().to_vec();
+        for b in (1..nbody).rev() {
+            subtree_mass[parent[b]] += subtree_mass[b];
+        }
         Tree {
+            body_rot_identity: model.body_quat().iter().map(|q| *q == [1.0, 0.0, 0.0, 0.0]).collect(),
+            subtree_mass,
             subtree_last: depth_first_runs(&parent),
             parent,
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
@@ -133,7 +182,7 @@ impl Tree {
     pub fn forward(&self, qpos: &[f64], out: &mut Frames) {
         for b in 1..self.parent.len() {
             let p = self.parent[b];
-            let mut rot = out.xrot[p] * self.body_rot[b];
+            let mut rot = if self.body_rot_identity[b] { out.xrot[p] } else { out.xrot[p] * self.body_rot[b] };
             let mut pos = out.xpos[p] + out.xrot[p] * self.body_pos[b];
             for &j in &self.joints[b] {
                 let jt = &self.joint[j];
@@ -153,10 +202,17 @@ impl Tree {
                         out.axis[j] = Vector3::z();
                     }
                     JointType::Hinge => {
-                        let anchor = pos + rot * jt.pos;
-                        let axis = rot * jt.axis;
-                        rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
-                        pos = anchor - rot * jt.pos;
+                        let anchor = if jt.at_origin { pos } else { pos + rot * jt.pos };
+                        let axis;
+                        if let Some((i, sign)) = jt.frame_axis {
+                            axis = rotated_frame_axis(&rot, i) * sign;
+                            let (s, c) = (0.5 * (qpos[a] - jt.qpos0)).sin_cos();
+                            rot = times_frame_rotation(&rot, i, sign * s, c);
+                        } else {
+                            axis = rot * jt.axis;
+                            rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
+                        }
+                        pos = if jt.at_origin { anchor } else { anchor - rot * jt.pos };
                         out.anchor[j] = anchor;
                         out.axis[j] = axis;
                     }
@@ -171,15 +227,13 @@ impl Tree {
             out.xpos[b] = pos;
             out.xrot[b] = rot;
         }
+        out.subtree_mass.copy_from_slice(&self.subtree_mass);
         for b in 0..self.parent.len() {
-            out.subtree_mass[b] = self.mass[b];
             out.subtree_com[b] = (out.xpos[b] + out.xrot[b] * self.body_ipos[b]) * self.mass[b];
         }
         for b in (1..self.parent.len()).rev() {
-            let p = self.parent[b];
-            let (m, c) = (out.subtree_mass[b], out.subtree_com[b]);
-            out.subtree_mass[p] += m;
-            out.subtree_com[p] += c;
+            let c = out.subtree_com[b];
+            out.subtree_com[self.parent[b]] += c;
         }
         for b in 0..self.parent.len() {
             let m = out.subtree_mass[b];
@@ -1092,6 +1146,95 @@ mod tests {
             assert!(r.position_error_m < 1e-9 && r.rotation_error_rad < 1e-9, "{r:?}");
             for k in 0..6 {
                 assert!((q[k] - want[k]).abs() < 1e-7, "joint {k}: {q:?} {want:?}");
+            }
+        }
+    }
+
+    /// The tree's kinematics equal MuJoCo's on every kind of joint and frame: hinges along
+    /// frame axes (± signs, at the origin or offset) and tilted, rotated and plain bodies, a
+    /// ball, a slide, a massless body, at random configurations.
+    #[test]
+    fn forward_kinematics_match_mujoco_on_all_joint_kinds() {
+        let xml = r#"<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint/>
+      <geom type="sphere" size="0.1"/>
+      <body name="a" pos="0.1 0 -0.1">
+        <joint type="hinge" axis="0 -1 0"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.2" size="0.02"/>
+        <body name="b" pos="0 0.05 -0.2" quat="0.9 0.3 0.1 -0.2">
+          <joint type="hinge" axis="1 0 0" pos="0.01 -0.02 0.03"/>
+          <joint type="hinge" axis="0 0 -1"/>
+          <geom type="box" size="0.03 0.02 0.05" pos="0.02 0 -0.03"/>
+          <body name="c" pos="0 0 -0.1">
+            <joint type="hinge" axis="0.3 -0.4 0.8" pos="0 0.01 0"/>
+            <geom type="sphere" size="0.02" pos="0.01 0.02 0"/>
+            <body name="slider" pos="0.05 0 0">
+              <joint type="slide" axis="0 1 0.2"/>
+              <geom type="sphere" size="0.01"/>
+              <body name="massless" pos="0.02 0 0"/>
+            </body>
+          </body>
+        </body>
+      </body>
+      <body name="d" pos="-0.1 0 0.05" quat="0.7 0 0.7 0">
+        <joint type="ball" pos="0 0 0.02"/>
+        <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.02"/>
+        <body name="e" pos="0.1 0 0">
+          <joint type="slide" axis="0 0 1" pos="0.01 0 0"/>
+          <geom type="sphere" size="0.03"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"#;
+        let model = std::sync::Arc::new(Model::from_xml_str(xml).unwrap());
+        let tree = Tree::new(&model);
+        assert!(tree.joint.iter().any(|j| j.frame_axis == Some((1, -1.0)) && j.at_origin));
+        assert!(tree.joint.iter().any(|j| j.frame_axis == Some((0, 1.0)) && !j.at_origin));
+        assert!(tree.joint.iter().any(|j| j.kind == JointType::Hinge && j.frame_axis.is_none()));
+        let mut data = crate::mj::Data::new(model.clone()).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut frames = tree.frames();
+        for _ in 0..20 {
+            let q: Vec<f64> = (0..model.nq()).map(|_| rng.random_range(-1.5..1.5)).collect();
+            data.qpos_mut().copy_from_slice(&q);
+            for j in 0..model.njnt() {
+                let a = model.jnt_qposadr()[j] as usize;
+                let n = match model.joint_type(j) {
+                    JointType::Free => Some((a + 3, 4)),
+                    JointType::Ball => Some((a, 4)),
+                    _ => None,
+                };
+                if let Some((a, n)) = n {
+                    let norm = data.qpos()[a..a + n].iter().map(|v| v * v).sum::<f64>().sqrt();
+                    data.qpos_mut()[a..a + n].iter_mut().for_each(|v| *v /= norm);
+                }
+            }
+            data.forward().unwrap();
+            tree.forward(data.qpos(), &mut frames);
+            for b in 0..model.nbody() {
+                assert!((frames.xpos[b] - Vector3::from(data.xpos()[b])).norm() < 1e-12, "body {b}");
+                assert!((frames.xrot[b].inverse() * quat(data.xquat()[b])).angle() < 1e-12, "body {b}");
+                let com = Vector3::from(data.subtree_com()[b]);
+                assert!((frames.subtree_com[b] - com).norm() < 1e-12, "body {b}");
+            }
+            // Anchors and axes from the joints' bodies (a hinge's axis is fixed in its body,
+            // when it is the body's last joint).
+            for (j, jt) in tree.joint.iter().enumerate() {
+                let b = tree.jnt_body[j];
+                if tree.joints[b].last() != Some(&j) {
+                    continue;
+                }
+                if matches!(jt.kind, JointType::Hinge) {
+                    assert!((frames.axis[j] - frames.xrot[b] * jt.axis).norm() < 1e-12, "joint {j}");
+                }
+                if !matches!(jt.kind, JointType::Free | JointType::Slide) {
+                    let anchor = frames.xpos[b] + frames.xrot[b] * jt.pos;
+                    assert!((frames.anchor[j] - anchor).norm() < 1e-12, "joint {j}");
+                }
             }
         }
     }
