@@ -20,8 +20,57 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
 /// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
 /// unit vectors already).
 fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
-    let (s, c) = (0.5 * angle).sin_cos();
+    let (s, c) = sin_cos(0.5 * angle);
     UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
+}
+
+/// `(sin x, cos x)` for joint angles, within 1 ulp or so of `f64::sin_cos`: one reduction by
+/// π/2 and the minimax polynomials of FreeBSD's `k_sin.c`/`k_cos.c` (|r| ≤ π/4). The library's
+/// `sin_cos` (rounding-mode guards, large-argument paths) was a third of the whole-tree pass;
+/// arguments beyond ±10⁵ rad (never joint angles) and NaN go to it.
+fn sin_cos(x: f64) -> (f64, f64) {
+    // π/2 as a 33-bit head (k·head exact for |k| < 2²⁰) and the tail.
+    const PIO2_HEAD: f64 = 1.570_796_326_734_125_614_17e+00;
+    const PIO2_TAIL: f64 = 6.077_100_506_506_192_249_32e-11;
+    #[allow(clippy::excessive_precision)]
+    const S: [f64; 6] = [
+        -1.666_666_666_666_663_243_48e-01,
+        8.333_333_333_322_489_461_24e-03,
+        -1.984_126_982_985_794_931_34e-04,
+        2.755_731_370_707_006_767_89e-06,
+        -2.505_076_025_340_686_341_95e-08,
+        1.589_690_995_211_550_102_21e-10,
+    ];
+    #[allow(clippy::excessive_precision)]
+    const C: [f64; 6] = [
+        4.166_666_666_666_660_190_37e-02,
+        -1.388_888_888_887_410_957_49e-03,
+        2.480_158_728_947_672_941_78e-05,
+        -2.755_731_435_139_066_330_35e-07,
+        2.087_572_321_298_174_827_90e-09,
+        -1.135_964_755_778_819_482_65e-11,
+    ];
+    if x.is_nan() || x.abs() > 1e5 {
+        return x.sin_cos();
+    }
+    // Nearest multiple of π/2 (a cast, where `round` is a library call without SSE4.1).
+    let k = (x * std::f64::consts::FRAC_2_PI + 0.5f64.copysign(x)) as i64;
+    let kf = k as f64;
+    let r = (x - kf * PIO2_HEAD) - kf * PIO2_TAIL;
+    let z = r * r;
+    let w = z * z;
+    let sr = S[1] + z * (S[2] + z * S[3]) + z * w * (S[4] + z * S[5]);
+    let sin_r = r + z * r * (S[0] + z * sr);
+    let cr = z * (C[0] + z * (C[1] + z * C[2])) + w * w * (C[3] + z * (C[4] + z * C[5]));
+    let hz = 0.5 * z;
+    let one_minus = 1.0 - hz;
+    let cos_r = one_minus + (((1.0 - one_minus) - hz) + z * cr);
+    match k & 3 {
+        0 => (sin_r, cos_r),
+        1 => (cos_r, -sin_r),
+        2 => (-sin_r, -cos_r),
+        _ => (-cos_r, sin_r),
+    }
 }
 
 /// One joint as forward kinematics needs it.
@@ -206,7 +255,7 @@ impl Tree {
                         let axis;
                         if let Some((i, sign)) = jt.frame_axis {
                             axis = rotated_frame_axis(&rot, i) * sign;
-                            let (s, c) = (0.5 * (qpos[a] - jt.qpos0)).sin_cos();
+                            let (s, c) = sin_cos(0.5 * (qpos[a] - jt.qpos0));
                             rot = times_frame_rotation(&rot, i, sign * s, c);
                         } else {
                             axis = rot * jt.axis;
@@ -987,7 +1036,7 @@ fn line_distance(x: &Vector3<f64>, p: &Vector3<f64>, d: &Vector3<f64>) -> f64 {
 fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> (f64, (f64, f64)) {
     let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
     let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
-    let r = y.hypot(x);
+    let r = (y * y + x * x).sqrt();
     (y.atan2(x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
 }
 
@@ -1013,7 +1062,7 @@ fn subproblem2(
     let gamma2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * w) / n.norm_squared();
     // Rounding leaves a touching solution slightly negative.
     let exact = gamma2 >= -1e-12;
-    let side = if n.dot(&rotate(a2, warm2.sin_cos(), &u)) < 0.0 { -1.0 } else { 1.0 };
+    let side = if n.dot(&rotate(a2, sin_cos(warm2), &u)) < 0.0 { -1.0 } else { 1.0 };
     let z = a1 * alpha + a2 * beta + n * (side * gamma2.max(0.0).sqrt());
     ([subproblem1(a1, &z, &v), subproblem1(a2, &u, &z)], exact)
 }
@@ -1237,6 +1286,21 @@ mod tests {
                 }
             }
         }
+    }
+
+    #[test]
+    fn sin_cos_matches_the_library() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let quarter = std::f64::consts::FRAC_PI_4;
+        let edges = (-40..=40).flat_map(|k| [-1e-15, 0.0, 1e-15].map(|e| k as f64 * quarter + e));
+        let random = (0..100_000).map(|_| rng.random_range(-20.0..20.0));
+        for x in edges.chain(random).chain([0.0, -0.0, 1e-300, 3e-8, 12345.678, 1e6, -1e6]) {
+            let (s, c) = sin_cos(x);
+            let (ws, wc) = x.sin_cos();
+            assert!((s - ws).abs() <= 2.3e-16 && (c - wc).abs() <= 2.3e-16, "{x}: {s} {c} / {ws} {wc}");
+        }
+        let (s, c) = sin_cos(f64::NAN);
+        assert!(s.is_nan() && c.is_nan());
     }
 
     #[test]
