@@ -73,6 +73,80 @@ fn sin_cos(x: f64) -> (f64, f64) {
     }
 }
 
+/// `atan2(y, x)` within an ulp or two of `f64::atan2`, for the leg IK's angles: FreeBSD's
+/// `s_atan.c` (argument reduction by a table of atan(½), atan(1), atan(3/2), the odd minimax
+/// polynomial) with the quadrant fixed as `e_atan2.c` does. The library's (rounding-mode
+/// guards) took half of the closed-form IK; NaN, zeros and infinities go to it.
+fn atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::PI;
+    const PI_LO: f64 = 1.224_646_799_147_353_207_2e-16;
+    if !(y.is_finite() && x.is_finite()) || x == 0.0 || y == 0.0 {
+        return y.atan2(x);
+    }
+    let t = atan((y / x).abs());
+    match (x > 0.0, y > 0.0) {
+        (true, true) => t,
+        (true, false) => -t,
+        (false, true) => PI - (t - PI_LO),
+        (false, false) => (t - PI_LO) - PI,
+    }
+}
+
+/// `atan(x)` for finite `x ≥ 0` (FreeBSD's `s_atan.c`).
+#[allow(clippy::excessive_precision)]
+fn atan(x: f64) -> f64 {
+    const HI: [f64; 4] = [
+        4.636_476_090_008_060_935_15e-01,
+        7.853_981_633_974_482_789_99e-01,
+        9.827_937_232_473_290_540_82e-01,
+        1.570_796_326_794_896_558_00e+00,
+    ];
+    const LO: [f64; 4] = [
+        2.269_877_745_296_168_709_24e-17,
+        3.061_616_997_868_383_017_93e-17,
+        1.390_331_103_123_099_845_16e-17,
+        6.123_233_995_736_766_035_87e-17,
+    ];
+    const AT: [f64; 11] = [
+        3.333_333_333_333_293_180_27e-01,
+        -1.999_999_999_987_648_324_76e-01,
+        1.428_571_427_250_346_637_11e-01,
+        -1.111_111_040_546_235_578_80e-01,
+        9.090_887_133_436_506_561_96e-02,
+        -7.691_876_205_044_829_994_95e-02,
+        6.661_073_137_387_531_206_69e-02,
+        -5.833_570_133_790_573_486_45e-02,
+        4.976_877_994_615_932_360_17e-02,
+        -3.653_157_274_421_691_552_70e-02,
+        1.628_582_011_536_578_236_23e-02,
+    ];
+    if x >= 7.378_697_629_483_820_646_4e19 {
+        return HI[3] + LO[3];
+    }
+    let (id, x) = if x < 0.4375 {
+        if x < 7.450_580_596_923_828_125e-9 {
+            return x;
+        }
+        (None, x)
+    } else if x < 0.6875 {
+        (Some(0), (2.0 * x - 1.0) / (2.0 + x))
+    } else if x < 1.1875 {
+        (Some(1), (x - 1.0) / (x + 1.0))
+    } else if x < 2.4375 {
+        (Some(2), (x - 1.5) / (1.0 + 1.5 * x))
+    } else {
+        (Some(3), -1.0 / x)
+    };
+    let z = x * x;
+    let w = z * z;
+    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
+    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
+    match id {
+        None => x - x * (s1 + s2),
+        Some(i) => HI[i] - ((x * (s1 + s2) - LO[i]) - x),
+    }
+}
+
 /// One joint as forward kinematics needs it.
 #[derive(Debug, Clone)]
 struct Joint {
@@ -992,7 +1066,7 @@ impl ClosedForm {
         let m = target.1.to_rotation_matrix().into_inner().transpose() * rot;
         let sine = Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]).norm() / 2.0;
         let cosine = (m.trace() - 1.0) / 2.0;
-        IkResult { position_error_m: (target.0 - pos).norm(), rotation_error_rad: sine.atan2(cosine) }
+        IkResult { position_error_m: (target.0 - pos).norm(), rotation_error_rad: atan2(sine, cosine) }
     }
 }
 
@@ -1037,7 +1111,7 @@ fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> (f64,
     let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
     let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
     let r = (y * y + x * x).sqrt();
-    (y.atan2(x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
+    (atan2(y, x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
 }
 
 /// Paden–Kahan subproblem 2 on directions: angles `θ₁`, `θ₂` (with sines and cosines) for
@@ -1088,7 +1162,8 @@ fn subproblem3(
     // Rounding can put a reachable straight or folded knee just past ±1.
     let exact = c.abs() <= 1.0 + 1e-12;
     let c = c.clamp(-1.0, 1.0);
-    let (phi, s) = (c.acos(), (1.0 - c * c).sqrt());
+    let s = (1.0 - c * c).sqrt();
+    let phi = atan2(s, c);
     let (plus, minus) = (near(theta0 + phi, warm), near(theta0 - phi, warm));
     let solution = if (minus - warm).abs() < (plus - warm).abs() {
         (minus, (s0 * c - c0 * s, c0 * c + s0 * s))
@@ -1301,6 +1376,27 @@ mod tests {
         }
         let (s, c) = sin_cos(f64::NAN);
         assert!(s.is_nan() && c.is_nan());
+    }
+
+    #[test]
+    fn atan2_matches_the_library() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        let special =
+            [0.0, -0.0, 1e-300, -1e-300, 1e-9, 0.4375, 0.6875, 1.1875, 2.4375, 1.0, -1.0, 3.0, 1e20, f64::INFINITY];
+        let pairs =
+            special.iter().flat_map(|&y| special.iter().flat_map(move |&x| [(y, x), (-y, x), (y, -x), (-y, -x)]));
+        let random = (0..100_000).map(|_| {
+            let scale = 10f64.powf(rng.random_range(-3.0..3.0));
+            (rng.random_range(-1.0..1.0) * scale, rng.random_range(-1.0..1.0))
+        });
+        for (y, x) in pairs.chain(random) {
+            let (got, want) = (atan2(y, x), y.atan2(x));
+            assert!(
+                (got - want).abs() <= 4.5e-16 * want.abs().max(1e-300) || got == want,
+                "atan2({y}, {x}): {got} / {want}"
+            );
+        }
+        assert!(atan2(f64::NAN, 1.0).is_nan() && atan2(1.0, f64::NAN).is_nan());
     }
 
     #[test]
