@@ -28,11 +28,11 @@ fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
 /// π/2 and the minimax polynomials of FreeBSD's `k_sin.c`/`k_cos.c` (|r| ≤ π/4). The library's
 /// `sin_cos` (rounding-mode guards, large-argument paths) was a third of the whole-tree pass;
 /// arguments beyond ±10⁵ rad (never joint angles) and NaN go to it.
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
 fn sin_cos(x: f64) -> (f64, f64) {
     // π/2 as a 33-bit head (k·head exact for |k| < 2²⁰) and the tail.
     const PIO2_HEAD: f64 = 1.570_796_326_734_125_614_17e+00;
     const PIO2_TAIL: f64 = 6.077_100_506_506_192_249_32e-11;
-    #[allow(clippy::excessive_precision)]
     const S: [f64; 6] = [
         -1.666_666_666_666_663_243_48e-01,
         8.333_333_333_322_489_461_24e-03,
@@ -41,7 +41,6 @@ fn sin_cos(x: f64) -> (f64, f64) {
         -2.505_076_025_340_686_341_95e-08,
         1.589_690_995_211_550_102_21e-10,
     ];
-    #[allow(clippy::excessive_precision)]
     const C: [f64; 6] = [
         4.166_666_666_666_660_190_37e-02,
         -1.388_888_888_887_410_957_49e-03,
@@ -77,6 +76,7 @@ fn sin_cos(x: f64) -> (f64, f64) {
 /// `s_atan.c` (argument reduction by a table of atan(½), atan(1), atan(3/2), the odd minimax
 /// polynomial) with the quadrant fixed as `e_atan2.c` does. The library's (rounding-mode
 /// guards) took half of the closed-form IK; NaN, zeros and infinities go to it.
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
 fn atan2(y: f64, x: f64) -> f64 {
     use std::f64::consts::PI;
     const PI_LO: f64 = 1.224_646_799_147_353_207_2e-16;
@@ -93,14 +93,11 @@ fn atan2(y: f64, x: f64) -> f64 {
 }
 
 /// `atan(x)` for finite `x ≥ 0` (FreeBSD's `s_atan.c`).
-#[allow(clippy::excessive_precision)]
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
 fn atan(x: f64) -> f64 {
-    const HI: [f64; 4] = [
-        4.636_476_090_008_060_935_15e-01,
-        7.853_981_633_974_482_789_99e-01,
-        9.827_937_232_473_290_540_82e-01,
-        1.570_796_326_794_896_558_00e+00,
-    ];
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+    // atan(½), atan(1), atan(3/2), atan(∞): heads and tails.
+    const HI: [f64; 4] = [4.636_476_090_008_060_935_15e-01, FRAC_PI_4, 9.827_937_232_473_290_540_82e-01, FRAC_PI_2];
     const LO: [f64; 4] = [
         2.269_877_745_296_168_709_24e-17,
         3.061_616_997_868_383_017_93e-17,
@@ -1105,9 +1102,12 @@ fn line_distance(x: &Vector3<f64>, p: &Vector3<f64>, d: &Vector3<f64>) -> f64 {
     (r - d * d.dot(&r)).norm()
 }
 
+/// An angle, radians, with its sine and cosine.
+type Angle = (f64, (f64, f64));
+
 /// Paden–Kahan subproblem 1: the angle turning `u` toward `v` about the unit `axis` (both
 /// relative to a point on it), with its sine and cosine (from the same `atan2` arguments).
-fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> (f64, (f64, f64)) {
+fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> Angle {
     let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
     let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
     let r = (y * y + x * x).sqrt();
@@ -1125,7 +1125,7 @@ fn subproblem2(
     u: &Vector3<f64>,
     v: &Vector3<f64>,
     warm2: f64,
-) -> ([(f64, (f64, f64)); 2], bool) {
+) -> ([Angle; 2], bool) {
     let (u, v) = (u.normalize(), v.normalize());
     // z = R₂ û = R₁ᵀ v̂ keeps û's component along a2 and v̂'s along a1.
     let w = a1.dot(a2);
@@ -1151,7 +1151,7 @@ fn subproblem3(
     centre: &Vector3<f64>,
     distance: f64,
     warm: f64,
-) -> ((f64, (f64, f64)), bool) {
+) -> (Angle, bool) {
     let (u, v) = (p - point, centre - point);
     let (ua, va) = (axis.dot(&u), axis.dot(&v));
     let (up, vp) = (u - axis * ua, v - axis * va);
