@@ -883,7 +883,7 @@ impl LegIk {
                 within &= q[k] == v;
             }
             if within {
-                return cf.error(&target, &sc);
+                return cf.error(&target, &theta, &sc);
             }
         }
         self.solve_dls(target, q, iterations, damping)
@@ -1044,26 +1044,25 @@ impl ClosedForm {
         (theta, sc, knee_exact && ankle_exact && hip_exact)
     }
 
-    /// Foot pose error from `target` at the angles of sines and cosines `sc`: the product of
-    /// exponentials with the solution's own `sin_cos` (a second kinematics pass would take
-    /// them again).
-    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), sc: &[(f64, f64); 6]) -> IkResult {
+    /// Foot pose error from `target` at the angles `theta` (sines and cosines `sc`): the
+    /// product of exponentials, the position with the solution's own sines and cosines, the
+    /// orientation with unit quaternions of the half angles (fewer products than matrices).
+    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), theta: &[f64; 6], sc: &[(f64, f64); 6]) -> IkResult {
         let mut pos = self.foot0.0;
-        let mut rot = self.foot0.1.to_rotation_matrix().into_inner();
+        let mut rot = self.foot0.1.into_inner();
         for k in (0..6).rev() {
-            let (s, c) = sc[k];
+            pos = self.turn(k, sc[k], &pos);
+            let (s, c) = sin_cos(0.5 * theta[k]);
             let a = &self.axis[k];
-            // Rodrigues: R = c I + s [a]ₓ + (1 − c) a aᵀ.
-            let turn = Matrix3::from_diagonal_element(c) + a.cross_matrix() * s + a * a.transpose() * (1.0 - c);
-            pos = self.point[k] + turn * (pos - self.point[k]);
-            rot = turn * rot;
+            rot = nalgebra::Quaternion::new(c, a.x * s, a.y * s, a.z * s) * rot;
         }
-        // Angle of R_targetᵀ R from its sine (skew part) and cosine (trace): exact near zero,
-        // where the trace alone is not.
-        let m = target.1.to_rotation_matrix().into_inner().transpose() * rot;
-        let sine = Vector3::new(m[(2, 1)] - m[(1, 2)], m[(0, 2)] - m[(2, 0)], m[(1, 0)] - m[(0, 1)]).norm() / 2.0;
-        let cosine = (m.trace() - 1.0) / 2.0;
-        IkResult { position_error_m: (target.0 - pos).norm(), rotation_error_rad: atan2(sine, cosine) }
+        // Angle of the rotation between: from its quaternion's vector and scalar parts (exact
+        // near zero, where an arccosine of the scalar is not).
+        let e = target.1.into_inner().conjugate() * rot;
+        IkResult {
+            position_error_m: (target.0 - pos).norm(),
+            rotation_error_rad: 2.0 * atan2(e.imag().norm(), e.w.abs()),
+        }
     }
 }
 
