@@ -231,6 +231,7 @@ pub struct Frames {
 
 impl Frames {
     /// Centre of mass of the whole model.
+    #[inline]
     pub fn com(&self) -> Vector3<f64> {
         self.subtree_com[0]
     }
@@ -369,6 +370,7 @@ impl Tree {
     }
 
     /// Whether body `b` is `ancestor` or below it.
+    #[inline]
     pub fn is_below(&self, mut b: usize, ancestor: usize) -> bool {
         if let Some(&last) = self.subtree_last.get(ancestor) {
             return (ancestor..=last).contains(&b);
@@ -387,6 +389,7 @@ impl Tree {
     /// Static joint torque of hinge/slide `joint` holding its subtree against gravity `g` and
     /// the point `forces` (position, force; world frame) acting on bodies below it:
     /// `τ = −axis · Σ (r − anchor) × f`.
+    #[inline]
     pub fn static_torque(
         &self,
         frames: &Frames,
@@ -407,6 +410,7 @@ impl Tree {
     }
 
     /// Body of `joint`.
+    #[inline]
     pub fn joint_body(&self, joint: usize) -> usize {
         self.jnt_body[joint]
     }
@@ -805,6 +809,7 @@ impl LegIk {
     }
 
     /// Bends a (nearly) straight knee in the guess `q`: straight legs are singular for IK.
+    #[inline]
     pub fn bend_knee(&self, q: &mut [f64], angle: f64) {
         let (k, sign) = self.knee;
         if k < q.len() && (q[k] * sign) < angle {
@@ -813,6 +818,7 @@ impl LegIk {
     }
 
     /// Number of joints.
+    #[inline]
     pub fn len(&self) -> usize {
         self.qpos_adr.len()
     }
@@ -823,6 +829,7 @@ impl LegIk {
     }
 
     /// `qpos` address of chain joint `k`.
+    #[inline]
     pub fn qpos_adr(&self, k: usize) -> usize {
         self.qpos_adr[k]
     }
