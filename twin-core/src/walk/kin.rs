@@ -202,7 +202,8 @@ pub struct Tree {
     mass: Vec<f64>,
     /// Subtree masses, kg (constants of the model).
     subtree_mass: Vec<f64>,
-    joints: Vec<Vec<usize>>,
+    /// Per body, its joints `start..end` (MuJoCo numbers a body's joints consecutively).
+    joints: Vec<(usize, usize)>,
     joint: Vec<Joint>,
     jnt_body: Vec<usize>,
     /// Per body, the last body of its subtree when the bodies are numbered depth first (each
@@ -261,7 +262,7 @@ impl Tree {
             .map(|b| {
                 let adr = model.body_jntadr()[b];
                 let n = model.body_jntnum()[b];
-                if adr < 0 { Vec::new() } else { (adr as usize..(adr + n) as usize).collect() }
+                if adr < 0 { (0, 0) } else { (adr as usize, (adr + n) as usize) }
             })
             .collect();
         let parent: Vec<usize> = model.body_parentid().iter().map(|&p| p as usize).collect();
@@ -305,7 +306,8 @@ impl Tree {
             let p = self.parent[b];
             let mut rot = if self.body_rot_identity[b] { out.xrot[p] } else { out.xrot[p] * self.body_rot[b] };
             let mut pos = out.xpos[p] + out.xrot[p] * self.body_pos[b];
-            for &j in &self.joints[b] {
+            let (first, end) = self.joints[b];
+            for j in first..end {
                 let jt = &self.joint[j];
                 let a = jt.qpos_adr;
                 match jt.kind {
@@ -635,7 +637,7 @@ impl Body {
             bodies.reverse();
             let joints: Vec<usize> = bodies
                 .iter()
-                .flat_map(|&b| tree.joints[b].iter().copied())
+                .flat_map(|&b| tree.joints[b].0..tree.joints[b].1)
                 .filter(|&j| model.joint_type(j) == JointType::Hinge)
                 .collect();
             if joints.len() < 6 {
@@ -1355,7 +1357,7 @@ mod tests {
             // when it is the body's last joint).
             for (j, jt) in tree.joint.iter().enumerate() {
                 let b = tree.jnt_body[j];
-                if tree.joints[b].last() != Some(&j) {
+                if tree.joints[b].1 != j + 1 {
                     continue;
                 }
                 if matches!(jt.kind, JointType::Hinge) {
