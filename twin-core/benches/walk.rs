@@ -5,7 +5,11 @@
 //! Each repetition resets the humanoid (armature as `scenarios/walk.toml`) and walks at
 //! 0.3 m/s for N steps, timing `Walker::compute` and the physics (`mj_step1` + `mj_step2`)
 //! separately; a plain C loop of `mj_step` on the same model gives the reference step time.
-//! Medians over the repetitions are printed as a Markdown table row.
+//! Medians over the repetitions are printed as Markdown table rows: the controller's cost per
+//! physics step, then where a walking tick's time goes against the C loop's step (per-core
+//! throughput of walking over the C loop's): the same `mj_step1` + `mj_step2` calls from Rust
+//! on the C loop's own trajectory (unactuated, from `home`) price the calls themselves, the
+//! physics while walking prices the walking state (contacts, actuated joints).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -35,12 +39,20 @@ fn main() {
     let mut command = vec![0.0; actuation.len(&model)];
     let mut data = Data::new(model.clone()).unwrap();
     let mut walker = Walker::new(&model, WalkOptions { vx: 0.3, ..WalkOptions::default() }).unwrap();
-    let (mut ctrl, mut phys, mut plain) = (Vec::new(), Vec::new(), Vec::new());
+    let (mut ctrl, mut phys, mut plain, mut passive) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     for _ in 0..reps {
         reset_to_home(&mut data).unwrap();
         let t = Instant::now();
         bench_c_step_loop(&mut data, steps);
         plain.push(t.elapsed().as_secs_f64() / steps as f64);
+
+        reset_to_home(&mut data).unwrap();
+        let t = Instant::now();
+        for _ in 0..steps {
+            data.step1().unwrap();
+            data.step2().unwrap();
+        }
+        passive.push(t.elapsed().as_secs_f64() / steps as f64);
 
         reset_to_home(&mut data).unwrap();
         walker.reset(&model, &Observation::of(&data)).unwrap();
@@ -61,10 +73,23 @@ fn main() {
         ctrl.push(c / steps as f64);
         phys.push(p / steps as f64);
     }
-    let (c, p, m) = (median(ctrl), median(phys), median(plain));
+    let (c, p, m, r) = (median(ctrl), median(phys), median(plain), median(passive));
     println!(
         "| steps × reps | walker compute (µs/tick) | mj_step1+2 while walking (µs) | plain C mj_step loop (µs) | controller / mj_step |"
     );
     println!("|---|---|---|---|---|");
     println!("| {steps} × {reps} | {:.2} | {:.2} | {:.2} | {:.1} % |", c * 1e6, p * 1e6, m * 1e6, 100.0 * c / p);
+    println!();
+    println!(
+        "| steps × reps | plain C mj_step loop (µs) | mj_step1+2 from Rust, same trajectory (µs) | mj_step1+2 while walking (µs) | walking tick (µs) | walking throughput / C loop |"
+    );
+    println!("|---|---|---|---|---|---|");
+    println!(
+        "| {steps} × {reps} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} |",
+        m * 1e6,
+        r * 1e6,
+        p * 1e6,
+        (c + p) * 1e6,
+        m / (c + p)
+    );
 }

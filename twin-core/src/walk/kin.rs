@@ -20,8 +20,128 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
 /// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
 /// unit vectors already).
 fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
-    let (s, c) = (0.5 * angle).sin_cos();
+    let (s, c) = sin_cos(0.5 * angle);
     UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
+}
+
+/// `(sin x, cos x)` for joint angles, within 1 ulp or so of `f64::sin_cos`: one reduction by
+/// π/2 and the minimax polynomials of FreeBSD's `k_sin.c`/`k_cos.c` (|r| ≤ π/4). The library's
+/// `sin_cos` (rounding-mode guards, large-argument paths) was a third of the whole-tree pass;
+/// arguments beyond ±10⁵ rad (never joint angles) and NaN go to it.
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
+fn sin_cos(x: f64) -> (f64, f64) {
+    // π/2 as a 33-bit head (k·head exact for |k| < 2²⁰) and the tail.
+    const PIO2_HEAD: f64 = 1.570_796_326_734_125_614_17e+00;
+    const PIO2_TAIL: f64 = 6.077_100_506_506_192_249_32e-11;
+    const S: [f64; 6] = [
+        -1.666_666_666_666_663_243_48e-01,
+        8.333_333_333_322_489_461_24e-03,
+        -1.984_126_982_985_794_931_34e-04,
+        2.755_731_370_707_006_767_89e-06,
+        -2.505_076_025_340_686_341_95e-08,
+        1.589_690_995_211_550_102_21e-10,
+    ];
+    const C: [f64; 6] = [
+        4.166_666_666_666_660_190_37e-02,
+        -1.388_888_888_887_410_957_49e-03,
+        2.480_158_728_947_672_941_78e-05,
+        -2.755_731_435_139_066_330_35e-07,
+        2.087_572_321_298_174_827_90e-09,
+        -1.135_964_755_778_819_482_65e-11,
+    ];
+    if x.is_nan() || x.abs() > 1e5 {
+        return x.sin_cos();
+    }
+    // Nearest multiple of π/2 (a cast, where `round` is a library call without SSE4.1).
+    let k = (x * std::f64::consts::FRAC_2_PI + 0.5f64.copysign(x)) as i64;
+    let kf = k as f64;
+    let r = (x - kf * PIO2_HEAD) - kf * PIO2_TAIL;
+    let z = r * r;
+    let w = z * z;
+    let sr = S[1] + z * (S[2] + z * S[3]) + z * w * (S[4] + z * S[5]);
+    let sin_r = r + z * r * (S[0] + z * sr);
+    let cr = z * (C[0] + z * (C[1] + z * C[2])) + w * w * (C[3] + z * (C[4] + z * C[5]));
+    let hz = 0.5 * z;
+    let one_minus = 1.0 - hz;
+    let cos_r = one_minus + (((1.0 - one_minus) - hz) + z * cr);
+    match k & 3 {
+        0 => (sin_r, cos_r),
+        1 => (cos_r, -sin_r),
+        2 => (-sin_r, -cos_r),
+        _ => (-cos_r, sin_r),
+    }
+}
+
+/// `atan2(y, x)` within an ulp or two of `f64::atan2`, for the leg IK's angles: FreeBSD's
+/// `s_atan.c` (argument reduction by a table of atan(½), atan(1), atan(3/2), the odd minimax
+/// polynomial) with the quadrant fixed as `e_atan2.c` does. The library's (rounding-mode
+/// guards) took half of the closed-form IK; NaN, zeros and infinities go to it.
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
+fn atan2(y: f64, x: f64) -> f64 {
+    use std::f64::consts::PI;
+    const PI_LO: f64 = 1.224_646_799_147_353_207_2e-16;
+    if !(y.is_finite() && x.is_finite()) || x == 0.0 || y == 0.0 {
+        return y.atan2(x);
+    }
+    let t = atan((y / x).abs());
+    match (x > 0.0, y > 0.0) {
+        (true, true) => t,
+        (true, false) => -t,
+        (false, true) => PI - (t - PI_LO),
+        (false, false) => (t - PI_LO) - PI,
+    }
+}
+
+/// `atan(x)` for finite `x ≥ 0` (FreeBSD's `s_atan.c`).
+#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
+fn atan(x: f64) -> f64 {
+    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
+    // atan(½), atan(1), atan(3/2), atan(∞): heads and tails.
+    const HI: [f64; 4] = [4.636_476_090_008_060_935_15e-01, FRAC_PI_4, 9.827_937_232_473_290_540_82e-01, FRAC_PI_2];
+    const LO: [f64; 4] = [
+        2.269_877_745_296_168_709_24e-17,
+        3.061_616_997_868_383_017_93e-17,
+        1.390_331_103_123_099_845_16e-17,
+        6.123_233_995_736_766_035_87e-17,
+    ];
+    const AT: [f64; 11] = [
+        3.333_333_333_333_293_180_27e-01,
+        -1.999_999_999_987_648_324_76e-01,
+        1.428_571_427_250_346_637_11e-01,
+        -1.111_111_040_546_235_578_80e-01,
+        9.090_887_133_436_506_561_96e-02,
+        -7.691_876_205_044_829_994_95e-02,
+        6.661_073_137_387_531_206_69e-02,
+        -5.833_570_133_790_573_486_45e-02,
+        4.976_877_994_615_932_360_17e-02,
+        -3.653_157_274_421_691_552_70e-02,
+        1.628_582_011_536_578_236_23e-02,
+    ];
+    if x >= 7.378_697_629_483_820_646_4e19 {
+        return HI[3] + LO[3];
+    }
+    let (id, x) = if x < 0.4375 {
+        if x < 7.450_580_596_923_828_125e-9 {
+            return x;
+        }
+        (None, x)
+    } else if x < 0.6875 {
+        (Some(0), (2.0 * x - 1.0) / (2.0 + x))
+    } else if x < 1.1875 {
+        (Some(1), (x - 1.0) / (x + 1.0))
+    } else if x < 2.4375 {
+        (Some(2), (x - 1.5) / (1.0 + 1.5 * x))
+    } else {
+        (Some(3), -1.0 / x)
+    };
+    let z = x * x;
+    let w = z * z;
+    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
+    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
+    match id {
+        None => x - x * (s1 + s2),
+        Some(i) => HI[i] - ((x * (s1 + s2) - LO[i]) - x),
+    }
 }
 
 /// One joint as forward kinematics needs it.
@@ -33,6 +153,41 @@ struct Joint {
     qpos0: f64,
     axis: Vector3<f64>,
     pos: Vector3<f64>,
+    /// `pos` is zero: the anchor is the body's origin (URDF joints).
+    at_origin: bool,
+    /// `axis` is ± a frame axis (index, sign), as URDF axes mostly are: then its rotation is
+    /// a product with two nonzero terms per component, its world axis a matrix column.
+    frame_axis: Option<(usize, f64)>,
+}
+
+/// `axis` as ± a frame axis (index, sign), if it is one exactly.
+fn frame_axis(axis: &Vector3<f64>) -> Option<(usize, f64)> {
+    (0..3).find_map(|i| {
+        let others_zero = (0..3).all(|k| k == i || axis[k] == 0.0);
+        (others_zero && axis[i].abs() == 1.0).then_some((i, axis[i]))
+    })
+}
+
+/// Column `i` of `q`'s rotation matrix: `q` applied to frame axis `i`.
+fn rotated_frame_axis(q: &UnitQuaternion<f64>, i: usize) -> Vector3<f64> {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    match i {
+        0 => Vector3::new(1.0 - 2.0 * (y * y + z * z), 2.0 * (x * y + w * z), 2.0 * (x * z - w * y)),
+        1 => Vector3::new(2.0 * (x * y - w * z), 1.0 - 2.0 * (x * x + z * z), 2.0 * (y * z + w * x)),
+        _ => Vector3::new(2.0 * (x * z + w * y), 2.0 * (y * z - w * x), 1.0 - 2.0 * (x * x + y * y)),
+    }
+}
+
+/// `q` times the rotation `(c, s·eᵢ)` about frame axis `i` (the hinge quaternion with its zero
+/// terms left out: 8 products where the general one takes 16).
+fn times_frame_rotation(q: &UnitQuaternion<f64>, i: usize, s: f64, c: f64) -> UnitQuaternion<f64> {
+    let (w, x, y, z) = (q.w, q.i, q.j, q.k);
+    let (w, x, y, z) = match i {
+        0 => (w * c - x * s, x * c + w * s, y * c + z * s, z * c - y * s),
+        1 => (w * c - y * s, x * c - z * s, y * c + w * s, z * c + x * s),
+        _ => (w * c - z * s, x * c + y * s, y * c - x * s, z * c + w * s),
+    };
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(w, x, y, z))
 }
 
 /// The kinematic tree of a model.
@@ -41,11 +196,19 @@ pub struct Tree {
     parent: Vec<usize>,
     body_pos: Vec<Vector3<f64>>,
     body_rot: Vec<UnitQuaternion<f64>>,
+    /// `body_rot` is the identity (URDF links without `rpy`): no product.
+    body_rot_identity: Vec<bool>,
     body_ipos: Vec<Vector3<f64>>,
     mass: Vec<f64>,
-    joints: Vec<Vec<usize>>,
+    /// Subtree masses, kg (constants of the model).
+    subtree_mass: Vec<f64>,
+    /// Per body, its joints `start..end` (MuJoCo numbers a body's joints consecutively).
+    joints: Vec<(usize, usize)>,
     joint: Vec<Joint>,
     jnt_body: Vec<usize>,
+    /// Per body, the last body of its subtree when the bodies are numbered depth first (each
+    /// subtree one run of ids, as MuJoCo's compiler numbers them); empty otherwise.
+    subtree_last: Vec<usize>,
     /// Total mass, kg.
     pub total_mass_kg: f64,
 }
@@ -69,6 +232,7 @@ pub struct Frames {
 
 impl Frames {
     /// Centre of mass of the whole model.
+    #[inline]
     pub fn com(&self) -> Vector3<f64> {
         self.subtree_com[0]
     }
@@ -81,12 +245,16 @@ impl Tree {
         let joint = (0..model.njnt())
             .map(|j| {
                 let qpos_adr = model.jnt_qposadr()[j] as usize;
+                let axis = Vector3::from(model.jnt_axis()[j]).normalize();
+                let pos = Vector3::from(model.jnt_pos()[j]);
                 Joint {
                     kind: model.joint_type(j),
                     qpos_adr,
                     qpos0: model.qpos0()[qpos_adr],
-                    axis: Vector3::from(model.jnt_axis()[j]).normalize(),
-                    pos: Vector3::from(model.jnt_pos()[j]),
+                    axis,
+                    pos,
+                    at_origin: pos == Vector3::zeros(),
+                    frame_axis: frame_axis(&axis),
                 }
             })
             .collect();
@@ -94,11 +262,19 @@ impl Tree {
             .map(|b| {
                 let adr = model.body_jntadr()[b];
                 let n = model.body_jntnum()[b];
-                if adr < 0 { Vec::new() } else { (adr as usize..(adr + n) as usize).collect() }
+                if adr < 0 { (0, 0) } else { (adr as usize, (adr + n) as usize) }
             })
             .collect();
+        let parent: Vec<usize> = model.body_parentid().iter().map(|&p| p as usize).collect();
+        let mut subtree_mass = model.body_mass().to_vec();
+        for b in (1..nbody).rev() {
+            subtree_mass[parent[b]] += subtree_mass[b];
+        }
         Tree {
-            parent: model.body_parentid().iter().map(|&p| p as usize).collect(),
+            body_rot_identity: model.body_quat().iter().map(|q| *q == [1.0, 0.0, 0.0, 0.0]).collect(),
+            subtree_mass,
+            subtree_last: depth_first_runs(&parent),
+            parent,
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
             body_ipos: model.body_ipos().iter().map(|&p| Vector3::from(p)).collect(),
@@ -128,9 +304,10 @@ impl Tree {
     pub fn forward(&self, qpos: &[f64], out: &mut Frames) {
         for b in 1..self.parent.len() {
             let p = self.parent[b];
-            let mut rot = out.xrot[p] * self.body_rot[b];
+            let mut rot = if self.body_rot_identity[b] { out.xrot[p] } else { out.xrot[p] * self.body_rot[b] };
             let mut pos = out.xpos[p] + out.xrot[p] * self.body_pos[b];
-            for &j in &self.joints[b] {
+            let (first, end) = self.joints[b];
+            for j in first..end {
                 let jt = &self.joint[j];
                 let a = jt.qpos_adr;
                 match jt.kind {
@@ -148,10 +325,17 @@ impl Tree {
                         out.axis[j] = Vector3::z();
                     }
                     JointType::Hinge => {
-                        let anchor = pos + rot * jt.pos;
-                        let axis = rot * jt.axis;
-                        rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
-                        pos = anchor - rot * jt.pos;
+                        let anchor = if jt.at_origin { pos } else { pos + rot * jt.pos };
+                        let axis;
+                        if let Some((i, sign)) = jt.frame_axis {
+                            axis = rotated_frame_axis(&rot, i) * sign;
+                            let (s, c) = sin_cos(0.5 * (qpos[a] - jt.qpos0));
+                            rot = times_frame_rotation(&rot, i, sign * s, c);
+                        } else {
+                            axis = rot * jt.axis;
+                            rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
+                        }
+                        pos = if jt.at_origin { anchor } else { anchor - rot * jt.pos };
                         out.anchor[j] = anchor;
                         out.axis[j] = axis;
                     }
@@ -166,15 +350,13 @@ impl Tree {
             out.xpos[b] = pos;
             out.xrot[b] = rot;
         }
+        out.subtree_mass.copy_from_slice(&self.subtree_mass);
         for b in 0..self.parent.len() {
-            out.subtree_mass[b] = self.mass[b];
             out.subtree_com[b] = (out.xpos[b] + out.xrot[b] * self.body_ipos[b]) * self.mass[b];
         }
         for b in (1..self.parent.len()).rev() {
-            let p = self.parent[b];
-            let (m, c) = (out.subtree_mass[b], out.subtree_com[b]);
-            out.subtree_mass[p] += m;
-            out.subtree_com[p] += c;
+            let c = out.subtree_com[b];
+            out.subtree_com[self.parent[b]] += c;
         }
         for b in 0..self.parent.len() {
             let m = out.subtree_mass[b];
@@ -190,7 +372,11 @@ impl Tree {
     }
 
     /// Whether body `b` is `ancestor` or below it.
+    #[inline]
     pub fn is_below(&self, mut b: usize, ancestor: usize) -> bool {
+        if let Some(&last) = self.subtree_last.get(ancestor) {
+            return (ancestor..=last).contains(&b);
+        }
         loop {
             if b == ancestor {
                 return true;
@@ -205,6 +391,7 @@ impl Tree {
     /// Static joint torque of hinge/slide `joint` holding its subtree against gravity `g` and
     /// the point `forces` (position, force; world frame) acting on bodies below it:
     /// `τ = −axis · Σ (r − anchor) × f`.
+    #[inline]
     pub fn static_torque(
         &self,
         frames: &Frames,
@@ -225,6 +412,7 @@ impl Tree {
     }
 
     /// Body of `joint`.
+    #[inline]
     pub fn joint_body(&self, joint: usize) -> usize {
         self.jnt_body[joint]
     }
@@ -247,6 +435,22 @@ impl Tree {
         }
         inertia
     }
+}
+
+/// Per body, the last body of its subtree, when each subtree is one run of ids (bodies
+/// numbered depth first, parents before children); empty when not.
+fn depth_first_runs(parent: &[usize]) -> Vec<usize> {
+    let n = parent.len();
+    let (mut last, mut size) = ((0..n).collect::<Vec<usize>>(), vec![1usize; n]);
+    for b in (1..n).rev() {
+        let p = parent[b];
+        if p >= b {
+            return Vec::new();
+        }
+        last[p] = last[p].max(last[b]);
+        size[p] += size[b];
+    }
+    if (0..n).all(|b| last[b] - b + 1 == size[b]) { last } else { Vec::new() }
 }
 
 /// Which side a leg is on.
@@ -433,7 +637,7 @@ impl Body {
             bodies.reverse();
             let joints: Vec<usize> = bodies
                 .iter()
-                .flat_map(|&b| tree.joints[b].iter().copied())
+                .flat_map(|&b| tree.joints[b].0..tree.joints[b].1)
                 .filter(|&j| model.joint_type(j) == JointType::Hinge)
                 .collect();
             if joints.len() < 6 {
@@ -534,6 +738,9 @@ pub struct LegIk {
     /// The knee: the chain joint farthest from both ends of the leg, and the sign of its
     /// larger range side (the way it bends).
     knee: (usize, f64),
+    /// Closed-form solution, for legs of the usual shape (see [`ClosedForm`]); the others use
+    /// damped least squares only.
+    closed_form: Option<ClosedForm>,
 }
 
 /// Result of [`LegIk::solve`].
@@ -576,6 +783,7 @@ impl LegIk {
             pos: leg.joints.iter().map(|&j| Vector3::from(model.jnt_pos()[j])).collect(),
             body_pos: model.body_pos().iter().map(|&p| Vector3::from(p)).collect(),
             body_rot: model.body_quat().iter().map(|&q| quat(q)).collect(),
+            closed_form: None,
         };
         let n = ik.len();
         let (mut anchors, mut axes) = (vec![Vector3::zeros(); n], vec![Vector3::zeros(); n]);
@@ -592,10 +800,18 @@ impl LegIk {
             let [lo, hi] = ik.range[knee];
             ik.knee = (knee, if hi.abs() >= lo.abs() { 1.0 } else { -1.0 });
         }
+        ik.closed_form = ClosedForm::new(&ik);
         ik
     }
 
+    /// Whether this leg is solved in closed form (three hip axes meeting in a point, a knee,
+    /// two ankle axes meeting in a point); otherwise by damped least squares only.
+    pub fn is_closed_form(&self) -> bool {
+        self.closed_form.is_some()
+    }
+
     /// Bends a (nearly) straight knee in the guess `q`: straight legs are singular for IK.
+    #[inline]
     pub fn bend_knee(&self, q: &mut [f64], angle: f64) {
         let (k, sign) = self.knee;
         if k < q.len() && (q[k] * sign) < angle {
@@ -604,6 +820,7 @@ impl LegIk {
     }
 
     /// Number of joints.
+    #[inline]
     pub fn len(&self) -> usize {
         self.qpos_adr.len()
     }
@@ -614,6 +831,7 @@ impl LegIk {
     }
 
     /// `qpos` address of chain joint `k`.
+    #[inline]
     pub fn qpos_adr(&self, k: usize) -> usize {
         self.qpos_adr[k]
     }
@@ -648,9 +866,41 @@ impl LegIk {
         self.fk(q, &mut a, &mut x)
     }
 
-    /// Damped-least-squares IK: updates `q` (the chain's angles, warm start) toward the foot
-    /// pose `target` in the pelvis frame, within the joint ranges.
+    /// Updates `q` (the chain's angles, warm start) toward the foot pose `target` in the pelvis
+    /// frame, within the joint ranges. A leg of the usual shape ([`LegIk::is_closed_form`]) is
+    /// solved in closed form, on the branches (knee bend, ankle and hip) nearest `q`: exactly,
+    /// or out of reach with the leg stretched toward the target and the foot turned as asked.
+    /// When that needs a joint beyond its range, and for other legs, `iterations` steps of
+    /// damped least squares (`damping`) follow from there (the clamped solution).
     pub fn solve(
+        &self,
+        target: (Vector3<f64>, UnitQuaternion<f64>),
+        q: &mut [f64],
+        iterations: usize,
+        damping: f64,
+    ) -> IkResult {
+        if let Some(cf) = &self.closed_form {
+            let mut warm = [0.0; 6];
+            for (k, w) in warm.iter_mut().enumerate() {
+                *w = q[k] - self.qpos0[k];
+            }
+            let (theta, sc, _) = cf.solve(&target, &warm);
+            let mut within = true;
+            for k in 0..6 {
+                let v = self.qpos0[k] + theta[k];
+                q[k] = v.clamp(self.range[k][0], self.range[k][1]);
+                within &= q[k] == v;
+            }
+            if within {
+                return cf.error(&target, &theta, &sc);
+            }
+        }
+        self.solve_dls(target, q, iterations, damping)
+    }
+
+    /// Damped-least-squares IK: `iterations` steps of `q` toward `target`; the error returned
+    /// is the one before the last step.
+    fn solve_dls(
         &self,
         target: (Vector3<f64>, UnitQuaternion<f64>),
         q: &mut [f64],
@@ -686,5 +936,553 @@ impl LegIk {
             }
         }
         result
+    }
+}
+
+/// Closed-form IK of the usual humanoid leg: six hinges, the first three (hip) with axes
+/// meeting in one point, the last two (ankle) with axes meeting in another, the fourth (knee)
+/// between; any order of yaw/roll/pitch, any axis directions and offsets otherwise. Legs not
+/// of this shape (within [`ClosedForm::MEET_M`]) are solved by damped least squares only.
+///
+/// With θ = q − qpos0 the foot pose is the product of exponentials
+/// `T(θ) = e^{ξ₁θ₁} ⋯ e^{ξ₆θ₆} T(0)` of the joints' screws at qpos0 (Murray, Li & Sastry,
+/// *A Mathematical Introduction to Robotic Manipulation*, §3.3), solved by Paden–Kahan
+/// subproblems: the knee from the hip–ankle distance (hip and ankle rotations keep it), the
+/// ankle from where the hip centre lies seen from the foot, the hip from what rotation is left.
+/// The damped-least-squares step it replaces took a Jacobian, a 6×6 Cholesky and a
+/// kinematics pass per iteration, and left the error of one Gauss–Newton step.
+#[derive(Debug, Clone)]
+struct ClosedForm {
+    /// Joint axes (unit), pelvis frame, at qpos0.
+    axis: [Vector3<f64>; 6],
+    /// A point on each joint axis, pelvis frame, at qpos0.
+    point: [Vector3<f64>; 6],
+    /// Where the hip axes meet, pelvis frame.
+    hip: Vector3<f64>,
+    /// Where the ankle axes meet, pelvis frame at qpos0.
+    ankle: Vector3<f64>,
+    /// A unit vector normal to the third hip axis: its angle is read from how this turns.
+    normal: Vector3<f64>,
+    /// Foot pose at qpos0, pelvis frame.
+    foot0: (Vector3<f64>, UnitQuaternion<f64>),
+}
+
+impl ClosedForm {
+    /// How close axes must pass to count as meeting, metres (rounding of the model's
+    /// constants is far below; an offset hip or ankle is far above).
+    const MEET_M: f64 = 1e-9;
+    /// Least sine between the axes of one subproblem: nearly parallel axes would make it
+    /// ill-conditioned.
+    const MIN_SINE: f64 = 0.1;
+    /// Least distance of the knee axis from the hip and ankle centres, metres: a knee through
+    /// either would not change the leg's length.
+    const MIN_KNEE_ARM_M: f64 = 1e-3;
+
+    /// The closed form of `ik`'s leg, if it has the shape.
+    fn new(ik: &LegIk) -> Option<ClosedForm> {
+        if ik.len() != 6 {
+            return None;
+        }
+        let (mut point, mut axis) = ([Vector3::zeros(); 6], [Vector3::zeros(); 6]);
+        let foot0 = ik.fk(&ik.qpos0, &mut point, &mut axis);
+        let apart = |i: usize, j: usize| axis[i].cross(&axis[j]).norm() >= Self::MIN_SINE;
+        if !(apart(0, 1) && apart(0, 2) && apart(1, 2) && apart(4, 5)) {
+            return None;
+        }
+        let (hip, hip_gap) = closest_point(&point[0], &axis[0], &point[1], &axis[1]);
+        let (ankle, ankle_gap) = closest_point(&point[4], &axis[4], &point[5], &axis[5]);
+        if hip_gap > Self::MEET_M
+            || line_distance(&hip, &point[2], &axis[2]) > Self::MEET_M
+            || ankle_gap > Self::MEET_M
+            || line_distance(&hip, &point[3], &axis[3]) < Self::MIN_KNEE_ARM_M
+            || line_distance(&ankle, &point[3], &axis[3]) < Self::MIN_KNEE_ARM_M
+        {
+            return None;
+        }
+        let normal = axis[2].cross(&axis[0]).normalize();
+        Some(ClosedForm { axis, point, hip, ankle, normal, foot0 })
+    }
+
+    /// Rotates point `x` about joint `k`'s axis by the angle of sine and cosine `sc`.
+    fn turn(&self, k: usize, sc: (f64, f64), x: &Vector3<f64>) -> Vector3<f64> {
+        self.point[k] + rotate(&self.axis[k], sc, &(x - self.point[k]))
+    }
+
+    /// Joint angles θ (from qpos0) putting the foot at `target` (pelvis frame), on the branches
+    /// nearest `warm` (θ too); their sines and cosines; whether the target is reached (else
+    /// the nearest pose).
+    fn solve(
+        &self,
+        target: &(Vector3<f64>, UnitQuaternion<f64>),
+        warm: &[f64; 6],
+    ) -> ([f64; 6], [(f64, f64); 6], bool) {
+        // G = T_target T(0)⁻¹: θ solves e^{ξ₁θ₁} ⋯ e^{ξ₆θ₆} = G.
+        let g_rot = (target.1 * self.foot0.1.inverse()).to_rotation_matrix().into_inner();
+        let g_pos = target.0 - g_rot * self.foot0.0;
+        let mut theta = [0.0; 6];
+        let mut sc = [(0.0, 1.0); 6];
+        let inverse = |(s, c): (f64, f64)| (-s, c);
+        // Knee: hip rotations fix the hip centre and ankle rotations the ankle centre, so
+        // |e^{ξ₄θ₄} a − h| = |G a − h|.
+        let distance = (g_rot * self.ankle + g_pos - self.hip).norm();
+        let (knee, knee_exact) = subproblem3(&self.axis[3], &self.point[3], &self.ankle, &self.hip, distance, warm[3]);
+        (theta[3], sc[3]) = knee;
+        // Ankle: e^{ξ₅θ₅} e^{ξ₆θ₆} G⁻¹ h = e^{−ξ₄θ₄} h, as directions from the ankle centre (the
+        // same when the knee reaches; out of reach, the foot points the leg at the target).
+        let from = g_rot.transpose() * (self.hip - g_pos) - self.ankle;
+        let to = self.turn(3, inverse(sc[3]), &self.hip) - self.ankle;
+        let (ankle, ankle_exact) = subproblem2(&self.axis[4], &self.axis[5], &from, &to, warm[5]);
+        for j in 0..2 {
+            (theta[4 + j], sc[4 + j]) = (near(ankle[j].0, warm[4 + j]), ankle[j].1);
+        }
+        // Hip: the rotation left, R₁R₂R₃ = R_G R₆ᵀ R₅ᵀ R₄ᵀ (its axes meet, so rotations are all
+        // of it): the third axis's direction gives θ₁ θ₂, a normal to it θ₃.
+        let lower = [inverse(sc[3]), inverse(sc[4]), inverse(sc[5])];
+        let left = |v: &Vector3<f64>| {
+            let v = rotate(&self.axis[3], lower[0], v);
+            let v = rotate(&self.axis[4], lower[1], &v);
+            g_rot * rotate(&self.axis[5], lower[2], &v)
+        };
+        let (hip, hip_exact) = subproblem2(&self.axis[0], &self.axis[1], &self.axis[2], &left(&self.axis[2]), warm[1]);
+        for j in 0..2 {
+            (theta[j], sc[j]) = (near(hip[j].0, warm[j]), hip[j].1);
+        }
+        let to = rotate(&self.axis[1], inverse(sc[1]), &rotate(&self.axis[0], inverse(sc[0]), &left(&self.normal)));
+        let (angle, angle_sc) = subproblem1(&self.axis[2], &self.normal, &to);
+        (theta[2], sc[2]) = (near(angle, warm[2]), angle_sc);
+        (theta, sc, knee_exact && ankle_exact && hip_exact)
+    }
+
+    /// Foot pose error from `target` at the angles `theta` (sines and cosines `sc`): the
+    /// product of exponentials, the position with the solution's own sines and cosines, the
+    /// orientation with unit quaternions of the half angles (fewer products than matrices).
+    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), theta: &[f64; 6], sc: &[(f64, f64); 6]) -> IkResult {
+        let mut pos = self.foot0.0;
+        let mut rot = self.foot0.1.into_inner();
+        for k in (0..6).rev() {
+            pos = self.turn(k, sc[k], &pos);
+            let (s, c) = sin_cos(0.5 * theta[k]);
+            let a = &self.axis[k];
+            rot = nalgebra::Quaternion::new(c, a.x * s, a.y * s, a.z * s) * rot;
+        }
+        // Angle of the rotation between: from its quaternion's vector and scalar parts (exact
+        // near zero, where an arccosine of the scalar is not).
+        let e = target.1.into_inner().conjugate() * rot;
+        IkResult {
+            position_error_m: (target.0 - pos).norm(),
+            rotation_error_rad: 2.0 * atan2(e.imag().norm(), e.w.abs()),
+        }
+    }
+}
+
+/// `v` rotated about the unit `axis` by the angle of sine and cosine `(s, c)` (Rodrigues).
+fn rotate(axis: &Vector3<f64>, (s, c): (f64, f64), v: &Vector3<f64>) -> Vector3<f64> {
+    v * c + axis.cross(v) * s + axis * (axis.dot(v) * (1.0 - c))
+}
+
+/// `angle` plus the multiple of 2π that brings it nearest `reference` (a loop: the angles are
+/// from `atan2`, the references joint angles, a turn or two apart at most).
+fn near(mut angle: f64, reference: f64) -> f64 {
+    use std::f64::consts::{PI, TAU};
+    while angle - reference > PI {
+        angle -= TAU;
+    }
+    while angle - reference < -PI {
+        angle += TAU;
+    }
+    angle
+}
+
+/// The point midway between the closest points of two lines (point, unit direction), and
+/// their distance.
+fn closest_point(p1: &Vector3<f64>, d1: &Vector3<f64>, p2: &Vector3<f64>, d2: &Vector3<f64>) -> (Vector3<f64>, f64) {
+    let w = p1 - p2;
+    let (b, d, e) = (d1.dot(d2), d1.dot(&w), d2.dot(&w));
+    let den = 1.0 - b * b;
+    let (s, t) = ((b * e - d) / den, (e - b * d) / den);
+    let (c1, c2) = (p1 + d1 * s, p2 + d2 * t);
+    ((c1 + c2) / 2.0, (c1 - c2).norm())
+}
+
+/// Distance of `x` from the line through `p` along the unit `d`.
+fn line_distance(x: &Vector3<f64>, p: &Vector3<f64>, d: &Vector3<f64>) -> f64 {
+    let r = x - p;
+    (r - d * d.dot(&r)).norm()
+}
+
+/// An angle, radians, with its sine and cosine.
+type Angle = (f64, (f64, f64));
+
+/// Paden–Kahan subproblem 1: the angle turning `u` toward `v` about the unit `axis` (both
+/// relative to a point on it), with its sine and cosine (from the same `atan2` arguments).
+fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> Angle {
+    let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
+    let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
+    let r = (y * y + x * x).sqrt();
+    (atan2(y, x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
+}
+
+/// Paden–Kahan subproblem 2 on directions: angles `θ₁`, `θ₂` (with sines and cosines) for
+/// `R₁(θ₁) R₂(θ₂) û = v̂` about the unit axes `a1`, `a2` (`û`, `v̂`: `u`, `v` normalized), and
+/// whether it is exact (else the nearest direction reachable). Of the two branches, the one on
+/// the side of the `a1`–`a2` plane where `θ₂ = warm2` puts `û` (one `sin_cos`, where comparing
+/// both branches' angles would take four `atan2`).
+fn subproblem2(
+    a1: &Vector3<f64>,
+    a2: &Vector3<f64>,
+    u: &Vector3<f64>,
+    v: &Vector3<f64>,
+    warm2: f64,
+) -> ([Angle; 2], bool) {
+    let (u, v) = (u.normalize(), v.normalize());
+    // z = R₂ û = R₁ᵀ v̂ keeps û's component along a2 and v̂'s along a1.
+    let w = a1.dot(a2);
+    let den = 1.0 - w * w;
+    let alpha = (a1.dot(&v) - w * a2.dot(&u)) / den;
+    let beta = (a2.dot(&u) - w * a1.dot(&v)) / den;
+    let n = a1.cross(a2);
+    let gamma2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * w) / n.norm_squared();
+    // Rounding leaves a touching solution slightly negative.
+    let exact = gamma2 >= -1e-12;
+    let side = if n.dot(&rotate(a2, sin_cos(warm2), &u)) < 0.0 { -1.0 } else { 1.0 };
+    let z = a1 * alpha + a2 * beta + n * (side * gamma2.max(0.0).sqrt());
+    ([subproblem1(a1, &z, &v), subproblem1(a2, &u, &z)], exact)
+}
+
+/// Paden–Kahan subproblem 3: the angle θ (with its sine and cosine), nearest `warm`, turning
+/// `p` about the unit `axis` through `point` to `distance` from `centre`, and whether it is
+/// exact (else the nearest distance reachable).
+fn subproblem3(
+    axis: &Vector3<f64>,
+    point: &Vector3<f64>,
+    p: &Vector3<f64>,
+    centre: &Vector3<f64>,
+    distance: f64,
+    warm: f64,
+) -> (Angle, bool) {
+    let (u, v) = (p - point, centre - point);
+    let (ua, va) = (axis.dot(&u), axis.dot(&v));
+    let (up, vp) = (u - axis * ua, v - axis * va);
+    let planar2 = distance * distance - (ua - va) * (ua - va);
+    let (theta0, (s0, c0)) = subproblem1(axis, &up, &vp);
+    let (nu, nv) = (up.norm(), vp.norm());
+    let c = (nu * nu + nv * nv - planar2) / (2.0 * nu * nv);
+    // Rounding can put a reachable straight or folded knee just past ±1.
+    let exact = c.abs() <= 1.0 + 1e-12;
+    let c = c.clamp(-1.0, 1.0);
+    let s = (1.0 - c * c).sqrt();
+    let phi = atan2(s, c);
+    let (plus, minus) = (near(theta0 + phi, warm), near(theta0 - phi, warm));
+    let solution = if (minus - warm).abs() < (plus - warm).abs() {
+        (minus, (s0 * c - c0 * s, c0 * c + s0 * s))
+    } else {
+        (plus, (s0 * c + c0 * s, c0 * c - s0 * s))
+    };
+    (solution, exact)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{Rng, SeedableRng};
+
+    /// A leg of the usual shape but nothing lined up with the pelvis: tilted hip and ankle
+    /// axes (each set meeting in a point, not at right angles), a knee off the hip–ankle line
+    /// and skewed, body frames rotated. `hip_offset_m` moves the third hip axis off the others.
+    fn skewed_leg(hip_offset_m: f64) -> (Model, Leg) {
+        let xml = format!(
+            r#"<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="pelvis" pos="0 0 1">
+      <freejoint/>
+      <geom type="sphere" size="0.1"/>
+      <body name="hip_a" pos="0.01 0.08 -0.05" quat="0.98 0.1 0.05 0.1">
+        <joint name="hip_a" axis="0.1 0.2 1" range="-2 2"/>
+        <geom type="sphere" size="0.02"/>
+        <body name="hip_b" quat="0.95 0 0.2 0.1">
+          <joint name="hip_b" axis="1 0.3 0" range="-2 2"/>
+          <geom type="sphere" size="0.02"/>
+          <body name="thigh" pos="0 {hip_offset_m} 0">
+            <joint name="hip_c" axis="0.2 1 -0.1" range="-2 2"/>
+            <geom type="capsule" fromto="0 0 0 0.02 0.03 -0.3" size="0.03"/>
+            <body name="shin" pos="0.02 0.03 -0.3" quat="0.99 0.05 0 0">
+              <joint name="knee" axis="0.1 1 0.05" range="-0.1 2.5"/>
+              <geom type="capsule" fromto="0 0 0 -0.01 -0.02 -0.3" size="0.03"/>
+              <body name="ankle" pos="-0.01 -0.02 -0.3">
+                <joint name="ankle_a" axis="0 1 0.2" range="-2 2"/>
+                <geom type="sphere" size="0.02"/>
+                <body name="foot" quat="0.97 0.1 -0.1 0.2">
+                  <joint name="ankle_b" axis="1 0 0.3" range="-2 2"/>
+                  <geom type="box" pos="0.03 0 -0.04" size="0.1 0.05 0.01"/>
+                </body>
+              </body>
+            </body>
+          </body>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"#
+        );
+        let model = Model::from_xml_str(&xml).unwrap();
+        let body = |n: &str| model.id(ObjType::Body, n).unwrap();
+        let bodies: Vec<usize> = ["hip_a", "hip_b", "thigh", "shin", "ankle", "foot"].iter().map(|n| body(n)).collect();
+        let joints = ["hip_a", "hip_b", "hip_c", "knee", "ankle_a", "ankle_b"]
+            .iter()
+            .map(|n| model.id(ObjType::Joint, n).unwrap())
+            .collect();
+        let leg = Leg {
+            side: Side::Left,
+            foot: body("foot"),
+            joints,
+            bodies,
+            sole_in_foot: Vector3::zeros(),
+            sole_half: [0.1, 0.05],
+            foot_rot_home: UnitQuaternion::identity(),
+        };
+        (model, leg)
+    }
+
+    fn humanoid_legs() -> (Model, [Leg; 2]) {
+        let model = Model::from_file(concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf")).unwrap();
+        let tree = Tree::new(&model);
+        let body = Body::find(&model, &tree, model.qpos0(), &BodyNames::default()).unwrap();
+        (model, body.legs)
+    }
+
+    /// Random reachable targets (the foot pose of random angles within the ranges, knee bent)
+    /// solved from a warm start 0.1 rad away: the closed form lands on them and on those
+    /// angles.
+    fn closed_form_matches_kinematics(ik: &LegIk, seed: u64) {
+        assert!(ik.is_closed_form());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(seed);
+        let (knee, sign) = ik.knee;
+        for _ in 0..200 {
+            let want: Vec<f64> = (0..6)
+                .map(|k| {
+                    if k == knee {
+                        sign * rng.random_range(0.2..1.8)
+                    } else {
+                        let [lo, hi] = ik.range[k];
+                        rng.random_range((lo + 0.01).max(ik.qpos0[k] - 0.5)..(hi - 0.01).min(ik.qpos0[k] + 0.5))
+                    }
+                })
+                .collect();
+            let target = ik.foot_pose(&want);
+            let mut q: Vec<f64> = want.iter().map(|&v| v + rng.random_range(-0.1..0.1)).collect();
+            let r = ik.solve(target, &mut q, 1, 1e-3);
+            let (p, rot) = ik.foot_pose(&q);
+            assert!((p - target.0).norm() < 1e-9, "{p} {}", target.0);
+            assert!((rot * target.1.inverse()).angle() < 1e-9);
+            assert!(r.position_error_m < 1e-9 && r.rotation_error_rad < 1e-9, "{r:?}");
+            for k in 0..6 {
+                assert!((q[k] - want[k]).abs() < 1e-7, "joint {k}: {q:?} {want:?}");
+            }
+        }
+    }
+
+    /// The tree's kinematics equal MuJoCo's on every kind of joint and frame: hinges along
+    /// frame axes (± signs, at the origin or offset) and tilted, rotated and plain bodies, a
+    /// ball, a slide, a massless body, at random configurations.
+    #[test]
+    fn forward_kinematics_match_mujoco_on_all_joint_kinds() {
+        let xml = r#"<mujoco>
+  <compiler angle="radian"/>
+  <worldbody>
+    <body name="base" pos="0 0 1">
+      <freejoint/>
+      <geom type="sphere" size="0.1"/>
+      <body name="a" pos="0.1 0 -0.1">
+        <joint type="hinge" axis="0 -1 0"/>
+        <geom type="capsule" fromto="0 0 0 0 0 -0.2" size="0.02"/>
+        <body name="b" pos="0 0.05 -0.2" quat="0.9 0.3 0.1 -0.2">
+          <joint type="hinge" axis="1 0 0" pos="0.01 -0.02 0.03"/>
+          <joint type="hinge" axis="0 0 -1"/>
+          <geom type="box" size="0.03 0.02 0.05" pos="0.02 0 -0.03"/>
+          <body name="c" pos="0 0 -0.1">
+            <joint type="hinge" axis="0.3 -0.4 0.8" pos="0 0.01 0"/>
+            <geom type="sphere" size="0.02" pos="0.01 0.02 0"/>
+            <body name="slider" pos="0.05 0 0">
+              <joint type="slide" axis="0 1 0.2"/>
+              <geom type="sphere" size="0.01"/>
+              <body name="massless" pos="0.02 0 0"/>
+            </body>
+          </body>
+        </body>
+      </body>
+      <body name="d" pos="-0.1 0 0.05" quat="0.7 0 0.7 0">
+        <joint type="ball" pos="0 0 0.02"/>
+        <geom type="capsule" fromto="0 0 0 0.1 0 0" size="0.02"/>
+        <body name="e" pos="0.1 0 0">
+          <joint type="slide" axis="0 0 1" pos="0.01 0 0"/>
+          <geom type="sphere" size="0.03"/>
+        </body>
+      </body>
+    </body>
+  </worldbody>
+</mujoco>"#;
+        let model = std::sync::Arc::new(Model::from_xml_str(xml).unwrap());
+        let tree = Tree::new(&model);
+        assert!(tree.joint.iter().any(|j| j.frame_axis == Some((1, -1.0)) && j.at_origin));
+        assert!(tree.joint.iter().any(|j| j.frame_axis == Some((0, 1.0)) && !j.at_origin));
+        assert!(tree.joint.iter().any(|j| j.kind == JointType::Hinge && j.frame_axis.is_none()));
+        let mut data = crate::mj::Data::new(model.clone()).unwrap();
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut frames = tree.frames();
+        for _ in 0..20 {
+            let q: Vec<f64> = (0..model.nq()).map(|_| rng.random_range(-1.5..1.5)).collect();
+            data.qpos_mut().copy_from_slice(&q);
+            for j in 0..model.njnt() {
+                let a = model.jnt_qposadr()[j] as usize;
+                let n = match model.joint_type(j) {
+                    JointType::Free => Some((a + 3, 4)),
+                    JointType::Ball => Some((a, 4)),
+                    _ => None,
+                };
+                if let Some((a, n)) = n {
+                    let norm = data.qpos()[a..a + n].iter().map(|v| v * v).sum::<f64>().sqrt();
+                    data.qpos_mut()[a..a + n].iter_mut().for_each(|v| *v /= norm);
+                }
+            }
+            data.forward().unwrap();
+            tree.forward(data.qpos(), &mut frames);
+            for b in 0..model.nbody() {
+                assert!((frames.xpos[b] - Vector3::from(data.xpos()[b])).norm() < 1e-12, "body {b}");
+                assert!((frames.xrot[b].inverse() * quat(data.xquat()[b])).angle() < 1e-12, "body {b}");
+                let com = Vector3::from(data.subtree_com()[b]);
+                assert!((frames.subtree_com[b] - com).norm() < 1e-12, "body {b}");
+            }
+            // Anchors and axes from the joints' bodies (a hinge's axis is fixed in its body,
+            // when it is the body's last joint).
+            for (j, jt) in tree.joint.iter().enumerate() {
+                let b = tree.jnt_body[j];
+                if tree.joints[b].1 != j + 1 {
+                    continue;
+                }
+                if matches!(jt.kind, JointType::Hinge) {
+                    assert!((frames.axis[j] - frames.xrot[b] * jt.axis).norm() < 1e-12, "joint {j}");
+                }
+                if !matches!(jt.kind, JointType::Free | JointType::Slide) {
+                    let anchor = frames.xpos[b] + frames.xrot[b] * jt.pos;
+                    assert!((frames.anchor[j] - anchor).norm() < 1e-12, "joint {j}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn sin_cos_matches_the_library() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
+        let quarter = std::f64::consts::FRAC_PI_4;
+        let edges = (-40..=40).flat_map(|k| [-1e-15, 0.0, 1e-15].map(|e| k as f64 * quarter + e));
+        let random = (0..100_000).map(|_| rng.random_range(-20.0..20.0));
+        for x in edges.chain(random).chain([0.0, -0.0, 1e-300, 3e-8, 12345.678, 1e6, -1e6]) {
+            let (s, c) = sin_cos(x);
+            let (ws, wc) = x.sin_cos();
+            assert!((s - ws).abs() <= 2.3e-16 && (c - wc).abs() <= 2.3e-16, "{x}: {s} {c} / {ws} {wc}");
+        }
+        let (s, c) = sin_cos(f64::NAN);
+        assert!(s.is_nan() && c.is_nan());
+    }
+
+    #[test]
+    fn atan2_matches_the_library() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        let special =
+            [0.0, -0.0, 1e-300, -1e-300, 1e-9, 0.4375, 0.6875, 1.1875, 2.4375, 1.0, -1.0, 3.0, 1e20, f64::INFINITY];
+        let pairs =
+            special.iter().flat_map(|&y| special.iter().flat_map(move |&x| [(y, x), (-y, x), (y, -x), (-y, -x)]));
+        let random = (0..100_000).map(|_| {
+            let scale = 10f64.powf(rng.random_range(-3.0..3.0));
+            (rng.random_range(-1.0..1.0) * scale, rng.random_range(-1.0..1.0))
+        });
+        for (y, x) in pairs.chain(random) {
+            let (got, want) = (atan2(y, x), y.atan2(x));
+            assert!(
+                (got - want).abs() <= 4.5e-16 * want.abs().max(1e-300) || got == want,
+                "atan2({y}, {x}): {got} / {want}"
+            );
+        }
+        assert!(atan2(f64::NAN, 1.0).is_nan() && atan2(1.0, f64::NAN).is_nan());
+    }
+
+    #[test]
+    fn subtree_runs_agree_with_the_parent_chain() {
+        let (model, _) = humanoid_legs();
+        let tree = Tree::new(&model);
+        assert_eq!(tree.subtree_last.len(), model.nbody(), "MuJoCo numbers bodies depth first");
+        let walk_up = |mut b: usize, ancestor: usize| loop {
+            if b == ancestor {
+                return true;
+            }
+            if b == 0 {
+                return false;
+            }
+            b = tree.parent[b];
+        };
+        for a in 0..model.nbody() {
+            for b in 0..model.nbody() {
+                assert_eq!(tree.is_below(b, a), walk_up(b, a), "body {b} below {a}");
+            }
+        }
+        // Not depth first: no runs (the parent chain is walked instead).
+        assert!(depth_first_runs(&[0, 0, 0, 1]).is_empty());
+        assert_eq!(depth_first_runs(&[0, 0, 1, 0]), vec![3, 2, 2, 3]);
+    }
+
+    #[test]
+    fn closed_form_ik_of_the_humanoid_matches_forward_kinematics() {
+        let (model, legs) = humanoid_legs();
+        for (seed, leg) in legs.iter().enumerate() {
+            closed_form_matches_kinematics(&LegIk::new(&model, leg), seed as u64);
+        }
+    }
+
+    #[test]
+    fn closed_form_ik_of_a_skewed_leg_matches_forward_kinematics() {
+        let (model, leg) = skewed_leg(0.0);
+        closed_form_matches_kinematics(&LegIk::new(&model, &leg), 3);
+    }
+
+    #[test]
+    fn leg_with_offset_hip_axes_is_solved_by_least_squares() {
+        let (model, leg) = skewed_leg(0.02);
+        let ik = LegIk::new(&model, &leg);
+        assert!(!ik.is_closed_form(), "the third hip axis passes 2 cm from the others");
+        let want = [0.1, -0.1, 0.2, 0.8, -0.3, 0.1];
+        let target = ik.foot_pose(&want);
+        let mut q = [0.0, 0.0, 0.0, 0.5, 0.0, 0.0];
+        let r = ik.solve(target, &mut q, 100, 1e-4);
+        assert!(r.position_error_m < 1e-6 && r.rotation_error_rad < 1e-5, "{r:?}");
+    }
+
+    /// Out of reach (1 m below the foot): the leg straight and pointed at the target, the
+    /// foot turned as asked, the remaining distance reported.
+    #[test]
+    fn unreachable_target_stretches_the_leg_toward_it() {
+        let (model, legs) = humanoid_legs();
+        let ik = LegIk::new(&model, &legs[0]);
+        let cf = ik.closed_form.clone().unwrap();
+        // The humanoid's foot frame is at its ankle centre.
+        assert!((cf.foot0.0 - cf.ankle).norm() < 1e-12);
+        let mut q: Vec<f64> = ik.qpos0.clone();
+        ik.bend_knee(&mut q, 0.5);
+        let (home_pos, home_rot) = ik.foot_pose(&q);
+        let target = (home_pos + Vector3::new(0.0, 0.0, -1.0), home_rot);
+        let warm: [f64; 6] = std::array::from_fn(|k| q[k] - ik.qpos0[k]);
+        assert!(!cf.solve(&target, &warm).2, "out of reach");
+        let r = ik.solve(target, &mut q, 1, 1e-3);
+        let (p, rot) = ik.foot_pose(&q);
+        assert!((r.position_error_m - (target.0 - p).norm()).abs() < 1e-12, "{r:?}");
+        assert!(r.rotation_error_rad < 1e-9 && (rot * target.1.inverse()).angle() < 1e-9, "{r:?}");
+        let (leg, aim) = (p - cf.hip, target.0 - cf.hip);
+        assert!(leg.cross(&aim).norm() / aim.norm() < 1e-9, "pointed at the target: {leg} {aim}");
+        // Straight: the leg as long as its thigh and shin (0.28 m each).
+        assert!((leg.norm() - 0.56).abs() < 1e-9, "{}", leg.norm());
+        assert!((r.position_error_m - (aim.norm() - 0.56)).abs() < 1e-9, "{r:?}");
+        for k in 0..6 {
+            assert!((ik.range[k][0]..=ik.range[k][1]).contains(&q[k]), "joint {k}: {q:?}");
+        }
     }
 }
