@@ -6,12 +6,17 @@
 //!    motion (DCM, capture point) is `ξ = c + ċ/ω`, `ω = √(g/h)`. Torso tilt and rate come from
 //!    the IMU (framequat + gyro), else from the floating base.
 //! 2. **Footsteps** ([`plan`]): from the velocity command `(vx, vy, yaw_rate)`, each step lands
-//!    the swing foot half a step width beside a centre path advanced by the command. During
-//!    single support the landing spot moves by the predicted DCM error at touchdown (stepping
-//!    to recover a push). With a zero command the walker stands, and starts stepping in place
+//!    the swing foot half a step width beside a centre path advanced by the command. During a
+//!    step the landing spot moves by the DCM error predicted at touchdown beyond what the stance
+//!    ankle takes back, and the touchdown comes earlier when the spot alone can't absorb it
+//!    (Khadiv et al. 2016). With a zero command the walker stands, and starts stepping in place
 //!    when its DCM nears the edge of the feet's support (`recovery_margin`): quick steps that land
 //!    under the capture point predicted at touchdown.
-//! 3. **CoM reference** ([`preview`]): LIPM ZMP preview control (Kajita) over `preview_horizon`.
+//! 3. **CoM reference**: standing, LIPM ZMP preview control (Kajita, [`preview`]) over
+//!    `preview_horizon`; walking, the DCM reference of the step in closed form (Englsberger et
+//!    al. 2015, [`plan::Step::dcm`]), anchored at the stance foot and the planned end-of-step
+//!    DCM, moved with the corrected landing spot and re-anchored at each touchdown; the CoM
+//!    reference follows it by `ċ = ω(ξ_ref − c)`.
 //! 4. **DCM feedback**: the commanded ZMP is `p_ref + (1 + k/ω)(ξ − ξ_ref)`, realised by the
 //!    contact forces of the feed-forward torque; the CoM command is offset by
 //!    `−dcm_com_gain·(ξ − ξ_ref)`.
@@ -39,7 +44,7 @@ use crate::error::{Error, Result};
 use crate::mj::{JointType, Model};
 use kin::{Body, Frames, LegIk, Tree};
 use nalgebra::{Rotation2, UnitQuaternion, Vector2, Vector3};
-use plan::{Foothold, Gait, Schedule, Step, swing_profile, wrap};
+use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
 
 /// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
@@ -93,6 +98,14 @@ pub struct WalkOptions {
     pub step_adjust_gain: f64,
     /// Largest landing-spot correction, m (default: 0.3).
     pub max_step_adjust: f64,
+    /// Part of the stance sole the landing-spot correction counts on the ankles to use: the
+    /// DCM error predicted at touchdown is the one left after ZMP feedback within this part of
+    /// the sole (default: 1.0; 0: the error grows as `e^(ω·t)`, no ankle help).
+    pub step_adjust_ankle: f64,
+    /// Shortest single support a walking step is cut to when its landing spot alone can't
+    /// absorb the DCM error (an earlier touchdown lets the error grow less), s (default: 0.25,
+    /// as `stand.toml`'s recovery steps).
+    pub min_single_support_secs: f64,
     /// Single support of a recovery step (stepping after a push at a zero command), s
     /// (default: 0.35: short, since the DCM diverges while the foot swings).
     pub recovery_swing_secs: f64,
@@ -152,6 +165,8 @@ impl Default for WalkOptions {
             dcm_com_gain: 0.3,
             step_adjust_gain: 1.0,
             max_step_adjust: 0.3,
+            step_adjust_ankle: 1.0,
+            min_single_support_secs: 0.25,
             recovery_swing_secs: 0.35,
             recovery_double_support_secs: 0.05,
             recovery_margin: 0.02,
@@ -190,7 +205,8 @@ impl WalkOptions {
     /// # Errors
     /// `(field, message)` for the first option out of range.
     pub fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
-        let positive: [(&'static str, f64); 9] = [
+        let positive: [(&'static str, f64); 10] = [
+            ("min_single_support_secs", self.min_single_support_secs),
             ("recovery_swing_secs", self.recovery_swing_secs),
             ("step_period", self.step_period),
             ("step_width", self.step_width),
@@ -230,6 +246,9 @@ impl WalkOptions {
         }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
+        }
+        if !(0.0..=1.0).contains(&self.step_adjust_ankle) {
+            return Err(("step_adjust_ankle", format!("must be in [0, 1] (got {})", self.step_adjust_ankle)));
         }
         if !(0.0..0.9).contains(&self.double_support) {
             return Err(("double_support", format!("must be in [0, 0.9) (got {})", self.double_support)));
@@ -350,11 +369,35 @@ pub struct Walker {
     planted: [Foothold; 2],
     /// Stepping to recover a push from standing: quick steps under the predicted capture
     /// point until the DCM is back inside the feet's support. (Walking corrects its landing
-    /// spots against the preview reference instead: switching a walking walker to these steps
+    /// spots against its DCM reference instead: switching a walking walker to these steps
     /// after a push fell more often, 16 of 20 randomized episodes against 13.)
     recovering: bool,
+    /// Walking's reference (the preview control's only serves standing).
+    track: Track,
+    /// Swing progress of the current step in [0, 1] and when it was last advanced: it runs so
+    /// that it reaches 1 at the step's end, continuous when the touchdown is moved earlier.
+    swing_s: f64,
+    swing_t: f64,
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
+}
+
+/// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
+/// end DCM ([`Step::dcm`]), fixed when the step starts from the nominal plan of then
+/// ([`Schedule::first_end_dcm`]). Landing-spot corrections during the step do not move it, so
+/// the DCM error they answer is measured against a reference that stays put (the preview
+/// control's reference reacted to every corrected landing, and the corrections chased it);
+/// at touchdown the plan, and with it the reference, re-anchors at the foot that landed.
+#[derive(Debug, Clone, Copy, Default)]
+struct Track {
+    /// DCM at the current step's end, world x y, m.
+    end_dcm: Vector2<f64>,
+    /// The current step's planned end, controller seconds.
+    end_secs: f64,
+    /// The current step's nominal landing spot (before corrections), world x y, m.
+    landing: Vector2<f64>,
+    /// CoM reference, world x y, m: follows the DCM reference by `ċ = ω(ξ_ref − c)`.
+    com: Vector2<f64>,
 }
 
 /// Rate of the walker's diagnostic topics, Hz.
@@ -430,6 +473,9 @@ impl Walker {
             state: WalkerState::default(),
             planted: [Foothold { side: Side::Left, pos: Vector2::zeros(), yaw: 0.0 }; 2],
             recovering: false,
+            track: Track::default(),
+            swing_s: 0.0,
+            swing_t: 0.0,
             diagnostics: Diagnostics::default(),
             body,
             options,
@@ -775,6 +821,64 @@ impl Walker {
         }
     }
 
+    /// The walking step `step` with its landing spot, and when the spot alone can't absorb
+    /// it its touchdown time, corrected for the measured DCM `dcm` at `t` (Khadiv et al. 2016):
+    /// the DCM error against the step's reference as planned ([`Track`]), carried to touchdown
+    /// under the stance ankle's ZMP feedback ([`dcm_error_ahead`], stance-foot frame), gives the
+    /// DCM at touchdown `ξ_T`; the foot lands at `ξ_T − b`, `b` the plan's offset of the DCM from
+    /// the landing foot, within `max_step_adjust` of the planned spot and without crossing the
+    /// stance foot. When that bound cuts the correction, an earlier touchdown (down to a
+    /// `min_single_support_secs` swing) that leaves less of it uncorrected is taken: the error
+    /// grows as `e^(ω·t)` while the foot swings.
+    fn corrected_step(&self, step: &Step, t: f64, dcm: Vector2<f64>) -> Step {
+        let o = &self.options;
+        let tr = &self.track;
+        let omega = self.omega;
+        let planned = Step { ss: tr.end_secs - step.start - step.ds, ..*step };
+        let (xi_ref, _) = planned.dcm(t, tr.end_dcm, omega);
+        let to_world = Rotation2::new(step.stance.yaw);
+        let err = to_world.inverse() * (dcm - xi_ref);
+        let half = self.body.legs[step.stance.side.index()].sole_half;
+        let gain = 1.0 + o.dcm_zmp_gain / omega;
+        let reach = 0.8 * o.step_adjust_ankle;
+        let u = step.stance.pos;
+        let side = step.swing_to.side.sign();
+        let ss_start = step.start + step.ds;
+        let earliest = (ss_start + o.min_single_support_secs)
+            .max(t + (1.0 - self.swing_s) * o.min_single_support_secs)
+            .min(step.end());
+        // (uncorrected part, touchdown time, landing spot), from the current touchdown on.
+        let mut best = (f64::INFINITY, step.end(), step.swing_to.pos);
+        const CANDIDATES: usize = 6;
+        for k in 0..CANDIDATES {
+            let end = step.end() - (step.end() - earliest) * k as f64 / (CANDIDATES - 1) as f64;
+            let tau = (end - t).max(0.0);
+            let ahead = Vector2::new(
+                dcm_error_ahead(err.x, reach * half[0], gain, omega, tau),
+                dcm_error_ahead(err.y, reach * half[1], gain, omega, tau),
+            );
+            let xi_td = u + (tr.end_dcm - u) * (omega * (end - tr.end_secs)).exp() + to_world * ahead;
+            let wanted = (xi_td - tr.end_dcm) * o.step_adjust_gain;
+            let mut adjust = wanted;
+            if adjust.norm() > o.max_step_adjust {
+                adjust *= o.max_step_adjust / adjust.norm();
+            }
+            // Keep the feet from crossing: at least 2/3 of the step width apart sideways.
+            let rel = to_world.inverse() * (tr.landing + adjust - u);
+            let lateral = side * (side * rel.y).max(o.step_width * 2.0 / 3.0);
+            let target = u + to_world * Vector2::new(rel.x, lateral);
+            let left = (tr.landing + wanted - target).norm();
+            // A later touchdown unless an earlier one leaves at least 1 mm less.
+            if left < best.0 - 1e-3 {
+                best = (left, end, target);
+            }
+            if left < 1e-3 || end <= earliest {
+                break;
+            }
+        }
+        Step { ss: best.1 - ss_start, swing_to: Foothold { pos: best.2, ..step.swing_to }, ..*step }
+    }
+
     /// Starts a step with `swing` swinging from the feet `feet` at `t`.
     fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
@@ -784,6 +888,8 @@ impl Walker {
             step.ss = self.options.recovery_swing_secs;
         }
         self.mode = Mode::Walking(step);
+        self.swing_s = 0.0;
+        self.swing_t = t;
         self.state.steps += 1;
     }
 }
@@ -850,13 +956,10 @@ impl Controller for Walker {
         let dcm = Vector2::new(com.x + self.com_vel.x / self.omega, com.y + self.com_vel.y / self.omega);
         let feet = [self.foothold_of(&self.frames, 0), self.foothold_of(&self.frames, 1)];
 
-        // 2. Reference DCM of the current preview state; the error drives stepping.
-        let (ax, ay) = (self.axes[0], self.axes[1]);
-        let dcm_ref = Vector2::new(ax.x[0] + ax.x[1] / self.omega, ay.x[0] + ay.x[1] / self.omega);
-        let dcm_err = dcm - dcm_ref;
-
         // 3. Step timing: touchdown, start, stop.
         let mut replan = self.tick == 0;
+        // A walking step (not a recovery one) started: its reference is set after the replan.
+        let mut new_step = false;
         match self.mode {
             Mode::Standing => {
                 let ready = t >= o.settle_secs;
@@ -874,6 +977,11 @@ impl Controller for Walker {
                     let zmp_from = self.schedule.zmp(t, &mut 0);
                     self.start_step(t, &feet, swing, ds, zmp_from);
                     replan = true;
+                    if !push {
+                        // Walking takes over the preview's CoM reference where it is.
+                        self.track.com = Vector2::new(self.axes[0].x[0], self.axes[1].x[0]);
+                        new_step = true;
+                    }
                 }
             }
             Mode::Walking(step) => {
@@ -896,6 +1004,7 @@ impl Controller for Walker {
                     } else {
                         let swing = if self.recovering { self.first_swing(Some(dcm), &now) } else { step.stance.side };
                         self.start_step(t, &now, swing, gait.ds_secs(), step.stance.pos);
+                        new_step = !self.recovering;
                     }
                     replan = true;
                 } else if self.recovering && step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
@@ -914,32 +1023,8 @@ impl Controller for Walker {
                     adjusted.swing_to.pos = p + Rotation2::new(step.stance.yaw) * Vector2::new(x, side * y);
                     self.mode = Mode::Walking(adjusted);
                     replan = true;
-                } else if step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
-                    // Landing-spot correction by the DCM error predicted at touchdown.
-                    let remaining = step.end() - t;
-                    let predicted = dcm_err * (self.omega * remaining).exp() * o.step_adjust_gain;
-                    let nominal = gait.foothold(
-                        step.swing_to.side,
-                        {
-                            let (c, _) = gait.next_center(gait.center_of(&step.stance), step.stance.yaw, &self.command);
-                            c
-                        },
-                        step.swing_to.yaw,
-                    );
-                    let mut adjust = predicted;
-                    if adjust.norm() > o.max_step_adjust {
-                        adjust *= o.max_step_adjust / adjust.norm();
-                    }
-                    let mut target = nominal.pos + adjust;
-                    // Keep the feet from crossing: at least 2/3 of the step width apart sideways.
-                    let rel = Rotation2::new(-step.stance.yaw) * (target - step.stance.pos);
-                    let side = step.swing_to.side.sign();
-                    let lateral =
-                        if side * rel.y < o.step_width * 2.0 / 3.0 { side * o.step_width * 2.0 / 3.0 } else { rel.y };
-                    target = step.stance.pos + Rotation2::new(step.stance.yaw) * Vector2::new(rel.x, lateral);
-                    let mut adjusted = step;
-                    adjusted.swing_to.pos = target;
-                    self.mode = Mode::Walking(adjusted);
+                } else if !self.recovering && self.swing_s < 0.7 {
+                    self.mode = Mode::Walking(self.corrected_step(&step, t, dcm));
                     replan = true;
                 }
             }
@@ -951,11 +1036,17 @@ impl Controller for Walker {
             self.schedule.rest_from = rest_from;
             self.schedule.rest_start = rest_start;
         }
+        if new_step && let Mode::Walking(step) = self.mode {
+            self.track.end_dcm = self.schedule.first_end_dcm(self.omega);
+            self.track.end_secs = step.end();
+            self.track.landing = step.swing_to.pos;
+        }
+        let tracking = matches!(self.mode, Mode::Walking(_)) && !self.recovering;
 
         // 4. Preview control at its own rate; the CoM reference in between is extrapolated.
         let ratio = self.preview_ratio;
         let pdt = self.dt * ratio as f64;
-        if self.tick.is_multiple_of(ratio) {
+        if !tracking && self.tick.is_multiple_of(ratio) {
             let mut cursor = 0;
             for j in 0..self.zmp_buf[0].len() {
                 let z = self.schedule.zmp(t + j as f64 * pdt, &mut cursor);
@@ -988,6 +1079,13 @@ impl Controller for Walker {
                 let err = (xi_td - self.clamp_to_support(xi_td, &landed)) * decay;
                 (com.xy(), dcm - err, err, p)
             }
+            Mode::Walking(step) => {
+                let end = self.track.end_dcm + (step.swing_to.pos - self.track.landing);
+                let (xi_ref, p_ref) = step.dcm(t, end, self.omega);
+                let decay = (-self.omega * self.dt).exp();
+                self.track.com = xi_ref + (self.track.com - xi_ref) * decay;
+                (self.track.com, xi_ref, dcm - xi_ref, p_ref)
+            }
             _ => (com_ref, dcm_ref, dcm_err, zmp_ref),
         };
         let zmp_cmd = zmp_ref + dcm_err * (1.0 + o.dcm_zmp_gain / self.omega);
@@ -1002,7 +1100,17 @@ impl Controller for Walker {
         let mut swinging: Option<usize> = None;
         if let Some(step) = swing {
             foot_targets[step.stance.side.index()] = (step.stance, 0.0);
-            let s = step.swing_phase(t);
+            let ss_start = step.start + step.ds;
+            if t <= ss_start {
+                self.swing_s = 0.0;
+            } else {
+                // (1 − s) shrinks with the time left, whatever the end is now.
+                let (left, before) = (step.end() - t, step.end() - self.swing_t.max(ss_start));
+                self.swing_s =
+                    if left <= 0.0 || before <= 0.0 { 1.0 } else { 1.0 - (1.0 - self.swing_s) * left / before };
+            }
+            self.swing_t = t;
+            let s = self.swing_s;
             let (blend, lift) = swing_profile(s);
             let from = step.swing_from;
             let to = step.swing_to;

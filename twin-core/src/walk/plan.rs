@@ -123,6 +123,22 @@ impl Step {
     pub fn swing_phase(&self, t: f64) -> f64 {
         ((t - self.start - self.ds) / self.ss.max(1e-9)).clamp(0.0, 1.0)
     }
+
+    /// The DCM reference at `t` within this step and the ZMP it implies, given the DCM `end`
+    /// at the step's end: `ξ̇ = ω(ξ − p)` solved backward from `end` (Englsberger et al. 2015),
+    /// the ZMP moving linearly from `zmp_from` to the stance foot over the double support
+    /// (the particular solution `p + ṗ/ω` is then exact) and staying on it in single support.
+    pub fn dcm(&self, t: f64, end: Vector2<f64>, omega: f64) -> (Vector2<f64>, Vector2<f64>) {
+        let u = self.stance.pos;
+        let tau = (t - self.start).clamp(0.0, self.ds + self.ss);
+        if tau >= self.ds || self.ds <= 0.0 {
+            return (u + (end - u) * (omega * (tau - self.ds - self.ss)).exp(), u);
+        }
+        let ds_end = u + (end - u) * (-omega * self.ss).exp();
+        let rate = (u - self.zmp_from) / self.ds;
+        let p = self.zmp_from + rate * tau;
+        (p + rate / omega + (ds_end - u - rate / omega) * (omega * (tau - self.ds)).exp(), p)
+    }
 }
 
 /// The schedule ahead: the steps from now on and where the ZMP settles after the last one.
@@ -160,6 +176,41 @@ impl Schedule {
         let a = ((t - start) / self.settle_secs.max(1e-9)).clamp(0.0, 1.0);
         let s = a * a * (3.0 - 2.0 * a);
         from + (self.rest - from) * s
+    }
+
+    /// The DCM at the end of the first step, from the steps after it backward ([`Step::dcm`]);
+    /// after the last step the DCM is taken at `rest` (its influence has decayed by
+    /// `e^(−ω·T)` per step in between).
+    pub fn first_end_dcm(&self, omega: f64) -> Vector2<f64> {
+        let mut end = self.rest;
+        for step in self.steps.iter().skip(1).rev() {
+            end = step.dcm(step.start, end, omega).0;
+        }
+        end
+    }
+}
+
+/// The DCM error (one axis of the stance foot's frame) `τ` seconds ahead under ankle feedback:
+/// the ZMP is put `gain · e` from its reference, within `±reach` (the sole), so
+/// `ė = ω(e − sat(gain · e))`: inside the reach the error decays at `ω(gain − 1)`, beyond it
+/// it diverges from the edge at `ω`. Closed form, piecewise.
+pub fn dcm_error_ahead(e: f64, reach: f64, gain: f64, omega: f64, tau: f64) -> f64 {
+    let (sign, e) = (e.signum(), e.abs());
+    let decay = omega * (gain - 1.0);
+    let reach = reach.max(0.0);
+    if gain * e <= reach {
+        return sign * e * (-decay * tau).exp();
+    }
+    if e >= reach {
+        return sign * (reach + (e - reach) * (omega * tau).exp());
+    }
+    // Saturated but shrinking toward `reach / gain`, then decaying.
+    let knee = reach / gain;
+    let t1 = ((reach - knee) / (reach - e)).ln() / omega;
+    if t1 >= tau {
+        sign * (reach - (reach - e) * (omega * tau).exp())
+    } else {
+        sign * knee * (-decay * (tau - t1)).exp()
     }
 }
 
@@ -215,5 +266,61 @@ mod tests {
         assert!((s - 0.5).abs() < 1e-12 && (z - 1.0).abs() < 1e-12);
         assert_eq!(swing_profile(0.0), (0.0, 0.0));
         assert!((wrap(3.0 * std::f64::consts::PI) - std::f64::consts::PI).abs() < 1e-12);
+    }
+
+    /// The closed-form DCM reference satisfies `ξ̇ = ω(ξ − p)` in both phases, is continuous at
+    /// the end of double support and ends at `end`.
+    #[test]
+    fn dcm_reference_obeys_the_pendulum() {
+        let omega = 4.0;
+        let right = Foothold { side: Side::Right, pos: Vector2::new(0.1, -0.09), yaw: 0.0 };
+        let left = Foothold { side: Side::Left, pos: Vector2::new(0.0, 0.09), yaw: 0.0 };
+        let step = Step {
+            start: 1.0,
+            ds: 0.1,
+            ss: 0.4,
+            zmp_from: left.pos,
+            stance: right,
+            swing_from: left,
+            swing_to: Foothold { pos: Vector2::new(0.25, 0.09), ..left },
+        };
+        let end = Vector2::new(0.2, 0.0);
+        assert!((step.dcm(step.end(), end, omega).0 - end).norm() < 1e-12);
+        let h = 1e-6;
+        for t in [1.02, 1.05, 1.09, 1.2, 1.45] {
+            let (xi, p) = step.dcm(t, end, omega);
+            let rate = (step.dcm(t + h, end, omega).0 - step.dcm(t - h, end, omega).0) / (2.0 * h);
+            assert!((rate - (xi - p) * omega).norm() < 1e-5, "{t}: {rate} {}", (xi - p) * omega);
+        }
+        let before = step.dcm(1.1 - 1e-9, end, omega).0;
+        let after = step.dcm(1.1 + 1e-9, end, omega).0;
+        assert!((before - after).norm() < 1e-6);
+        // The first step's end DCM is the second step's start DCM.
+        let second = Step { start: step.end(), zmp_from: right.pos, stance: step.swing_to, ..step };
+        let schedule = Schedule { steps: vec![step, second], rest: Vector2::new(0.25, 0.0), ..Schedule::default() };
+        let start_of_second = second.dcm(second.start, schedule.rest, omega).0;
+        assert!((schedule.first_end_dcm(omega) - start_of_second).norm() < 1e-12);
+    }
+
+    /// Ankle feedback: a small error decays at `ω(gain − 1)`, one beyond the sole grows from its
+    /// edge at `ω`, one between `reach/gain` and `reach` shrinks onto the linear region; the
+    /// closed form matches a fine integration.
+    #[test]
+    fn dcm_error_ahead_matches_integration() {
+        let (omega, gain, reach) = (4.0, 1.5, 0.06);
+        for e0 in [0.0, 0.02, -0.03, 0.05, 0.059, 0.07, -0.2] {
+            for tau in [0.05, 0.2, 0.45] {
+                let mut e: f64 = e0;
+                let n = 200_000;
+                for _ in 0..n {
+                    let p = (gain * e).clamp(-reach, reach);
+                    e += omega * (e - p) * tau / n as f64;
+                }
+                let closed = dcm_error_ahead(e0, reach, gain, omega, tau);
+                assert!((closed - e).abs() < 1e-5 * (1.0 + e.abs()), "{e0} {tau}: {closed} {e}");
+            }
+        }
+        // No ankle reach: the error grows as e^(ωτ).
+        assert!((dcm_error_ahead(0.1, 0.0, gain, omega, 0.25) - 0.1 * 1.0_f64.exp()).abs() < 1e-12);
     }
 }
