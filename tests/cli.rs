@@ -10,6 +10,8 @@ mod convert;
 mod deploy;
 #[path = "cli/engine.rs"]
 mod engine;
+#[path = "../twin-core/tests/it/example_robot_data.rs"]
+mod example_robot_data;
 #[path = "cli/excite.rs"]
 mod excite;
 #[path = "cli/gap.rs"]

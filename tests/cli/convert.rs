@@ -130,14 +130,7 @@ fn check_names_low_friction_when_the_feet_slide() {
 /// twin-core's corpus test, which converts all of them); fails when pip cannot fetch it.
 #[test]
 fn real_public_urdfs_convert_load_and_stand() {
-    let cache = std::env::var_os("TWIN_URDF_CACHE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
-    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let script = repo().join("twin-core/tests/python/fetch_example_robot_data.py");
-    let ok = Command::new(&python).arg(&script).arg(&cache).status().is_ok_and(|s| s.success());
-    assert!(ok, "could not fetch example-robot-data from PyPI with {python}: set TWIN_PYTHON to a Python with pip");
-    let robots = cache.join("cmeel.prefix/share/example-robot-data/robots");
+    let robots = crate::example_robot_data::example_robot_data();
     let pkg = robots.to_str().unwrap();
     // (URDF, extra flags): a humanoid with Gazebo tags, mimic joints and package:// meshes;
     // a quadruped with Collada meshes; arms on a world link or welded.

@@ -205,11 +205,9 @@ fn sysid_floating_base_from_a_bag_and_refusal_without_odometry() {
 /// touches the identified numbers.
 #[test]
 fn sysid_updates_a_urdf_with_package_meshes() {
-    let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
-        "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",
-    );
-    let share = cache.join("cmeel.prefix/share");
-    let truth = share.join("example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    let robots = crate::example_robot_data::example_robot_data();
+    let share = robots.parent().and_then(Path::parent).expect("…/share/example-robot-data/robots");
+    let truth = robots.join("ur_description/urdf/ur5_robot.urdf");
     assert!(truth.is_file(), "{} is missing: fetch example-robot-data into TWIN_URDF_CACHE", truth.display());
     let text = std::fs::read_to_string(&truth).unwrap();
     assert!(text.contains("package://") && text.contains(".dae") && text.contains(".stl"));
@@ -260,10 +258,7 @@ fn sysid_updates_a_urdf_with_package_meshes() {
 /// identification through twin's converter: six joints, and the links carry the URDF's masses.
 #[test]
 fn sysid_loads_a_urdf_with_package_meshes_through_the_converter() {
-    let cache = std::env::var_os("TWIN_URDF_CACHE").map(PathBuf::from).expect(
-        "TWIN_URDF_CACHE must name the example-robot-data cache (see convert::real_public_urdfs_convert_load_and_stand)",
-    );
-    let truth = cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    let truth = crate::example_robot_data::example_robot_data().join("ur_description/urdf/ur5_robot.urdf");
     let robot = sysid::RobotModel::from_urdf(&truth).unwrap();
     let names: Vec<&str> = robot.joints.iter().map(|j| j.name.as_str()).collect();
     assert_eq!(

@@ -226,11 +226,8 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
 /// parameters is MuJoCo's inverse dynamics.
 #[test]
 fn regressor_matches_mujoco_inverse_dynamics_on_the_ur5() {
-    let cache = std::env::var_os("TWIN_URDF_CACHE")
-        .map(std::path::PathBuf::from)
-        .expect("TWIN_URDF_CACHE must name the example-robot-data cache");
     check_against_inverse_dynamics(
-        &cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf"),
+        &crate::example_robot_data::example_robot_data().join("ur_description/urdf/ur5_robot.urdf"),
     );
 }
 
@@ -242,10 +239,7 @@ fn regressor_matches_mujoco_inverse_dynamics_on_the_ur5() {
 #[test]
 fn synthetic_ur5_torques_are_the_inverse_dynamics_of_its_logged_motion() {
     use sysid::synth::{SynthOptions, simulate};
-    let cache = std::env::var_os("TWIN_URDF_CACHE")
-        .map(std::path::PathBuf::from)
-        .expect("TWIN_URDF_CACHE must name the example-robot-data cache");
-    let ur5 = cache.join("cmeel.prefix/share/example-robot-data/robots/ur_description/urdf/ur5_robot.urdf");
+    let ur5 = crate::example_robot_data::example_robot_data().join("ur_description/urdf/ur5_robot.urdf");
     let opts = SynthOptions {
         duration_secs: 1.0,
         encoder_bits: 50,

@@ -8,28 +8,13 @@
 //! `twin-core/src/convert/corpus.md` (`cargo test -p twin-core --test it corpus:: -- --nocapture`).
 
 use std::path::{Path, PathBuf};
-use std::process::Command;
 use std::sync::{Arc, Mutex};
 use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions};
 use twin_core::convert::{ConvertOptions, convert_urdf};
 use twin_core::mj::{Data, Model, ObjType, Warning};
 
-/// The extracted robots folder of example-robot-data 6.0.0.
-pub fn example_robot_data() -> PathBuf {
-    let cache = std::env::var_os("TWIN_URDF_CACHE")
-        .map(PathBuf::from)
-        .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
-    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("tests/python/fetch_example_robot_data.py");
-    let status = Command::new(&python).arg(&script).arg(&cache).status();
-    assert!(
-        status.as_ref().is_ok_and(|s| s.success()),
-        "could not fetch example-robot-data 6.0.0 with {python} {} ({status:?}): set TWIN_PYTHON to a Python with pip and network access to PyPI",
-        script.display()
-    );
-    cache.join("cmeel.prefix/share/example-robot-data/robots")
-}
+use crate::example_robot_data::example_robot_data;
 
 fn urdfs(dir: &Path, out: &mut Vec<PathBuf>) {
     let mut entries: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();

@@ -3,6 +3,7 @@
 mod convert;
 mod corpus;
 mod errors;
+mod example_robot_data;
 mod grasp;
 mod log_interop;
 mod physics;
