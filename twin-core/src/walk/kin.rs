@@ -24,6 +24,13 @@ fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
 }
 
+// The polynomial coefficients of `sin_cos` and `atan` below are those of FreeBSD's msun
+// (`k_sin.c`, `k_cos.c`, `s_atan.c`), which carry Sun's fdlibm notice:
+//   Copyright (C) 1993 by Sun Microsystems, Inc. All rights reserved.
+//   Developed at SunPro, a Sun Microsystems, Inc. business.
+//   Permission to use, copy, modify, and distribute this software is freely granted,
+//   provided that this notice is preserved.
+
 /// `(sin x, cos x)` for joint angles, within 1 ulp or so of `f64::sin_cos`: one reduction by
 /// π/2 and the minimax polynomials of FreeBSD's `k_sin.c`/`k_cos.c` (|r| ≤ π/4). The library's
 /// `sin_cos` (rounding-mode guards, large-argument paths) was a third of the whole-tree pass;
