@@ -2,19 +2,27 @@
 //!
 //!     cargo bench -p twin-core --bench walk -- [--steps N] [--reps R]
 //!
-//! Each repetition resets the humanoid (armature as `scenarios/walk.toml`) and walks at
-//! 0.3 m/s for N steps, timing `Walker::compute` and the physics (`mj_step1` + `mj_step2`)
-//! separately; a plain C loop of `mj_step` on the same model gives the reference step time.
-//! Medians over the repetitions are printed as Markdown table rows: the controller's cost per
-//! physics step, then where a walking tick's time goes against the C loop's step (per-core
-//! throughput of walking over the C loop's): the same `mj_step1` + `mj_step2` calls from Rust
-//! on the C loop's own trajectory (unactuated, from `home`) price the calls themselves, the
-//! physics while walking prices the walking state (contacts, actuated joints).
+//! Each repetition resets the humanoid (armature as `scenarios/walk.toml`) and, back to back:
+//!
+//! 1. **C loop, collapsing**: a plain C loop of `mj_step` from `home` with zero control (the
+//!    humanoid falls: cheaper physics than walking's). The reference of earlier figures.
+//! 2. **Rust, same trajectory**: the same `mj_step1` + `mj_step2` calls the walk makes, from
+//!    Rust, on the collapsing trajectory: what the calls themselves cost.
+//! 3. **walking**: the walker at 0.3 m/s for N steps, the whole loop timed (the controller's
+//!    commands are recorded outside the timed calls, as a copy of `ctrl`).
+//! 4. **C replay**: a plain C loop that copies each step's recorded `ctrl` and calls `mj_step`
+//!    from `home` (`twin_core::mj::bench_c_replay_loop`): the same physics as the walk,
+//!    checked bit for bit against the walk's final state. The fair reference for walking.
+//! 5. **walking, split**: the walk again, timing `Walker::compute` apart from `mj_step1` +
+//!    `mj_step2` (its final state checked against 3's: the timers change nothing).
+//!
+//! Medians over the repetitions are printed as one Markdown table row, with the controller's
+//! cost against each step and walking's per-core throughput against each C loop.
 
 use std::sync::Arc;
 use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, reset_to_home};
-use twin_core::mj::{Data, Model, bench_c_step_loop};
+use twin_core::mj::{Data, Model, bench_c_replay_loop, bench_c_step_loop};
 use twin_core::walk::{WALK_ARMATURE, WalkOptions, Walker};
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -36,16 +44,21 @@ fn main() {
     let loaded = Model::from_file(path).unwrap_or_else(|e| panic!("{e}"));
     let model = Arc::new(twin_core::scenario::prepare_model(&loaded, WALK_ARMATURE, None).unwrap());
     let actuation = Actuation::of(&model);
+    let into_qfrc = actuation == Actuation::Qfrc;
     let mut command = vec![0.0; actuation.len(&model)];
+    let mut commands = Vec::with_capacity(command.len() * steps as usize);
     let mut data = Data::new(model.clone()).unwrap();
     let mut walker = Walker::new(&model, WalkOptions { vx: 0.3, ..WalkOptions::default() }).unwrap();
-    let (mut ctrl, mut phys, mut plain, mut passive) = (Vec::new(), Vec::new(), Vec::new(), Vec::new());
+    let mut rows: [Vec<f64>; 6] = Default::default();
+    let [collapsing, passive, walking, replay, ctrl, phys] = &mut rows;
     for _ in 0..reps {
+        // 1.
         reset_to_home(&mut data).unwrap();
         let t = Instant::now();
         bench_c_step_loop(&mut data, steps);
-        plain.push(t.elapsed().as_secs_f64() / steps as f64);
+        collapsing.push(t.elapsed().as_secs_f64() / steps as f64);
 
+        // 2.
         reset_to_home(&mut data).unwrap();
         let t = Instant::now();
         for _ in 0..steps {
@@ -54,6 +67,31 @@ fn main() {
         }
         passive.push(t.elapsed().as_secs_f64() / steps as f64);
 
+        // 3.
+        reset_to_home(&mut data).unwrap();
+        walker.reset(&model, &Observation::of(&data)).unwrap();
+        commands.clear();
+        let t = Instant::now();
+        for _ in 0..steps {
+            data.step1().unwrap();
+            walker.compute(&model, &Observation::of(&data), &mut command);
+            actuation.apply(&mut data, &command);
+            data.step2().unwrap();
+            // Capacity reserved up front: a copy of 25 numbers, no allocation.
+            commands.extend_from_slice(&command);
+        }
+        walking.push(t.elapsed().as_secs_f64() / steps as f64);
+        assert!(data.qpos()[2] > 0.5, "the humanoid fell during the benchmark");
+        let walked = [data.qpos().to_vec(), data.qvel().to_vec()];
+
+        // 4.
+        reset_to_home(&mut data).unwrap();
+        let t = Instant::now();
+        bench_c_replay_loop(&mut data, into_qfrc, &commands).unwrap();
+        replay.push(t.elapsed().as_secs_f64() / steps as f64);
+        assert_eq!([data.qpos(), data.qvel()], [&walked[0][..], &walked[1][..]], "the C replay left the walk");
+
+        // 5.
         reset_to_home(&mut data).unwrap();
         walker.reset(&model, &Observation::of(&data)).unwrap();
         let (mut c, mut p) = (0.0, 0.0);
@@ -69,27 +107,25 @@ fn main() {
             c += (t2 - t1).as_secs_f64();
             p += (t1 - t0).as_secs_f64() + (t3 - t2).as_secs_f64();
         }
-        assert!(data.qpos()[2] > 0.5, "the humanoid fell during the benchmark");
+        assert_eq!([data.qpos(), data.qvel()], [&walked[0][..], &walked[1][..]], "the timed walk left the walk");
         ctrl.push(c / steps as f64);
         phys.push(p / steps as f64);
     }
-    let (c, p, m, r) = (median(ctrl), median(phys), median(plain), median(passive));
+    let [collapsing, passive, walking, replay, c, p] = rows.map(|v| median(v) * 1e6);
     println!(
-        "| steps × reps | walker compute (µs/tick) | mj_step1+2 while walking (µs) | plain C mj_step loop (µs) | controller / mj_step |"
+        "| steps × reps | walker compute (µs/tick) | mj_step1+2 while walking (µs) | C replay of the walk, mj_step (µs) | \
+         walking tick, whole loop (µs) | C loop, collapsing (µs) | Rust mj_step1+2, collapsing (µs) | \
+         walker / step while walking | walker / C replay step | walker / collapsing C step | \
+         walking throughput / C replay | walking throughput / collapsing C loop |"
     );
-    println!("|---|---|---|---|---|");
-    println!("| {steps} × {reps} | {:.2} | {:.2} | {:.2} | {:.1} % |", c * 1e6, p * 1e6, m * 1e6, 100.0 * c / p);
-    println!();
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
     println!(
-        "| steps × reps | plain C mj_step loop (µs) | mj_step1+2 from Rust, same trajectory (µs) | mj_step1+2 while walking (µs) | walking tick (µs) | walking throughput / C loop |"
-    );
-    println!("|---|---|---|---|---|---|");
-    println!(
-        "| {steps} × {reps} | {:.2} | {:.2} | {:.2} | {:.2} | {:.3} |",
-        m * 1e6,
-        r * 1e6,
-        p * 1e6,
-        (c + p) * 1e6,
-        m / (c + p)
+        "| {steps} × {reps} | {c:.2} | {p:.2} | {replay:.2} | {walking:.2} | {collapsing:.2} | {passive:.2} | \
+         {:.1} % | {:.1} % | {:.1} % | {:.3} | {:.3} |",
+        100.0 * c / p,
+        100.0 * c / replay,
+        100.0 * c / collapsing,
+        replay / walking,
+        collapsing / walking
     );
 }

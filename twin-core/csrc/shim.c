@@ -178,6 +178,17 @@ void twin_bench_c_step_loop(const mjModel* m, mjData* d, long n) {
   }
 }
 
+// The reference for a controlled rollout: the same plain C loop replaying recorded commands.
+// Step i copies `len` values from cmd + i * len into `dst` (d->ctrl or d->qfrc_applied), then
+// calls mj_step; MuJoCo being deterministic, this reproduces the recorded rollout bit for bit.
+void twin_bench_c_replay_loop(const mjModel* m, mjData* d, mjtNum* dst, const mjtNum* cmd, long len,
+                              long n) {
+  for (long i = 0; i < n; i++) {
+    memcpy(dst, cmd + i * len, (size_t)len * sizeof(mjtNum));
+    mj_step(m, d);
+  }
+}
+
 // Kinematics and velocity-dependent quantities only (positions, com frame, cvel, cdof_dot):
 // what Jacobians and their time derivatives need, without collision detection or dynamics.
 int twin_kinematics_vel(const mjModel* m, mjData* d, char* err, int err_sz) {

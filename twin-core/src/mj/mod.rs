@@ -88,6 +88,14 @@ pub(crate) mod ffi {
             err_sz: c_int,
         ) -> c_int;
         pub fn twin_bench_c_step_loop(m: *const mjModel, d: *mut mjData, n: c_long);
+        pub fn twin_bench_c_replay_loop(
+            m: *const mjModel,
+            d: *mut mjData,
+            dst: *mut mjtNum,
+            cmd: *const mjtNum,
+            len: c_long,
+            n: c_long,
+        );
         pub fn twin_multi_ray(
             m: *const mjModel,
             d: *mut mjData,
@@ -171,4 +179,36 @@ pub fn bench_c_step_loop(data: &mut Data, n: u64) {
     // SAFETY: pointers from a live Model/Data pair; mj_step on a valid pair has no other
     // preconditions (errors are the documented exception of this function).
     unsafe { ffi::twin_bench_c_step_loop(m, d, n as std::ffi::c_long) }
+}
+
+/// Replays `commands` with a plain C loop of `mj_step` and no error guard: per step, the next
+/// `nu` values into `ctrl` (or `nv` values into `qfrc_applied` with `into_qfrc_applied`), then
+/// `mj_step`. The reference for a controlled rollout: the same physics as the rollout that
+/// recorded the commands, without its controller, observers or wrappers. Returns the steps run
+/// (`commands.len()` / the command length). Not for general use: a MuJoCo error in this loop is
+/// not caught.
+///
+/// # Errors
+/// [`Error::Size`] when `commands` is not a whole number of commands (or the model has no
+/// command entries).
+#[doc(hidden)]
+pub fn bench_c_replay_loop(data: &mut Data, into_qfrc_applied: bool, commands: &[f64]) -> Result<u64> {
+    let len = if into_qfrc_applied { data.model().nv() } else { data.model().nu() };
+    if len == 0 || !commands.len().is_multiple_of(len) {
+        return Err(Error::Size {
+            what: "replayed commands (a multiple of the command length)",
+            expected: len,
+            got: commands.len(),
+        });
+    }
+    let n = commands.len() / len;
+    let dst = if into_qfrc_applied { data.qfrc_applied_mut().as_mut_ptr() } else { data.ctrl_mut().as_mut_ptr() };
+    let (m, d) = data.raw_parts();
+    // SAFETY: pointers from a live Model/Data pair; `dst` has `len` entries and `commands` `n * len`
+    // (checked above); mj_step on a valid pair has no other preconditions (errors are the documented
+    // exception of this function).
+    unsafe {
+        ffi::twin_bench_c_replay_loop(m, d, dst, commands.as_ptr(), len as std::ffi::c_long, n as std::ffi::c_long)
+    };
+    Ok(n as u64)
 }
