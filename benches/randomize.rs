@@ -3,6 +3,10 @@
 //!
 //! `cargo bench --bench randomize [-- EPISODES SECONDS]` (default 24 episodes of 2.5 s).
 //!
+//! `cargo bench --bench randomize -- --scenario FILE [--episodes N] [--seed S]` measures
+//! instead a scenario's randomized episodes (as `twin randomize --scenario FILE --threads 1`,
+//! default spec) against a plain C loop that replays each episode (see [`scenario_paired`]).
+//!
 //! - C loop: per episode, reset to the `home` keyframe and run `mj_step` S times in C with zero
 //!   control (`twin_core::mj::bench_c_step_loop`). One thread.
 //! - twin, same work: the randomize engine with an empty spec and the `passive` controller, so
@@ -21,7 +25,9 @@ use std::sync::Arc;
 use std::sync::atomic::AtomicBool;
 use std::time::Instant;
 use twin_core::control::reset_to_home;
+use twin_core::engine::replay::InputLog;
 use twin_core::mj::{Data, Model};
+use twin_core::scenario::Scenario;
 
 const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/randomize/tests/fixtures/humanoid.xml");
 
@@ -79,6 +85,77 @@ fn paired(episodes: u64, secs: f64) -> (f64, f64) {
     (total / c_secs, total / twin_secs)
 }
 
+/// Per-core throughput of a scenario's randomized episodes against plain C `mj_step` loops.
+/// Episode by episode, back to back: the episode as each `twin randomize` worker runs it
+/// (`Worker::run`: the draw, the model copy, the controller under the sensor model, the
+/// disturbances, fall detection, metrics and checks), timed; the same episode again, untimed,
+/// recording its inputs (`InputLog`: the applied `ctrl` per step, the kicks); a plain C loop
+/// replaying them on the episode's model from its initial state, timed, checked to end in the
+/// episode's final state bit for bit: the same physics without twin. Then, for the figure of
+/// earlier sessions, a C loop of as many steps from `home` with zero control on the nominal
+/// model (the robot collapses: cheaper physics than walking).
+fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
+    let scenario = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
+    let default_model = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf"));
+    let robot = scenario.robot(default_model).unwrap_or_else(|e| panic!("{e}"));
+    let mut spec = Spec::default_spec();
+    if robot.base.is_none() {
+        spec.push = None;
+    }
+    let (layout, _) = Layout::new_skipping_missing(&spec, &robot.model).expect("spec");
+    let options = EpisodeOptions {
+        duration_secs: scenario.duration_secs,
+        controller: scenario.controller.clone(),
+        ..EpisodeOptions::default()
+    };
+    let nominal = robot.model.clone();
+    let batch = Batch::from_robot(robot, layout, options, seed)
+        .and_then(|b| b.with_scenario(Arc::new(scenario)))
+        .unwrap_or_else(|e| panic!("{e}"));
+    let mut worker = randomize::Worker::new(&batch).expect("worker");
+    let mut log = InputLog::new();
+    let mut collapsing = Data::new(nominal).expect("data");
+    let (mut twin_secs, mut replay_secs, mut c_secs) = (0.0, 0.0, 0.0);
+    let (mut steps, mut events, mut successes) = (0u64, 0usize, 0u64);
+    for i in 0..episodes {
+        let t = Instant::now();
+        let r = worker.run(&batch, i, None).expect("episode");
+        twin_secs += t.elapsed().as_secs_f64();
+        let again = worker.run_recorded(&batch, i, None, Some(&mut log)).expect("episode");
+        assert_eq!(r, again, "episode {i} is not reproducible");
+        let end = worker.data().expect("data");
+        let (qpos, qvel) = (end.qpos().to_vec(), end.qvel().to_vec());
+        let mut data = Data::new(end.model().clone()).expect("data");
+        let t = Instant::now();
+        let n = log.replay_c(&mut data).expect("replay");
+        replay_secs += t.elapsed().as_secs_f64();
+        assert_eq!([data.qpos(), data.qvel()], [&qpos[..], &qvel[..]], "the C replay of episode {i} left it");
+
+        reset_to_home(&mut collapsing).expect("reset");
+        let t = Instant::now();
+        twin_core::mj::bench_c_step_loop(&mut collapsing, n);
+        c_secs += t.elapsed().as_secs_f64();
+        steps += n;
+        events += log.events();
+        successes += u64::from(r.success());
+    }
+    let rate = |secs: f64| steps as f64 / secs;
+    println!(
+        "| scenario | episodes (success) | steps (disturbed) | twin `Worker::run` (µs/step) | C replay (µs/step) | \
+         C loop, collapsing (µs/step) | twin / C replay, per core | twin / collapsing C loop, per core |"
+    );
+    println!("|---|---|---|---|---|---|---|---|");
+    println!(
+        "| {} | {episodes} ({successes}) | {steps} ({events}) | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} |",
+        path.file_name().unwrap_or_default().to_string_lossy(),
+        1e6 / rate(twin_secs),
+        1e6 / rate(replay_secs),
+        1e6 / rate(c_secs),
+        rate(twin_secs) / rate(replay_secs),
+        rate(twin_secs) / rate(c_secs),
+    );
+}
+
 fn c_loop(episodes: u64, steps: u64) -> f64 {
     let model = Arc::new(Model::from_file(MODEL).expect("fixture"));
     let mut data = Data::new(model).expect("data");
@@ -118,6 +195,14 @@ print("VERSION", mujoco.__version__)
 
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).filter(|a| a != "--bench").collect();
+    if let Some(k) = args.iter().position(|a| a == "--scenario") {
+        let value = |flag: &str| args.iter().position(|a| a == flag).and_then(|k| args.get(k + 1));
+        let path = args.get(k + 1).expect("--scenario FILE");
+        let episodes = value("--episodes").map_or(20, |v| v.parse().expect("--episodes N"));
+        let seed = value("--seed").map_or(0, |v| v.parse().expect("--seed S"));
+        scenario_paired(Path::new(path), episodes, seed);
+        return;
+    }
     let episodes: u64 = args.first().and_then(|a| a.parse().ok()).unwrap_or(24);
     let secs: f64 = args.get(1).and_then(|a| a.parse().ok()).unwrap_or(2.5);
     let model = Model::from_file(MODEL).expect("fixture");

@@ -154,6 +154,26 @@ impl Batch {
         self
     }
 
+    /// The batch run as `scenario` says (`twin randomize --scenario`): the scenario's
+    /// controller, with its options, on each worker; its checks deciding each episode's success;
+    /// its scripted pushes besides the spec's random ones. The nominal robot should be
+    /// `scenario.robot(..)` (its armature and friction).
+    ///
+    /// # Errors
+    /// The scenario's controller or check error for the nominal robot.
+    pub fn with_scenario(self, scenario: Arc<twin_core::scenario::Scenario>) -> Result<Batch> {
+        let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
+        Ok(self
+            .with_controller(move |r| scenario.controller(&r.model))?
+            .with_checks(move |r| {
+                let check: Box<dyn Check> = Box::new(for_checks.check(&r.model)?);
+                Ok(vec![check])
+            })?
+            .with_disturbances(move |m| {
+                for_pushes.disturbances(m).into_iter().map(|d| Box::new(d) as Box<dyn Disturbance>).collect()
+            }))
+    }
+
     /// Name of the controller.
     pub fn controller_name(&self) -> &str {
         &self.controller_name
@@ -309,18 +329,19 @@ impl Worker {
         self.run_recorded(batch, index, trajectory, None)
     }
 
-    /// [`Worker::run`], also recording every step into `recording` (MCAP topics / rerun, see
-    /// `twin_core::sim::record`), stamped with each step's start time. Recording does not
-    /// change the episode.
+    /// [`Worker::run`], also showing every step to `recording`: a recorder (MCAP topics / rerun,
+    /// `twin_core::sim::Recording`, stamped with each step's start time) or any other observer
+    /// (e.g. `twin_core::engine::replay::InputLog`), after the fall and divergence detection and
+    /// the metrics. Recording does not change the episode.
     ///
     /// # Errors
-    /// As [`Worker::run`]; write errors of the recording.
+    /// As [`Worker::run`]; the recording's errors (e.g. a write that failed).
     pub fn run_recorded(
         &mut self,
         batch: &Batch,
         index: u64,
         trajectory: Option<&mut Trajectory>,
-        recording: Option<&mut twin_core::sim::Recording>,
+        recording: Option<&mut dyn Observer>,
     ) -> Result<EpisodeResult> {
         let mut param_rng = episode_rng(batch.seed, index, 0);
         let draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
@@ -333,7 +354,7 @@ impl Worker {
         index: u64,
         draw: Draw,
         trajectory: Option<&mut Trajectory>,
-        recording: Option<&mut twin_core::sim::Recording>,
+        recording: Option<&mut dyn Observer>,
     ) -> Result<EpisodeResult> {
         let Draw {
             values,

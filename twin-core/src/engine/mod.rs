@@ -42,6 +42,7 @@
 
 pub mod disturb;
 pub mod observers;
+pub mod replay;
 
 pub use crate::control::{Actuation, Controller, Observation};
 
