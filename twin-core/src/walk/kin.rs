@@ -16,6 +16,36 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
 }
 
+/// `UnitQuaternion::from_euler_angles(roll, pitch, yaw)` bit for bit, without the library's
+/// `sin` and `cos` of the angles that are zero (the walker's headings have two, its tilt
+/// corrections one: eight library calls a tick saved): sin ±0 = ±0 and cos 0 = 1 exactly, the
+/// products and sums are nalgebra's.
+pub fn euler_quat(roll: f64, pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
+    let half = |a: f64| if a == 0.0 { (a, 1.0) } else { (a * 0.5).sin_cos() };
+    let ((sr, cr), (sp, cp), (sy, cy)) = (half(roll), half(pitch), half(yaw));
+    UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(
+        cr * cp * cy + sr * sp * sy,
+        sr * cp * cy - cr * sp * sy,
+        cr * sp * cy + sr * cp * sy,
+        cr * cp * sy - sr * sp * cy,
+    ))
+}
+
+/// `q.euler_angles().2` (the yaw) bit for bit, without the roll's `atan2` and the rotation
+/// matrix's other entries: nalgebra's products for the three entries it needs, its branches.
+pub fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
+    let (i, j, k, w) = (q.i, q.j, q.k, q.w);
+    let m20 = i * k * 2.0 - w * j * 2.0;
+    if m20.abs() < 1.0 {
+        let m10 = w * k * 2.0 + i * j * 2.0;
+        let m00 = w * w + i * i - j * j - k * k;
+        let cos_pitch = (-m20.asin()).cos();
+        (m10 / cos_pitch).atan2(m00 / cos_pitch)
+    } else {
+        0.0
+    }
+}
+
 /// Rotation by `angle` (radians) about the unit vector `axis`: one `sin_cos`, where
 /// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
 /// unit vectors already).
@@ -309,6 +339,17 @@ impl Tree {
 
     /// Forward kinematics of `qpos` into `out`, as `mj_kinematics` + `mj_comPos` compute them.
     pub fn forward(&self, qpos: &[f64], out: &mut Frames) {
+        self.poses::<true>(qpos, out);
+        self.subtree_sums(out);
+        for b in 0..self.parent.len() {
+            out.subtree_com[b] = self.subtree_com_of(out, b);
+        }
+    }
+
+    /// Body poses of `qpos` into `out.xpos`/`out.xrot`; with `JOINTS`, the joints' anchors and
+    /// axes into `out.anchor`/`out.axis` too.
+    #[inline(always)]
+    fn poses<const JOINTS: bool>(&self, qpos: &[f64], out: &mut Frames) {
         for b in 1..self.parent.len() {
             let p = self.parent[b];
             let mut rot = if self.body_rot_identity[b] { out.xrot[p] } else { out.xrot[p] * self.body_rot[b] };
@@ -321,42 +362,58 @@ impl Tree {
                     JointType::Free => {
                         pos = Vector3::new(qpos[a], qpos[a + 1], qpos[a + 2]);
                         rot = quat([qpos[a + 3], qpos[a + 4], qpos[a + 5], qpos[a + 6]]);
-                        out.anchor[j] = pos;
-                        out.axis[j] = Vector3::z();
+                        if JOINTS {
+                            out.anchor[j] = pos;
+                            out.axis[j] = Vector3::z();
+                        }
                     }
                     JointType::Ball => {
                         let anchor = pos + rot * jt.pos;
                         rot *= quat([qpos[a], qpos[a + 1], qpos[a + 2], qpos[a + 3]]);
                         pos = anchor - rot * jt.pos;
-                        out.anchor[j] = anchor;
-                        out.axis[j] = Vector3::z();
+                        if JOINTS {
+                            out.anchor[j] = anchor;
+                            out.axis[j] = Vector3::z();
+                        }
                     }
                     JointType::Hinge => {
                         let anchor = if jt.at_origin { pos } else { pos + rot * jt.pos };
-                        let axis;
                         if let Some((i, sign)) = jt.frame_axis {
-                            axis = rotated_frame_axis(&rot, i) * sign;
+                            if JOINTS {
+                                out.axis[j] = rotated_frame_axis(&rot, i) * sign;
+                            }
                             let (s, c) = sin_cos(0.5 * (qpos[a] - jt.qpos0));
                             rot = times_frame_rotation(&rot, i, sign * s, c);
                         } else {
-                            axis = rot * jt.axis;
+                            if JOINTS {
+                                out.axis[j] = rot * jt.axis;
+                            }
                             rot *= hinge_rotation(&jt.axis, qpos[a] - jt.qpos0);
                         }
                         pos = if jt.at_origin { anchor } else { anchor - rot * jt.pos };
-                        out.anchor[j] = anchor;
-                        out.axis[j] = axis;
+                        if JOINTS {
+                            out.anchor[j] = anchor;
+                        }
                     }
                     JointType::Slide => {
                         let axis = rot * jt.axis;
                         pos += axis * (qpos[a] - jt.qpos0);
-                        out.anchor[j] = pos + rot * jt.pos;
-                        out.axis[j] = axis;
+                        if JOINTS {
+                            out.anchor[j] = pos + rot * jt.pos;
+                            out.axis[j] = axis;
+                        }
                     }
                 }
             }
             out.xpos[b] = pos;
             out.xrot[b] = rot;
         }
+    }
+
+    /// Each subtree's mass and mass-weighted sum of its bodies' centres into
+    /// `out.subtree_mass`/`out.subtree_com`, from the body poses.
+    #[inline(always)]
+    fn subtree_sums(&self, out: &mut Frames) {
         out.subtree_mass.copy_from_slice(&self.subtree_mass);
         for b in 0..self.parent.len() {
             out.subtree_com[b] = (out.xpos[b] + out.xrot[b] * self.body_ipos[b]) * self.mass[b];
@@ -365,12 +422,23 @@ impl Tree {
             let c = out.subtree_com[b];
             out.subtree_com[self.parent[b]] += c;
         }
-        for b in 0..self.parent.len() {
-            let m = out.subtree_mass[b];
-            // A massless subtree's centre is its body's inertial frame, as in `mj_comPos`.
-            out.subtree_com[b] =
-                if m >= 1e-15 { out.subtree_com[b] / m } else { out.xpos[b] + out.xrot[b] * self.body_ipos[b] };
-        }
+    }
+
+    /// Subtree `b`'s centre of mass from [`Tree::subtree_sums`].
+    #[inline(always)]
+    fn subtree_com_of(&self, out: &Frames, b: usize) -> Vector3<f64> {
+        let m = out.subtree_mass[b];
+        // A massless subtree's centre is its body's inertial frame, as in `mj_comPos`.
+        if m >= 1e-15 { out.subtree_com[b] / m } else { out.xpos[b] + out.xrot[b] * self.body_ipos[b] }
+    }
+
+    /// Centre of mass of the whole model at `qpos`, as [`Tree::forward`]'s `com()` bit for bit
+    /// (same poses, same sums), using `scratch` for the body poses and sums; its joint anchors,
+    /// axes and the other subtrees' centres are left stale. Half the work of a whole pass.
+    pub fn com(&self, qpos: &[f64], scratch: &mut Frames) -> Vector3<f64> {
+        self.poses::<false>(qpos, scratch);
+        self.subtree_sums(scratch);
+        self.subtree_com_of(scratch, 0)
     }
 
     /// Parent of body `b`.
