@@ -43,7 +43,7 @@ use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, 
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model};
 use kin::{Body, Frames, LegIk, Tree};
-use nalgebra::{Rotation2, UnitQuaternion, Vector2, Vector3};
+use nalgebra::{Rotation2, Vector2, Vector3};
 use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
 
@@ -625,7 +625,7 @@ impl Walker {
         let l = &self.body.legs[leg];
         let p = self.sole_world(frames, leg);
         let heading = frames.xrot[l.foot] * l.foot_rot_home.inverse();
-        Foothold { side: l.side, pos: Vector2::new(p.x, p.y), yaw: heading.euler_angles().2 }
+        Foothold { side: l.side, pos: Vector2::new(p.x, p.y), yaw: kin::yaw_of(&heading) }
     }
 
     fn build_loops(&mut self, model: &Model) {
@@ -1129,8 +1129,8 @@ impl Controller for Walker {
             -(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0]),
             -(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1]),
         ];
-        let pelvis_rot = UnitQuaternion::from_euler_angles(0.0, 0.0, heading)
-            * UnitQuaternion::from_euler_angles(correction[0].clamp(-0.2, 0.2), correction[1].clamp(-0.2, 0.2), 0.0);
+        let pelvis_rot = kin::euler_quat(0.0, 0.0, heading)
+            * kin::euler_quat(correction[0].clamp(-0.2, 0.2), correction[1].clamp(-0.2, 0.2), 0.0);
         let off = Rotation2::new(heading) * self.pelvis_from_com.xy();
         let crouch = smooth(t / o.settle_secs.max(1e-9));
         let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
@@ -1140,7 +1140,7 @@ impl Controller for Walker {
         let mut ik_error: f64 = 0.0;
         for (leg, &(f, lift)) in foot_targets.iter().enumerate() {
             let l = &self.body.legs[leg];
-            let rot = UnitQuaternion::from_euler_angles(0.0, 0.0, f.yaw) * l.foot_rot_home;
+            let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
             let inv = pelvis_rot.inverse();
@@ -1166,8 +1166,7 @@ impl Controller for Walker {
             self.q_des[b..b + 3].copy_from_slice(pelvis_pos.as_slice());
             let qq = pelvis_rot.into_inner();
             self.q_des[b + 3..b + 7].copy_from_slice(&[qq.w, qq.i, qq.j, qq.k]);
-            self.tree.forward(&self.q_des, &mut self.desired);
-            let c = self.desired.com();
+            let c = self.tree.com(&self.q_des, &mut self.desired);
             let d = Rotation2::new(-heading) * Vector2::new(pelvis_pos.x - c.x, pelvis_pos.y - c.y);
             self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis_pos.z - c.z);
         }
