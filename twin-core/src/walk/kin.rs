@@ -1421,7 +1421,11 @@ mod tests {
                 }
             }
             data.forward().unwrap();
+            // The CoM-only pass first, on the frames the full pass then overwrites: the same
+            // bits as the full pass's.
+            let com = tree.com(data.qpos(), &mut frames);
             tree.forward(data.qpos(), &mut frames);
+            assert_eq!(com, frames.com());
             for b in 0..model.nbody() {
                 assert!((frames.xpos[b] - Vector3::from(data.xpos()[b])).norm() < 1e-12, "body {b}");
                 assert!((frames.xrot[b].inverse() * quat(data.xquat()[b])).angle() < 1e-12, "body {b}");
@@ -1443,6 +1447,25 @@ mod tests {
                     assert!((frames.anchor[j] - anchor).norm() < 1e-12, "joint {j}");
                 }
             }
+        }
+    }
+
+    #[test]
+    fn euler_conversions_match_nalgebra_bit_for_bit() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+        let mut angle = |zero: bool| if zero { 0.0 } else { rng.random_range(-4.0..4.0) };
+        for k in 0..4000 {
+            // Every pattern of zero angles, as the walker passes them (and -0).
+            let (r, p, y) = (angle(k & 1 != 0), angle(k & 2 != 0), angle(k & 4 != 0));
+            let r = if k & 8 != 0 { -r } else { r };
+            let q = euler_quat(r, p, y);
+            assert_eq!(q.coords, UnitQuaternion::from_euler_angles(r, p, y).coords, "{r} {p} {y}");
+            assert_eq!(yaw_of(&q).to_bits(), q.euler_angles().2.to_bits(), "{r} {p} {y}");
+        }
+        // Pitch ±90°: nalgebra's gimbal-lock branches give yaw 0.
+        for p in [std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2] {
+            let q = UnitQuaternion::from_euler_angles(0.3, p, 0.2);
+            assert_eq!(yaw_of(&q).to_bits(), q.euler_angles().2.to_bits());
         }
     }
 
