@@ -4,8 +4,9 @@
 //! `cargo bench --bench randomize [-- EPISODES SECONDS]` (default 24 episodes of 2.5 s).
 //!
 //! `cargo bench --bench randomize -- --scenario FILE [--episodes N] [--seed S]` measures
-//! instead a scenario's randomized episodes (as `twin randomize --scenario FILE --threads 1`,
-//! default spec) against a plain C loop that replays each episode (see [`scenario_paired`]).
+//! instead a scenario's randomized episodes (as `twin randomize --scenario FILE --threads 1`:
+//! the scenario's spec or the default one) against a plain C loop that replays each episode
+//! (see [`scenario_paired`]).
 //!
 //! - C loop: per episode, reset to the `home` keyframe and run `mj_step` S times in C with zero
 //!   control (`twin_core::mj::bench_c_step_loop`). One thread.
@@ -98,10 +99,17 @@ fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
     let scenario = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
     let default_model = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf"));
     let robot = scenario.robot(default_model).unwrap_or_else(|e| panic!("{e}"));
-    let mut spec = Spec::default_spec();
-    if robot.base.is_none() {
-        spec.push = None;
-    }
+    // As `twin randomize --scenario` without `--config`: the scenario's own spec, else the default.
+    let spec = match &scenario.randomize {
+        Some(file) => Spec::from_file(file).unwrap_or_else(|e| panic!("{e}")),
+        None => {
+            let mut spec = Spec::default_spec();
+            if robot.base.is_none() {
+                spec.push = None;
+            }
+            spec
+        }
+    };
     let (layout, _) = Layout::new_skipping_missing(&spec, &robot.model).expect("spec");
     let options = EpisodeOptions {
         duration_secs: scenario.duration_secs,
