@@ -18,7 +18,7 @@ pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
 
 /// `UnitQuaternion::from_euler_angles(roll, pitch, yaw)` bit for bit, without the library's
 /// `sin` and `cos` of the angles that are zero (the walker's headings have two, its tilt
-/// corrections one: eight library calls a tick saved): sin ±0 = ±0 and cos 0 = 1 exactly, the
+/// correction one: seven of its twelve angles a tick): sin ±0 = ±0 and cos 0 = 1 exactly, the
 /// products and sums are nalgebra's.
 pub fn euler_quat(roll: f64, pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
     let half = |a: f64| if a == 0.0 { (a, 1.0) } else { (a * 0.5).sin_cos() };
