@@ -94,23 +94,24 @@ fn paired(episodes: u64, secs: f64) -> (f64, f64) {
 /// replaying them on the episode's model from its initial state, timed, checked to end in the
 /// episode's final state bit for bit: the same physics without twin. Then, for the figure of
 /// earlier sessions, a C loop of as many steps from `home` with zero control on the nominal
-/// model (the robot collapses: cheaper physics than walking).
+/// model (the robot collapses: cheaper physics than walking). An unstable episode (MuJoCo reset
+/// a diverged state) has nothing to replay: it is left out of the times.
 fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
     let scenario = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
     let default_model = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf"));
     let robot = scenario.robot(default_model).unwrap_or_else(|e| panic!("{e}"));
     // As `twin randomize --scenario` without `--config`: the scenario's own spec, else the default.
-    let spec = match &scenario.randomize {
-        Some(file) => Spec::from_file(file).unwrap_or_else(|e| panic!("{e}")),
+    let layout = match &scenario.randomize {
+        Some(file) => Spec::from_file(file).and_then(|spec| Layout::new(&spec, &robot.model)),
         None => {
             let mut spec = Spec::default_spec();
             if robot.base.is_none() {
                 spec.push = None;
             }
-            spec
+            Layout::new_skipping_missing(&spec, &robot.model).map(|(layout, _)| layout)
         }
-    };
-    let (layout, _) = Layout::new_skipping_missing(&spec, &robot.model).expect("spec");
+    }
+    .unwrap_or_else(|e| panic!("{e}"));
     let options = EpisodeOptions {
         duration_secs: scenario.duration_secs,
         controller: scenario.controller.clone(),
@@ -124,11 +125,17 @@ fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
     let mut log = InputLog::new();
     let mut collapsing = Data::new(nominal).expect("data");
     let (mut twin_secs, mut replay_secs, mut c_secs) = (0.0, 0.0, 0.0);
-    let (mut steps, mut events, mut successes) = (0u64, 0usize, 0u64);
+    let (mut steps, mut events, mut successes, mut unstable) = (0u64, 0usize, 0u64, 0u64);
     for i in 0..episodes {
         let t = Instant::now();
         let r = worker.run(&batch, i, None).expect("episode");
-        twin_secs += t.elapsed().as_secs_f64();
+        let secs = t.elapsed().as_secs_f64();
+        if r.unstable {
+            // MuJoCo reset a diverged state (or raised an error): nothing to replay.
+            unstable += 1;
+            continue;
+        }
+        twin_secs += secs;
         let again = worker.run_recorded(&batch, i, None, Some(&mut log)).expect("episode");
         assert_eq!(r, again, "episode {i} is not reproducible");
         let end = worker.data().expect("data");
@@ -149,12 +156,12 @@ fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
     }
     let rate = |secs: f64| steps as f64 / secs;
     println!(
-        "| scenario | episodes (success) | steps (disturbed) | twin `Worker::run` (µs/step) | C replay (µs/step) | \
+        "| scenario | episodes (successes; unstable) | steps (disturbed) | twin `Worker::run` (µs/step) | C replay (µs/step) | \
          C loop, collapsing (µs/step) | twin / C replay, per core | twin / collapsing C loop, per core |"
     );
     println!("|---|---|---|---|---|---|---|---|");
     println!(
-        "| {} | {episodes} ({successes}) | {steps} ({events}) | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} |",
+        "| {} | {episodes} ({successes}; {unstable}) | {steps} ({events}) | {:.2} | {:.2} | {:.2} | {:.3} | {:.3} |",
         path.file_name().unwrap_or_default().to_string_lossy(),
         1e6 / rate(twin_secs),
         1e6 / rate(replay_secs),
