@@ -444,6 +444,9 @@ struct Problem<'a> {
     beta: Option<f64>,
     /// Inside the search: [`Eval::scaled_condition`] is not computed.
     searching: bool,
+    /// Where a joint touches its box, differentiate the scaled branch of
+    /// [`Problem::box_fit`] (else the unscaled one, which asks for more motion).
+    touching_scaled: bool,
 }
 
 /// Weight of the squared limit violations against the criterion in the search's cost.
@@ -1005,10 +1008,12 @@ impl<'a> Problem<'a> {
             }
         }
         // Through box_fit: rest clamped into the range, the motion scaled by s = min(1, room).
-        let scale = |room: f64| if room.is_finite() { (0.999 * room).min(1.0) } else { 1.0 };
+        // Uncapped scale 0.999·room (infinite for a joint that does not move).
+        let uncapped = |room: f64| if room.is_finite() { 0.999 * room } else { f64::INFINITY };
         for (i, (f, (g_rest, ga, gb))) in raw.iter().zip(&g_series).enumerate() {
             let lim = &self.limits[i];
-            let s = scale(self.room(f, lim).1);
+            let s_free = uncapped(self.room(f, lim).1);
+            let s = s_free.min(1.0);
             let gx = &mut grad[i * nvj..(i + 1) * nvj];
             if f.rest > lim.lower && f.rest < lim.upper {
                 gx[0] = *g_rest;
@@ -1017,7 +1022,11 @@ impl<'a> Problem<'a> {
                 gx[l] = s * (ga[l] - ga[0]);
                 gx[h - 1 + l] = s * (gb[l] - (l + 1) as f64 * gb[0]);
             }
-            if s < 1.0 {
+            // Where the joint touches its box (the searches start there: each start is scaled
+            // to touch), the cost has a kink: either branch's gradient may stall the line
+            // search (the unscaled one asks for motion the box removes; on the leg no step is
+            // accepted), so each start is searched with both (`touching_scaled`).
+            if s_free < 1.0 || (self.touching_scaled && s_free <= 1.0 + 1e-6) {
                 // ∂s/∂x by differences of the box fit alone (no regressor involved).
                 let g_dev: f64 = ga.iter().zip(&f.a).chain(gb.iter().zip(&f.b)).map(|(g, c)| g * c).sum();
                 let mut v = x[i * nvj..(i + 1) * nvj].to_vec();
@@ -1025,9 +1034,9 @@ impl<'a> Problem<'a> {
                     let kept = v[p];
                     let step = 1e-7 * (1.0 + kept.abs());
                     v[p] += step;
-                    let s1 = scale(self.room(&joint_from_vars(&v, h, &template[i]), lim).1);
+                    let s1 = uncapped(self.room(&joint_from_vars(&v, h, &template[i]), lim).1);
                     v[p] = kept;
-                    gx[p] += g_dev * (s1 - s) / step;
+                    gx[p] += g_dev * (s1 - s_free) / step;
                 }
             }
         }
@@ -1406,6 +1415,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         involved: Vec::new(),
         beta: None,
         searching: false,
+        touching_scaled: false,
     };
     let template: Vec<FourierJoint> = selected
         .iter()
@@ -1490,19 +1500,28 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let (mut joints, mut condition, mut scaled_condition, mut cost) =
         (best_random.clone(), best_random_condition, best_eval.scaled_condition, best_eval.cost);
     let mut binding_note = None;
-    let mut results: Vec<(f64, Vec<f64>)> = Vec::new();
+    let mut results: Vec<(f64, Vec<f64>, bool)> = Vec::new();
     for (_, start) in pool.iter().take(opts.starts) {
-        let mut x = vars_from_joints(start, h);
-        for &beta in &opts.smoothing {
-            problem.beta = Some(beta);
-            x = bfgs(|x, with_gradient| problem.cost(x, &template, with_gradient), &x, &steps, opts.max_iterations)?;
+        for touching_scaled in [false, true] {
+            problem.touching_scaled = touching_scaled;
+            let mut x = vars_from_joints(start, h);
+            for &beta in &opts.smoothing {
+                problem.beta = Some(beta);
+                x = bfgs(
+                    |x, with_gradient| problem.cost(x, &template, with_gradient),
+                    &x,
+                    &steps,
+                    opts.max_iterations,
+                )?;
+            }
+            problem.beta = None;
+            let js = problem.box_fit(&joints_from_vars(&x, h, &template), false);
+            results.push((problem.evaluate(&js)?.cost, x, touching_scaled));
         }
-        problem.beta = None;
-        let js = problem.box_fit(&joints_from_vars(&x, h, &template), false);
-        results.push((problem.evaluate(&js)?.cost, x));
     }
     results.sort_by(|a, b| a.0.total_cmp(&b.0));
-    if let Some((_, x0)) = results.first() {
+    if let Some((_, x0, touching_scaled)) = results.first() {
+        problem.touching_scaled = *touching_scaled;
         let x = bfgs(|x, with_gradient| problem.cost(x, &template, with_gradient), x0, &steps, opts.max_iterations)?;
         problem.searching = false;
         // The fine grid (4 points per sample) can miss a 15-harmonic peak by up to

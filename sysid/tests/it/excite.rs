@@ -94,7 +94,7 @@ fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions, min_ra
 #[test]
 #[cfg_attr(debug_assertions, ignore = "slow in the dev profile: cargo test --release")]
 fn arm6_designed_trajectory_beats_random() {
-    // Measured: 5.14× (23.25 against 119.6; the friction pairs against the gravity columns
+    // Measured: 5.15× (23.24 against 119.6; the friction pairs against the gravity columns
     // leave little room above 5×, see BENCHMARKS.md).
     check_design("arm6.urdf", &[], SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 5.0);
 }
@@ -110,7 +110,7 @@ fn humanoid_leg_designed_trajectory_beats_random() {
         "left_ankle_pitch_joint",
         "left_ankle_roll_joint",
     ];
-    // Measured: 10.2× (1163 against 1.19e4; 17.9× with 10 harmonics, 15.6× with 5).
+    // Measured: 15.0× (789 against 1.19e4).
     check_design("humanoid.urdf", &leg, SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 10.0);
 }
 
