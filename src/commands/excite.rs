@@ -36,7 +36,7 @@ pub struct Args {
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     pub rate: f64,
     /// Harmonics per joint of the designed trajectory.
-    #[arg(long, default_value_t = 10, value_name = "N")]
+    #[arg(long, default_value_t = 15, value_name = "N")]
     pub harmonics: usize,
     /// Harmonics per joint of the 20 random trajectories the design starts from and is compared
     /// with (at most --harmonics).
@@ -70,7 +70,7 @@ pub struct Args {
     #[arg(long, default_value_t = 3, value_name = "N")]
     pub starts: usize,
     /// Quasi-Newton iterations per search stage.
-    #[arg(long, default_value_t = 60, value_name = "N")]
+    #[arg(long, default_value_t = 150, value_name = "N")]
     pub iterations: usize,
     /// Seed of the random trajectories the search starts from.
     #[arg(long, default_value_t = 1)]

@@ -37,17 +37,20 @@
 //!
 //! ## Search
 //! 20 random 5-harmonic trajectories (`baseline_harmonics`) are drawn and shrunk as a whole to
-//! the limits: the best is the comparison figure. The design has 10 harmonics by default (its
+//! the limits: the best is the comparison figure. The design has 15 harmonics by default (its
 //! higher ones zero in those 20): on the arm the binding columns are each joint's viscous and
 //! Coulomb pair, which only a velocity that rests near zero and then bursts to the limit tells
-//! apart, a shape 5 harmonics can't make. A global stage then draws 100 more (all harmonics,
-//! rest anywhere in the range, so that offsets keeping links apart are tried) and scales each of the 120 per joint to touch
+//! apart, a shape 5 harmonics can't make. A global stage then draws 1000 more (all harmonics,
+//! rest anywhere in the range, so that offsets keeping links apart are tried) and scales each of the 1020 per joint to touch
 //! its binding position, velocity or acceleration limit; from the best 3, quasi-Newton
-//! searches (BFGS, forward-difference gradients, backtracking line search) minimize smooth
-//! surrogates of `ln cond` (soft maximum minus soft minimum of `ln σᵢ`, sharpness 4 then 16:
+//! searches (BFGS, backtracking line search) minimize smooth
+//! surrogates of `ln cond` (soft maximum minus soft minimum of `ln σᵢ`, sharpness 4, 16, 64, then 256:
 //! the condition number is not differentiable where singular values cross, and at its optimum
-//! many of them do), and the best is polished on `ln cond` itself. Deterministic for a given
-//! seed.
+//! many of them do), and the best is polished on `ln cond` itself. The gradient is
+//! semi-analytic: each sample's regressor rows are differentiated in that sample's own
+//! `(q, q̇, q̈)` and chained through the singular values (`dσᵢ = uᵢᵀ·dW·vᵢ`) and the Fourier
+//! series, 3 regressor evaluations per joint and sample instead of a full evaluation per
+//! variable. Deterministic for a given seed.
 
 use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
@@ -78,7 +81,7 @@ pub struct ExciteOptions {
     /// Joints to excite, by name (default: empty: every revolute and prismatic joint). The
     /// others hold their rest position (0 clamped into their range).
     pub joints: Vec<String>,
-    /// Harmonics per joint of the designed trajectory (default: 10: up to 1 Hz at the default
+    /// Harmonics per joint of the designed trajectory (default: 15: up to 1.5 Hz at the default
     /// 10-s period; more harmonics let a joint's velocity rest near zero and then burst, which
     /// separates its viscous and Coulomb columns, at the cost of a faster trajectory to track).
     pub harmonics: usize,
@@ -107,16 +110,18 @@ pub struct ExciteOptions {
     /// Random trajectories tried first; the best is the search's start and the comparison
     /// figure (default: 20).
     pub random_candidates: usize,
-    /// Quasi-Newton iterations per stage (default: 60).
+    /// Quasi-Newton iterations per stage (default: 150; with the semi-analytic gradient an
+    /// iteration costs about 20 evaluations' worth of regressor rows).
     pub max_iterations: usize,
     /// Further random trajectories (rest anywhere in the range) drawn for the global stage
-    /// (default: 100).
+    /// (default: 1000: a draw costs one evaluation, and the search's outcome depends mostly on
+    /// its start).
     pub global_candidates: usize,
     /// Searches started from the best of all random trajectories, each scaled to touch its
     /// limits (default: 3).
     pub starts: usize,
     /// Sharpness of the smooth surrogates of `ln cond` each search goes through before the
-    /// polish on `ln cond` itself (default: `[4, 16]`).
+    /// polish on `ln cond` itself (default: `[4, 16, 64, 256]`).
     pub smoothing: Vec<f64>,
     /// Grid points per period for the criterion and the penalty (default: 100; limits are
     /// checked at the end on a 4× finer grid).
@@ -133,7 +138,7 @@ impl Default for ExciteOptions {
     fn default() -> Self {
         ExciteOptions {
             joints: Vec::new(),
-            harmonics: 10,
+            harmonics: 15,
             baseline_harmonics: 5,
             base_frequency_hz: 0.1,
             position_margin: 0.05,
@@ -144,10 +149,10 @@ impl Default for ExciteOptions {
             self_collision: true,
             criterion: Criterion::Condition,
             random_candidates: 20,
-            max_iterations: 60,
-            global_candidates: 100,
+            max_iterations: 150,
+            global_candidates: 1000,
             starts: 3,
-            smoothing: vec![4.0, 16.0],
+            smoothing: vec![4.0, 16.0, 64.0, 256.0],
             samples: 100,
             seed: 1,
             velocity_deadzone: 0.05,
@@ -439,7 +444,16 @@ struct Problem<'a> {
     beta: Option<f64>,
     /// Inside the search: [`Eval::scaled_condition`] is not computed.
     searching: bool,
+    /// Where a joint touches its box, differentiate the scaled branch of
+    /// [`Problem::box_fit`] (else the unscaled one, which asks for more motion).
+    touching_scaled: bool,
 }
+
+/// Weight of the squared limit violations against the criterion in the search's cost.
+const PENALTY_WEIGHT: f64 = 100.0;
+
+/// A self-collision's depth that counts as much as a 100 % limit excess, m.
+const COLLISION_DEPTH_SCALE_M: f64 = 0.01;
 
 /// Free variables per joint: `c`, `a₂…a_H`, `b₂…b_H`.
 fn vars_per_joint(h: usize) -> usize {
@@ -448,22 +462,20 @@ fn vars_per_joint(h: usize) -> usize {
 
 fn joints_from_vars(x: &[f64], h: usize, template: &[FourierJoint]) -> Vec<FourierJoint> {
     let nv = vars_per_joint(h);
-    template
-        .iter()
-        .enumerate()
-        .map(|(i, t)| {
-            let v = &x[i * nv..(i + 1) * nv];
-            let mut a = vec![0.0; h];
-            let mut b = vec![0.0; h];
-            for l in 1..h {
-                a[l] = v[l];
-                b[l] = v[h - 1 + l];
-            }
-            a[0] = -a[1..].iter().sum::<f64>();
-            b[0] = -(1..h).map(|l| (l + 1) as f64 * b[l]).sum::<f64>();
-            FourierJoint { name: t.name.clone(), index: t.index, rest: v[0], a, b }
-        })
-        .collect()
+    template.iter().enumerate().map(|(i, t)| joint_from_vars(&x[i * nv..(i + 1) * nv], h, t)).collect()
+}
+
+/// One joint's series from its variables `c, a₂…a_H, b₂…b_H` (`a₁`, `b₁` give rest at the ends).
+fn joint_from_vars(v: &[f64], h: usize, template: &FourierJoint) -> FourierJoint {
+    let mut a = vec![0.0; h];
+    let mut b = vec![0.0; h];
+    for l in 1..h {
+        a[l] = v[l];
+        b[l] = v[h - 1 + l];
+    }
+    a[0] = -a[1..].iter().sum::<f64>();
+    b[0] = -(1..h).map(|l| (l + 1) as f64 * b[l]).sum::<f64>();
+    FourierJoint { name: template.name.clone(), index: template.index, rest: v[0], a, b }
 }
 
 fn vars_from_joints(joints: &[FourierJoint], h: usize) -> Vec<f64> {
@@ -600,34 +612,24 @@ impl<'a> Problem<'a> {
             for (s, &j) in self.selected.iter().enumerate() {
                 acc.push(s, &rows[j * ncols..(j + 1) * ncols], tau[j]);
             }
-            if collisions && let Some((data, allowed)) = &mut self.collide {
-                for (j, joint) in self.robot.joints.iter().enumerate() {
-                    data.qpos_mut()[joint.qpos_adr] = q[j];
-                }
-                data.kinematics_collision()?;
-                let model = data.model().clone();
-                for (dist, geoms) in data.contacts() {
-                    let bodies = [
-                        model.geom_bodyid()[geoms[0] as usize] as usize,
-                        model.geom_bodyid()[geoms[1] as usize] as usize,
-                    ];
-                    if dist < 0.0 && !allowed.contains(&sorted(bodies)) {
-                        // The joints that move one link and not the other.
-                        let (a, b) = (&self.body_joints[bodies[0]], &self.body_joints[bodies[1]]);
-                        for &x in a.iter().filter(|x| !b.contains(x)).chain(b.iter().filter(|x| !a.contains(x))) {
-                            involved[x] = true;
-                        }
-                        note(
-                            format!(
-                                "links \"{}\" and \"{}\" collide ({:.1} mm deep) at t = {t:.2} s",
-                                model.name(ObjType::Body, bodies[0]),
-                                model.name(ObjType::Body, bodies[1]),
-                                -dist * 1e3
-                            ),
-                            -dist / 0.01,
-                            &mut penalty,
-                        );
+            if collisions {
+                for (bodies, depth) in self.penetrations(&q)? {
+                    // The joints that move one link and not the other.
+                    let (a, b) = (&self.body_joints[bodies[0]], &self.body_joints[bodies[1]]);
+                    for &x in a.iter().filter(|x| !b.contains(x)).chain(b.iter().filter(|x| !a.contains(x))) {
+                        involved[x] = true;
                     }
+                    let model = &self.robot.model;
+                    note(
+                        format!(
+                            "links \"{}\" and \"{}\" collide ({:.1} mm deep) at t = {t:.2} s",
+                            model.name(ObjType::Body, bodies[0]),
+                            model.name(ObjType::Body, bodies[1]),
+                            depth * 1e3
+                        ),
+                        depth / COLLISION_DEPTH_SCALE_M,
+                        &mut penalty,
+                    );
                 }
             }
         }
@@ -637,7 +639,37 @@ impl<'a> Problem<'a> {
         Ok((acc.compressed(&weights), penalty, worst))
     }
 
+    /// Self-contacts between links not excepted, at joint positions `q` (every robot joint, rad
+    /// or m): the two bodies (sorted) and the penetration depth, m (> 0). None without the
+    /// collision check.
+    fn penetrations(&mut self, q: &[f64]) -> Result<Vec<([usize; 2], f64)>> {
+        let Some((data, allowed)) = &mut self.collide else {
+            return Ok(Vec::new());
+        };
+        for (j, joint) in self.robot.joints.iter().enumerate() {
+            data.qpos_mut()[joint.qpos_adr] = q[j];
+        }
+        data.kinematics_collision()?;
+        let model = data.model().clone();
+        Ok(data
+            .contacts()
+            .into_iter()
+            .filter_map(|(dist, geoms)| {
+                let bodies = sorted([
+                    model.geom_bodyid()[geoms[0] as usize] as usize,
+                    model.geom_bodyid()[geoms[1] as usize] as usize,
+                ]);
+                (dist < 0.0 && !allowed.contains(&bodies)).then_some((bodies, -dist))
+            })
+            .collect())
+    }
+
     fn evaluate(&mut self, joints: &[FourierJoint]) -> Result<Eval> {
+        Ok(self.evaluate_with_matrix(joints)?.0)
+    }
+
+    /// [`Problem::evaluate`], and the compressed regressor it was computed from.
+    fn evaluate_with_matrix(&mut self, joints: &[FourierJoint]) -> Result<(Eval, Mat<f64>)> {
         self.evaluations += 1;
         let (rz, penalty, _) = self.assess(joints, self.opts.samples, self.opts.self_collision)?;
         // The column-scaled figure is only reported (and the log-determinant's): the search
@@ -666,7 +698,7 @@ impl<'a> Problem<'a> {
             }
             _ => (f64::INFINITY, f64::INFINITY, 100.0),
         };
-        Ok(Eval { cost: crit + 100.0 * penalty, condition, scaled_condition, penalty })
+        Ok((Eval { cost: crit + PENALTY_WEIGHT * penalty, condition, scaled_condition, penalty }, rz))
     }
 
     /// Scales each joint's deviation from rest to use its position, velocity and acceleration
@@ -777,7 +809,11 @@ impl<'a> Problem<'a> {
     /// can be scaled before it touches its binding position, velocity or acceleration limit on
     /// the fine grid (infinite for a joint that does not move).
     fn room(&self, f: &FourierJoint, lim: &JointLimits) -> (FourierJoint, f64) {
-        let n = 4 * self.opts.samples;
+        self.room_on(f, lim, 4 * self.opts.samples)
+    }
+
+    /// [`Problem::room`] on an `n`-point grid.
+    fn room_on(&self, f: &FourierJoint, lim: &JointLimits, n: usize) -> (FourierJoint, f64) {
         let omega = self.omega();
         let period = 1.0 / self.opts.base_frequency_hz;
         let mut f = f.clone();
@@ -799,6 +835,222 @@ impl<'a> Problem<'a> {
             }
         }
         (f, room)
+    }
+
+    /// `M` such that `d(criterion) = Σ_rows drᵀ·M·r` over the base columns of the regressor's
+    /// rows `r` (the rows behind the compressed `rz`); `None` where the criterion is degenerate.
+    /// With `W = U·Σ·Vᵀ`, `dσᵢ = Σ_rows (r·vᵢ)(dr·vᵢ)/σᵢ`; the log-determinant's column scaling
+    /// adds `d ln‖w_c‖ = Σ_rows r_c·dr_c/‖w_c‖²`.
+    fn criterion_metric(&self, rz: &Mat<f64>) -> Option<Mat<f64>> {
+        let cols = &self.base_cols;
+        let nb = cols.len();
+        let w = Mat::from_fn(rz.nrows(), nb, |i, k| rz[(i, cols[k])]);
+        let svd = w.thin_svd().ok()?;
+        let sv: Vec<f64> = (0..nb).map(|i| svd.S().column_vector()[i]).collect();
+        if sv.iter().any(|s| !(*s > 0.0 && s.is_finite())) {
+            return None;
+        }
+        let ln_sv: Vec<f64> = sv.iter().map(|s| s.ln()).collect();
+        // ∂ln σᵢ weights of the soft maximum (β > 0) or soft minimum (β < 0) of ln σ.
+        let softmax = |beta: f64| -> Vec<f64> {
+            let m = ln_sv.iter().map(|l| beta * l).fold(f64::NEG_INFINITY, f64::max);
+            let e: Vec<f64> = ln_sv.iter().map(|l| (beta * l - m).exp()).collect();
+            let total: f64 = e.iter().sum();
+            e.iter().map(|x| x / total).collect()
+        };
+        let (d, e): (Vec<f64>, Vec<f64>) = match self.opts.criterion {
+            Criterion::Condition => {
+                // ∂criterion/∂ln σᵢ.
+                let c: Vec<f64> = match self.beta {
+                    Some(beta) => softmax(beta).iter().zip(softmax(-beta)).map(|(p, m)| p - m).collect(),
+                    None => {
+                        let arg = |better: fn(f64, f64) -> bool| {
+                            (0..nb).fold(0, |best, i| if better(sv[i], sv[best]) { i } else { best })
+                        };
+                        let (imax, imin) = (arg(|a, b| a > b), arg(|a, b| a < b));
+                        (0..nb).map(|i| f64::from(u8::from(i == imax)) - f64::from(u8::from(i == imin))).collect()
+                    }
+                };
+                (c.iter().zip(&sv).map(|(c, s)| c / (s * s)).collect(), vec![0.0; nb])
+            }
+            Criterion::LogDet => {
+                let k = 2.0 / nb as f64;
+                let norms2 = (0..nb).map(|c| (0..w.nrows()).map(|i| w[(i, c)] * w[(i, c)]).sum::<f64>());
+                (sv.iter().map(|s| -k / (s * s)).collect(), norms2.map(|n2| k / n2).collect())
+            }
+        };
+        let v = svd.V();
+        Some(Mat::from_fn(nb, nb, |i, j| {
+            (0..nb).map(|k| v[(i, k)] * d[k] * v[(j, k)]).sum::<f64>() + if i == j { e[i] } else { 0.0 }
+        }))
+    }
+
+    /// Squared self-collision excess at joint positions `q` (as in [`Problem::assess`]).
+    fn collision_penalty(&mut self, q: &[f64]) -> Result<f64> {
+        Ok(self.penetrations(q)?.iter().map(|(_, depth)| (depth / COLLISION_DEPTH_SCALE_M).powi(2)).sum())
+    }
+
+    /// The search's cost at the variables `x` ([`Problem::evaluate`] of
+    /// [`Problem::box_fit`]`(x)`) and its gradient. A sample's regressor rows depend only on
+    /// that sample's `(q, q̇, q̈)`, which are linear in the Fourier coefficients: each sample's
+    /// rows are differentiated in its own 3 values per excited joint (forward differences; the
+    /// rows are linear in q̈), pushed through [`Problem::criterion_metric`] and the penalties,
+    /// and chained through the Fourier series and each joint's scaling into its box. That is
+    /// 3 regressor evaluations per joint and sample, against a full evaluation (regressor,
+    /// collision check, QR and SVD) per variable (2H − 1 per joint) for finite differences.
+    fn cost_gradient(&mut self, x: &[f64], template: &[FourierJoint]) -> Result<(f64, Vec<f64>)> {
+        let h = self.opts.harmonics;
+        let nvj = vars_per_joint(h);
+        let raw = joints_from_vars(x, h, template);
+        let joints = self.box_fit(&raw, false);
+        let (eval, rz) = self.evaluate_with_matrix(&joints)?;
+        let mut grad = vec![0.0; x.len()];
+        let Some(metric) = self.criterion_metric(&rz) else {
+            return Ok((eval.cost, grad));
+        };
+        let nb = self.base_cols.len();
+        let ncols = self.ncols;
+        let nsel = self.selected.len();
+        let selected = self.selected.clone();
+        let base_cols = self.base_cols.clone();
+        // Per excited joint, the base columns its rows keep (as the accumulator does).
+        let masks: Vec<Vec<bool>> =
+            self.cols.iter().map(|c| base_cols.iter().map(|b| c.contains(b)).collect()).collect();
+        let n = self.opts.samples;
+        let omega = self.omega();
+        let period = 1.0 / self.opts.base_frequency_hz;
+        let nj = self.robot.joints.len();
+        let (mut q, mut qd, mut qdd) = (self.hold.clone(), vec![0.0; nj], vec![0.0; nj]);
+        let (mut rows, mut rows1) = (Vec::new(), Vec::new());
+        let mut z = vec![0.0; nsel * nb];
+        let mut r = vec![0.0; nb];
+        // ∂cost/∂(rest, a, b) of each excited joint's scaled series.
+        let mut g_series: Vec<(f64, Vec<f64>, Vec<f64>)> = vec![(0.0, vec![0.0; h], vec![0.0; h]); nsel];
+        for k in 0..n {
+            let t = k as f64 * period / n as f64;
+            for f in &joints {
+                (q[f.index], qd[f.index], qdd[f.index]) = f.sample(omega, t);
+            }
+            let tau0 = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            for (s, &j) in selected.iter().enumerate() {
+                for (b, rb) in r.iter_mut().enumerate() {
+                    *rb = if masks[s][b] { rows[j * ncols + base_cols[b]] } else { 0.0 };
+                }
+                for a in 0..nb {
+                    z[s * nb + a] = (0..nb).map(|b| metric[(a, b)] * r[b]).sum();
+                }
+            }
+            // ∂penalty/∂τ_j of the torque excesses.
+            let torque_weight: Vec<f64> = selected
+                .iter()
+                .zip(&self.limits)
+                .map(|(&j, lim)| match lim.torque {
+                    Some(tmax) if tau0[j].abs() > tmax => 2.0 * (tau0[j].abs() / tmax - 1.0) * tau0[j].signum() / tmax,
+                    _ => 0.0,
+                })
+                .collect();
+            let mut g_sample = vec![[0.0; 3]; nsel];
+            for (i, &ji) in selected.iter().enumerate() {
+                for (kind, step) in [1e-6, 1e-6, 1e-3].into_iter().enumerate() {
+                    let slot = match kind {
+                        0 => &mut q[ji],
+                        1 => &mut qd[ji],
+                        _ => &mut qdd[ji],
+                    };
+                    let kept = *slot;
+                    *slot += step;
+                    let tau1 = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows1)?;
+                    match kind {
+                        0 => q[ji] = kept,
+                        1 => qd[ji] = kept,
+                        _ => qdd[ji] = kept,
+                    }
+                    let mut d = 0.0;
+                    for (s, &j) in selected.iter().enumerate() {
+                        for (b, &c) in base_cols.iter().enumerate() {
+                            if masks[s][b] {
+                                d += (rows1[j * ncols + c] - rows[j * ncols + c]) * z[s * nb + b];
+                            }
+                        }
+                        d += PENALTY_WEIGHT * torque_weight[s] * (tau1[j] - tau0[j]);
+                    }
+                    g_sample[i][kind] = d / step;
+                }
+                // The joint's own position, velocity and acceleration excesses.
+                let lim = &self.limits[i];
+                let range = (lim.upper - lim.lower).max(1e-6);
+                let excess = |v: f64, limit: f64| 2.0 * (v.abs() / limit - 1.0).max(0.0) * v.signum() / limit;
+                g_sample[i][0] += PENALTY_WEIGHT * 2.0 * ((q[ji] - lim.upper).max(0.0) - (lim.lower - q[ji]).max(0.0))
+                    / (range * range);
+                g_sample[i][1] += PENALTY_WEIGHT * excess(qd[ji], lim.velocity);
+                g_sample[i][2] += PENALTY_WEIGHT * excess(qdd[ji], lim.acceleration);
+            }
+            if self.opts.self_collision {
+                let p0 = self.collision_penalty(&q)?;
+                if p0 > 0.0 {
+                    for (i, &ji) in selected.iter().enumerate() {
+                        let kept = q[ji];
+                        q[ji] += 1e-6;
+                        let p1 = self.collision_penalty(&q)?;
+                        q[ji] = kept;
+                        g_sample[i][0] += PENALTY_WEIGHT * (p1 - p0) / 1e-6;
+                    }
+                }
+            }
+            for ((rest, ga, gb), [gq, gv, gacc]) in g_series.iter_mut().zip(&g_sample) {
+                *rest += gq;
+                for l in 0..h {
+                    let w = omega * (l + 1) as f64;
+                    let (sn, cs) = (w * t).sin_cos();
+                    ga[l] += gq * sn / w + gv * cs - gacc * w * sn;
+                    gb[l] += -gq * (cs - 1.0) / w + gv * sn + gacc * w * cs;
+                }
+            }
+        }
+        // Through box_fit: rest clamped into the range, the motion scaled by s = min(1, room).
+        // Uncapped scale 0.999·room (infinite for a joint that does not move).
+        let uncapped = |room: f64| if room.is_finite() { 0.999 * room } else { f64::INFINITY };
+        for (i, (f, (g_rest, ga, gb))) in raw.iter().zip(&g_series).enumerate() {
+            let lim = &self.limits[i];
+            let s_free = uncapped(self.room(f, lim).1);
+            let s = s_free.min(1.0);
+            let gx = &mut grad[i * nvj..(i + 1) * nvj];
+            if f.rest > lim.lower && f.rest < lim.upper {
+                gx[0] = *g_rest;
+            }
+            for l in 1..h {
+                gx[l] = s * (ga[l] - ga[0]);
+                gx[h - 1 + l] = s * (gb[l] - (l + 1) as f64 * gb[0]);
+            }
+            // Where the joint touches its box (the searches start there: each start is scaled
+            // to touch), the cost has a kink: either branch's gradient may stall the line
+            // search (the unscaled one asks for motion the box removes; on the leg no step is
+            // accepted), so each start is searched with both (`touching_scaled`).
+            if s_free < 1.0 || (self.touching_scaled && s_free <= 1.0 + 1e-6) {
+                // ∂s/∂x by differences of the box fit alone (no regressor involved).
+                let g_dev: f64 = ga.iter().zip(&f.a).chain(gb.iter().zip(&f.b)).map(|(g, c)| g * c).sum();
+                let mut v = x[i * nvj..(i + 1) * nvj].to_vec();
+                for p in 0..nvj {
+                    let kept = v[p];
+                    let step = 1e-7 * (1.0 + kept.abs());
+                    v[p] += step;
+                    let s1 = uncapped(self.room(&joint_from_vars(&v, h, &template[i]), lim).1);
+                    v[p] = kept;
+                    gx[p] += g_dev * (s1 - s_free) / step;
+                }
+            }
+        }
+        Ok((eval.cost, grad))
+    }
+
+    /// The search's cost at the variables `x`, with its gradient (else an empty one).
+    fn cost(&mut self, x: &[f64], template: &[FourierJoint], with_gradient: bool) -> Result<(f64, Vec<f64>)> {
+        if with_gradient {
+            self.cost_gradient(x, template)
+        } else {
+            let js = self.box_fit(&joints_from_vars(x, self.opts.harmonics, template), false);
+            Ok((self.evaluate(&js)?.cost, Vec::new()))
+        }
     }
 
     fn usage(&mut self, joints: &[FourierJoint]) -> Result<Vec<JointUse>> {
@@ -894,25 +1146,19 @@ fn initial_hinv(steps: &[f64]) -> Vec<Vec<f64>> {
     (0..n).map(|i| (0..n).map(|j| if i == j { 1e-2 * steps[i] * steps[i] } else { 0.0 }).collect()).collect()
 }
 
-/// Minimizes `f` from `x0` by BFGS with forward-difference gradients and a backtracking line
-/// search; returns the best point found. (Small dense updates keep index loops.)
+/// Minimizes `f` from `x0` by BFGS with a backtracking line search; returns the best point
+/// found. `f(x, true)` gives the value and its gradient, `f(x, false)` the value alone (the
+/// line search's). (Small dense updates keep index loops.)
 #[allow(clippy::needless_range_loop)]
-fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max_iter: usize) -> Result<Vec<f64>> {
+fn bfgs(
+    mut f: impl FnMut(&[f64], bool) -> Result<(f64, Vec<f64>)>,
+    x0: &[f64],
+    steps: &[f64],
+    max_iter: usize,
+) -> Result<Vec<f64>> {
     let n = x0.len();
     let mut x = x0.to_vec();
-    let mut fx = f(&x)?;
-    let grad = |f: &mut dyn FnMut(&[f64]) -> Result<f64>, x: &[f64], fx: f64| -> Result<Vec<f64>> {
-        let mut g = vec![0.0; n];
-        let mut xp = x.to_vec();
-        for i in 0..n {
-            let h = 1e-4 * steps[i];
-            xp[i] = x[i] + h;
-            g[i] = (f(&xp)? - fx) / h;
-            xp[i] = x[i];
-        }
-        Ok(g)
-    };
-    let mut g = grad(&mut f, &x, fx)?;
+    let (mut fx, mut g) = f(&x, true)?;
     let mut hinv = initial_hinv(steps);
     let mut restarted = false;
     for _ in 0..max_iter {
@@ -927,7 +1173,7 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
         let mut accepted = None;
         for _ in 0..12 {
             let xn: Vec<f64> = x.iter().zip(&d).map(|(a, b)| a + alpha * b).collect();
-            let fnew = f(&xn)?;
+            let fnew = f(&xn, false)?.0;
             if fnew <= fx + 1e-4 * alpha * slope {
                 accepted = Some((xn, fnew));
                 break;
@@ -945,7 +1191,7 @@ fn bfgs(mut f: impl FnMut(&[f64]) -> Result<f64>, x0: &[f64], steps: &[f64], max
             continue;
         };
         restarted = false;
-        let gn = grad(&mut f, &xn, fnew)?;
+        let gn = f(&xn, true)?.1;
         let s: Vec<f64> = xn.iter().zip(&x).map(|(a, b)| a - b).collect();
         let y: Vec<f64> = gn.iter().zip(&g).map(|(a, b)| a - b).collect();
         let sy: f64 = s.iter().zip(&y).map(|(a, b)| a * b).sum();
@@ -1169,6 +1415,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         involved: Vec::new(),
         beta: None,
         searching: false,
+        touching_scaled: false,
     };
     let template: Vec<FourierJoint> = selected
         .iter()
@@ -1253,38 +1500,45 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     let (mut joints, mut condition, mut scaled_condition, mut cost) =
         (best_random.clone(), best_random_condition, best_eval.scaled_condition, best_eval.cost);
     let mut binding_note = None;
-    let mut results: Vec<(f64, Vec<f64>)> = Vec::new();
+    let mut results: Vec<(f64, Vec<f64>, bool)> = Vec::new();
     for (_, start) in pool.iter().take(opts.starts) {
-        let mut x = vars_from_joints(start, h);
-        for &beta in &opts.smoothing {
-            problem.beta = Some(beta);
-            x = bfgs(
-                |x| {
-                    let js = problem.box_fit(&joints_from_vars(x, h, &template), false);
-                    Ok(problem.evaluate(&js)?.cost)
-                },
-                &x,
-                &steps,
-                opts.max_iterations,
-            )?;
+        for touching_scaled in [false, true] {
+            problem.touching_scaled = touching_scaled;
+            let mut x = vars_from_joints(start, h);
+            for &beta in &opts.smoothing {
+                problem.beta = Some(beta);
+                x = bfgs(
+                    |x, with_gradient| problem.cost(x, &template, with_gradient),
+                    &x,
+                    &steps,
+                    opts.max_iterations,
+                )?;
+            }
+            problem.beta = None;
+            let js = problem.box_fit(&joints_from_vars(&x, h, &template), false);
+            results.push((problem.evaluate(&js)?.cost, x, touching_scaled));
         }
-        problem.beta = None;
-        let js = problem.box_fit(&joints_from_vars(&x, h, &template), false);
-        results.push((problem.evaluate(&js)?.cost, x));
     }
     results.sort_by(|a, b| a.0.total_cmp(&b.0));
-    if let Some((_, x0)) = results.first() {
-        let x = bfgs(
-            |x| {
-                let js = problem.box_fit(&joints_from_vars(x, h, &template), false);
-                Ok(problem.evaluate(&js)?.cost)
-            },
-            x0,
-            &steps,
-            opts.max_iterations,
-        )?;
+    if let Some((_, x0, touching_scaled)) = results.first() {
+        problem.touching_scaled = *touching_scaled;
+        let x = bfgs(|x, with_gradient| problem.cost(x, &template, with_gradient), x0, &steps, opts.max_iterations)?;
         problem.searching = false;
-        let designed = problem.box_fit(&joints_from_vars(&x, h, &template), false);
+        // The fine grid (4 points per sample) can miss a 15-harmonic peak by up to
+        // 1 − cos(π·15/400) ≈ 0.7 %: the design is shrunk per joint to fit its position,
+        // velocity and acceleration limits on a grid 100 points per harmonic.
+        let designed: Vec<FourierJoint> = problem
+            .box_fit(&joints_from_vars(&x, h, &template), false)
+            .iter()
+            .zip(&problem.limits)
+            .map(|(f, lim)| {
+                let (mut f, room) = problem.room_on(f, lim, (100 * h).max(4 * opts.samples));
+                if room < 1.0 {
+                    f.scale(room);
+                }
+                f
+            })
+            .collect();
         let mut options = Vec::new();
         let (_, pen, _) = problem.assess(&designed, 4 * opts.samples, opts.self_collision)?;
         if pen == 0.0 {
