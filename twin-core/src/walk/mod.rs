@@ -14,9 +14,10 @@
 //!    under the capture point predicted at touchdown.
 //! 3. **CoM reference**: standing, LIPM ZMP preview control (Kajita, [`preview`]) over
 //!    `preview_horizon`; walking, the DCM reference of the step in closed form (Englsberger et
-//!    al. 2015, [`plan::Step::dcm`]), anchored at the stance foot and the planned end-of-step
-//!    DCM, moved with the corrected landing spot and re-anchored at each touchdown; the CoM
-//!    reference follows it by `ċ = ω(ξ_ref − c)`.
+//!    al. 2015, [`plan::Step::dcm`]), anchored at the stance foot's ZMP point (`zmp_inward`
+//!    inside its centre, so the DCM runs farther inside the sole and a kick toward the stance
+//!    side leaves it later) and the planned end-of-step DCM, moved with the corrected landing
+//!    spot and re-anchored at each touchdown; the CoM reference follows it by `ċ = ω(ξ_ref − c)`.
 //! 4. **DCM feedback**: the commanded ZMP is `p_ref + (1 + k/ω)(ξ − ξ_ref)`, realised by the
 //!    contact forces of the feed-forward torque; the CoM command is offset by
 //!    `−dcm_com_gain·(ξ − ξ_ref)`.
