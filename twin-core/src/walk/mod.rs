@@ -14,9 +14,10 @@
 //!    under the capture point predicted at touchdown.
 //! 3. **CoM reference**: standing, LIPM ZMP preview control (Kajita, [`preview`]) over
 //!    `preview_horizon`; walking, the DCM reference of the step in closed form (Englsberger et
-//!    al. 2015, [`plan::Step::dcm`]), anchored at the stance foot and the planned end-of-step
-//!    DCM, moved with the corrected landing spot and re-anchored at each touchdown; the CoM
-//!    reference follows it by `ċ = ω(ξ_ref − c)`.
+//!    al. 2015, [`plan::Step::dcm`]), anchored at the stance foot's ZMP point (`zmp_inward`
+//!    inside its centre, so the DCM runs farther inside the sole and a kick toward the stance
+//!    side leaves it later) and the planned end-of-step DCM, moved with the corrected landing
+//!    spot and re-anchored at each touchdown; the CoM reference follows it by `ċ = ω(ξ_ref − c)`.
 //! 4. **DCM feedback**: the commanded ZMP is `p_ref + (1 + k/ω)(ξ − ξ_ref)`, realised by the
 //!    contact forces of the feed-forward torque; the CoM command is offset by
 //!    `−dcm_com_gain·(ξ − ξ_ref)`.
@@ -69,6 +70,9 @@ pub struct WalkOptions {
     pub double_support: f64,
     /// Lateral distance between the soles' centres, m (default: 0.18, the hip spacing).
     pub step_width: f64,
+    /// How far inside the stance sole's centre (toward the other foot) walking plans the ZMP
+    /// in single support, m (default: 0.0).
+    pub zmp_inward: f64,
     /// Centre-of-mass height while walking, m (default: 0.62: knees bent, away from the
     /// stretched-leg singularity of the shipped humanoid, whose standing CoM is at 0.68 m).
     pub com_height: f64,
@@ -151,6 +155,7 @@ impl Default for WalkOptions {
             step_period: 0.6,
             double_support: 0.2,
             step_width: 0.18,
+            zmp_inward: 0.0,
             com_height: 0.62,
             foot_clearance: 0.05,
             max_step_length: 0.2,
@@ -197,6 +202,7 @@ impl WalkOptions {
             max_step_length: self.max_step_length,
             max_step_lateral: self.max_step_lateral,
             max_step_yaw: self.max_step_yaw,
+            zmp_inward: self.zmp_inward,
         }
     }
 
@@ -222,7 +228,8 @@ impl WalkOptions {
                 return Err((name, format!("must be a positive number (got {v})")));
             }
         }
-        let non_negative: [(&'static str, f64); 15] = [
+        let non_negative: [(&'static str, f64); 16] = [
+            ("zmp_inward", self.zmp_inward),
             ("recovery_double_support_secs", self.recovery_double_support_secs),
             ("foot_clearance", self.foot_clearance),
             ("max_step_lateral", self.max_step_lateral),
@@ -768,10 +775,11 @@ impl Walker {
                     start: prev.end(),
                     ds: gait.ds_secs(),
                     ss: gait.period - gait.ds_secs(),
-                    zmp_from: prev.stance.pos,
+                    zmp_from: prev.zmp_point(),
                     stance: prev.swing_to,
                     swing_from: prev.stance,
                     swing_to: gait.foothold(prev.stance.side, c, y),
+                    zmp_inward: gait.zmp_inward,
                 };
                 (center, yaw) = (c, y);
                 self.schedule.steps.push(next);
@@ -795,6 +803,7 @@ impl Walker {
             stance,
             swing_from: feet[swing.index()],
             swing_to: gait.foothold(swing, c, y),
+            zmp_inward: gait.zmp_inward,
         }
     }
 
@@ -842,6 +851,7 @@ impl Walker {
         let gain = 1.0 + o.dcm_zmp_gain / omega;
         let reach = 0.8 * o.step_adjust_ankle;
         let u = step.stance.pos;
+        let zmp = step.zmp_point();
         let side = step.swing_to.side.sign();
         let ss_start = step.start + step.ds;
         let earliest = (ss_start + o.min_single_support_secs)
@@ -857,7 +867,7 @@ impl Walker {
                 dcm_error_ahead(err.x, reach * half[0], gain, omega, tau),
                 dcm_error_ahead(err.y, reach * half[1], gain, omega, tau),
             );
-            let xi_td = u + (tr.end_dcm - u) * (omega * (end - tr.end_secs)).exp() + to_world * ahead;
+            let xi_td = zmp + (tr.end_dcm - zmp) * (omega * (end - tr.end_secs)).exp() + to_world * ahead;
             let wanted = (xi_td - tr.end_dcm) * o.step_adjust_gain;
             let mut adjust = wanted;
             if adjust.norm() > o.max_step_adjust {
@@ -886,6 +896,8 @@ impl Walker {
             // A recovery step: quick, since the DCM diverges meanwhile.
             step.ds = self.options.recovery_double_support_secs;
             step.ss = self.options.recovery_swing_secs;
+            // Its ZMP goes where the DCM needs it, not to a planned point.
+            step.zmp_inward = 0.0;
         }
         self.mode = Mode::Walking(step);
         self.swing_s = 0.0;
@@ -1003,7 +1015,7 @@ impl Controller for Walker {
                         self.recovering = false;
                     } else {
                         let swing = if self.recovering { self.first_swing(Some(dcm), &now) } else { step.stance.side };
-                        self.start_step(t, &now, swing, gait.ds_secs(), step.stance.pos);
+                        self.start_step(t, &now, swing, gait.ds_secs(), step.zmp_point());
                         new_step = !self.recovering;
                     }
                     replan = true;

@@ -53,6 +53,9 @@ pub struct Gait {
     pub max_step_lateral: f64,
     /// Largest yaw change per step, radians.
     pub max_step_yaw: f64,
+    /// How far inside the stance sole's centre (toward the other foot) the ZMP is planned in
+    /// single support, metres.
+    pub zmp_inward: f64,
 }
 
 impl Gait {
@@ -98,12 +101,22 @@ pub struct Step {
     pub swing_from: Foothold,
     /// Its landing.
     pub swing_to: Foothold,
+    /// How far inside the stance sole's centre (toward the swing foot's side) the ZMP sits in
+    /// single support, metres ([`Gait::zmp_inward`]).
+    pub zmp_inward: f64,
 }
 
 impl Step {
     /// End time.
     pub fn end(&self) -> f64 {
         self.start + self.ds + self.ss
+    }
+
+    /// Where the ZMP sits in single support: the stance sole's centre moved `zmp_inward`
+    /// toward the other foot.
+    pub fn zmp_point(&self) -> Vector2<f64> {
+        self.stance.pos
+            + Rotation2::new(self.stance.yaw) * Vector2::new(0.0, -self.stance.side.sign() * self.zmp_inward)
     }
 
     /// ZMP reference at `t` within this step.
@@ -113,9 +126,9 @@ impl Step {
             let a = (tau / self.ds).clamp(0.0, 1.0);
             // Smooth transfer (zero rate at both ends).
             let s = a * a * (3.0 - 2.0 * a);
-            self.zmp_from + (self.stance.pos - self.zmp_from) * s
+            self.zmp_from + (self.zmp_point() - self.zmp_from) * s
         } else {
-            self.stance.pos
+            self.zmp_point()
         }
     }
 
@@ -126,10 +139,10 @@ impl Step {
 
     /// The DCM reference at `t` within this step and the ZMP it implies, given the DCM `end`
     /// at the step's end: `ξ̇ = ω(ξ − p)` solved backward from `end` (Englsberger et al. 2015),
-    /// the ZMP moving linearly from `zmp_from` to the stance foot over the double support
-    /// (the particular solution `p + ṗ/ω` is then exact) and staying on it in single support.
+    /// the ZMP moving linearly from `zmp_from` to [`Step::zmp_point`] over the double support
+    /// (the particular solution `p + ṗ/ω` is then exact) and staying there in single support.
     pub fn dcm(&self, t: f64, end: Vector2<f64>, omega: f64) -> (Vector2<f64>, Vector2<f64>) {
-        let u = self.stance.pos;
+        let u = self.zmp_point();
         let tau = (t - self.start).clamp(0.0, self.ds + self.ss);
         if tau >= self.ds || self.ds <= 0.0 {
             return (u + (end - u) * (omega * (tau - self.ds - self.ss)).exp(), u);
@@ -170,7 +183,7 @@ impl Schedule {
             return step.zmp(t);
         }
         let (from, start) = match self.steps.last() {
-            Some(last) => (last.stance.pos, last.end()),
+            Some(last) => (last.zmp_point(), last.end()),
             None => (self.rest_from, self.rest_start),
         };
         let a = ((t - start) / self.settle_secs.max(1e-9)).clamp(0.0, 1.0);
@@ -247,6 +260,7 @@ mod tests {
             max_step_length: 0.2,
             max_step_lateral: 0.1,
             max_step_yaw: 0.3,
+            zmp_inward: 0.0,
         }
     }
 
@@ -283,6 +297,7 @@ mod tests {
             stance: right,
             swing_from: left,
             swing_to: Foothold { pos: Vector2::new(0.25, 0.09), ..left },
+            zmp_inward: 0.01,
         };
         let end = Vector2::new(0.2, 0.0);
         assert!((step.dcm(step.end(), end, omega).0 - end).norm() < 1e-12);

@@ -306,3 +306,33 @@ fn walk_scenario_catches_kicks_while_stepping() {
         assert!(s.forward_m > min_forward, "{force:?}: walked on {} m", s.forward_m);
     }
 }
+
+/// A kick toward the stance foot's side while walking (the swing foot can't catch it without
+/// crossing over): with the single-support ZMP planned 4 cm inside the sole (`walk.toml`'s
+/// `zmp_inward`) the DCM runs farther inside the stance foot early in the step, and 0.3 m/s
+/// kicks to the right at the start and 0.15 s into the right foot's stance are held by its
+/// ankle; with the ZMP at the sole's centre the DCM leaves the sole's outer edge and the walker
+/// falls over it.
+#[test]
+fn walk_scenario_holds_kicks_toward_the_stance_side() {
+    // 0.3 m/s × 35.7 kg in 0.05 s on the pelvis, to the right (−y).
+    let kick = |sc: &mut Scenario, time: f64| {
+        sc.duration_secs = 9.0;
+        sc.checks = Default::default();
+        sc.pushes.push(Push { time, duration: 0.05, force: [0.0, -214.2, 0.0], body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.zmp_inward > 0.0);
+    let mut centred_falls = 0;
+    for time in [4.26, 4.4] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time));
+        assert!(!s.fell, "kick at {time} s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m > 2.0, "kick at {time} s: walked on {} m", s.forward_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, time);
+            sc.walk.zmp_inward = 0.0;
+        });
+        centred_falls += usize::from(s.fell);
+    }
+    assert_eq!(centred_falls, 2, "the ZMP at the sole's centre fell to both kicks in the lab");
+}
