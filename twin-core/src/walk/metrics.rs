@@ -259,8 +259,8 @@ impl GaitMetrics {
                     foot_contact[k] = true;
                     self.hull.push([position[0], position[1]]);
                     let track = &mut self.foot[k];
-                    for a in 0..3 {
-                        track.contact_sum[a] += position[a];
+                    for (sum, x) in track.contact_sum.iter_mut().zip(position) {
+                        *sum += x;
                     }
                     track.contact_n += 1;
                 }
