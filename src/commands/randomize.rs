@@ -203,25 +203,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(mut s) = scenario {
-        // The scenario's walker (its options) on each worker, and its checks.
+        // The scenario's walker (its options, the --controller override) on each worker, its
+        // checks, and its scripted pushes besides the spec's random ones.
         s.controller = controller;
-        let s = std::sync::Arc::new(s);
-        let for_checks = s.clone();
-        let for_pushes = s.clone();
-        batch = batch
-            .with_controller(move |r| s.controller(&r.model))?
-            .with_checks(move |r| {
-                let check: Box<dyn twin_core::engine::Check> = Box::new(for_checks.check(&r.model)?);
-                Ok(vec![check])
-            })?
-            // The scenario's scripted pushes too, besides the spec's random ones.
-            .with_disturbances(move |m| {
-                for_pushes
-                    .disturbances(m)
-                    .into_iter()
-                    .map(|d| Box::new(d) as Box<dyn twin_core::engine::Disturbance>)
-                    .collect()
-            });
+        batch = batch.with_scenario(std::sync::Arc::new(s))?;
     }
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {

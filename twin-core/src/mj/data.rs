@@ -208,6 +208,16 @@ impl Data {
         contacts.iter().map(|c| c.geom)
     }
 
+    /// Geom ids and world position (metres) of each active contact, after the last forward pass:
+    /// [`Data::contact_geoms`] with `contact[i].pos`, for observers that need where contacts are
+    /// but not their forces (no `mj_contactForce`, no allocation).
+    pub fn contact_points(&self) -> impl Iterator<Item = ([i32; 2], [f64; 3])> + '_ {
+        let d = self.raw();
+        // SAFETY: as in contact_geoms().
+        let contacts = unsafe { raw_slice(d.contact as *const sys::mjContact, self.ncon()) };
+        contacts.iter().map(|c| (c.geom, c.pos))
+    }
+
     /// The model this state belongs to.
     pub fn model(&self) -> &Arc<Model> {
         &self.model

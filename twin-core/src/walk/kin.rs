@@ -967,7 +967,7 @@ impl LegIk {
                 within &= q[k] == v;
             }
             if within {
-                return cf.error(&target, &theta, &sc);
+                return cf.error(&target, &sc);
             }
         }
         self.solve_dls(target, q, iterations, damping)
@@ -1128,15 +1128,15 @@ impl ClosedForm {
         (theta, sc, knee_exact && ankle_exact && hip_exact)
     }
 
-    /// Foot pose error from `target` at the angles `theta` (sines and cosines `sc`): the
-    /// product of exponentials, the position with the solution's own sines and cosines, the
-    /// orientation with unit quaternions of the half angles (fewer products than matrices).
-    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), theta: &[f64; 6], sc: &[(f64, f64); 6]) -> IkResult {
+    /// Foot pose error from `target` at the sines and cosines `sc` of the solution's angles:
+    /// the product of exponentials, the position with those sines and cosines, the orientation
+    /// with unit quaternions of the half angles (fewer products than matrices).
+    fn error(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), sc: &[(f64, f64); 6]) -> IkResult {
         let mut pos = self.foot0.0;
         let mut rot = self.foot0.1.into_inner();
         for k in (0..6).rev() {
             pos = self.turn(k, sc[k], &pos);
-            let (s, c) = sin_cos(0.5 * theta[k]);
+            let (s, c) = half_angle(sc[k]);
             let a = &self.axis[k];
             rot = nalgebra::Quaternion::new(c, a.x * s, a.y * s, a.z * s) * rot;
         }
@@ -1147,6 +1147,20 @@ impl ClosedForm {
             position_error_m: (target.0 - pos).norm(),
             rotation_error_rad: 2.0 * atan2(e.imag().norm(), e.w.abs()),
         }
+    }
+}
+
+/// Sine and cosine of half the angle of sine and cosine `(s, c)`, up to a common sign (the
+/// same rotation as a quaternion): a square root where `sin_cos` of the half angle costs a
+/// polynomial. Each branch divides by the larger half (≥ √½), so both stay accurate near 0
+/// and near a half turn.
+fn half_angle((s, c): (f64, f64)) -> (f64, f64) {
+    if c >= 0.0 {
+        let half_c = (0.5 + 0.5 * c).sqrt();
+        (s / (2.0 * half_c), half_c)
+    } else {
+        let half_s = (0.5 - 0.5 * c).sqrt().copysign(s);
+        (half_s, s / (2.0 * half_s))
     }
 }
 
@@ -1466,6 +1480,20 @@ mod tests {
         for p in [std::f64::consts::FRAC_PI_2, -std::f64::consts::FRAC_PI_2] {
             let q = UnitQuaternion::from_euler_angles(0.3, p, 0.2);
             assert_eq!(yaw_of(&q).to_bits(), q.euler_angles().2.to_bits());
+        }
+    }
+
+    #[test]
+    fn half_angle_is_the_half_angles_sine_and_cosine_up_to_sign() {
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
+        let quarter = std::f64::consts::FRAC_PI_4;
+        let edges = (-16..=16).flat_map(|k| [-1e-12, 0.0, 1e-12].map(|e| k as f64 * quarter + e));
+        let random = (0..100_000).map(|_| rng.random_range(-10.0..10.0));
+        for x in edges.chain(random).chain([1e-300, -3e-9]) {
+            let (s, c) = half_angle(x.sin_cos());
+            let (ws, wc) = (0.5 * x).sin_cos();
+            let sign = if s * ws + c * wc >= 0.0 { 1.0 } else { -1.0 };
+            assert!((s - sign * ws).abs() <= 1e-15 && (c - sign * wc).abs() <= 1e-15, "{x}: {s} {c} / {ws} {wc}");
         }
     }
 

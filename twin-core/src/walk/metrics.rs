@@ -82,6 +82,46 @@ struct FootTrack {
     stances: u64,
 }
 
+/// What a contact with one geom means to the metrics, found once per rollout from the model
+/// (the per-step loop over contacts then walks no body tree).
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct GeomPart {
+    /// The geom belongs to the world body (the floor).
+    world: bool,
+    /// What its body is, when the other geom is the world's.
+    body: BodyPart,
+}
+
+#[derive(Debug, Clone, Copy, PartialEq)]
+enum BodyPart {
+    /// Not in the robot's subtree (a cup on a table).
+    Scene,
+    /// Foot `k` (0 left, 1 right).
+    Foot(usize),
+    /// Any other robot body: its ground contact is a fall.
+    Body,
+}
+
+/// Each geom's [`GeomPart`] for the robot rooted at `base` with feet `feet`.
+fn geom_parts(model: &Model, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
+    model
+        .geom_bodyid()
+        .iter()
+        .map(|&b| {
+            let b = b as usize;
+            let body = if !crate::robot::in_subtree(model, base, b) {
+                BodyPart::Scene
+            } else {
+                match feet.iter().position(|&f| f == b) {
+                    Some(k) => BodyPart::Foot(k),
+                    None => BodyPart::Body,
+                }
+            };
+            GeomPart { world: b == 0, body }
+        })
+        .collect()
+}
+
 /// Accumulates [`GaitSummary`] step by step.
 #[derive(Debug, Clone)]
 pub struct GaitMetrics {
@@ -111,6 +151,10 @@ pub struct GaitMetrics {
     vel_err_sq: f64,
     vel_windows: u64,
     hull: Vec<[f64; 2]>,
+    /// Scratch of [`support_margin_into`], kept to spare an allocation per step.
+    hull_scratch: Vec<[f64; 2]>,
+    /// Per geom, found at the first update (see [`GeomPart`]).
+    geoms: Vec<GeomPart>,
 }
 
 impl GaitMetrics {
@@ -154,6 +198,8 @@ impl GaitMetrics {
             vel_err_sq: 0.0,
             vel_windows: 0,
             hull: Vec::new(),
+            hull_scratch: Vec::new(),
+            geoms: Vec::new(),
         }
     }
 
@@ -172,7 +218,6 @@ impl GaitMetrics {
         if self.fell_at.is_some() {
             return;
         }
-        let model = data.model().clone();
         let t = data.time_secs();
         let base = data.xpos()[self.base];
         let yaw = Self::yaw_of(data, self.base);
@@ -181,6 +226,7 @@ impl GaitMetrics {
             self.last_yaw = yaw;
             self.last_base = base;
             self.window = Some((t, [base[0], base[1]], yaw));
+            self.geoms = geom_parts(data.model(), self.base, self.feet);
             return;
         };
         self.time = t - t0;
@@ -193,35 +239,32 @@ impl GaitMetrics {
         let mut body_on_ground = false;
         let mut foot_contact = [false; 2];
         self.hull.clear();
-        for (i, g) in data.contact_geoms().enumerate() {
+        // Only where the contacts are matters here, not their forces.
+        for (g, position) in data.contact_points() {
             if g[0] < 0 || g[1] < 0 {
                 continue;
             }
-            let b = [model.geom_bodyid()[g[0] as usize] as usize, model.geom_bodyid()[g[1] as usize] as usize];
-            let robot = if b[0] == 0 {
-                b[1]
-            } else if b[1] == 0 {
-                b[0]
+            let part = [self.geoms[g[0] as usize], self.geoms[g[1] as usize]];
+            let robot = if part[0].world {
+                part[1].body
+            } else if part[1].world {
+                part[0].body
             } else {
                 continue;
             };
-            // Scene objects (a cup on a table) are not the robot.
-            if !crate::robot::in_subtree(&model, self.base, robot) {
-                continue;
-            }
-            match self.feet.iter().position(|&f| f == robot) {
-                Some(k) => {
+            match robot {
+                // Scene objects (a cup on a table) are not the robot.
+                BodyPart::Scene => {}
+                BodyPart::Foot(k) => {
                     foot_contact[k] = true;
-                    if let Some(w) = data.contact_wrench_world(i) {
-                        self.hull.push([w.position[0], w.position[1]]);
-                        let track = &mut self.foot[k];
-                        for a in 0..3 {
-                            track.contact_sum[a] += w.position[a];
-                        }
-                        track.contact_n += 1;
+                    self.hull.push([position[0], position[1]]);
+                    let track = &mut self.foot[k];
+                    for (sum, x) in track.contact_sum.iter_mut().zip(position) {
+                        *sum += x;
                     }
+                    track.contact_n += 1;
                 }
-                None => body_on_ground = true,
+                BodyPart::Body => body_on_ground = true,
             }
         }
         if base[2] < 0.5 * origin[2] || up < 0.5 || body_on_ground {
@@ -238,14 +281,14 @@ impl GaitMetrics {
             // Slide of the foot's material point at its contacts since the previous step.
             let slide = match (track.prev_pose, track.contact_n) {
                 (Some((pp, pr)), n) if n > 0 => {
-                    let c: Vec<f64> = track.contact_sum.iter().map(|v| v / f64::from(n)).collect();
+                    let c = track.contact_sum.map(|v| v / f64::from(n));
                     let d = [c[0] - p[0], c[1] - p[1], c[2] - p[2]];
                     // Body-frame coordinates of the contact point, then where it was before.
-                    let local: Vec<f64> =
-                        (0..3).map(|j| rot[j] * d[0] + rot[3 + j] * d[1] + rot[6 + j] * d[2]).collect();
-                    let was: Vec<f64> = (0..3)
-                        .map(|i| pp[i] + pr[3 * i] * local[0] + pr[3 * i + 1] * local[1] + pr[3 * i + 2] * local[2])
-                        .collect();
+                    let local: [f64; 3] =
+                        std::array::from_fn(|j| rot[j] * d[0] + rot[3 + j] * d[1] + rot[6 + j] * d[2]);
+                    let was: [f64; 3] = std::array::from_fn(|i| {
+                        pp[i] + pr[3 * i] * local[0] + pr[3 * i + 1] * local[1] + pr[3 * i + 2] * local[2]
+                    });
                     (c[0] - was[0]).hypot(c[1] - was[1])
                 }
                 _ => 0.0,
@@ -286,7 +329,7 @@ impl GaitMetrics {
         // CoM over the support polygon.
         if !self.hull.is_empty() {
             let com = data.subtree_com()[self.base];
-            let margin = support_margin(&mut self.hull, [com[0], com[1]]);
+            let margin = support_margin_into(&mut self.hull, [com[0], com[1]], &mut self.hull_scratch);
             self.margin_min = self.margin_min.min(margin);
             self.margin_sum += margin;
             self.margin_n += 1;
@@ -424,6 +467,12 @@ impl std::fmt::Display for GaitSummary {
 /// Signed distance of `p` inside the convex hull of `points` (reordered in place), metres;
 /// negative outside. For one or two points: minus the distance to the point / segment.
 pub fn support_margin(points: &mut Vec<[f64; 2]>, p: [f64; 2]) -> f64 {
+    support_margin_into(points, p, &mut Vec::new())
+}
+
+/// [`support_margin`] building the hull in `hull` (cleared first), so that a caller measuring
+/// every step reuses one buffer.
+fn support_margin_into(points: &mut Vec<[f64; 2]>, p: [f64; 2], hull: &mut Vec<[f64; 2]>) -> f64 {
     // Monotone chain hull.
     points.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
     points.dedup_by(|a, b| (a[0] - b[0]).abs() < 1e-6 && (a[1] - b[1]).abs() < 1e-6);
@@ -437,7 +486,7 @@ pub fn support_margin(points: &mut Vec<[f64; 2]>, p: [f64; 2]) -> f64 {
     if points.len() == 1 {
         return -seg_dist(points[0], points[0]);
     }
-    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(points.len() * 2);
+    hull.clear();
     for &pt in points.iter() {
         while hull.len() >= 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], pt) <= 0.0 {
             hull.pop();
