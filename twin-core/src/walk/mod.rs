@@ -73,6 +73,14 @@ pub struct WalkOptions {
     /// How far inside the stance sole's centre (toward the other foot) walking plans the ZMP
     /// in single support, m (default: 0.0).
     pub zmp_inward: f64,
+    /// Straight walking (no `vy`, no `yaw_rate`) holds the line it started on: each planned
+    /// step's centre moves back toward that line by this fraction of the planned centre's
+    /// offset from it (default: 0.0, off). It acts only through the footstep plan, so each
+    /// step's DCM reference is built from the corrected plan (landing corrections after kicks
+    /// otherwise leave the whole walk offset sideways).
+    pub line_hold_gain: f64,
+    /// Largest sideways correction of one step toward the line, m (default: 0.03).
+    pub line_hold_step: f64,
     /// Centre-of-mass height while walking, m (default: 0.62: knees bent, away from the
     /// stretched-leg singularity of the shipped humanoid, whose standing CoM is at 0.68 m).
     pub com_height: f64,
@@ -156,6 +164,8 @@ impl Default for WalkOptions {
             double_support: 0.2,
             step_width: 0.18,
             zmp_inward: 0.0,
+            line_hold_gain: 0.0,
+            line_hold_step: 0.03,
             com_height: 0.62,
             foot_clearance: 0.05,
             max_step_length: 0.2,
@@ -228,8 +238,10 @@ impl WalkOptions {
                 return Err((name, format!("must be a positive number (got {v})")));
             }
         }
-        let non_negative: [(&'static str, f64); 16] = [
+        let non_negative: [(&'static str, f64); 18] = [
             ("zmp_inward", self.zmp_inward),
+            ("line_hold_gain", self.line_hold_gain),
+            ("line_hold_step", self.line_hold_step),
             ("recovery_double_support_secs", self.recovery_double_support_secs),
             ("foot_clearance", self.foot_clearance),
             ("max_step_lateral", self.max_step_lateral),
@@ -379,6 +391,9 @@ pub struct Walker {
     /// spots against its DCM reference instead: switching a walking walker to these steps
     /// after a push fell more often, 16 of 20 randomized episodes against 13.)
     recovering: bool,
+    /// The line straight walking holds (`line_hold_gain`): a point on it and its heading,
+    /// world, m and rad; set when walking starts, cleared by a command that is not straight.
+    line: Option<(Vector2<f64>, f64)>,
     /// Walking's reference (the preview control's only serves standing).
     track: Track,
     /// Swing progress of the current step in [0, 1] and when it was last advanced: it runs so
@@ -480,6 +495,7 @@ impl Walker {
             state: WalkerState::default(),
             planted: [Foothold { side: Side::Left, pos: Vector2::zeros(), yaw: 0.0 }; 2],
             recovering: false,
+            line: None,
             track: Track::default(),
             swing_s: 0.0,
             swing_t: 0.0,
@@ -510,6 +526,9 @@ impl Walker {
     /// Sets a new velocity command (takes effect at the next step).
     pub fn set_command(&mut self, command: Command) {
         self.command = command;
+        if !self.straight() {
+            self.line = None;
+        }
     }
 
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
@@ -770,7 +789,7 @@ impl Walker {
             let mut center = gait.center_of(&step.swing_to);
             let mut yaw = step.swing_to.yaw;
             while prev.end() < t + horizon + gait.period {
-                let (c, y) = gait.next_center(center, yaw, &self.command);
+                let (c, y) = self.next_center(center, yaw);
                 let next = Step {
                     start: prev.end(),
                     ds: gait.ds_secs(),
@@ -790,11 +809,29 @@ impl Walker {
         self.schedule.rest = (last.stance.pos + last.swing_to.pos) / 2.0;
     }
 
+    /// Whether the command walks straight ahead or back (the only one with a line to hold).
+    fn straight(&self) -> bool {
+        self.command.vy == 0.0 && self.command.yaw_rate == 0.0
+    }
+
+    /// The next step's centre and heading after `(center, yaw)`: the command's advance plus,
+    /// walking straight, a sideways move toward the held line (`line_hold_gain`).
+    fn next_center(&self, center: Vector2<f64>, yaw: f64) -> (Vector2<f64>, f64) {
+        let (mut c, y) = self.options.gait().next_center(center, yaw, &self.command);
+        if let (Some((origin, heading)), true) = (self.line, self.straight()) {
+            let off_m = (Rotation2::new(-heading) * (center - origin)).y;
+            let reach = self.options.line_hold_step;
+            let dy_m = (-self.options.line_hold_gain * off_m).clamp(-reach, reach);
+            c += Rotation2::new(heading) * Vector2::new(0.0, dy_m);
+        }
+        (c, y)
+    }
+
     /// The first step from standing at `t` with `swing` swinging.
     fn first_step(&self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) -> Step {
         let gait = self.options.gait();
         let stance = feet[swing.other().index()];
-        let (c, y) = gait.next_center(gait.center_of(&stance), stance.yaw, &self.command);
+        let (c, y) = self.next_center(gait.center_of(&stance), stance.yaw);
         Step {
             start: t,
             ds,
@@ -981,6 +1018,11 @@ impl Controller for Walker {
                     // Plan from where the push left the body: the reference restarts at the
                     // measured CoM state, so the feedback does not pull it back to a stale one.
                     self.restart_preview(com);
+                }
+                if ready && !push && !self.command.is_zero() && self.straight() && self.line.is_none() {
+                    // The line to hold: through the feet's midpoint along their mean heading.
+                    let heading = feet[0].yaw + wrap(feet[1].yaw - feet[0].yaw) / 2.0;
+                    self.line = Some(((feet[0].pos + feet[1].pos) / 2.0, heading));
                 }
                 if ready && (!self.command.is_zero() || push) {
                     // Step toward where the body is falling, or as planned.

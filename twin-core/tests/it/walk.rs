@@ -336,3 +336,30 @@ fn walk_scenario_holds_kicks_toward_the_stance_side() {
     }
     assert_eq!(centred_falls, 2, "the ZMP at the sole's centre fell to both kicks in the lab");
 }
+
+/// Sideways kicks while walking straight: the landing-spot corrections that catch them leave
+/// the walk offset sideways, and without `line_hold_gain` the offsets add up; `walk.toml`'s
+/// line hold (0.5 of the planned centre's offset per step) walks back to the start line (in
+/// the lab: 0.55 m off the line without it after eight 0.3-m/s kicks, 0.03 m with it).
+#[test]
+fn walk_scenario_walks_back_to_its_line_after_sideways_kicks() {
+    // 0.3 m/s × 35.7 kg in 0.05 s on the pelvis, to the left (+y), eight times.
+    let kicks = |sc: &mut Scenario| {
+        sc.duration_secs = 18.0;
+        sc.checks = Default::default();
+        for time in [3.0, 4.5, 6.0, 7.5, 9.0, 10.5, 12.0, 13.5] {
+            sc.pushes.push(Push { time, duration: 0.05, force: [0.0, 214.2, 0.0], body: None });
+        }
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.line_hold_gain > 0.0);
+    let (held, _, _) = run_scenario(shipped.clone(), kicks);
+    let (free, _, _) = run_scenario(shipped, |sc| {
+        kicks(sc);
+        sc.walk.line_hold_gain = 0.0;
+    });
+    assert!(!held.fell && !free.fell, "fell at {:?} / {:?}", held.fall_time_secs, free.fall_time_secs);
+    assert!(held.forward_m > 3.5, "walked {} m", held.forward_m);
+    assert!(free.lateral_m.abs() > 0.5, "without the line hold: {} m off the line", free.lateral_m);
+    assert!(held.lateral_m.abs() < 0.1, "with the line hold: {} m off the line", held.lateral_m);
+}
