@@ -926,6 +926,10 @@ impl<'a> Problem<'a> {
         let mut r = vec![0.0; nb];
         // ∂cost/∂(rest, a, b) of each excited joint's scaled series.
         let mut g_series: Vec<(f64, Vec<f64>, Vec<f64>)> = vec![(0.0, vec![0.0; h], vec![0.0; h]); nsel];
+        // Per sample, every entry rewritten: ∂penalty/∂τ_j of the torque excesses, and
+        // ∂cost/∂(q, q̇, q̈) of each excited joint.
+        let mut torque_weight = vec![0.0; nsel];
+        let mut g_sample = vec![[0.0; 3]; nsel];
         for k in 0..n {
             let t = k as f64 * period / n as f64;
             for f in &joints {
@@ -940,16 +944,12 @@ impl<'a> Problem<'a> {
                     z[s * nb + a] = (0..nb).map(|b| metric[(a, b)] * r[b]).sum();
                 }
             }
-            // ∂penalty/∂τ_j of the torque excesses.
-            let torque_weight: Vec<f64> = selected
-                .iter()
-                .zip(&self.limits)
-                .map(|(&j, lim)| match lim.torque {
+            for ((w, &j), lim) in torque_weight.iter_mut().zip(&selected).zip(&self.limits) {
+                *w = match lim.torque {
                     Some(tmax) if tau0[j].abs() > tmax => 2.0 * (tau0[j].abs() / tmax - 1.0) * tau0[j].signum() / tmax,
                     _ => 0.0,
-                })
-                .collect();
-            let mut g_sample = vec![[0.0; 3]; nsel];
+                };
+            }
             for (i, &ji) in selected.iter().enumerate() {
                 for (kind, step) in [1e-6, 1e-6, 1e-3].into_iter().enumerate() {
                     let slot = match kind {
