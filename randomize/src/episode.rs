@@ -179,13 +179,14 @@ impl Batch {
         &self.controller_name
     }
 
-    /// Names of the batch's checks (empty without checks).
+    /// The verdicts of the batch's checks before any episode (empty without checks): their
+    /// names and the measurements each one reports, which are the CSV's check columns.
     ///
     /// # Errors
     /// The check factory's error.
-    pub fn check_names(&self) -> Result<Vec<String>> {
+    pub fn check_verdicts(&self) -> Result<Vec<Verdict>> {
         Ok(match &self.checks {
-            Some(f) => f(&self.robot)?.iter().map(|c| c.name().to_string()).collect(),
+            Some(f) => f(&self.robot)?.iter().map(|c| c.verdict()).collect(),
             None => Vec::new(),
         })
     }
@@ -220,7 +221,8 @@ pub struct EpisodeResult {
     pub distance_m: f64,
     /// `distance_m / sim_secs`, m/s.
     pub avg_speed_mps: f64,
-    /// Foot touch-downs (a foot's contact with the ground starting).
+    /// Foot touch-downs (a foot's contact with the ground starting after at least
+    /// [`twin_core::engine::observers::TOUCHDOWN_MIN_AIR_SECS`] in the air).
     pub steps_taken: u64,
     /// Largest tilt of the base from upright, radians.
     pub max_tilt_rad: f64,

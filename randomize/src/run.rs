@@ -187,7 +187,9 @@ pub fn run_batch(
         tmp_csv = dir.join(crate::merge::PARTIAL_CSV);
         let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
-        w.write_record(crate::summary::csv_header(params, !batch.check_names()?.is_empty()))
+        let checks = batch.check_verdicts()?;
+        let check_metrics = crate::summary::check_metric_names(&checks);
+        w.write_record(crate::summary::csv_header(params, !checks.is_empty(), &check_metrics))
             .map_err(|e| csv_io(&tmp_csv, e))?;
         csv_writer = Some(w);
     } else {

@@ -9,6 +9,7 @@ use crate::error::{Error, Result};
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
 use std::path::Path;
+use twin_core::engine::{Measurement, Verdict};
 
 /// The fixed leading CSV columns; the drawn parameters follow.
 pub const METRIC_COLUMNS: [&str; 13] = [
@@ -31,13 +32,36 @@ pub const METRIC_COLUMNS: [&str; 13] = [
 /// batches with checks only.
 pub const CHECKS_COLUMN: &str = "checks";
 
-/// The CSV header for parameter columns `params`, with the [`CHECKS_COLUMN`] when the batch
-/// has checks.
-pub fn csv_header(params: &[String], with_checks: bool) -> Vec<String> {
+/// Prefix of the columns holding the checks' numbers (`metric:scenario.slip_mean_m`), between
+/// the [`CHECKS_COLUMN`] and the drawn parameters (no parameter kind is called `metric`).
+pub const CHECK_METRIC_PREFIX: &str = "metric:";
+
+/// The name of check `check`'s measurement `m` as a CSV column (without
+/// [`CHECK_METRIC_PREFIX`]) and a summary row: `check.name` with the unit as a suffix
+/// (`scenario.average_speed_mps`), so that a summary read back from the CSV, where units are
+/// not kept, names it the same.
+pub fn check_metric_name(check: &str, m: &Measurement) -> String {
+    let unit = match m.unit {
+        "" => String::new(),
+        "m/s" => "_mps".into(),
+        u => format!("_{}", u.replace(|c: char| !c.is_ascii_alphanumeric(), "_")),
+    };
+    format!("{check}.{}{unit}", m.name)
+}
+
+/// The check metric columns of the verdicts `checks` (the same in every episode of a batch).
+pub fn check_metric_names(checks: &[Verdict]) -> Vec<String> {
+    checks.iter().flat_map(|c| c.metrics.iter().map(|m| check_metric_name(&c.name, m))).collect()
+}
+
+/// The CSV header for parameter columns `params`, with the [`CHECKS_COLUMN`] and the checks'
+/// metric columns `check_metrics` (from [`check_metric_names`]) when the batch has checks.
+pub fn csv_header(params: &[String], with_checks: bool, check_metrics: &[String]) -> Vec<String> {
     METRIC_COLUMNS
         .iter()
         .map(|s| s.to_string())
         .chain(with_checks.then(|| CHECKS_COLUMN.to_string()))
+        .chain(check_metrics.iter().map(|m| format!("{CHECK_METRIC_PREFIX}{m}")))
         .chain(params.iter().cloned())
         .collect()
 }
@@ -64,6 +88,7 @@ pub fn csv_record(r: &EpisodeResult) -> Vec<String> {
         let verdicts: Vec<String> =
             r.checks.iter().map(|c| format!("{}={}", c.name, if c.passed { "PASS" } else { "FAIL" })).collect();
         out.push(verdicts.join(";"));
+        out.extend(r.checks.iter().flat_map(|c| c.metrics.iter().map(|m| m.value.to_string())));
     }
     out.extend(r.params.iter().map(f64::to_string));
     out
@@ -90,7 +115,14 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
         ));
     }
     let with_checks = names.get(METRIC_COLUMNS.len()) == Some(&CHECKS_COLUMN);
-    let first_param = METRIC_COLUMNS.len() + usize::from(with_checks);
+    let first_metric = METRIC_COLUMNS.len() + usize::from(with_checks);
+    // The checks' metric columns: (check, measurement name), as written by `csv_header`.
+    let check_metrics: Vec<(&str, &str)> = names[first_metric..]
+        .iter()
+        .map_while(|n| n.strip_prefix(CHECK_METRIC_PREFIX))
+        .map(|n| n.split_once('.').unwrap_or((n, "")))
+        .collect();
+    let first_param = first_metric + check_metrics.len();
     let params: Vec<String> = names[first_param..].iter().map(|s| s.to_string()).collect();
     let mut rows = Vec::new();
     for (i, rec) in rdr.records().enumerate() {
@@ -134,7 +166,18 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
             energy_j: f(12)?,
             params: (first_param..names.len()).map(f).collect::<Result<_>>()?,
             checks: if with_checks {
-                read_verdicts(&rec[METRIC_COLUMNS.len()]).map_err(|m| err(Some(line), m))?
+                let mut verdicts = read_verdicts(&rec[METRIC_COLUMNS.len()]).map_err(|m| err(Some(line), m))?;
+                for (k, (check, name)) in check_metrics.iter().enumerate() {
+                    let value = f(first_metric + k)?;
+                    let Some(v) = verdicts.iter_mut().find(|v| v.name == *check) else {
+                        return Err(err(
+                            Some(line),
+                            format!("column {}: the checks column has no check {check:?}", names[first_metric + k]),
+                        ));
+                    };
+                    v.metrics.push(Measurement::new(*name, value, ""));
+                }
+                verdicts
             } else {
                 Vec::new()
             },
@@ -182,9 +225,10 @@ pub fn write_csv<'a>(
 ) -> Result<()> {
     let io = |e: csv::Error| Error::Io { path: path.to_path_buf(), source: std::io::Error::other(e) };
     let rows: Vec<&EpisodeResult> = rows.into_iter().collect();
-    let with_checks = rows.iter().any(|r| !r.checks.is_empty());
+    let first_checked = rows.iter().find(|r| !r.checks.is_empty());
+    let check_metrics = first_checked.map(|r| check_metric_names(&r.checks)).unwrap_or_default();
     let mut wtr = csv::Writer::from_writer(w);
-    wtr.write_record(csv_header(params, with_checks)).map_err(io)?;
+    wtr.write_record(csv_header(params, first_checked.is_some(), &check_metrics)).map_err(io)?;
     for r in rows {
         wtr.write_record(csv_record(r)).map_err(io)?;
     }
@@ -270,6 +314,9 @@ pub struct SummaryBuilder {
     fell: u64,
     unstable: u64,
     metrics: [Vec<f64>; 7],
+    /// The checks' metrics (e.g. a scenario's gait metrics), by [`check_metric_name`], in the
+    /// order first seen.
+    check_metrics: Vec<(String, Vec<f64>)>,
     groups: Vec<[Moments; 2]>,
 }
 
@@ -286,6 +333,7 @@ impl SummaryBuilder {
             fell: 0,
             unstable: 0,
             metrics: Default::default(),
+            check_metrics: Vec::new(),
             groups: vec![Default::default(); params.len()],
         }
     }
@@ -303,6 +351,15 @@ impl SummaryBuilder {
             for (m, v) in self.metrics.iter_mut().zip(values) {
                 m.push(v);
             }
+            for c in &r.checks {
+                for m in &c.metrics {
+                    let name = check_metric_name(&c.name, m);
+                    match self.check_metrics.iter_mut().find(|(n, _)| *n == name) {
+                        Some((_, values)) => values.push(m.value),
+                        None => self.check_metrics.push((name, vec![m.value])),
+                    }
+                }
+            }
         }
         if let Some(t) = r.fall_time_secs {
             self.metrics[6].push(t);
@@ -319,13 +376,15 @@ impl SummaryBuilder {
         let rate = if n > 0 { self.succeeded as f64 / n as f64 } else { 0.0 };
         let quantiles = QUANTILE_METRICS
             .iter()
+            .map(|name| name.to_string())
             .zip(&self.metrics)
+            .chain(self.check_metrics.iter().map(|(name, v)| (name.clone(), v)))
             .filter(|(_, v)| !v.is_empty())
             .map(|(name, v)| {
                 let mut s = v.clone();
                 s.sort_by(f64::total_cmp);
                 Quantiles {
-                    metric: name.to_string(),
+                    metric: name,
                     count: s.len() as u64,
                     min: s[0],
                     p05: quantile(&s, 0.05),
@@ -404,15 +463,16 @@ impl Summary {
             self.unstable
         );
         if !self.quantiles.is_empty() {
+            let w = self.quantiles.iter().map(|q| q.metric.chars().count()).max().unwrap_or(0).max(18);
             let _ = writeln!(
                 s,
-                "\n{:<18} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
+                "\n{:<w$} {:>7} {:>10} {:>10} {:>10} {:>10} {:>10}",
                 "metric", "n", "min", "p5", "median", "p95", "max"
             );
             for q in &self.quantiles {
                 let _ = writeln!(
                     s,
-                    "{:<18} {:>7} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.4}",
+                    "{:<w$} {:>7} {:>10.4} {:>10.4} {:>10.4} {:>10.4} {:>10.4}",
                     q.metric, q.count, q.min, q.p05, q.p50, q.p95, q.max
                 );
             }

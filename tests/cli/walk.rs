@@ -63,6 +63,10 @@ fn randomize_scenario_checks_decide_success() {
     assert!(out.contains("success: 2/2"), "standing still for 1.5 s passes:\n{out}");
     let csv = std::fs::read_to_string(out_dir.join("episodes.csv")).unwrap();
     assert_eq!(csv.matches("scenario=PASS").count(), 2, "{csv}");
+    // Standing, the soles' contacts flicker but no foot leaves the ground: no steps.
+    for row in csv.lines().skip(1) {
+        assert_eq!(row.split(',').nth(9), Some("0"), "steps_taken standing: {row}");
+    }
     let summary = std::fs::read_to_string(out_dir.join("summary.json")).unwrap();
     assert!(summary.contains("\"controller\": \"walk\"") && summary.contains("\"duration_secs\": 1.5"), "{summary}");
     // Standing can't cover 5 m: every episode fails its check, though none falls.
@@ -84,6 +88,63 @@ fn randomize_scenario_checks_decide_success() {
     let (ok, out, err) = run(&["randomize", "--scenario", pushed.to_str().unwrap(), "--episodes", "2"]);
     assert!(ok, "{err}");
     assert!(out.contains("success: 0/2") && out.contains("fell 2"), "{out}");
+}
+
+/// `twin randomize --scenario` tabulates the scenario's gait metrics per episode (CSV columns
+/// `metric:scenario.*`, quantiles in the summary), counts a walking foot's landings as steps
+/// (not its sole's contact flicker), and shards of such a batch merge into the same bytes.
+#[test]
+fn randomize_scenario_summarizes_gait_metrics_and_shards_merge() {
+    let dir = tempfile::tempdir().unwrap();
+    let model = super::common::repo_root().join("models/humanoid.urdf");
+    // 1 s crouch, then 0.5-s steps from 1.3 s: about 5 landings in 4 s.
+    let walk = write(
+        dir.path(),
+        "walk.toml",
+        &format!(
+            "model = {:?}\nduration = 4.0\n[walk]\nvx = 0.3\nstep_period = 0.5\n[checks]\nfalls = 0\n",
+            model.display().to_string()
+        ),
+    );
+    let w = walk.to_str().unwrap();
+    let out_of = |name: &str| dir.path().join(name);
+    let whole = out_of("whole");
+    let (ok, out, err) = run(&["randomize", "--scenario", w, "--episodes", "2", "--out", whole.to_str().unwrap()]);
+    assert!(ok, "{out}\n{err}");
+    for metric in ["scenario.slip_mean_m", "scenario.velocity_rms_error_mps", "scenario.cost_of_transport"] {
+        assert!(out.contains(metric), "the summary tabulates {metric}:\n{out}");
+    }
+    let csv = std::fs::read_to_string(whole.join("episodes.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name}: {header:?}"));
+    let (steps, gait_steps, slip) =
+        (col("steps_taken"), col("metric:scenario.steps"), col("metric:scenario.slip_mean_m"));
+    for line in lines {
+        let row: Vec<&str> = line.split(',').collect();
+        let n: f64 = row[steps].parse().unwrap();
+        assert!((3.0..=8.0).contains(&n), "about 5 landings in 2.7 s of 0.5-s steps, got {n}: {line}");
+        assert_eq!(row[gait_steps].parse::<f64>().unwrap(), n, "the engine and the gait metrics count alike");
+        let slip_m: f64 = row[slip].parse().unwrap();
+        assert!((0.0..0.02).contains(&slip_m), "{slip_m}");
+    }
+    for k in 1..=2 {
+        let shard = out_of(&format!("shard-{k}"));
+        let shard_arg = format!("{k}/2");
+        let args =
+            ["randomize", "--scenario", w, "--episodes", "2", "--shard", &shard_arg, "--out", shard.to_str().unwrap()];
+        let (ok, out, err) = run(&args);
+        assert!(ok, "{out}\n{err}");
+    }
+    let merged = out_of("merged");
+    let (s1, s2) = (out_of("shard-1"), out_of("shard-2"));
+    let args = ["randomize", "merge", s1.to_str().unwrap(), s2.to_str().unwrap(), "--out", merged.to_str().unwrap()];
+    let (ok, out, err) = run(&args);
+    assert!(ok, "{out}\n{err}");
+    for name in ["episodes.csv", "summary.json"] {
+        let (a, b) = (std::fs::read(whole.join(name)).unwrap(), std::fs::read(merged.join(name)).unwrap());
+        assert!(a == b, "{name}: merged shards differ from the single run");
+    }
 }
 
 /// `--topics` may name the walker's own topics (`/walk/*`): they are its diagnostics, recorded

@@ -597,7 +597,17 @@ impl Check for ScenarioCheck {
         crate::engine::Verdict {
             name: "scenario".into(),
             passed: failed.is_empty(),
-            metrics: verdicts.iter().map(|v| Measurement::new(v.name, v.value, "")).collect(),
+            // The whole gait summary (what `twin randomize` tabulates per episode), then the
+            // grasp numbers, which the gait summary lacks.
+            metrics: self
+                .metrics
+                .summary()
+                .measurements()
+                .into_iter()
+                // The episode's own fall detection reports falls.
+                .filter(|m| m.name != "fell")
+                .chain(self.grasp.iter().flat_map(|g| g.verdicts()).map(|v| Measurement::new(v.name, v.value, "")))
+                .collect(),
             details: verdicts.iter().map(ToString::to_string).collect(),
             cause: (!failed.is_empty()).then(|| format!("failed: {}", failed.join(", "))),
         }

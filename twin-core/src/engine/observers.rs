@@ -201,13 +201,20 @@ impl Metric for Energy {
     }
 }
 
-/// Foot touch-downs: a foot's contact with the world body starting. A foot's geoms are those
-/// of its body and of the bodies below it.
+/// Least time a foot is off the ground before its next contact counts as a touch-down, s:
+/// shorter gaps are a rolling or chattering sole (a walking foot's contacts flicker several
+/// times a stance), not a step.
+pub const TOUCHDOWN_MIN_AIR_SECS: f64 = 0.05;
+
+/// Foot touch-downs: a foot's contact with the world body starting after at least
+/// [`TOUCHDOWN_MIN_AIR_SECS`] off it. A foot's geoms are those of its body and of the bodies
+/// below it.
 #[derive(Debug, Clone, Default)]
 pub struct Touchdowns {
     /// Foot index per geom (−1: not a foot's).
     geom_foot: Vec<i32>,
-    down: Vec<bool>,
+    /// Time each foot has been off the ground, s.
+    air_secs: Vec<f64>,
     now: Vec<bool>,
     /// Touch-downs so far.
     pub count: u64,
@@ -222,7 +229,7 @@ impl Touchdowns {
                 feet.iter().position(|&f| crate::robot::in_subtree(model, f, body)).map_or(-1, |k| k as i32)
             })
             .collect();
-        Touchdowns { geom_foot, down: vec![false; feet.len()], now: vec![false; feet.len()], count: 0 }
+        Touchdowns { geom_foot, air_secs: vec![0.0; feet.len()], now: vec![false; feet.len()], count: 0 }
     }
 
     fn mark(&self, data: &Data, now: &mut [bool]) {
@@ -245,10 +252,9 @@ impl Touchdowns {
 }
 
 impl Observer for Touchdowns {
-    fn start(&mut self, _model: &Model, data: &Data) -> Result<()> {
-        let mut down = std::mem::take(&mut self.down);
-        self.mark(data, &mut down);
-        self.down = down;
+    fn start(&mut self, _model: &Model, _data: &Data) -> Result<()> {
+        // A foot on the ground or in the air at the start has not touched down yet.
+        self.air_secs.fill(0.0);
         self.count = 0;
         Ok(())
     }
@@ -256,11 +262,15 @@ impl Observer for Touchdowns {
     fn observe(&mut self, step: &StepView<'_>) -> Result<Flow> {
         let mut now = std::mem::take(&mut self.now);
         self.mark(step.data, &mut now);
-        for (down, &n) in self.down.iter_mut().zip(&now) {
-            if n && !*down {
-                self.count += 1;
+        for (air, &n) in self.air_secs.iter_mut().zip(&now) {
+            if n {
+                if *air >= TOUCHDOWN_MIN_AIR_SECS {
+                    self.count += 1;
+                }
+                *air = 0.0;
+            } else {
+                *air += step.dt_secs;
             }
-            *down = n;
         }
         self.now = now;
         Ok(Flow::Continue)

@@ -298,7 +298,7 @@ impl GaitMetrics {
             track.contact_n = 0;
             if foot_contact[k] {
                 if !track.in_contact {
-                    if track.off_secs >= 0.05 {
+                    if track.off_secs >= crate::engine::observers::TOUCHDOWN_MIN_AIR_SECS {
                         self.steps += 1;
                         // Step geometry against the other foot, in the heading frame.
                         let o = data.xpos()[self.feet[1 - k]];
