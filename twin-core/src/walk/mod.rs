@@ -422,6 +422,10 @@ struct Track {
     com: Vector2<f64>,
 }
 
+/// Two recovery steps whose predicted misses ([`Walker::recovery_miss`]) differ by less than
+/// this are equally good, m.
+const RECOVERY_MISS_TIE_M: f64 = 0.01;
+
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
 
@@ -844,13 +848,56 @@ impl Walker {
         }
     }
 
-    /// Which foot swings first: after a push (`push`: the measured DCM) the foot farther from
-    /// the DCM, so that the stance foot's ankle holds what it can while the swing foot
-    /// catches the rest (stepping with the nearer foot puts the ZMP on the far one, and the
-    /// DCM runs away faster than a step can follow); else toward the commanded side or turn.
+    /// Where a recovery step of `swing` lands, `secs` before touchdown, with the measured DCM
+    /// `dcm`: under the capture point predicted at touchdown (the ZMP held at the `stance`
+    /// sole meanwhile), within `max_step_adjust` fore-aft and at least 2/3 of a step width
+    /// beside the stance foot (the feet must not cross). Also that predicted capture point.
+    fn recovery_landing(
+        &self,
+        stance: &Foothold,
+        swing: Side,
+        dcm: Vector2<f64>,
+        secs: f64,
+    ) -> (Vector2<f64>, Vector2<f64>) {
+        let o = &self.options;
+        let p = self.clamp_to_sole(stance, dcm);
+        let xi_td = p + (dcm - p) * (self.omega * secs.max(0.0)).exp();
+        let rel = Rotation2::new(-stance.yaw) * (xi_td - stance.pos);
+        let side = swing.sign();
+        let reach = o.max_step_adjust;
+        let x = (rel.x * o.step_adjust_gain).clamp(-reach, reach);
+        let y = (side * rel.y * o.step_adjust_gain).clamp(o.step_width * 2.0 / 3.0, o.step_width + reach);
+        (stance.pos + Rotation2::new(stance.yaw) * Vector2::new(x, side * y), xi_td)
+    }
+
+    /// How far the capture point predicted at a recovery step's touchdown stays outside the
+    /// feet's support once `swing` has landed where [`Walker::recovery_landing`] puts it, m:
+    /// 0 when that one step captures the push.
+    fn recovery_miss(&self, feet: &[Foothold; 2], swing: Side, dcm: Vector2<f64>) -> f64 {
+        let o = &self.options;
+        let stance = feet[swing.other().index()];
+        let secs = o.recovery_double_support_secs + o.recovery_swing_secs;
+        let (landing, xi_td) = self.recovery_landing(&stance, swing, dcm, secs);
+        let mut landed = [stance; 2];
+        landed[swing.index()] = Foothold { side: swing, pos: landing, yaw: stance.yaw };
+        (xi_td - self.clamp_to_support(xi_td, &landed)).norm()
+    }
+
+    /// Which foot swings first: after a push (`push`: the measured DCM) the one whose step
+    /// leaves the capture point predicted at touchdown least outside the feet
+    /// ([`Walker::recovery_miss`]): a foot that would have to cross the other to get under it
+    /// (a sideways push toward the stance foot) can't, and stepping it in place again and
+    /// again lets the DCM run away. When both do equally well, the foot farther from the DCM,
+    /// so that the stance foot's ankle holds what it can while the swing foot catches the
+    /// rest (stepping with the nearer foot puts the ZMP on the far one, and the DCM runs away
+    /// faster than a step can follow); else toward the commanded side or turn.
     fn first_swing(&self, push: Option<Vector2<f64>>, feet: &[Foothold; 2]) -> Side {
         match push {
             Some(dcm) => {
+                let (ml, mr) = (self.recovery_miss(feet, Side::Left, dcm), self.recovery_miss(feet, Side::Right, dcm));
+                if (ml - mr).abs() > RECOVERY_MISS_TIE_M {
+                    return if ml < mr { Side::Left } else { Side::Right };
+                }
                 let gap = |f: &Foothold| (self.clamp_to_sole(f, dcm) - dcm).norm();
                 let (gl, gr) = (gap(&feet[0]), gap(&feet[1]));
                 if (gl - gr).abs() > 1e-3 {
@@ -1062,19 +1109,10 @@ impl Controller for Walker {
                     }
                     replan = true;
                 } else if self.recovering && step.swing_phase(t) > 0.0 && step.swing_phase(t) < 0.7 {
-                    // Recovery step: land under the capture point predicted at touchdown (the
-                    // ZMP held at the stance foot meanwhile), at least a step width beside it.
-                    let remaining = step.end() - t;
-                    let p = self.clamp_to_sole(&step.stance, dcm);
-                    let xi = p + (dcm - p) * (self.omega * remaining).exp();
-                    let p = step.stance.pos;
-                    let rel = Rotation2::new(-step.stance.yaw) * (xi - p);
-                    let side = step.swing_to.side.sign();
-                    let reach = o.max_step_adjust;
-                    let x = (rel.x * o.step_adjust_gain).clamp(-reach, reach);
-                    let y = (side * rel.y * o.step_adjust_gain).clamp(o.step_width * 2.0 / 3.0, o.step_width + reach);
+                    // Recovery step: land under the capture point predicted at touchdown.
+                    let (landing, _) = self.recovery_landing(&step.stance, step.swing_to.side, dcm, step.end() - t);
                     let mut adjusted = step;
-                    adjusted.swing_to.pos = p + Rotation2::new(step.stance.yaw) * Vector2::new(x, side * y);
+                    adjusted.swing_to.pos = landing;
                     self.mode = Mode::Walking(adjusted);
                     replan = true;
                 } else if !self.recovering && self.swing_s < 0.7 {
