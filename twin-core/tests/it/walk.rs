@@ -363,3 +363,41 @@ fn walk_scenario_walks_back_to_its_line_after_sideways_kicks() {
     assert!(free.lateral_m.abs() > 0.5, "without the line hold: {} m off the line", free.lateral_m);
     assert!(held.lateral_m.abs() < 0.1, "with the line hold: {} m off the line", held.lateral_m);
 }
+
+/// Recovery steps of `stand.toml` reach their landing spot by 60 % of the swing
+/// (`recovery_reach_fraction`): a backward kick of 0.6 m/s of the whole robot (capture point
+/// 0.15 m behind, the soles reach 0.10 m), and a 0.55 m/s kick 1.6 s after one in another
+/// direction (the second comes while the feet stand apart from the first step), are caught by
+/// stepping. With the foot's move spread over the whole swing (1.0, the walking steps' blend)
+/// the sideways and backward steps land short, and the robot falls to each of them (in the lab,
+/// 8 directions × 8 directions of two 0.55 m/s kicks: 0 falls against 9).
+#[test]
+fn stand_scenario_recovery_steps_reach_their_spot_early() {
+    // v m/s × 35.7 kg in 0.05 s on the pelvis at angle `deg` from +x.
+    let force = |v: f64, deg: f64| {
+        let f = v * 35.7 / 0.05;
+        [f * deg.to_radians().cos(), f * deg.to_radians().sin(), 0.0]
+    };
+    let kicks: [&[(f64, f64, f64)]; 3] =
+        [&[(3.0, 0.6, 180.0)], &[(3.0, 0.55, 0.0), (4.6, 0.55, 90.0)], &[(3.0, 0.55, 180.0), (4.6, 0.55, 180.0)]];
+    let shipped = Scenario::load(scenarios().join("stand.toml")).unwrap();
+    assert_eq!(shipped.walk.recovery_reach_fraction, 0.6);
+    for pushes in kicks {
+        let lab = |sc: &mut Scenario| {
+            sc.pushes.clear();
+            sc.duration_secs = 7.0;
+            sc.checks.max_distance = None;
+            for &(time, v, deg) in pushes {
+                sc.pushes.push(Push { time, duration: 0.05, force: force(v, deg), body: None });
+            }
+        };
+        let (early, _, _) = run_scenario(shipped.clone(), lab);
+        assert!(!early.fell, "{pushes:?}: fell at {:?}", early.fall_time_secs);
+        assert!(early.steps >= pushes.len() as u64, "{pushes:?}: caught by stepping, {} steps", early.steps);
+        let (spread, _, _) = run_scenario(shipped.clone(), |sc| {
+            lab(sc);
+            sc.walk.recovery_reach_fraction = 1.0;
+        });
+        assert!(spread.fell, "{pushes:?}: the foot moving over the whole swing fell in the lab: {spread:?}");
+    }
+}
