@@ -152,6 +152,10 @@ pub struct WalkOptions {
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
     pub bodies: BodyNames,
+    /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
+    /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
+    /// the ground and a moved spot drags it sideways).
+    pub step_adjust_until: f64,
 }
 
 impl Default for WalkOptions {
@@ -194,6 +198,7 @@ impl Default for WalkOptions {
             swing_stiffness: 0.3,
             ik_iterations: 1,
             bodies: BodyNames::default(),
+            step_adjust_until: 0.7,
         }
     }
 }
@@ -265,6 +270,9 @@ impl WalkOptions {
         }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
+        }
+        if !(0.0..=1.0).contains(&self.step_adjust_until) {
+            return Err(("step_adjust_until", format!("must be in [0, 1] (got {})", self.step_adjust_until)));
         }
         if !(0.0..=1.0).contains(&self.step_adjust_ankle) {
             return Err(("step_adjust_ankle", format!("must be in [0, 1] (got {})", self.step_adjust_ankle)));
@@ -1077,7 +1085,7 @@ impl Controller for Walker {
                     adjusted.swing_to.pos = p + Rotation2::new(step.stance.yaw) * Vector2::new(x, side * y);
                     self.mode = Mode::Walking(adjusted);
                     replan = true;
-                } else if !self.recovering && self.swing_s < 0.7 {
+                } else if !self.recovering && self.swing_s < o.step_adjust_until {
                     self.mode = Mode::Walking(self.corrected_step(&step, t, dcm));
                     replan = true;
                 }
