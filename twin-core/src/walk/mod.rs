@@ -156,6 +156,11 @@ pub struct WalkOptions {
     /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
     /// the ground and a moved spot drags it sideways).
     pub step_adjust_until: f64,
+    /// A swinging leg's IK target is placed from the measured pelvis pose instead of the
+    /// commanded one, so the foot follows its trajectory in the world (default: false: a
+    /// body tilted by a push carries the swing foot with it, into the ground short of its
+    /// landing spot).
+    pub swing_from_measured_pelvis: bool,
 }
 
 impl Default for WalkOptions {
@@ -199,6 +204,7 @@ impl Default for WalkOptions {
             ik_iterations: 1,
             bodies: BodyNames::default(),
             step_adjust_until: 0.7,
+            swing_from_measured_pelvis: false,
         }
     }
 }
@@ -1205,8 +1211,13 @@ impl Controller for Walker {
             let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
-            let inv = pelvis_rot.inverse();
-            let target = (inv * (foot - pelvis_pos), inv * rot);
+            let (base_pos, base_rot) = if o.swing_from_measured_pelvis && swinging == Some(leg) {
+                (self.frames.xpos[self.body.pelvis], self.frames.xrot[self.body.pelvis])
+            } else {
+                (pelvis_pos, pelvis_rot)
+            };
+            let inv = base_rot.inverse();
+            let target = (inv * (foot - base_pos), inv * rot);
             let ik = &self.ik[leg];
             let mut q = [0.0; 12];
             let n = ik.len().min(12);
