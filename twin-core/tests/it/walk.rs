@@ -363,3 +363,36 @@ fn walk_scenario_walks_back_to_its_line_after_sideways_kicks() {
     assert!(free.lateral_m.abs() > 0.5, "without the line hold: {} m off the line", free.lateral_m);
     assert!(held.lateral_m.abs() < 0.1, "with the line hold: {} m off the line", held.lateral_m);
 }
+
+/// Kicks of 0.45 m/s while walking that need the landing spot moved late in the swing and the
+/// swing foot to reach it with the body rolled: to the left 0.43 s into the right foot's stance
+/// (the left foot about to land; at `step_adjust_until` 0.7 it lands at its planned spot with
+/// the DCM beyond it) and to the right 0.15 s into it (toward the stance side: the left foot
+/// lands narrow, then the right one steps out, which lowered with the rolled body touched
+/// down short when its target came from the commanded pelvis). `walk.toml` catches both and
+/// walks on; with the defaults of `step_adjust_until` and `swing_from_measured_pelvis` the
+/// walker falls to both (the lab: 11 of 64 single kicks of 0.45/0.6 m/s fell, 21 before).
+#[test]
+fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
+    // 0.45 m/s × 35.7 kg in 0.05 s on the pelvis.
+    let kick = |sc: &mut Scenario, time: f64, force_y: f64| {
+        sc.duration_secs = 9.0;
+        sc.checks = Default::default();
+        sc.pushes.push(Push { time, duration: 0.05, force: [0.0, force_y, 0.0], body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.step_adjust_until > 0.9 && shipped.walk.swing_from_measured_pelvis);
+    let defaults = WalkOptions::default();
+    for (time, force_y) in [(4.68, 321.3), (4.4, -321.3)] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force_y));
+        assert!(!s.fell, "kick {force_y} N at {time} s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m > 2.0, "kick {force_y} N at {time} s: walked on {} m", s.forward_m);
+        assert!(s.lateral_m.abs() < 0.3, "kick {force_y} N at {time} s: {} m off the line", s.lateral_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, time, force_y);
+            sc.walk.step_adjust_until = defaults.step_adjust_until;
+            sc.walk.swing_from_measured_pelvis = defaults.swing_from_measured_pelvis;
+        });
+        assert!(s.fell, "kick {force_y} N at {time} s: the defaults fell in the lab, now walked {} m", s.forward_m);
+    }
+}
