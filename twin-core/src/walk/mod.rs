@@ -414,6 +414,10 @@ pub struct Walker {
     /// that it reaches 1 at the step's end, continuous when the touchdown is moved earlier.
     swing_s: f64,
     swing_t: f64,
+    /// Per leg, how much of its IK target is placed from the measured pelvis pose rather than
+    /// the commanded one (`swing_from_measured_pelvis`): 1 while it swings, then back to 0
+    /// over [`MEASURED_FRAME_RELEASE_SECS`] after touchdown.
+    measured_frame: [f64; 2],
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
 }
@@ -435,6 +439,11 @@ struct Track {
     /// CoM reference, world x y, m: follows the DCM reference by `ċ = ω(ξ_ref − c)`.
     com: Vector2<f64>,
 }
+
+/// Time over which a landed leg's IK target returns from the measured pelvis frame to the
+/// commanded one, s: switching at once moves the landed foot by the pelvis's pose error
+/// (a rolled body lifts or drags the foot it has just put down).
+const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -513,6 +522,7 @@ impl Walker {
             track: Track::default(),
             swing_s: 0.0,
             swing_t: 0.0,
+            measured_frame: [0.0; 2],
             diagnostics: Diagnostics::default(),
             body,
             options,
@@ -1211,8 +1221,16 @@ impl Controller for Walker {
             let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
-            let (base_pos, base_rot) = if o.swing_from_measured_pelvis && swinging == Some(leg) {
-                (self.frames.xpos[self.body.pelvis], self.frames.xrot[self.body.pelvis])
+            let w = &mut self.measured_frame[leg];
+            *w = if o.swing_from_measured_pelvis && swinging == Some(leg) {
+                1.0
+            } else {
+                (*w - self.dt / MEASURED_FRAME_RELEASE_SECS).max(0.0)
+            };
+            let (base_pos, base_rot) = if *w > 0.0 {
+                let (pos, rot) = (self.frames.xpos[self.body.pelvis], self.frames.xrot[self.body.pelvis]);
+                // (Half a turn apart, e.g. fallen over, has no slerp: the measured pose then.)
+                (pelvis_pos.lerp(&pos, *w), pelvis_rot.try_slerp(&rot, *w, 1e-9).unwrap_or(rot))
             } else {
                 (pelvis_pos, pelvis_rot)
             };
