@@ -160,6 +160,15 @@ pub struct WalkOptions {
     /// successes with 1.0 (adjusted until 0.7), 190 + 190 with 0.6, 191 + 186 with 0.7,
     /// 187 + 178 with 0.5.
     pub recovery_reach_fraction: f64,
+    /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
+    /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
+    /// the ground and a moved spot drags it sideways).
+    pub step_adjust_until: f64,
+    /// A swinging leg's IK target is placed from the measured pelvis pose instead of the
+    /// commanded one, so the foot follows its trajectory in the world (default: false: a
+    /// body tilted by a push carries the swing foot with it, into the ground short of its
+    /// landing spot).
+    pub swing_from_measured_pelvis: bool,
 }
 
 impl Default for WalkOptions {
@@ -203,6 +212,8 @@ impl Default for WalkOptions {
             ik_iterations: 1,
             bodies: BodyNames::default(),
             recovery_reach_fraction: 0.6,
+            step_adjust_until: 0.7,
+            swing_from_measured_pelvis: false,
         }
     }
 }
@@ -274,6 +285,9 @@ impl WalkOptions {
         }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
+        }
+        if !(0.0..=1.0).contains(&self.step_adjust_until) {
+            return Err(("step_adjust_until", format!("must be in [0, 1] (got {})", self.step_adjust_until)));
         }
         if !(0.0..=1.0).contains(&self.step_adjust_ankle) {
             return Err(("step_adjust_ankle", format!("must be in [0, 1] (got {})", self.step_adjust_ankle)));
@@ -415,6 +429,10 @@ pub struct Walker {
     /// that it reaches 1 at the step's end, continuous when the touchdown is moved earlier.
     swing_s: f64,
     swing_t: f64,
+    /// Per leg, how much of its IK target is placed from the measured pelvis pose rather than
+    /// the commanded one (`swing_from_measured_pelvis`): 1 while it swings, then back to 0
+    /// over [`MEASURED_FRAME_RELEASE_SECS`] after touchdown.
+    measured_frame: [f64; 2],
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
 }
@@ -440,6 +458,10 @@ struct Track {
 /// Two recovery steps whose predicted misses ([`Walker::recovery_miss`]) differ by less than
 /// this are equally good, m.
 const RECOVERY_MISS_TIE_M: f64 = 0.01;
+/// Time over which a landed leg's IK target returns from the measured pelvis frame to the
+/// commanded one, s: switching at once moves the landed foot by the pelvis's pose error
+/// (a rolled body lifts or drags the foot it has just put down).
+const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -518,6 +540,7 @@ impl Walker {
             track: Track::default(),
             swing_s: 0.0,
             swing_t: 0.0,
+            measured_frame: [0.0; 2],
             diagnostics: Diagnostics::default(),
             body,
             options,
@@ -1134,7 +1157,7 @@ impl Controller for Walker {
                     adjusted.swing_to.pos = landing;
                     self.mode = Mode::Walking(adjusted);
                     replan = true;
-                } else if !self.recovering && self.swing_s < 0.7 {
+                } else if !self.recovering && self.swing_s < o.step_adjust_until {
                     self.mode = Mode::Walking(self.corrected_step(&step, t, dcm));
                     replan = true;
                 }
@@ -1258,8 +1281,21 @@ impl Controller for Walker {
             let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
-            let inv = pelvis_rot.inverse();
-            let target = (inv * (foot - pelvis_pos), inv * rot);
+            let w = &mut self.measured_frame[leg];
+            *w = if o.swing_from_measured_pelvis && swinging == Some(leg) {
+                1.0
+            } else {
+                (*w - self.dt / MEASURED_FRAME_RELEASE_SECS).max(0.0)
+            };
+            let (base_pos, base_rot) = if *w > 0.0 {
+                let (pos, rot) = (self.frames.xpos[self.body.pelvis], self.frames.xrot[self.body.pelvis]);
+                // (Half a turn apart, e.g. fallen over, has no slerp: the measured pose then.)
+                (pelvis_pos.lerp(&pos, *w), pelvis_rot.try_slerp(&rot, *w, 1e-9).unwrap_or(rot))
+            } else {
+                (pelvis_pos, pelvis_rot)
+            };
+            let inv = base_rot.inverse();
+            let target = (inv * (foot - base_pos), inv * rot);
             let ik = &self.ik[leg];
             let mut q = [0.0; 12];
             let n = ik.len().min(12);

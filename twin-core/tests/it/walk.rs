@@ -312,7 +312,8 @@ fn walk_scenario_catches_kicks_while_stepping() {
 /// `zmp_inward`) the DCM runs farther inside the stance foot early in the step, and 0.3 m/s
 /// kicks to the right at the start and 0.15 s into the right foot's stance are held by its
 /// ankle; with the ZMP at the sole's centre the DCM leaves the sole's outer edge and the walker
-/// falls over it.
+/// falls over it (without `step_adjust_until` and `swing_from_measured_pelvis`: with them,
+/// stepping out catches both kicks even with the ZMP at the centre).
 #[test]
 fn walk_scenario_holds_kicks_toward_the_stance_side() {
     // 0.3 m/s × 35.7 kg in 0.05 s on the pelvis, to the right (−y).
@@ -331,6 +332,9 @@ fn walk_scenario_holds_kicks_toward_the_stance_side() {
         let (s, _, _) = run_scenario(shipped.clone(), |sc| {
             kick(sc, time);
             sc.walk.zmp_inward = 0.0;
+            let defaults = WalkOptions::default();
+            sc.walk.step_adjust_until = defaults.step_adjust_until;
+            sc.walk.swing_from_measured_pelvis = defaults.swing_from_measured_pelvis;
         });
         centred_falls += usize::from(s.fell);
     }
@@ -340,12 +344,13 @@ fn walk_scenario_holds_kicks_toward_the_stance_side() {
 /// Sideways kicks while walking straight: the landing-spot corrections that catch them leave
 /// the walk offset sideways, and without `line_hold_gain` the offsets add up; `walk.toml`'s
 /// line hold (0.5 of the planned centre's offset per step) walks back to the start line (in
-/// the lab: 0.55 m off the line without it after eight 0.3-m/s kicks, 0.03 m with it).
+/// the lab: 1.03 m off the line without it 10 s after eight 0.3-m/s kicks, 0.03 m with it;
+/// with it 0.46 m off right after the last kick, since the kicks are caught by stepping out).
 #[test]
 fn walk_scenario_walks_back_to_its_line_after_sideways_kicks() {
     // 0.3 m/s × 35.7 kg in 0.05 s on the pelvis, to the left (+y), eight times.
     let kicks = |sc: &mut Scenario| {
-        sc.duration_secs = 18.0;
+        sc.duration_secs = 24.0;
         sc.checks = Default::default();
         for time in [3.0, 4.5, 6.0, 7.5, 9.0, 10.5, 12.0, 13.5] {
             sc.pushes.push(Push { time, duration: 0.05, force: [0.0, 214.2, 0.0], body: None });
@@ -399,5 +404,38 @@ fn stand_scenario_recovery_steps_reach_their_spot_early() {
             sc.walk.recovery_reach_fraction = 1.0;
         });
         assert!(spread.fell, "{pushes:?}: the foot moving over the whole swing fell in the lab: {spread:?}");
+    }
+}
+
+/// Kicks of 0.45 m/s while walking that need the landing spot moved late in the swing and the
+/// swing foot to reach it with the body rolled: to the left 0.43 s into the right foot's stance
+/// (the left foot about to land; at `step_adjust_until` 0.7 it lands at its planned spot with
+/// the DCM beyond it) and to the right 0.15 s into it (toward the stance side: the left foot
+/// lands narrow, then the right one steps out, which lowered with the rolled body touched
+/// down short when its target came from the commanded pelvis). `walk.toml` catches both and
+/// walks on; with the defaults of `step_adjust_until` and `swing_from_measured_pelvis` the
+/// walker falls to both (the lab: 11 of 64 single kicks of 0.45/0.6 m/s fell, 21 before).
+#[test]
+fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
+    // 0.45 m/s × 35.7 kg in 0.05 s on the pelvis.
+    let kick = |sc: &mut Scenario, time: f64, force_y: f64| {
+        sc.duration_secs = 9.0;
+        sc.checks = Default::default();
+        sc.pushes.push(Push { time, duration: 0.05, force: [0.0, force_y, 0.0], body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.step_adjust_until > 0.9 && shipped.walk.swing_from_measured_pelvis);
+    let defaults = WalkOptions::default();
+    for (time, force_y) in [(4.68, 321.3), (4.4, -321.3)] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force_y));
+        assert!(!s.fell, "kick {force_y} N at {time} s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m > 2.0, "kick {force_y} N at {time} s: walked on {} m", s.forward_m);
+        assert!(s.lateral_m.abs() < 0.3, "kick {force_y} N at {time} s: {} m off the line", s.lateral_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, time, force_y);
+            sc.walk.step_adjust_until = defaults.step_adjust_until;
+            sc.walk.swing_from_measured_pelvis = defaults.swing_from_measured_pelvis;
+        });
+        assert!(s.fell, "kick {force_y} N at {time} s: the defaults fell in the lab, now walked {} m", s.forward_m);
     }
 }
