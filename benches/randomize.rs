@@ -3,7 +3,7 @@
 //!
 //! `cargo bench --bench randomize [-- EPISODES SECONDS]` (default 24 episodes of 2.5 s).
 //!
-//! `cargo bench --bench randomize -- --scenario FILE [--episodes N] [--seed S]` measures
+//! `cargo bench --bench randomize -- --scenario FILE [--episodes N] [--seed S] [--reps R]` measures
 //! instead a scenario's randomized episodes (as `twin randomize --scenario FILE --threads 1`:
 //! the scenario's spec or the default one) against a plain C loop that replays each episode
 //! (see [`scenario_paired`]).
@@ -96,7 +96,11 @@ fn paired(episodes: u64, secs: f64) -> (f64, f64) {
 /// earlier sessions, a C loop of as many steps from `home` with zero control on the nominal
 /// model (the robot collapses: cheaper physics than walking). An unstable episode (MuJoCo reset
 /// a diverged state) has nothing to replay: it is left out of the times.
-fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
+///
+/// With `reps` > 1 each episode's twin run and C replay are timed `reps` times, alternately, and
+/// each keeps its fastest: on a shared machine a burst of load then slows one repetition of one
+/// side, not the figure (both sides measured alike, the same work each time).
+fn scenario_paired(path: &Path, episodes: u64, seed: u64, reps: u64) {
     let scenario = Scenario::load(path).unwrap_or_else(|e| panic!("{e}"));
     let default_model = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/models/humanoid.urdf"));
     let robot = scenario.robot(default_model).unwrap_or_else(|e| panic!("{e}"));
@@ -129,22 +133,34 @@ fn scenario_paired(path: &Path, episodes: u64, seed: u64) {
     for i in 0..episodes {
         let t = Instant::now();
         let r = worker.run(&batch, i, None).expect("episode");
-        let secs = t.elapsed().as_secs_f64();
+        let mut secs = t.elapsed().as_secs_f64();
         if r.unstable {
             // MuJoCo reset a diverged state (or raised an error): nothing to replay.
             unstable += 1;
             continue;
         }
-        twin_secs += secs;
         let again = worker.run_recorded(&batch, i, None, Some(&mut log)).expect("episode");
         assert_eq!(r, again, "episode {i} is not reproducible");
         let end = worker.data().expect("data");
         let (qpos, qvel) = (end.qpos().to_vec(), end.qvel().to_vec());
-        let mut data = Data::new(end.model().clone()).expect("data");
-        let t = Instant::now();
-        let n = log.replay_c(&mut data).expect("replay");
-        replay_secs += t.elapsed().as_secs_f64();
-        assert_eq!([data.qpos(), data.qvel()], [&qpos[..], &qvel[..]], "the C replay of episode {i} left it");
+        let model = end.model().clone();
+        let mut replay = f64::INFINITY;
+        let mut n = 0;
+        for rep in 0..reps {
+            if rep > 0 {
+                let t = Instant::now();
+                let again = worker.run(&batch, i, None).expect("episode");
+                secs = secs.min(t.elapsed().as_secs_f64());
+                assert_eq!(r, again, "episode {i} is not reproducible");
+            }
+            let mut data = Data::new(model.clone()).expect("data");
+            let t = Instant::now();
+            n = log.replay_c(&mut data).expect("replay");
+            replay = replay.min(t.elapsed().as_secs_f64());
+            assert_eq!([data.qpos(), data.qvel()], [&qpos[..], &qvel[..]], "the C replay of episode {i} left it");
+        }
+        twin_secs += secs;
+        replay_secs += replay;
 
         reset_to_home(&mut collapsing).expect("reset");
         let t = Instant::now();
@@ -215,7 +231,9 @@ fn main() {
         let path = args.get(k + 1).expect("--scenario FILE");
         let episodes = value("--episodes").map_or(20, |v| v.parse().expect("--episodes N"));
         let seed = value("--seed").map_or(0, |v| v.parse().expect("--seed S"));
-        scenario_paired(Path::new(path), episodes, seed);
+        let reps = value("--reps").map_or(1, |v| v.parse().expect("--reps N"));
+        assert!(reps >= 1, "--reps N needs N ≥ 1");
+        scenario_paired(Path::new(path), episodes, seed, reps);
         return;
     }
     let episodes: u64 = args.first().and_then(|a| a.parse().ok()).unwrap_or(24);
