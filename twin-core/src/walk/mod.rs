@@ -1295,6 +1295,14 @@ impl Controller for Walker {
         // 6. Leg IK: a swinging leg's every tick (its target moves fastest, and late lands short),
         // a supporting leg's on one tick in `ik_every_ticks` (in between its joints track the
         // last solution).
+        // The measured-pelvis weights move every tick, whether or not a leg's IK runs on it.
+        for (leg, w) in self.measured_frame.iter_mut().enumerate() {
+            *w = if o.swing_from_measured_pelvis && swinging == Some(leg) {
+                1.0
+            } else {
+                (*w - self.dt / MEASURED_FRAME_RELEASE_SECS).max(0.0)
+            };
+        }
         let solve_all = self.tick.is_multiple_of(o.ik_every_ticks);
         let mut ik_error: f64 = if solve_all { 0.0 } else { self.state.ik_error_m };
         for (leg, &(f, lift)) in foot_targets.iter().enumerate().filter(|&(leg, _)| solve_all || swinging == Some(leg))
@@ -1303,16 +1311,11 @@ impl Controller for Walker {
             let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
             let foot = sole - rot * l.sole_in_foot;
-            let w = &mut self.measured_frame[leg];
-            *w = if o.swing_from_measured_pelvis && swinging == Some(leg) {
-                1.0
-            } else {
-                (*w - self.dt / MEASURED_FRAME_RELEASE_SECS).max(0.0)
-            };
-            let (base_pos, base_rot) = if *w > 0.0 {
+            let w = self.measured_frame[leg];
+            let (base_pos, base_rot) = if w > 0.0 {
                 let (pos, rot) = (self.frames.xpos[self.body.pelvis], self.frames.xrot[self.body.pelvis]);
                 // (Half a turn apart, e.g. fallen over, has no slerp: the measured pose then.)
-                (pelvis_pos.lerp(&pos, *w), pelvis_rot.try_slerp(&rot, *w, 1e-9).unwrap_or(rot))
+                (pelvis_pos.lerp(&pos, w), pelvis_rot.try_slerp(&rot, w, 1e-9).unwrap_or(rot))
             } else {
                 (pelvis_pos, pelvis_rot)
             };
