@@ -31,6 +31,7 @@
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
 
+pub mod hip;
 pub mod kin;
 pub mod metrics;
 pub mod plan;
@@ -174,6 +175,16 @@ pub struct WalkOptions {
     /// 1, every tick: 2 saves a fifth of the IK but the randomized `walk.toml` falls more,
     /// 55 and 58 of 200 on seeds 0 and 11 against 42 and 47; both legs at 2, 53 and 64).
     pub ik_every_ticks: u64,
+    /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
+    /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
+    /// 0.0, off; 1: all of it, within `hip_max_lean_rad`).
+    pub hip_gain: f64,
+    /// Largest lean of the upper body the hip strategy commands (roll, pitch), rad (default:
+    /// [0.15, 0.4]: the hips' roll, which also spreads the legs, has less range to spare).
+    pub hip_max_lean_rad: [f64; 2],
+    /// Time constant of the upper body's return upright once the feet hold the ZMP again, s
+    /// (default: 0.4: the return moves the CMP back, which the feet then take).
+    pub hip_return_secs: f64,
 }
 
 impl Default for WalkOptions {
@@ -220,6 +231,9 @@ impl Default for WalkOptions {
             step_adjust_until: 0.7,
             swing_from_measured_pelvis: false,
             ik_every_ticks: 1,
+            hip_gain: 0.0,
+            hip_max_lean_rad: [0.15, 0.4],
+            hip_return_secs: 0.4,
         }
     }
 }
@@ -335,6 +349,20 @@ impl WalkOptions {
         if self.ik_every_ticks == 0 {
             return Err(("ik_every_ticks", "must be at least 1".into()));
         }
+        self.validate_hip()
+    }
+
+    /// The hip strategy's options ([`WalkOptions::validate`]).
+    fn validate_hip(&self) -> std::result::Result<(), (&'static str, String)> {
+        if !(self.hip_gain >= 0.0 && self.hip_gain.is_finite()) {
+            return Err(("hip_gain", format!("must be a non-negative number (got {})", self.hip_gain)));
+        }
+        if !self.hip_max_lean_rad.iter().all(|m| (0.0..=1.0).contains(m)) {
+            return Err(("hip_max_lean_rad", format!("must be in [0, 1] rad (got {:?})", self.hip_max_lean_rad)));
+        }
+        if !(self.hip_return_secs > 0.0 && self.hip_return_secs.is_finite()) {
+            return Err(("hip_return_secs", format!("must be a positive number (got {})", self.hip_return_secs)));
+        }
         Ok(())
     }
 }
@@ -444,6 +472,8 @@ pub struct Walker {
     measured_frame: [f64; 2],
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
+    /// The hip strategy's lean of the upper body (`hip_gain`).
+    hip: hip::HipStrategy,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -551,9 +581,11 @@ impl Walker {
             swing_t: 0.0,
             measured_frame: [0.0; 2],
             diagnostics: Diagnostics::default(),
+            hip: hip::HipStrategy::default(),
             body,
             options,
         };
+        walker.hip = walker.new_hip(model);
         walker.check_reach()?;
         walker.build_loops(model);
         Ok(walker)
@@ -1281,12 +1313,19 @@ impl Controller for Walker {
         let yaw_r = foot_targets[1].0.yaw;
         let heading = yaw_r + wrap(yaw_l - yaw_r) / 2.0;
         let (tilt, rate) = self.tilt(observation);
+        let (lean, tilt, rate) = self.hip_lean(zmp_cmd, dcm, &feet, swinging.and(stance_side), heading, tilt, rate);
+        // (Without a lean the correction alone, bit for bit.)
+        let lean_plus = |k: usize, c: f64| if lean[k] == 0.0 { c } else { lean[k] + c };
         let correction = [
             -(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0]),
             -(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1]),
         ];
         let pelvis_rot = kin::euler_quat(0.0, 0.0, heading)
-            * kin::euler_quat(correction[0].clamp(-0.2, 0.2), correction[1].clamp(-0.2, 0.2), 0.0);
+            * kin::euler_quat(
+                lean_plus(0, correction[0].clamp(-0.2, 0.2)),
+                lean_plus(1, correction[1].clamp(-0.2, 0.2)),
+                0.0,
+            );
         let off = Rotation2::new(heading) * self.pelvis_from_com.xy();
         let crouch = smooth(t / o.settle_secs.max(1e-9));
         let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
@@ -1437,6 +1476,50 @@ impl Controller for Walker {
 }
 
 impl Walker {
+    /// The hip strategy for the model, in its home pose.
+    fn new_hip(&self, model: &Model) -> hip::HipStrategy {
+        let mut frames = self.tree.frames();
+        self.tree.forward(&self.nominal, &mut frames);
+        hip::HipStrategy::new(model, &self.tree, &frames, &self.body, -self.gravity.z)
+    }
+
+    /// The hip strategy's lean of the upper body this tick (roll, pitch, heading frame, rad),
+    /// and the torso tilt and rate the tilt feedback acts on: measured against the lean, so
+    /// that the feedback holds the commanded lean instead of taking it back. `stance`: the
+    /// foot that alone supports (else both do). Zero, and the tilt unchanged, when off.
+    ///
+    /// What drives it is the commanded ZMP's distance beyond the feet, except during a recovery
+    /// step: there the ZMP is planned at the stance sole's edge and the landing spot is to
+    /// catch the rest, so the lean acts on the DCM beyond the stance sole and slows it while
+    /// the foot swings (the landing spot follows the slower DCM, and lands nearer).
+    #[allow(clippy::too_many_arguments)]
+    fn hip_lean(
+        &mut self,
+        zmp_cmd: Vector2<f64>,
+        dcm: Vector2<f64>,
+        feet: &[Foothold; 2],
+        stance: Option<Side>,
+        heading: f64,
+        tilt: [f64; 2],
+        rate: [f64; 2],
+    ) -> ([f64; 2], [f64; 2], [f64; 2]) {
+        let o = &self.options;
+        if o.hip_gain == 0.0 {
+            return ([0.0; 2], tilt, rate);
+        }
+        // What the feet give: the forces' points (step 7) are clamped the same way.
+        let wanted = if self.recovering && stance.is_some() { dcm } else { zmp_cmd };
+        let held = match stance {
+            Some(side) => self.clamp_to_sole(&feet[side.index()], wanted),
+            None => self.clamp_to_support(wanted, feet),
+        };
+        let excess = Rotation2::new(-heading) * (wanted - held);
+        let params =
+            hip::HipParams { gain: o.hip_gain, max_lean_rad: o.hip_max_lean_rad, return_secs: o.hip_return_secs };
+        let (lean, lean_rate) = self.hip.update(excess, stance.is_some(), self.dt, &params);
+        ([lean.x, lean.y], [tilt[0] - lean.x, tilt[1] - lean.y], [rate[0] - lean_rate.x, rate[1] - lean_rate.y])
+    }
+
     /// Refreshes the diagnostic messages from this tick's state at their rate.
     fn publish_diagnostics(&mut self, time_secs: f64) {
         let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.dt).round().max(1.0) as u64;
