@@ -125,3 +125,82 @@ impl HipStrategy {
         (self.lean_rad, self.rate_rad_s)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::walk::WalkOptions;
+
+    fn strategy() -> HipStrategy {
+        // The shipped humanoid's numbers, roughly: 350 N, 2 kg·m² about the hips.
+        HipStrategy {
+            lean_rad: Vector2::zeros(),
+            rate_rad_s: Vector2::zeros(),
+            inertia_kg_m2: Vector2::new(2.0, 2.0),
+            weight_n: 350.0,
+        }
+    }
+
+    const PARAMS: HipParams = HipParams { gain: 1.0, max_lean_rad: [0.15, 0.4], return_secs: 0.4 };
+
+    #[test]
+    fn leans_into_the_fall_as_fast_as_the_excess_asks_and_stops_at_its_bound() {
+        let mut hip = strategy();
+        let dt = 0.002;
+        // 5 cm beyond the toes: α = 350 · 0.05 / 2 = 8.75 rad/s², pitch forward only.
+        let (lean, rate) = hip.update(Vector2::new(0.05, 0.0), true, dt, &PARAMS);
+        assert!((rate.y - 8.75 * dt).abs() < 1e-12 && rate.x == 0.0 && lean.x == 0.0, "{rate:?}");
+        for _ in 0..500 {
+            hip.update(Vector2::new(0.05, 0.0), true, dt, &PARAMS);
+        }
+        // Braked to rest at the largest pitch, never past it.
+        assert!((hip.lean_rad.y - 0.4).abs() < 1e-3 && hip.rate_rad_s.y.abs() < 0.05, "{:?}", hip.lean_rad);
+        // A leftward excess rolls the top to the left (negative roll), within its own bound.
+        let mut hip = strategy();
+        for _ in 0..500 {
+            hip.update(Vector2::new(0.0, 0.05), true, dt, &PARAMS);
+        }
+        assert!((hip.lean_rad.x + 0.15).abs() < 1e-3 && hip.lean_rad.y == 0.0, "{:?}", hip.lean_rad);
+    }
+
+    #[test]
+    fn coasts_through_a_step_then_returns_upright() {
+        let mut hip = strategy();
+        let dt = 0.002;
+        // 0.2 s at 8.75 rad/s²: 1.75 rad/s, 0.175 rad.
+        for _ in 0..100 {
+            hip.update(Vector2::new(0.05, 0.0), true, dt, &PARAMS);
+        }
+        let (lean0, rate0) = (hip.lean_rad.y, hip.rate_rad_s.y);
+        assert!((rate0 - 1.75).abs() < 1e-9 && (lean0 - 0.175).abs() < 0.002, "{lean0} {rate0}");
+        // The excess gone mid-step: the lean keeps turning (braking only to stop at 0.4 rad).
+        hip.update(Vector2::zeros(), true, dt, &PARAMS);
+        assert!(hip.rate_rad_s.y > 0.9 * rate0 && hip.lean_rad.y > lean0);
+        // Landed: back upright within a few time constants, without overshoot.
+        let mut least = f64::INFINITY;
+        for _ in 0..1500 {
+            hip.update(Vector2::zeros(), false, dt, &PARAMS);
+            least = least.min(hip.lean_rad.y);
+        }
+        assert!(hip.lean_rad.y.abs() < 0.01 && least > -0.01, "{} (least {least})", hip.lean_rad.y);
+        // Millimetres of excess (quiet standing) move nothing.
+        let mut hip = strategy();
+        hip.update(Vector2::new(0.004, -0.004), false, dt, &PARAMS);
+        assert_eq!(hip.lean_rad, Vector2::zeros());
+    }
+
+    #[test]
+    fn options_out_of_range_name_the_option() {
+        let bad = [
+            WalkOptions { hip_gain: -1.0, ..WalkOptions::default() },
+            WalkOptions { hip_gain: f64::NAN, ..WalkOptions::default() },
+            WalkOptions { hip_max_lean_rad: [0.1, 1.5], ..WalkOptions::default() },
+            WalkOptions { hip_return_secs: 0.0, ..WalkOptions::default() },
+        ];
+        let names = ["hip_gain", "hip_gain", "hip_max_lean_rad", "hip_return_secs"];
+        for (o, name) in bad.iter().zip(names) {
+            assert_eq!(o.validate().unwrap_err().0, name);
+        }
+        assert!(WalkOptions { hip_gain: 1.0, ..WalkOptions::default() }.validate().is_ok());
+    }
+}

@@ -439,3 +439,33 @@ fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
         assert!(s.fell, "kick {force_y} N at {time} s: the defaults fell in the lab, now walked {} m", s.forward_m);
     }
 }
+
+/// The hip strategy (`hip_gain`, on in `stand.toml`): kicks of 0.7 m/s (25 N·s) diagonally
+/// forward-left and to the left, beyond what the recovery step alone catches (the capture
+/// point runs past the stance sole faster than the swing foot can follow), are caught when the
+/// upper body leans into the fall during the swing, moving the CMP beyond the stance sole:
+/// the DCM slows and the step lands under it. Without the lean the walker falls to both.
+#[test]
+fn stand_scenario_hip_strategy_catches_kicks_a_step_alone_does_not() {
+    // 0.7 m/s × 35.7 kg in 0.05 s on the pelvis at angle `deg` from +x.
+    let kick = |sc: &mut Scenario, deg: f64| {
+        let f = 0.7 * 35.7 / 0.05;
+        sc.pushes.clear();
+        sc.duration_secs = 6.0;
+        sc.checks.max_distance = None;
+        let force = [f * deg.to_radians().cos(), f * deg.to_radians().sin(), 0.0];
+        sc.pushes.push(Push { time: 3.0, duration: 0.05, force, body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("stand.toml")).unwrap();
+    assert!(shipped.walk.hip_gain > 0.0);
+    for deg in [45.0, 90.0] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, deg));
+        assert!(!s.fell, "kick at {deg}°: fell at {:?}", s.fall_time_secs);
+        assert!(s.distance_m < 0.5, "kick at {deg}°: recovered {} m away", s.distance_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, deg);
+            sc.walk.hip_gain = 0.0;
+        });
+        assert!(s.fell, "kick at {deg}°: without the hip strategy the walker fell in the lab, now {} steps", s.steps);
+    }
+}
