@@ -97,14 +97,14 @@ impl HipStrategy {
         // Roll about +x leans the top toward −y: a leftward excess rolls negative.
         let drive = [-excess_m.y, excess_m.x].map(|e| if e.abs() > DEADBAND_M { e } else { 0.0 });
         let tau = p.return_secs.max(dt_secs);
-        for k in 0..2 {
+        for (k, &drive) in drive.iter().enumerate() {
             let (lean, rate, max) = (self.lean_rad[k], self.rate_rad_s[k], p.max_lean_rad[k]);
             let outward = rate * lean > 0.0 || (lean == 0.0 && rate != 0.0);
             // Deceleration that stops an outward turn at the largest lean, rad/s².
             let room = (max - lean.abs()).max(1e-6);
             let stop = rate * rate / (2.0 * room);
-            let accel = if drive[k] != 0.0 {
-                let a = p.gain * self.weight_n * drive[k] / self.inertia_kg_m2[k];
+            let accel = if drive != 0.0 {
+                let a = p.gain * self.weight_n * drive / self.inertia_kg_m2[k];
                 if outward && a * rate >= 0.0 && stop >= a.abs() { -stop.copysign(rate) } else { a }
             } else if outward && stepping {
                 -stop.copysign(rate)
