@@ -9,9 +9,11 @@
 //!
 //! The lean is a trajectory the pelvis orientation follows (the leg IK puts it on the hips):
 //! driven, its angular acceleration is the one that gives the missing part of the CMP,
-//! `α = gain · m·g·e / I`, `e` the commanded ZMP's distance beyond the feet's support and `I`
-//! the upper body's moment of inertia about the hips (from the model's tree); undriven, it
-//! returns upright, critically damped.
+//! `α = gain · m·g·e / I`, `e` the commanded ZMP's distance beyond the feet's support (during
+//! a recovery step the DCM's beyond the stance sole: the step's ZMP is planned at the sole's
+//! edge) and `I` the upper body's moment of inertia about the hips (from the model's tree);
+//! undriven, it coasts to the end of a step, then returns upright, critically damped. The
+//! walker's tilt feedback acts on the tilt less the lean, so it holds the lean.
 
 use super::kin::{Body, Frames, Tree};
 use crate::mj::Model;
