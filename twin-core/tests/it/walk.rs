@@ -453,3 +453,30 @@ fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
         assert!(s.fell, "kick {force_y} N at {time} s: the defaults fell in the lab, now walked {} m", s.forward_m);
     }
 }
+
+/// `walk.toml`'s quick steps (0.35 s, down to 0.2-s swings): each step moves the support under
+/// the DCM sooner, so kicks of 0.5 m/s that the 0.5-s gait fell to (to the right 4.25 s in,
+/// backward 4.15 s in) are caught and the walk goes on (the lab, 0.5 m/s kicks in 8 directions
+/// × 10 times 4.0-4.45 s: 3 falls of 80, 7 at 0.5 s).
+#[test]
+fn walk_scenario_quick_steps_catch_kicks_the_half_second_gait_falls_to() {
+    // 0.5 m/s × 35.7 kg in 0.05 s on the pelvis.
+    let kick = |sc: &mut Scenario, time: f64, force: [f64; 3]| {
+        sc.duration_secs = 9.0;
+        sc.checks = Default::default();
+        sc.pushes.push(Push { time, duration: 0.05, force, body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.step_period < 0.4, "{}", shipped.walk.step_period);
+    for (time, force) in [(4.25, [0.0, -357.0, 0.0]), (4.15, [-357.0, 0.0, 0.0])] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force));
+        assert!(!s.fell, "kick {force:?} at {time} s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m > 2.0, "kick {force:?} at {time} s: walked on {} m", s.forward_m);
+        assert!(s.lateral_m.abs() < 0.3, "kick {force:?} at {time} s: {} m off the line", s.lateral_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, time, force);
+            half_second_steps(sc);
+        });
+        assert!(s.fell, "kick {force:?} at {time} s: the 0.5-s gait fell in the lab, now walked {} m", s.forward_m);
+    }
+}
