@@ -66,6 +66,14 @@ fn stand(duration: f64) -> Scenario {
     .unwrap()
 }
 
+/// `walk.toml` stepping every 0.5 s with 0.25-s shortest swings, the gait its kick tests were
+/// timed for (`walk.toml` now steps every 0.35 s): the kick times below fall at the phases of
+/// a step they name.
+fn half_second_steps(sc: &mut Scenario) {
+    sc.walk.step_period = 0.5;
+    sc.walk.min_single_support_secs = 0.25;
+}
+
 /// Priority 1: the shipped scenario walks ≥ 10 m straight at ≥ 0.3 m/s, drifting < 0.5 m.
 #[test]
 fn walks_ten_metres_straight() {
@@ -292,11 +300,13 @@ fn walker_reads_the_robots_imu() {
 /// Walking's push response (the step's DCM reference, landing spot and touchdown corrected for
 /// the DCM error at touchdown): a forward kick of 0.6 m/s of the whole robot early in a single
 /// support (capture point 0.15 m ahead, growing ×e^(ω·t) while the foot swings) and a 0.45 m/s
-/// kick to the swing foot's side are caught by stepping, and the walk goes on.
+/// kick to the swing foot's side are caught by stepping, and the walk goes on. Steps of 0.5 s
+/// ([`half_second_steps`]).
 #[test]
 fn walk_scenario_catches_kicks_while_stepping() {
     for (force, min_forward) in [([428.4, 0.0, 0.0], 2.0), ([0.0, 321.3, 0.0], 2.0)] {
         let (s, _, _) = run_scenario(Scenario::load(scenarios().join("walk.toml")).unwrap(), |sc| {
+            half_second_steps(sc);
             sc.duration_secs = 9.0;
             sc.checks = Default::default();
             // 0.05 s on the pelvis, 0.15 s into the right foot's stance (the left foot swings).
@@ -313,11 +323,13 @@ fn walk_scenario_catches_kicks_while_stepping() {
 /// kicks to the right at the start and 0.15 s into the right foot's stance are held by its
 /// ankle; with the ZMP at the sole's centre the DCM leaves the sole's outer edge and the walker
 /// falls over it (without `step_adjust_until` and `swing_from_measured_pelvis`: with them,
-/// stepping out catches both kicks even with the ZMP at the centre).
+/// stepping out catches both kicks even with the ZMP at the centre). Steps of 0.5 s
+/// ([`half_second_steps`]).
 #[test]
 fn walk_scenario_holds_kicks_toward_the_stance_side() {
     // 0.3 m/s × 35.7 kg in 0.05 s on the pelvis, to the right (−y).
     let kick = |sc: &mut Scenario, time: f64| {
+        half_second_steps(sc);
         sc.duration_secs = 9.0;
         sc.checks = Default::default();
         sc.pushes.push(Push { time, duration: 0.05, force: [0.0, -214.2, 0.0], body: None });
@@ -415,10 +427,12 @@ fn stand_scenario_recovery_steps_reach_their_spot_early() {
 /// down short when its target came from the commanded pelvis). `walk.toml` catches both and
 /// walks on; with the defaults of `step_adjust_until` and `swing_from_measured_pelvis` the
 /// walker falls to both (the lab: 11 of 64 single kicks of 0.45/0.6 m/s fell, 21 before).
+/// Steps of 0.5 s ([`half_second_steps`]).
 #[test]
 fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
     // 0.45 m/s × 35.7 kg in 0.05 s on the pelvis.
     let kick = |sc: &mut Scenario, time: f64, force_y: f64| {
+        half_second_steps(sc);
         sc.duration_secs = 9.0;
         sc.checks = Default::default();
         sc.pushes.push(Push { time, duration: 0.05, force: [0.0, force_y, 0.0], body: None });
@@ -467,5 +481,32 @@ fn stand_scenario_hip_strategy_catches_kicks_a_step_alone_does_not() {
             sc.walk.hip_gain = 0.0;
         });
         assert!(s.fell, "kick at {deg}°: without the hip strategy the walker fell in the lab, now {} steps", s.steps);
+    }
+}
+
+/// `walk.toml`'s quick steps (0.35 s, down to 0.2-s swings): each step moves the support under
+/// the DCM sooner, so kicks of 0.5 m/s that the 0.5-s gait fell to (to the right 4.25 s in,
+/// backward 4.15 s in) are caught and the walk goes on (the lab, 0.5 m/s kicks in 8 directions
+/// × 10 times 4.0-4.45 s: 3 falls of 80, 7 at 0.5 s).
+#[test]
+fn walk_scenario_quick_steps_catch_kicks_the_half_second_gait_falls_to() {
+    // 0.5 m/s × 35.7 kg in 0.05 s on the pelvis.
+    let kick = |sc: &mut Scenario, time: f64, force: [f64; 3]| {
+        sc.duration_secs = 9.0;
+        sc.checks = Default::default();
+        sc.pushes.push(Push { time, duration: 0.05, force, body: None });
+    };
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    assert!(shipped.walk.step_period < 0.4, "{}", shipped.walk.step_period);
+    for (time, force) in [(4.25, [0.0, -357.0, 0.0]), (4.15, [-357.0, 0.0, 0.0])] {
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force));
+        assert!(!s.fell, "kick {force:?} at {time} s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m > 2.0, "kick {force:?} at {time} s: walked on {} m", s.forward_m);
+        assert!(s.lateral_m.abs() < 0.3, "kick {force:?} at {time} s: {} m off the line", s.lateral_m);
+        let (s, _, _) = run_scenario(shipped.clone(), |sc| {
+            kick(sc, time, force);
+            half_second_steps(sc);
+        });
+        assert!(s.fell, "kick {force:?} at {time} s: the 0.5-s gait fell in the lab, now walked {} m", s.forward_m);
     }
 }
