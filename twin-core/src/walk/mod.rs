@@ -444,6 +444,18 @@ pub struct Walker {
     measured_frame: [f64; 2],
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
+    /// What the joint PD runs on besides the IK targets.
+    held: Held,
+}
+
+/// What the joint PD ([`Walker::joint_torques`]) takes from the last solve besides the IK
+/// targets `q_des`.
+#[derive(Debug, Clone, Default)]
+struct Held {
+    /// Feed-forward torque of each joint loop (in `loops`' order), N·m (N on a slide).
+    ff: Vec<f64>,
+    /// The leg that was swinging (its joints take the soft swing gains).
+    swinging: Option<usize>,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -551,6 +563,7 @@ impl Walker {
             swing_t: 0.0,
             measured_frame: [0.0; 2],
             diagnostics: Diagnostics::default(),
+            held: Held::default(),
             body,
             options,
         };
@@ -784,6 +797,7 @@ impl Walker {
                 }
             }
         }
+        self.held.ff = vec![0.0; loops.len()];
         self.loops = loops;
     }
 
@@ -1375,17 +1389,8 @@ impl Controller for Walker {
         }
 
         // 8. PD + feed-forward.
-        command.fill(0.0);
-        for l in &self.loops {
-            let (kp, kd) = match (l.leg, swinging) {
-                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
-                _ => (l.kp, l.kd),
-            };
-            let ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, &forces[..nforces]);
-            let q_target = self.q_des[l.qpos_adr];
-            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
-            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
-        }
+        self.hold_feed_forward(&forces[..nforces], swinging);
+        self.joint_torques(observation, command);
 
         // Telemetry.
         self.state.com_ref = [com_ref.x, com_ref.y, self.options.com_height];
@@ -1437,6 +1442,30 @@ impl Controller for Walker {
 }
 
 impl Walker {
+    /// Each joint loop's feed-forward torque (gravity and the planned contact `forces` at the
+    /// observed configuration, `self.frames`) and the swinging leg, kept for the joint PD
+    /// ([`Walker::joint_torques`]).
+    fn hold_feed_forward(&mut self, forces: &[(usize, Vector3<f64>, Vector3<f64>)], swinging: Option<usize>) {
+        self.held.swinging = swinging;
+        for (ff, l) in self.held.ff.iter_mut().zip(&self.loops) {
+            *ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, forces);
+        }
+    }
+
+    /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
+    fn joint_torques(&self, observation: &Observation<'_>, command: &mut [f64]) {
+        command.fill(0.0);
+        for (l, &ff) in self.loops.iter().zip(&self.held.ff) {
+            let (kp, kd) = match (l.leg, self.held.swinging) {
+                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
+                _ => (l.kp, l.kd),
+            };
+            let q_target = self.q_des[l.qpos_adr];
+            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
+            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+        }
+    }
+
     /// Refreshes the diagnostic messages from this tick's state at their rate.
     fn publish_diagnostics(&mut self, time_secs: f64) {
         let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.dt).round().max(1.0) as u64;
