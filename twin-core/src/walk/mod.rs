@@ -28,6 +28,9 @@
 //!    softened on a swinging leg so that `√(kp/I)·dt` stays small) plus the static torque that
 //!    holds every subtree against gravity and the planned contact forces.
 //!
+//! Steps 1–6 are the solve; with `plan_every_ticks` > 1 it runs on one physics step in that
+//! many, and the joint PD on every one, toward the last solve's targets.
+//!
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
 
@@ -169,11 +172,20 @@ pub struct WalkOptions {
     /// body tilted by a push carries the swing foot with it, into the ground short of its
     /// landing spot).
     pub swing_from_measured_pelvis: bool,
-    /// A supporting leg's IK runs on one control tick in this many, a swinging leg's every
-    /// tick; the joint PD and feed-forward run every tick on the targets last solved (default:
-    /// 1, every tick: 2 saves a fifth of the IK but the randomized `walk.toml` falls more,
-    /// 55 and 58 of 200 on seeds 0 and 11 against 42 and 47; both legs at 2, 53 and 64).
+    /// A supporting leg's IK runs on one control tick (a solve, see `plan_every_ticks`) in
+    /// this many, a swinging leg's on every one; the joint PD and feed-forward run on the
+    /// targets last solved (default: 1, every solve: 2 saves a fifth of the IK but the
+    /// randomized `walk.toml` falls more, 55 and 58 of 200 on seeds 0 and 11 against 42 and
+    /// 47; both legs at 2, 53 and 64).
     pub ik_every_ticks: u64,
+    /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
+    /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
+    /// runs on every step toward the last solve's targets, with its feed-forward and gains
+    /// (default: 1, every step: at 2 the walker costs half, but the randomized `walk.toml`
+    /// falls more, 43 and 45 of 200 on seeds 0 and 11 against 36 and 37; with the targets
+    /// moved on between solves at the rate of the last two, 50 and 58: that rate carries the
+    /// encoder and IMU noise the feedback passes into the targets).
+    pub plan_every_ticks: u64,
 }
 
 impl Default for WalkOptions {
@@ -220,6 +232,7 @@ impl Default for WalkOptions {
             step_adjust_until: 0.7,
             swing_from_measured_pelvis: false,
             ik_every_ticks: 1,
+            plan_every_ticks: 1,
         }
     }
 }
@@ -335,6 +348,12 @@ impl WalkOptions {
         if self.ik_every_ticks == 0 {
             return Err(("ik_every_ticks", "must be at least 1".into()));
         }
+        if !(1..=MAX_PLAN_EVERY_TICKS).contains(&self.plan_every_ticks) {
+            return Err((
+                "plan_every_ticks",
+                format!("must be in 1..={MAX_PLAN_EVERY_TICKS} (got {})", self.plan_every_ticks),
+            ));
+        }
         Ok(())
     }
 }
@@ -403,7 +422,12 @@ pub struct Walker {
     q_des: Vec<f64>,
     gravity: Vector3<f64>,
     omega: f64,
+    /// Control period: time between solves, `plan_every_ticks` physics steps, s.
     dt: f64,
+    /// The model's physics step (the joint PD's period), s.
+    physics_dt: f64,
+    /// Physics steps (calls of `compute`) since the reset.
+    physics_tick: u64,
     preview: PreviewGains,
     preview_ratio: u64,
     axes: [PreviewAxis; 2],
@@ -456,6 +480,8 @@ struct Held {
     ff: Vec<f64>,
     /// The leg that was swinging (its joints take the soft swing gains).
     swinging: Option<usize>,
+    /// Physics steps since the last solve.
+    since: u64,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -483,6 +509,10 @@ const RECOVERY_MISS_TIE_M: f64 = 0.01;
 /// commanded one, s: switching at once moves the landed foot by the pelvis's pose error
 /// (a rolled body lifts or drags the foot it has just put down).
 const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
+
+/// Largest `plan_every_ticks`: beyond a few physics steps between solves the extrapolated
+/// targets and held feed-forward are no longer a control of the same body.
+const MAX_PLAN_EVERY_TICKS: u64 = 10;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -522,7 +552,8 @@ impl Walker {
                 message: format!("gravity must point down (−z); the model's is {:?}", model.gravity()),
             });
         }
-        let dt = model.timestep_secs();
+        let physics_dt = model.timestep_secs();
+        let dt = physics_dt * options.plan_every_ticks as f64;
         let preview_ratio = ((0.005 / dt).round() as u64).max(1);
         let preview_dt = dt * preview_ratio as f64;
         let horizon = (options.preview_horizon / preview_dt).ceil() as usize;
@@ -539,6 +570,8 @@ impl Walker {
             gravity: Vector3::new(0.0, 0.0, -g),
             omega: (g / options.com_height).sqrt(),
             dt,
+            physics_dt,
+            physics_tick: 0,
             preview,
             preview_ratio,
             axes: [PreviewAxis::default(); 2],
@@ -760,7 +793,7 @@ impl Walker {
             let (kp, kd) = (kp * gear, kd * gear);
             let inertia = self.tree.subtree_axis_inertia(model, &frames, joint)
                 + model.dof_armature()[model.jnt_dofadr()[joint] as usize];
-            let kp_cap = (o.swing_stiffness / self.dt).powi(2) * inertia;
+            let kp_cap = (o.swing_stiffness / self.physics_dt).powi(2) * inertia;
             let kp_swing = kp.min(kp_cap);
             let kd_swing = (2.0 * o.damping_ratio * (kp_swing * inertia).sqrt())
                 .min(kd.max(0.0) + 2.0 * (kp_swing * inertia).sqrt());
@@ -797,7 +830,7 @@ impl Walker {
                 }
             }
         }
-        self.held.ff = vec![0.0; loops.len()];
+        self.held = Held { ff: vec![0.0; loops.len()], ..Held::default() };
         self.loops = loops;
     }
 
@@ -1101,6 +1134,14 @@ impl Controller for Walker {
     }
 
     fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        if self.tick > 0 && self.held.since + 1 < self.options.plan_every_ticks {
+            // Between solves (`plan_every_ticks`): the joint PD alone.
+            self.held.since += 1;
+            self.joint_torques(observation, command);
+            self.publish_diagnostics(observation.time_secs);
+            self.physics_tick += 1;
+            return;
+        }
         let t = observation.time_secs - self.t0;
         let o = self.options.clone();
         let gait = o.gait();
@@ -1407,6 +1448,7 @@ impl Controller for Walker {
         }
         self.publish_diagnostics(observation.time_secs);
         self.tick += 1;
+        self.physics_tick += 1;
     }
 
     /// CoM, ZMP and DCM (reference and actual) as points, the planned footsteps as poses, all
@@ -1450,6 +1492,7 @@ impl Walker {
         for (ff, l) in self.held.ff.iter_mut().zip(&self.loops) {
             *ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, forces);
         }
+        self.held.since = 0;
     }
 
     /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
@@ -1468,9 +1511,11 @@ impl Walker {
 
     /// Refreshes the diagnostic messages from this tick's state at their rate.
     fn publish_diagnostics(&mut self, time_secs: f64) {
-        let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.dt).round().max(1.0) as u64;
+        // Counted in physics steps: their rate whatever `plan_every_ticks` (between solves they
+        // repeat the last one's state).
+        let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.physics_dt).round().max(1.0) as u64;
         let d = &mut self.diagnostics;
-        d.fresh = self.tick.is_multiple_of(every);
+        d.fresh = self.physics_tick.is_multiple_of(every);
         if !d.fresh {
             return;
         }
