@@ -554,7 +554,9 @@ impl Walker {
         }
         let physics_dt = model.timestep_secs();
         let dt = physics_dt * options.plan_every_ticks as f64;
-        let preview_ratio = ((0.005 / dt).round() as u64).max(1);
+        // In solves: the preview (and the commanded CoM offset) no more often than at
+        // every-step solving, about 5 ms apart in physics steps.
+        let preview_ratio = ((0.005 / physics_dt).round() as u64).max(1).div_ceil(options.plan_every_ticks);
         let preview_dt = dt * preview_ratio as f64;
         let horizon = (options.preview_horizon / preview_dt).ceil() as usize;
         let preview =
