@@ -181,10 +181,10 @@ pub struct WalkOptions {
     /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
     /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
     /// runs on every step toward the last solve's targets, with its feed-forward and gains
-    /// (default: 1, every step: at 2 the walker costs half, but the randomized `walk.toml`
-    /// falls more, 43 and 45 of 200 on seeds 0 and 11 against 36 and 37; with the targets
-    /// moved on between solves at the rate of the last two, 50 and 58: that rate carries the
-    /// encoder and IMU noise the feedback passes into the targets).
+    /// (default: 1, every step: at 2 the walker costs about half, but the randomized
+    /// `walk.toml` falls more, 47 and 50 of 200 on seeds 0 and 11 against 36 and 37; with
+    /// the targets moved on between solves at the rate of the last two, 50 and 58: that rate
+    /// carries the sensor noise the feedback passes into the targets).
     pub plan_every_ticks: u64,
 }
 
@@ -1568,6 +1568,10 @@ mod tests {
         for bad in [0.0, 1.5, f64::NAN] {
             let o = WalkOptions { recovery_reach_fraction: bad, ..WalkOptions::default() };
             assert_eq!(o.validate().unwrap_err().0, "recovery_reach_fraction");
+        }
+        for bad in [0, MAX_PLAN_EVERY_TICKS + 1] {
+            let o = WalkOptions { plan_every_ticks: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "plan_every_ticks");
         }
     }
 }
