@@ -1,6 +1,6 @@
 //! The walking controller's cost per control tick against `mj_step` on the shipped humanoid.
 //!
-//!     cargo bench -p twin-core --bench walk -- [--steps N] [--reps R]
+//!     cargo bench -p twin-core --bench walk -- [--steps N] [--reps R] [--plan-every K]
 //!
 //! Each repetition resets the humanoid (armature as `scenarios/walk.toml`) and, back to back:
 //!
@@ -17,7 +17,10 @@
 //!    `mj_step2` (its final state checked against 3's: the timers change nothing).
 //!
 //! Medians over the repetitions are printed as one Markdown table row, with the controller's
-//! cost against each step and walking's per-core throughput against each C loop.
+//! cost against each step and walking's per-core throughput against each C loop. With
+//! `--plan-every K` (`WalkOptions::plan_every_ticks`, default 1) the walker solves on one step
+//! in K: its cost is given per physics step (every `compute` call) and per control tick (all
+//! its time over the solves, the joint PD of the steps between them included).
 
 use std::sync::Arc;
 use std::time::Instant;
@@ -31,12 +34,13 @@ fn median(mut v: Vec<f64>) -> f64 {
 }
 
 fn main() {
-    let (mut steps, mut reps) = (5_000u64, 7usize);
+    let (mut steps, mut reps, mut plan_every) = (5_000u64, 7usize, 1u64);
     let mut args = std::env::args().skip(1);
     while let Some(a) = args.next() {
         match a.as_str() {
             "--steps" => steps = args.next().and_then(|v| v.parse().ok()).expect("--steps N"),
             "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
+            "--plan-every" => plan_every = args.next().and_then(|v| v.parse().ok()).expect("--plan-every K"),
             _ => {}
         }
     }
@@ -48,7 +52,8 @@ fn main() {
     let mut command = vec![0.0; actuation.len(&model)];
     let mut commands = Vec::with_capacity(command.len() * steps as usize);
     let mut data = Data::new(model.clone()).unwrap();
-    let mut walker = Walker::new(&model, WalkOptions { vx: 0.3, ..WalkOptions::default() }).unwrap();
+    let options = WalkOptions { vx: 0.3, plan_every_ticks: plan_every, ..WalkOptions::default() };
+    let mut walker = Walker::new(&model, options).unwrap_or_else(|e| panic!("{e}"));
     let mut rows: [Vec<f64>; 6] = Default::default();
     let [collapsing, passive, walking, replay, ctrl, phys] = &mut rows;
     for _ in 0..reps {
@@ -112,18 +117,23 @@ fn main() {
         phys.push(p / steps as f64);
     }
     let [collapsing, passive, walking, replay, c, p] = rows.map(|v| median(v) * 1e6);
+    // The solves: the first step's and one in `plan_every` after it.
+    let solves = steps.div_ceil(plan_every);
+    let per_control_tick = c * steps as f64 / solves as f64;
     println!(
-        "| steps × reps | walker compute (µs/tick) | mj_step1+2 while walking (µs) | C replay of the walk, mj_step (µs) | \
+        "| steps × reps | plan every | walker compute (µs/physics step) | walker compute (µs/control tick) | \
+         mj_step1+2 while walking (µs) | C replay of the walk, mj_step (µs) | \
          walking tick, whole loop (µs) | C loop, collapsing (µs) | Rust mj_step1+2, collapsing (µs) | \
-         walker / step while walking | walker / C replay step | walker / collapsing C step | \
-         walking throughput / C replay | walking throughput / collapsing C loop |"
+         walker / step while walking | walker / C replay step | walker per control tick / step while walking | \
+         walker / collapsing C step | walking throughput / C replay | walking throughput / collapsing C loop |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     println!(
-        "| {steps} × {reps} | {c:.2} | {p:.2} | {replay:.2} | {walking:.2} | {collapsing:.2} | {passive:.2} | \
-         {:.1} % | {:.1} % | {:.1} % | {:.3} | {:.3} |",
+        "| {steps} × {reps} | {plan_every} | {c:.2} | {per_control_tick:.2} | {p:.2} | {replay:.2} | {walking:.2} | \
+         {collapsing:.2} | {passive:.2} | {:.1} % | {:.1} % | {:.1} % | {:.1} % | {:.3} | {:.3} |",
         100.0 * c / p,
         100.0 * c / replay,
+        100.0 * per_control_tick / p,
         100.0 * c / collapsing,
         replay / walking,
         collapsing / walking

@@ -28,6 +28,9 @@
 //!    softened on a swinging leg so that `√(kp/I)·dt` stays small) plus the static torque that
 //!    holds every subtree against gravity and the planned contact forces.
 //!
+//! Steps 1–6 are the solve; with `plan_every_ticks` > 1 it runs on one physics step in that
+//! many, and the joint PD on every one, toward the last solve's targets.
+//!
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
 
@@ -170,10 +173,11 @@ pub struct WalkOptions {
     /// body tilted by a push carries the swing foot with it, into the ground short of its
     /// landing spot).
     pub swing_from_measured_pelvis: bool,
-    /// A supporting leg's IK runs on one control tick in this many, a swinging leg's every
-    /// tick; the joint PD and feed-forward run every tick on the targets last solved (default:
-    /// 1, every tick: 2 saves a fifth of the IK but the randomized `walk.toml` falls more,
-    /// 55 and 58 of 200 on seeds 0 and 11 against 42 and 47; both legs at 2, 53 and 64).
+    /// A supporting leg's IK runs on one control tick (a solve, see `plan_every_ticks`) in
+    /// this many, a swinging leg's on every one; the joint PD and feed-forward run on the
+    /// targets last solved (default: 1, every solve: 2 saves a fifth of the IK but the
+    /// randomized `walk.toml` falls more, 55 and 58 of 200 on seeds 0 and 11 against 42 and
+    /// 47; both legs at 2, 53 and 64).
     pub ik_every_ticks: u64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
@@ -185,6 +189,14 @@ pub struct WalkOptions {
     /// Time constant of the upper body's return upright once the feet hold the ZMP again, s
     /// (default: 0.4: the return moves the CMP back, which the feet then take).
     pub hip_return_secs: f64,
+    /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
+    /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
+    /// runs on every step toward the last solve's targets, with its feed-forward and gains
+    /// (default: 1, every step: at 2 the walker costs about half, but the randomized
+    /// `walk.toml` falls more, 47 and 50 of 200 on seeds 0 and 11 against 36 and 37; with
+    /// the targets moved on between solves at the rate of the last two, 50 and 58: that rate
+    /// carries the sensor noise the feedback passes into the targets).
+    pub plan_every_ticks: u64,
 }
 
 impl Default for WalkOptions {
@@ -234,6 +246,7 @@ impl Default for WalkOptions {
             hip_gain: 0.0,
             hip_max_lean_rad: [0.15, 0.4],
             hip_return_secs: 0.4,
+            plan_every_ticks: 1,
         }
     }
 }
@@ -349,6 +362,12 @@ impl WalkOptions {
         if self.ik_every_ticks == 0 {
             return Err(("ik_every_ticks", "must be at least 1".into()));
         }
+        if !(1..=MAX_PLAN_EVERY_TICKS).contains(&self.plan_every_ticks) {
+            return Err((
+                "plan_every_ticks",
+                format!("must be in 1..={MAX_PLAN_EVERY_TICKS} (got {})", self.plan_every_ticks),
+            ));
+        }
         self.validate_hip()
     }
 
@@ -431,7 +450,12 @@ pub struct Walker {
     q_des: Vec<f64>,
     gravity: Vector3<f64>,
     omega: f64,
+    /// Control period: time between solves, `plan_every_ticks` physics steps, s.
     dt: f64,
+    /// The model's physics step (the joint PD's period), s.
+    physics_dt: f64,
+    /// Physics steps (calls of `compute`) since the reset.
+    physics_tick: u64,
     preview: PreviewGains,
     preview_ratio: u64,
     axes: [PreviewAxis; 2],
@@ -474,6 +498,20 @@ pub struct Walker {
     diagnostics: Diagnostics,
     /// The hip strategy's lean of the upper body (`hip_gain`).
     hip: hip::HipStrategy,
+    /// What the joint PD runs on besides the IK targets.
+    held: Held,
+}
+
+/// What the joint PD ([`Walker::joint_torques`]) takes from the last solve besides the IK
+/// targets `q_des`.
+#[derive(Debug, Clone, Default)]
+struct Held {
+    /// Feed-forward torque of each joint loop (in `loops`' order), N·m (N on a slide).
+    ff: Vec<f64>,
+    /// The leg that was swinging (its joints take the soft swing gains).
+    swinging: Option<usize>,
+    /// Physics steps since the last solve.
+    since: u64,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -501,6 +539,10 @@ const RECOVERY_MISS_TIE_M: f64 = 0.01;
 /// commanded one, s: switching at once moves the landed foot by the pelvis's pose error
 /// (a rolled body lifts or drags the foot it has just put down).
 const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
+
+/// Largest `plan_every_ticks`: beyond a few physics steps between solves the extrapolated
+/// targets and held feed-forward are no longer a control of the same body.
+const MAX_PLAN_EVERY_TICKS: u64 = 10;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -540,8 +582,11 @@ impl Walker {
                 message: format!("gravity must point down (−z); the model's is {:?}", model.gravity()),
             });
         }
-        let dt = model.timestep_secs();
-        let preview_ratio = ((0.005 / dt).round() as u64).max(1);
+        let physics_dt = model.timestep_secs();
+        let dt = physics_dt * options.plan_every_ticks as f64;
+        // In solves: the preview (and the commanded CoM offset) no more often than at
+        // every-step solving, about 5 ms apart in physics steps.
+        let preview_ratio = ((0.005 / physics_dt).round() as u64).max(1).div_ceil(options.plan_every_ticks);
         let preview_dt = dt * preview_ratio as f64;
         let horizon = (options.preview_horizon / preview_dt).ceil() as usize;
         let preview =
@@ -557,6 +602,8 @@ impl Walker {
             gravity: Vector3::new(0.0, 0.0, -g),
             omega: (g / options.com_height).sqrt(),
             dt,
+            physics_dt,
+            physics_tick: 0,
             preview,
             preview_ratio,
             axes: [PreviewAxis::default(); 2],
@@ -582,6 +629,7 @@ impl Walker {
             measured_frame: [0.0; 2],
             diagnostics: Diagnostics::default(),
             hip: hip::HipStrategy::default(),
+            held: Held::default(),
             body,
             options,
         };
@@ -779,7 +827,7 @@ impl Walker {
             let (kp, kd) = (kp * gear, kd * gear);
             let inertia = self.tree.subtree_axis_inertia(model, &frames, joint)
                 + model.dof_armature()[model.jnt_dofadr()[joint] as usize];
-            let kp_cap = (o.swing_stiffness / self.dt).powi(2) * inertia;
+            let kp_cap = (o.swing_stiffness / self.physics_dt).powi(2) * inertia;
             let kp_swing = kp.min(kp_cap);
             let kd_swing = (2.0 * o.damping_ratio * (kp_swing * inertia).sqrt())
                 .min(kd.max(0.0) + 2.0 * (kp_swing * inertia).sqrt());
@@ -816,6 +864,7 @@ impl Walker {
                 }
             }
         }
+        self.held = Held { ff: vec![0.0; loops.len()], ..Held::default() };
         self.loops = loops;
     }
 
@@ -1119,6 +1168,14 @@ impl Controller for Walker {
     }
 
     fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        if self.tick > 0 && self.held.since + 1 < self.options.plan_every_ticks {
+            // Between solves (`plan_every_ticks`): the joint PD alone.
+            self.held.since += 1;
+            self.joint_torques(observation, command);
+            self.publish_diagnostics(observation.time_secs);
+            self.physics_tick += 1;
+            return;
+        }
         let t = observation.time_secs - self.t0;
         let o = self.options.clone();
         let gait = o.gait();
@@ -1414,17 +1471,8 @@ impl Controller for Walker {
         }
 
         // 8. PD + feed-forward.
-        command.fill(0.0);
-        for l in &self.loops {
-            let (kp, kd) = match (l.leg, swinging) {
-                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
-                _ => (l.kp, l.kd),
-            };
-            let ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, &forces[..nforces]);
-            let q_target = self.q_des[l.qpos_adr];
-            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
-            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
-        }
+        self.hold_feed_forward(&forces[..nforces], swinging);
+        self.joint_torques(observation, command);
 
         // Telemetry.
         self.state.com_ref = [com_ref.x, com_ref.y, self.options.com_height];
@@ -1441,6 +1489,7 @@ impl Controller for Walker {
         }
         self.publish_diagnostics(observation.time_secs);
         self.tick += 1;
+        self.physics_tick += 1;
     }
 
     /// CoM, ZMP and DCM (reference and actual) as points, the planned footsteps as poses, all
@@ -1520,11 +1569,38 @@ impl Walker {
         ([lean.x, lean.y], [tilt[0] - lean.x, tilt[1] - lean.y], [rate[0] - lean_rate.x, rate[1] - lean_rate.y])
     }
 
+    /// Each joint loop's feed-forward torque (gravity and the planned contact `forces` at the
+    /// observed configuration, `self.frames`) and the swinging leg, kept for the joint PD
+    /// ([`Walker::joint_torques`]).
+    fn hold_feed_forward(&mut self, forces: &[(usize, Vector3<f64>, Vector3<f64>)], swinging: Option<usize>) {
+        self.held.swinging = swinging;
+        for (ff, l) in self.held.ff.iter_mut().zip(&self.loops) {
+            *ff = self.tree.static_torque(&self.frames, l.joint, self.gravity, forces);
+        }
+        self.held.since = 0;
+    }
+
+    /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
+    fn joint_torques(&self, observation: &Observation<'_>, command: &mut [f64]) {
+        command.fill(0.0);
+        for (l, &ff) in self.loops.iter().zip(&self.held.ff) {
+            let (kp, kd) = match (l.leg, self.held.swinging) {
+                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
+                _ => (l.kp, l.kd),
+            };
+            let q_target = self.q_des[l.qpos_adr];
+            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
+            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+        }
+    }
+
     /// Refreshes the diagnostic messages from this tick's state at their rate.
     fn publish_diagnostics(&mut self, time_secs: f64) {
-        let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.dt).round().max(1.0) as u64;
+        // Counted in physics steps: their rate whatever `plan_every_ticks` (between solves they
+        // repeat the last one's state).
+        let every = ((1.0 / DIAGNOSTICS_RATE_HZ) / self.physics_dt).round().max(1.0) as u64;
         let d = &mut self.diagnostics;
-        d.fresh = self.tick.is_multiple_of(every);
+        d.fresh = self.physics_tick.is_multiple_of(every);
         if !d.fresh {
             return;
         }
@@ -1575,6 +1651,10 @@ mod tests {
         for bad in [0.0, 1.5, f64::NAN] {
             let o = WalkOptions { recovery_reach_fraction: bad, ..WalkOptions::default() };
             assert_eq!(o.validate().unwrap_err().0, "recovery_reach_fraction");
+        }
+        for bad in [0, MAX_PLAN_EVERY_TICKS + 1] {
+            let o = WalkOptions { plan_every_ticks: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "plan_every_ticks");
         }
     }
 }
