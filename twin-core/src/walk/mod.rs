@@ -185,6 +185,12 @@ pub struct WalkOptions {
     /// Time constant of the upper body's return upright once the feet hold the ZMP again, s
     /// (default: 0.4: the return moves the CMP back, which the feet then take).
     pub hip_return_secs: f64,
+    /// Walking, each step's advance counts from where the previous step was aimed (its
+    /// corrected landing spot) rather than where the foot landed, by this fraction of the
+    /// fore-aft gap, at most `max_step_adjust` (default: 0.0, from where it landed; 1: from the
+    /// aim). A swing foot that lands past its spot (at 0.35-s steps the shipped humanoid's land
+    /// 5.5 cm long) otherwise lengthens every step by that much: 0.42 m/s for 0.3 commanded.
+    pub progress_hold_gain: f64,
 }
 
 impl Default for WalkOptions {
@@ -234,6 +240,7 @@ impl Default for WalkOptions {
             hip_gain: 0.0,
             hip_max_lean_rad: [0.15, 0.4],
             hip_return_secs: 0.4,
+            progress_hold_gain: 0.0,
         }
     }
 }
@@ -348,6 +355,9 @@ impl WalkOptions {
         }
         if self.ik_every_ticks == 0 {
             return Err(("ik_every_ticks", "must be at least 1".into()));
+        }
+        if !(0.0..=1.0).contains(&self.progress_hold_gain) {
+            return Err(("progress_hold_gain", format!("must be in [0, 1] (got {})", self.progress_hold_gain)));
         }
         self.validate_hip()
     }
@@ -1055,9 +1065,28 @@ impl Walker {
         Step { ss: best.1 - ss_start, swing_to: Foothold { pos: best.2, ..step.swing_to }, ..*step }
     }
 
+    /// The walking step `step` with its landing spot moved fore-aft by `progress_hold_gain` of
+    /// the gap between its stance foot as aimed (`aimed`, the previous step's corrected landing
+    /// spot) and as landed, at most `max_step_adjust`: the advance the command asks for then
+    /// counts from the aim, so a foot that lands past its spot doesn't lengthen every step.
+    fn progress_held(&self, step: Step, aimed: &Foothold) -> Step {
+        let o = &self.options;
+        if aimed.side != step.stance.side {
+            return step;
+        }
+        let to_world = Rotation2::new(step.stance.yaw);
+        let past_m = (to_world.inverse() * (step.stance.pos - aimed.pos)).x;
+        let back_m = (-o.progress_hold_gain * past_m).clamp(-o.max_step_adjust, o.max_step_adjust);
+        let pos = step.swing_to.pos + to_world * Vector2::new(back_m, 0.0);
+        Step { swing_to: Foothold { pos, ..step.swing_to }, ..step }
+    }
+
     /// Starts a step with `swing` swinging from the feet `feet` at `t`.
     fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
+        if let (Mode::Walking(prev), false) = (self.mode, self.recovering) {
+            step = self.progress_held(step, &prev.swing_to);
+        }
         if self.recovering {
             // A recovery step: quick, since the DCM diverges meanwhile.
             step.ds = self.options.recovery_double_support_secs;
