@@ -1606,4 +1606,13 @@ mod tests {
             assert_eq!(o.validate().unwrap_err().0, "recovery_reach_fraction");
         }
     }
+
+    #[test]
+    fn progress_hold_gain_out_of_range_is_refused() {
+        for bad in [-0.1, 1.5, f64::NAN] {
+            let o = WalkOptions { progress_hold_gain: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "progress_hold_gain");
+        }
+        assert!(WalkOptions { progress_hold_gain: 1.0, ..WalkOptions::default() }.validate().is_ok());
+    }
 }
