@@ -578,3 +578,21 @@ fn solving_every_other_step_commands_what_every_step_solving_does() {
     assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
     assert!((summary.average_speed_mps - every_step.average_speed_mps).abs() < 0.05, "{summary}");
 }
+
+/// The nominal walk goes the commanded speed: `walk.toml`'s swing feet land ~5.5 cm past their
+/// spots at 0.35-s steps, and with each step's advance counted from where the foot landed
+/// (`progress_hold_gain` 0) every step is that much longer (0.42 m/s for 0.3 commanded); counted
+/// from where it was aimed, the walking speed is within 10 % of `vx`.
+#[test]
+fn walk_scenario_walks_at_its_commanded_speed() {
+    let shipped = Scenario::load(scenarios().join("walk.toml")).unwrap();
+    let walking_speed = |s: &GaitSummary, sc: &Scenario| s.forward_m / (sc.duration_secs - sc.walk.settle_secs);
+    let vx = shipped.walk.vx;
+    let (s, _, _) = run_scenario(shipped.clone(), |_| {});
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let held = walking_speed(&s, &shipped);
+    assert!((held - vx).abs() < 0.1 * vx, "{held} m/s walking for {vx} commanded");
+    let (s, _, _) = run_scenario(shipped.clone(), |sc| sc.walk.progress_hold_gain = 0.0);
+    let unheld = walking_speed(&s, &shipped);
+    assert!(unheld > 1.2 * vx, "without the hold {unheld} m/s for {vx} commanded");
+}
