@@ -2,18 +2,21 @@
 //! with numbers, and scenario errors that name the file, the line and the key.
 
 use super::common::{run, write};
+use std::path::{Path, PathBuf};
+
+/// Writes `dir/name`: a scenario of the shipped humanoid with the TOML `rest` after its model.
+fn humanoid_scenario(dir: &Path, name: &str, rest: &str) -> PathBuf {
+    let model = super::common::repo_root().join("models/humanoid.urdf");
+    write(dir, name, &format!("model = {:?}\n{rest}", model.display().to_string()))
+}
 
 #[test]
 fn walk_prints_gait_metrics_and_failed_checks_fail_the_command() {
     let dir = tempfile::tempdir().unwrap();
-    let model = super::common::repo_root().join("models/humanoid.urdf");
-    let file = write(
+    let file = humanoid_scenario(
         dir.path(),
         "short.toml",
-        &format!(
-            "model = {:?}\nduration = 3.0\n[walk]\nvx = 0.3\n[checks]\nfalls = 0\nmin_forward = 5.0\n",
-            model.display().to_string()
-        ),
+        "duration = 3.0\n[walk]\nvx = 0.3\n[checks]\nfalls = 0\nmin_forward = 5.0\n",
     );
     let (ok, out, err) = run(&["sim", "--scenario", file.to_str().unwrap()]);
     assert!(!ok, "min_forward 5 m in 3 s can't pass:\n{out}");
@@ -40,13 +43,8 @@ fn scenario_errors_name_file_line_and_key() {
 #[test]
 fn randomize_scenario_checks_decide_success() {
     let dir = tempfile::tempdir().unwrap();
-    let model = super::common::repo_root().join("models/humanoid.urdf");
     let scenario = |name: &str, checks: &str| {
-        write(
-            dir.path(),
-            name,
-            &format!("model = {:?}\nduration = 1.5\n[walk]\nvx = 0.0\n[checks]\n{checks}", model.display().to_string()),
-        )
+        humanoid_scenario(dir.path(), name, &format!("duration = 1.5\n[walk]\nvx = 0.0\n[checks]\n{checks}"))
     };
     let stand = scenario("stand.toml", "falls = 0\nmax_distance = 0.5\n");
     let out_dir = dir.path().join("out");
@@ -64,8 +62,9 @@ fn randomize_scenario_checks_decide_success() {
     let csv = std::fs::read_to_string(out_dir.join("episodes.csv")).unwrap();
     assert_eq!(csv.matches("scenario=PASS").count(), 2, "{csv}");
     // Standing, the soles' contacts flicker but no foot leaves the ground: no steps.
+    let steps = csv.lines().next().unwrap().split(',').position(|h| h == "steps_taken").unwrap();
     for row in csv.lines().skip(1) {
-        assert_eq!(row.split(',').nth(9), Some("0"), "steps_taken standing: {row}");
+        assert_eq!(row.split(',').nth(steps), Some("0"), "steps_taken standing: {row}");
     }
     let summary = std::fs::read_to_string(out_dir.join("summary.json")).unwrap();
     assert!(summary.contains("\"controller\": \"walk\"") && summary.contains("\"duration_secs\": 1.5"), "{summary}");
@@ -76,14 +75,10 @@ fn randomize_scenario_checks_decide_success() {
     assert!(out.contains("success: 0/2") && out.contains("fell 0"), "{out}");
     // The scenario's scripted pushes act in every episode too: 1000 N for 0.1 s (2.8 m/s of
     // the whole robot, a capture point 0.7 m ahead) fells both, where the same standing passed.
-    let pushed = write(
+    let pushed = humanoid_scenario(
         dir.path(),
         "pushed.toml",
-        &format!(
-            "model = {:?}\nduration = 2.5\n[walk]\nvx = 0.0\n[[push]]\ntime = 0.5\nforce = [1000.0, 0.0, 0.0]\n\
-             [checks]\nfalls = 0\n",
-            model.display().to_string()
-        ),
+        "duration = 2.5\n[walk]\nvx = 0.0\n[[push]]\ntime = 0.5\nforce = [1000.0, 0.0, 0.0]\n[checks]\nfalls = 0\n",
     );
     let (ok, out, err) = run(&["randomize", "--scenario", pushed.to_str().unwrap(), "--episodes", "2"]);
     assert!(ok, "{err}");
@@ -96,15 +91,11 @@ fn randomize_scenario_checks_decide_success() {
 #[test]
 fn randomize_scenario_summarizes_gait_metrics_and_shards_merge() {
     let dir = tempfile::tempdir().unwrap();
-    let model = super::common::repo_root().join("models/humanoid.urdf");
     // 1 s crouch, then 0.5-s steps from 1.3 s: about 5 landings in 4 s.
-    let walk = write(
+    let walk = humanoid_scenario(
         dir.path(),
         "walk.toml",
-        &format!(
-            "model = {:?}\nduration = 4.0\n[walk]\nvx = 0.3\nstep_period = 0.5\n[checks]\nfalls = 0\n",
-            model.display().to_string()
-        ),
+        "duration = 4.0\n[walk]\nvx = 0.3\nstep_period = 0.5\n[checks]\nfalls = 0\n",
     );
     let w = walk.to_str().unwrap();
     let out_of = |name: &str| dir.path().join(name);
