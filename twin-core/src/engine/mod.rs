@@ -307,8 +307,8 @@ impl Engine {
         let noisy_s = sensors.noisy_sensors();
         // The entries that draw noise, in index order (the draws' order): the loops below then
         // skip the noiseless ones without testing each entry every step.
-        let noisy = |std: &[f64], len: usize| -> Vec<(usize, f64)> {
-            std.iter().copied().take(len).enumerate().filter(|&(_, s)| s > 0.0).collect()
+        let noisy = |deviations: &[f64], len: usize| -> Vec<(usize, f64)> {
+            deviations.iter().copied().take(len).enumerate().filter(|&(_, s)| s > 0.0).collect()
         };
         let (qpos_noise, sensor_noise) = (noisy(&sensors.qpos_noise_std, nq), noisy(&sensors.sensor_noise_std, ns));
         // The bias of every `sensordata` entry (zero past the spec's).
