@@ -304,26 +304,30 @@ impl Engine {
         let exact = sensors.is_exact();
         let obs_len = nq + nv + ns;
         let depth = sensors.latency_steps + 1;
-        let (noisy_q, noisy_s) = (sensors.noisy_qpos(), sensors.noisy_sensors());
+        let noisy_s = sensors.noisy_sensors();
+        // The entries that draw noise, in index order (the draws' order): the loops below then
+        // skip the noiseless ones without testing each entry every step.
+        let noisy = |deviations: &[f64], len: usize| -> Vec<(usize, f64)> {
+            deviations.iter().copied().take(len).enumerate().filter(|&(_, s)| s > 0.0).collect()
+        };
+        let (qpos_noise, sensor_noise) = (noisy(&sensors.qpos_noise_std, nq), noisy(&sensors.sensor_noise_std, ns));
+        // The bias of every `sensordata` entry (zero past the spec's).
+        let bias: Vec<f64> = (0..ns).map(|k| sensors.sensor_bias.get(k).copied().unwrap_or(0.0)).collect();
         let capture = |data: &Data, history: &mut [f64], slot: usize, rng: &mut ChaCha8Rng| {
             let o = &mut history[slot * obs_len..(slot + 1) * obs_len];
             o[..nq].copy_from_slice(data.qpos());
             o[nq..nq + nv].copy_from_slice(data.qvel());
             o[nq + nv..].copy_from_slice(data.sensordata());
-            if noisy_q {
-                for (q, &s) in o[..nq].iter_mut().zip(&sensors.qpos_noise_std) {
-                    if s > 0.0 {
-                        *q += s * rng.sample::<f64, _>(StandardNormal);
-                    }
-                }
+            for &(k, s) in &qpos_noise {
+                o[k] += s * rng.sample::<f64, _>(StandardNormal);
             }
             if noisy_s {
-                let bias = sensors.sensor_bias.iter().copied().chain(std::iter::repeat(0.0));
-                for ((v, &s), b) in o[nq + nv..].iter_mut().zip(&sensors.sensor_noise_std).zip(bias) {
+                let o = &mut o[nq + nv..];
+                for (v, b) in o.iter_mut().zip(&bias) {
                     *v += b;
-                    if s > 0.0 {
-                        *v += s * rng.sample::<f64, _>(StandardNormal);
-                    }
+                }
+                for &(k, s) in &sensor_noise {
+                    o[k] += s * rng.sample::<f64, _>(StandardNormal);
                 }
             }
         };
@@ -380,14 +384,14 @@ impl Engine {
                 let observation = slot_observation(&self.history, oldest * obs_len, (nq, nv, ns), time_secs);
                 controller.compute(model, &observation, &mut self.command);
             }
-            let mut saturated = false;
-            let scale = episode.command_scale.iter().copied().chain(std::iter::repeat(1.0));
-            for ((c, &[lo, hi]), k) in self.command.iter_mut().zip(&limits).zip(scale) {
+            // (Entries past `command_scale` keep their value: `c · 1` is `c`.)
+            for (c, &k) in self.command.iter_mut().zip(&episode.command_scale) {
                 *c *= k;
-                if (*c <= lo && lo.is_finite()) || (*c >= hi && hi.is_finite()) {
-                    saturated = saturated || lo != hi;
-                }
             }
+            // Without short-circuits, so that the loop runs branch-free over the entries.
+            let saturated = self.command.iter().zip(&limits).fold(false, |any, (&c, &[lo, hi])| {
+                any | (((c <= lo) & lo.is_finite()) | ((c >= hi) & hi.is_finite())) & (lo != hi)
+            });
             actuation.apply(data, &self.command);
             // 3.
             self.qpos_t.copy_from_slice(data.qpos());
@@ -398,7 +402,7 @@ impl Engine {
             // 4. A disturbance that moved the state (a kick of the base's velocity, a pinned base)
             // makes the physics start from the moved state: its position and velocity stages
             // run again, as `mj_step` would run them.
-            if data.qpos() != self.qpos_t.as_slice() || data.qvel() != self.qvel_t.as_slice() {
+            if differs(data.qpos(), &self.qpos_t) || differs(data.qvel(), &self.qvel_t) {
                 self.qpos_t.copy_from_slice(data.qpos());
                 self.qvel_t.copy_from_slice(data.qvel());
                 if split && let Err(e) = data.step1() {
@@ -456,6 +460,12 @@ impl Engine {
     }
 }
 
+/// `a != b` for slices of one length, without stopping at the first difference: a loop the
+/// compiler vectorizes, where the slices' `!=` compares one pair at a time.
+fn differs(a: &[f64], b: &[f64]) -> bool {
+    a.len() != b.len() || a.iter().zip(b).fold(false, |any, (x, y)| any | (x != y))
+}
+
 /// The observation stored at `start` of `history`: `qpos`, `qvel`, `sensordata` back to back.
 fn slot_observation(
     history: &[f64],
@@ -465,4 +475,58 @@ fn slot_observation(
 ) -> Observation<'_> {
     let o = &history[start..start + nq + nv + ns];
     Observation { time_secs, qpos: &o[..nq], qvel: &o[nq..nq + nv], sensordata: &o[nq + nv..] }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::SeedableRng;
+
+    /// Records each observation's `qpos` and `sensordata`; commands nothing.
+    #[derive(Default)]
+    struct Recorder {
+        seen: Vec<(Vec<f64>, Vec<f64>)>,
+    }
+
+    impl Controller for Recorder {
+        fn name(&self) -> &'static str {
+            "recorder"
+        }
+        fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
+            Ok(())
+        }
+        fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+            command.fill(0.0);
+            self.seen.push((observation.qpos.to_vec(), observation.sensordata.to_vec()));
+        }
+    }
+
+    /// Noise goes on the entries with a deviation, drawn in entry order from the rollout's
+    /// stream; a bias acts even without a noise list. The robot rests at zero (no gravity, no
+    /// command), so the observation is the corruption alone.
+    #[test]
+    fn sensor_noise_and_bias_act_on_their_entries_only() {
+        let xml = r#"<mujoco><option gravity="0 0 0"/><worldbody><body>
+            <joint name="a" axis="0 0 1"/><geom type="sphere" size="0.1" mass="1"/>
+            <body><joint name="b" axis="0 1 0"/><geom type="sphere" size="0.1" mass="1"/></body>
+            </body></worldbody><sensor><jointpos joint="a"/><jointpos joint="b"/></sensor></mujoco>"#;
+        let model = Arc::new(Model::from_xml_str(xml).unwrap());
+        let sensors = SensorModel {
+            qpos_noise_std: vec![0.0, 0.1],
+            sensor_noise_std: Vec::new(),
+            sensor_bias: vec![0.5, -0.25],
+            latency_steps: 0,
+        };
+        let episode = Episode { steps: 20, sensors, ..Episode::default() };
+        let mut recorder = Recorder::default();
+        let mut rng = ChaCha8Rng::seed_from_u64(7);
+        Engine::new().run(&model, &episode, &mut recorder, &mut [], &mut [], &mut rng).unwrap();
+        let mut draws = ChaCha8Rng::seed_from_u64(7);
+        assert_eq!(recorder.seen.len(), 20);
+        for (qpos, sensordata) in &recorder.seen {
+            assert_eq!(qpos[0], 0.0);
+            assert_eq!(qpos[1], 0.1 * draws.sample::<f64, _>(StandardNormal));
+            assert_eq!(sensordata, &[0.5, -0.25]);
+        }
+    }
 }

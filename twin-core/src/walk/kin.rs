@@ -10,6 +10,7 @@
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model, ObjType};
 use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
+use std::cell::Cell;
 
 /// Unit quaternion from MuJoCo's `w x y z`.
 pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
@@ -29,6 +30,37 @@ pub fn euler_quat(roll: f64, pitch: f64, yaw: f64) -> UnitQuaternion<f64> {
         cr * sp * cy + sr * cp * sy,
         cr * cp * sy - sr * sp * cy,
     ))
+}
+
+/// Entries of [`kept_sin_cos`]'s memo (a power of two).
+const SIN_COS_MEMO: usize = 16;
+
+thread_local! {
+    /// [`kept_sin_cos`]'s memo: per slot, an angle's bits and its `sin_cos` (NaN's bits: empty;
+    /// non-finite angles are never kept).
+    static SIN_COS: [Cell<(u64, f64, f64)>; SIN_COS_MEMO] =
+        const { [const { Cell::new((0x7ff8_0000_0000_0000, 0.0, 0.0)) }; SIN_COS_MEMO] };
+}
+
+/// `angle.sin_cos()` bit for bit, the last few angles' kept: the walker takes the sine and
+/// cosine of the same few headings (the footholds', the pelvis's) many times a tick, and the
+/// library's were 2 000 instructions a physics step.
+pub fn kept_sin_cos(angle: f64) -> (f64, f64) {
+    if !angle.is_finite() {
+        return angle.sin_cos();
+    }
+    let bits = angle.to_bits();
+    // Fibonacci hashing: the product's top bits mix all of the angle's.
+    let slot = (bits.wrapping_mul(0x9e37_79b9_7f4a_7c15) >> (64 - SIN_COS_MEMO.trailing_zeros())) as usize;
+    SIN_COS.with(|memo| {
+        let (key, s, c) = memo[slot].get();
+        if key == bits {
+            return (s, c);
+        }
+        let (s, c) = angle.sin_cos();
+        memo[slot].set((bits, s, c));
+        (s, c)
+    })
 }
 
 /// `q.euler_angles().2` (the yaw) bit for bit, without the roll's `atan2` and the rotation

@@ -213,6 +213,19 @@ impl GaitMetrics {
         m[3].atan2(m[0])
     }
 
+    /// Adds a touchdown's step length and width errors: the landed foot at `p` against the
+    /// other at `o`, in the heading frame of `yaw`. Out of line: inlined, the compiler took the
+    /// heading's `sin_cos` on every step, not only at touchdowns.
+    #[inline(never)]
+    fn step_geometry(len_sq: &mut f64, width_sq: &mut f64, targets: &GaitTargets, p: [f64; 3], o: [f64; 3], yaw: f64) {
+        let (s, c) = yaw.sin_cos();
+        let d = [p[0] - o[0], p[1] - o[1]];
+        let along = c * d[0] + s * d[1];
+        let across = -s * d[0] + c * d[1];
+        *len_sq += (along - targets.step_length).powi(2);
+        *width_sq += (across.abs() - targets.step_width).powi(2);
+    }
+
     /// Takes in one simulation step (call after `mj_step2`, or after `mj_step`/`forward`).
     pub fn update(&mut self, data: &Data) {
         if self.fell_at.is_some() {
@@ -300,14 +313,8 @@ impl GaitMetrics {
                 if !track.in_contact {
                     if track.off_secs >= crate::engine::observers::TOUCHDOWN_MIN_AIR_SECS {
                         self.steps += 1;
-                        // Step geometry against the other foot, in the heading frame.
                         let o = data.xpos()[self.feet[1 - k]];
-                        let (s, c) = yaw.sin_cos();
-                        let d = [p[0] - o[0], p[1] - o[1]];
-                        let along = c * d[0] + s * d[1];
-                        let across = -s * d[0] + c * d[1];
-                        self.step_len_sq += (along - self.targets.step_length).powi(2);
-                        self.step_width_sq += (across.abs() - self.targets.step_width).powi(2);
+                        Self::step_geometry(&mut self.step_len_sq, &mut self.step_width_sq, &self.targets, p, o, yaw);
                         self.step_samples += 1;
                     }
                     track.in_contact = true;

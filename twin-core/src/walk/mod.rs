@@ -48,9 +48,10 @@ use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, 
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model};
 use kin::{Body, Frames, LegIk, Tree};
-use nalgebra::{Rotation2, Vector2, Vector3};
-use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, swing_profile, wrap};
+use nalgebra::{Vector2, Vector3};
+use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, rotation, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
+use std::sync::Arc;
 
 /// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
 /// ([`crate::convert::ConvertOptions::armature`]) unless a scenario sets another: without it the
@@ -173,12 +174,6 @@ pub struct WalkOptions {
     /// body tilted by a push carries the swing foot with it, into the ground short of its
     /// landing spot).
     pub swing_from_measured_pelvis: bool,
-    /// A supporting leg's IK runs on one control tick (a solve, see `plan_every_ticks`) in
-    /// this many, a swinging leg's on every one; the joint PD and feed-forward run on the
-    /// targets last solved (default: 1, every solve: 2 saves a fifth of the IK but the
-    /// randomized `walk.toml` falls more, 55 and 58 of 200 on seeds 0 and 11 against 42 and
-    /// 47; both legs at 2, 53 and 64).
-    pub ik_every_ticks: u64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
     /// 0.0, off; 1: all of it, within `hip_max_lean_rad`).
@@ -249,7 +244,6 @@ impl Default for WalkOptions {
             recovery_reach_fraction: 0.6,
             step_adjust_until: 0.7,
             swing_from_measured_pelvis: false,
-            ik_every_ticks: 1,
             hip_gain: 0.0,
             hip_max_lean_rad: [0.15, 0.4],
             hip_return_secs: 0.4,
@@ -367,9 +361,6 @@ impl WalkOptions {
         if self.ik_iterations == 0 {
             return Err(("ik_iterations", "must be at least 1".into()));
         }
-        if self.ik_every_ticks == 0 {
-            return Err(("ik_every_ticks", "must be at least 1".into()));
-        }
         if !(1..=MAX_PLAN_EVERY_TICKS).contains(&self.plan_every_ticks) {
             return Err((
                 "plan_every_ticks",
@@ -450,7 +441,9 @@ pub struct WalkerState {
 /// The walking controller (`walk`): see the [module docs](self).
 #[derive(Debug, Clone)]
 pub struct Walker {
-    options: WalkOptions,
+    /// Shared so that a solve holds them while it updates the walker (a clone of the options
+    /// per solve was ~130 instructions).
+    options: Arc<WalkOptions>,
     tree: Tree,
     body: Body,
     ik: [LegIk; 2],
@@ -642,7 +635,7 @@ impl Walker {
             hip: hip::HipStrategy::default(),
             held: Held::default(),
             body,
-            options,
+            options: Arc::new(options),
         };
         walker.hip = walker.new_hip(model);
         walker.check_reach()?;
@@ -727,14 +720,14 @@ impl Walker {
     fn support_region(&self, feet: &[Foothold; 2]) -> (Vector2<f64>, Vector2<f64>, f64, Vector2<f64>) {
         let heading = feet[1].yaw + wrap(feet[0].yaw - feet[1].yaw) / 2.0;
         let sole = |k: usize| self.body.legs[0].sole_half[k].min(self.body.legs[1].sole_half[k]);
-        let segment = Rotation2::new(-heading) * (feet[1].pos - feet[0].pos);
+        let segment = rotation(-heading) * (feet[1].pos - feet[0].pos);
         (feet[0].pos, segment, heading, Vector2::new(sole(0), sole(1)))
     }
 
     /// Whether `p` lies inside the feet's support region, at least `margin` from its edge.
     fn inside_support(&self, p: Vector2<f64>, feet: &[Foothold; 2], margin: f64) -> bool {
         let (a, d, heading, half) = self.support_region(feet);
-        let q = Rotation2::new(-heading) * (p - a);
+        let q = rotation(-heading) * (p - a);
         // Some s in [0, 1] with |q − s·d| ≤ half − margin on both axes.
         let (mut lo, mut hi) = (0.0_f64, 1.0_f64);
         for k in 0..2 {
@@ -759,7 +752,7 @@ impl Walker {
     /// between the soles, then within a sole around that point.
     fn clamp_to_support(&self, p: Vector2<f64>, feet: &[Foothold; 2]) -> Vector2<f64> {
         let (a, d, heading, half) = self.support_region(feet);
-        let rot = Rotation2::new(heading);
+        let rot = rotation(heading);
         let q = rot.inverse() * (p - a);
         let s = (q.dot(&d) / d.norm_squared().max(1e-12)).clamp(0.0, 1.0);
         let r = q - d * s;
@@ -771,7 +764,7 @@ impl Walker {
     fn clamp_to_sole(&self, foot: &Foothold, p: Vector2<f64>) -> Vector2<f64> {
         let half = self.body.legs[foot.side.index()].sole_half;
         // One `sin_cos`: the inverse is the transpose, `Rotation2::new(-yaw)` bit for bit.
-        let r = Rotation2::new(foot.yaw);
+        let r = rotation(foot.yaw);
         let rel = r.inverse() * (p - foot.pos);
         let rel = Vector2::new(rel.x.clamp(-half[0] * 0.8, half[0] * 0.8), rel.y.clamp(-half[1] * 0.8, half[1] * 0.8));
         foot.pos + r * rel
@@ -900,7 +893,7 @@ impl Walker {
             }
         };
         let (roll, pitch, yaw) = rot.euler_angles();
-        let rate = Rotation2::new(-yaw) * Vector2::new(gyro_world.x, gyro_world.y);
+        let rate = rotation(-yaw) * Vector2::new(gyro_world.x, gyro_world.y);
         ([roll, pitch], [rate.x, rate.y])
     }
 
@@ -965,10 +958,10 @@ impl Walker {
     fn next_center(&self, center: Vector2<f64>, yaw: f64) -> (Vector2<f64>, f64) {
         let (mut c, y) = self.options.gait().next_center(center, yaw, &self.command);
         if let (Some((origin, heading)), true) = (self.line, self.straight()) {
-            let off_m = (Rotation2::new(-heading) * (center - origin)).y;
+            let off_m = (rotation(-heading) * (center - origin)).y;
             let reach = self.options.line_hold_step;
             let dy_m = (-self.options.line_hold_gain * off_m).clamp(-reach, reach);
-            c += Rotation2::new(heading) * Vector2::new(0.0, dy_m);
+            c += rotation(heading) * Vector2::new(0.0, dy_m);
         }
         (c, y)
     }
@@ -1004,12 +997,12 @@ impl Walker {
         let o = &self.options;
         let p = self.clamp_to_sole(stance, dcm);
         let xi_td = p + (dcm - p) * (self.omega * secs.max(0.0)).exp();
-        let rel = Rotation2::new(-stance.yaw) * (xi_td - stance.pos);
+        let rel = rotation(-stance.yaw) * (xi_td - stance.pos);
         let side = swing.sign();
         let reach = o.max_step_adjust;
         let x = (rel.x * o.step_adjust_gain).clamp(-reach, reach);
         let y = (side * rel.y * o.step_adjust_gain).clamp(o.step_width * 2.0 / 3.0, o.step_width + reach);
-        (stance.pos + Rotation2::new(stance.yaw) * Vector2::new(x, side * y), xi_td)
+        (stance.pos + rotation(stance.yaw) * Vector2::new(x, side * y), xi_td)
     }
 
     /// How far the capture point predicted at a recovery step's touchdown stays outside the
@@ -1048,7 +1041,7 @@ impl Walker {
                 // Equally near (a push straight ahead or back): the foot away from the
                 // DCM's sideways offset swings.
                 let mid = (feet[0].pos + feet[1].pos) / 2.0;
-                let lateral = Rotation2::new(-(feet[0].yaw + feet[1].yaw) / 2.0) * (dcm - mid);
+                let lateral = rotation(-(feet[0].yaw + feet[1].yaw) / 2.0) * (dcm - mid);
                 if lateral.y >= 0.0 { Side::Right } else { Side::Left }
             }
             None if self.command.vy < 0.0 || self.command.yaw_rate < 0.0 => Side::Right,
@@ -1071,7 +1064,7 @@ impl Walker {
         let omega = self.omega;
         let planned = Step { ss: tr.end_secs - step.start - step.ds, ..*step };
         let (xi_ref, _) = planned.dcm(t, tr.end_dcm, omega);
-        let to_world = Rotation2::new(step.stance.yaw);
+        let to_world = rotation(step.stance.yaw);
         let err = to_world.inverse() * (dcm - xi_ref);
         let half = self.body.legs[step.stance.side.index()].sole_half;
         let gain = 1.0 + o.dcm_zmp_gain / omega;
@@ -1124,7 +1117,7 @@ impl Walker {
         if aimed.side != step.stance.side {
             return step;
         }
-        let to_world = Rotation2::new(step.stance.yaw);
+        let to_world = rotation(step.stance.yaw);
         let past_m = (to_world.inverse() * (step.stance.pos - aimed.pos)).x;
         let back_m = (-o.progress_hold_gain * past_m).clamp(-o.max_step_adjust, o.max_step_adjust);
         let pos = step.swing_to.pos + to_world * Vector2::new(back_m, 0.0);
@@ -1165,7 +1158,7 @@ impl Controller for Walker {
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         // Masses, inertias and gains may differ per episode (randomization): rebuild for `model`.
         let command = self.command;
-        *self = Walker::new(model, self.options.clone())?;
+        *self = Walker::new(model, WalkOptions::clone(&self.options))?;
         self.command = command;
         self.t0 = observation.time_secs;
         self.tree.forward(observation.qpos, &mut self.frames);
@@ -1175,7 +1168,7 @@ impl Controller for Walker {
         self.com_vel = Vector3::zeros();
         let pelvis = self.frames.xpos[self.body.pelvis];
         let yaw = self.frames.xrot[self.body.pelvis].euler_angles().2;
-        let d = Rotation2::new(-yaw) * Vector2::new(pelvis.x - com.x, pelvis.y - com.y);
+        let d = rotation(-yaw) * Vector2::new(pelvis.x - com.x, pelvis.y - com.y);
         self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis.z - com.z);
         self.pelvis_z0 = pelvis.z;
         self.pelvis_z = self.options.com_height + (pelvis.z - com.z);
@@ -1207,7 +1200,7 @@ impl Controller for Walker {
             return;
         }
         let t = observation.time_secs - self.t0;
-        let o = self.options.clone();
+        let o = Arc::clone(&self.options);
         let gait = o.gait();
         // 1. State.
         self.tree.forward(observation.qpos, &mut self.frames);
@@ -1413,15 +1406,14 @@ impl Controller for Walker {
                 lean_plus(1, correction[1].clamp(-0.2, 0.2)),
                 0.0,
             );
-        let off = Rotation2::new(heading) * self.pelvis_from_com.xy();
+        let off = rotation(heading) * self.pelvis_from_com.xy();
         let crouch = smooth(t / o.settle_secs.max(1e-9));
         let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
         let pelvis_pos = Vector3::new(com_cmd.x + off.x, com_cmd.y + off.y, pelvis_z);
 
-        // 6. Leg IK: a swinging leg's every tick (its target moves fastest, and late lands short),
-        // a supporting leg's on one tick in `ik_every_ticks` (in between its joints track the
-        // last solution).
-        // The measured-pelvis weights move every tick, whether or not a leg's IK runs on it.
+        // 6. Leg IK, both legs on every solve (the physics steps between solves,
+        // `plan_every_ticks`, track the last solution). The measured-pelvis weights move on
+        // each solve.
         for (leg, w) in self.measured_frame.iter_mut().enumerate() {
             *w = if o.swing_from_measured_pelvis && swinging == Some(leg) {
                 1.0
@@ -1429,10 +1421,8 @@ impl Controller for Walker {
                 (*w - self.dt / MEASURED_FRAME_RELEASE_SECS).max(0.0)
             };
         }
-        let solve_all = self.tick.is_multiple_of(o.ik_every_ticks);
-        let mut ik_error: f64 = if solve_all { 0.0 } else { self.state.ik_error_m };
-        for (leg, &(f, lift)) in foot_targets.iter().enumerate().filter(|&(leg, _)| solve_all || swinging == Some(leg))
-        {
+        let mut ik_error: f64 = 0.0;
+        for (leg, &(f, lift)) in foot_targets.iter().enumerate() {
             let l = &self.body.legs[leg];
             let rot = kin::euler_quat(0.0, 0.0, f.yaw) * l.foot_rot_home;
             let sole = Vector3::new(f.pos.x, f.pos.y, self.sole_z + lift);
@@ -1469,7 +1459,7 @@ impl Controller for Walker {
             let qq = pelvis_rot.into_inner();
             self.q_des[b + 3..b + 7].copy_from_slice(&[qq.w, qq.i, qq.j, qq.k]);
             let c = self.tree.com(&self.q_des, &mut self.desired);
-            let d = Rotation2::new(-heading) * Vector2::new(pelvis_pos.x - c.x, pelvis_pos.y - c.y);
+            let d = rotation(-heading) * Vector2::new(pelvis_pos.x - c.x, pelvis_pos.y - c.y);
             self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis_pos.z - c.z);
         }
 
@@ -1592,7 +1582,7 @@ impl Walker {
             Some(side) => self.clamp_to_sole(&feet[side.index()], wanted),
             None => self.clamp_to_support(wanted, feet),
         };
-        let excess = Rotation2::new(-heading) * (wanted - held);
+        let excess = rotation(-heading) * (wanted - held);
         let params =
             hip::HipParams { gain: o.hip_gain, max_lean_rad: o.hip_max_lean_rad, return_secs: o.hip_return_secs };
         let (lean, lean_rate) = self.hip.update(excess, stance.is_some(), self.dt, &params);
@@ -1660,7 +1650,9 @@ impl Walker {
         d.footsteps.poses.resize(s.footholds.len(), crate::log::typed::Pose::default());
         for (pose, (_, xy, yaw)) in d.footsteps.poses.iter_mut().zip(&s.footholds) {
             pose.position = [xy[0], xy[1], z];
-            pose.orientation_xyzw = [0.0, 0.0, (yaw / 2.0).sin(), (yaw / 2.0).cos()];
+            // (The planned yaws repeat from tick to tick: their sines are kept.)
+            let (sin, cos) = kin::kept_sin_cos(yaw / 2.0);
+            pose.orientation_xyzw = [0.0, 0.0, sin, cos];
         }
     }
 }

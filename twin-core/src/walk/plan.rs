@@ -6,8 +6,16 @@
 //! the other swings to its landing spot. Footholds follow a "centre path" advanced by the
 //! command each step; each foot lands half the step width to its side of it.
 
-use super::kin::Side;
-use nalgebra::{Rotation2, Vector2};
+use super::kin::{Side, kept_sin_cos};
+use nalgebra::{Matrix2, Rotation2, Vector2};
+
+/// `Rotation2::new(angle)` bit for bit, its `sin_cos` from [`kept_sin_cos`]: a walker's solve
+/// rotates by the same few headings (the footholds', the pelvis's, their negatives) many
+/// times over.
+pub fn rotation(angle: f64) -> Rotation2<f64> {
+    let (s, c) = kept_sin_cos(angle);
+    Rotation2::from_matrix_unchecked(Matrix2::new(c, -s, s, c))
+}
 
 /// A foot placement: sole centre (world x, y, metres) and yaw (radians).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -70,17 +78,17 @@ impl Gait {
         let dx = (cmd.vx * self.period).clamp(-self.max_step_length, self.max_step_length);
         let dy = (cmd.vy * self.period).clamp(-self.max_step_lateral, self.max_step_lateral);
         let dyaw = (cmd.yaw_rate * self.period).clamp(-self.max_step_yaw, self.max_step_yaw);
-        (center + Rotation2::new(yaw) * Vector2::new(dx, dy), yaw + dyaw)
+        (center + rotation(yaw) * Vector2::new(dx, dy), yaw + dyaw)
     }
 
     /// Foothold of `side` around centre `(c, yaw)`.
     pub fn foothold(&self, side: Side, center: Vector2<f64>, yaw: f64) -> Foothold {
-        Foothold { side, pos: center + Rotation2::new(yaw) * Vector2::new(0.0, side.sign() * self.width / 2.0), yaw }
+        Foothold { side, pos: center + rotation(yaw) * Vector2::new(0.0, side.sign() * self.width / 2.0), yaw }
     }
 
     /// Centre of the path a foothold belongs to.
     pub fn center_of(&self, f: &Foothold) -> Vector2<f64> {
-        f.pos - Rotation2::new(f.yaw) * Vector2::new(0.0, f.side.sign() * self.width / 2.0)
+        f.pos - rotation(f.yaw) * Vector2::new(0.0, f.side.sign() * self.width / 2.0)
     }
 }
 
@@ -115,8 +123,7 @@ impl Step {
     /// Where the ZMP sits in single support: the stance sole's centre moved `zmp_inward`
     /// toward the other foot.
     pub fn zmp_point(&self) -> Vector2<f64> {
-        self.stance.pos
-            + Rotation2::new(self.stance.yaw) * Vector2::new(0.0, -self.stance.side.sign() * self.zmp_inward)
+        self.stance.pos + rotation(self.stance.yaw) * Vector2::new(0.0, -self.stance.side.sign() * self.zmp_inward)
     }
 
     /// ZMP reference at `t` within this step.
@@ -261,6 +268,24 @@ mod tests {
             max_step_lateral: 0.1,
             max_step_yaw: 0.3,
             zmp_inward: 0.0,
+        }
+    }
+
+    /// The memo gives the library's rotation bit for bit, for angles met again, colliding in
+    /// a slot, negated, zero of either sign and not finite.
+    #[test]
+    fn rotation_is_the_librarys_bit_for_bit() {
+        let mut angles: Vec<f64> = (0..200).map(|k| (k as f64 * 0.7311).sin() * 4.0).collect();
+        angles.extend([0.0, -0.0, 1e-300, -1e-300, std::f64::consts::PI, 1e6, f64::NAN, f64::INFINITY]);
+        let negated: Vec<f64> = angles.iter().map(|a| -a).collect();
+        angles.extend(negated);
+        for _ in 0..3 {
+            for &a in &angles {
+                let (memo, library) = (rotation(a).into_inner(), Rotation2::new(a).into_inner());
+                for (m, l) in memo.iter().zip(library.iter()) {
+                    assert!(m.to_bits() == l.to_bits() || (m.is_nan() && l.is_nan()), "{a}: {memo} {library}");
+                }
+            }
         }
     }
 
