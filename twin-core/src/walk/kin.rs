@@ -1012,6 +1012,44 @@ impl LegIk {
         }
         result
     }
+
+    /// How the chain's angles follow a small motion of the pelvis (the IK's base) with the
+    /// foot held where it is in the world, at angles `q`: `out[k]` is joint `k`'s change, rad,
+    /// per unit pelvis translation (x, y, z, m) and rotation (x, y, z, rad), both in the
+    /// pelvis's own frame; through the damped least-squares inverse (`damping`) of the leg's
+    /// Jacobian, the linear part of [`LegIk::solve`] about `q`.
+    pub fn base_motion_map(&self, q: &[f64], damping: f64, out: &mut [[f64; 6]]) {
+        let n = self.len().min(12).min(out.len());
+        let mut anchors = [Vector3::zeros(); 12];
+        let mut axes = [Vector3::zeros(); 12];
+        let (p, _) = self.fk(q, &mut anchors[..n], &mut axes[..n]);
+        let mut jjt = Matrix6::<f64>::identity() * (damping * damping);
+        let mut cols = [Vector6::zeros(); 12];
+        for k in 0..n {
+            let lin = axes[k].cross(&(p - anchors[k]));
+            cols[k] = Vector6::new(lin.x, lin.y, lin.z, axes[k].x, axes[k].y, axes[k].z);
+            jjt += cols[k] * cols[k].transpose();
+        }
+        // The foot's target in the pelvis frame, per unit pelvis motion: a translation `d`
+        // moves it by −d, a rotation `w` by −w × p (position) and −w (orientation).
+        let mut moves = Matrix6::<f64>::zeros();
+        for j in 0..3 {
+            let e = Vector3::ith(j, 1.0);
+            let turn = p.cross(&e);
+            moves.fixed_view_mut::<3, 1>(0, j).copy_from(&-e);
+            moves.fixed_view_mut::<3, 1>(0, 3 + j).copy_from(&turn);
+            moves.fixed_view_mut::<3, 1>(3, 3 + j).copy_from(&-e);
+        }
+        let Some(y) = jjt.cholesky().map(|c| c.solve(&moves)) else {
+            out.iter_mut().for_each(|row| *row = [0.0; 6]);
+            return;
+        };
+        for (k, row) in out.iter_mut().enumerate().take(n) {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = cols[k].dot(&y.column(j));
+            }
+        }
+    }
 }
 
 /// Closed-form IK of the usual humanoid leg: six hinges, the first three (hip) with axes

@@ -48,7 +48,7 @@ use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, 
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model};
 use kin::{Body, Frames, LegIk, Tree};
-use nalgebra::{Rotation2, Vector2, Vector3};
+use nalgebra::{Rotation2, UnitQuaternion, Vector2, Vector3};
 use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
 
@@ -523,6 +523,26 @@ struct Held {
     swinging: Option<usize>,
     /// Physics steps since the last solve.
     since: u64,
+    /// Each joint loop's target offset from `q_des` on the steps between solves, rad (m on a
+    /// slide): the legs' share of the tilt feedback since the solve ([`Walker::hold_targets`]).
+    dq: Vec<f64>,
+    /// Each loop's target change per unit change of the pelvis correction (roll, pitch, rad)
+    /// through its leg's IK with the foot held (zero off the legs, and on a leg placed from
+    /// the measured pelvis).
+    tilt_map: Vec<[f64; 2]>,
+    /// Each loop's target change per unit motion of the measured pelvis (translation m,
+    /// rotation rad, in its frame at the solve), on a leg whose IK base is (partly) the
+    /// measured pelvis (`swing_from_measured_pelvis`); zero elsewhere.
+    pelvis_map: Vec<[f64; 6]>,
+    /// The pelvis correction (roll, pitch) the solve commanded, rad.
+    correction: [f64; 2],
+    /// What the tilt feedback measured the tilt and its rate against at the solve (the hip
+    /// strategy's lean and its rate: roll, pitch, rad and rad/s).
+    lean: [f64; 2],
+    lean_rate: [f64; 2],
+    /// The measured pelvis pose (`qpos` of the free joint) at the solve, when a leg's map
+    /// needs it.
+    pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -875,7 +895,13 @@ impl Walker {
                 }
             }
         }
-        self.held = Held { ff: vec![0.0; loops.len()], ..Held::default() };
+        self.held = Held {
+            ff: vec![0.0; loops.len()],
+            dq: vec![0.0; loops.len()],
+            tilt_map: vec![[0.0; 2]; loops.len()],
+            pelvis_map: vec![[0.0; 6]; loops.len()],
+            ..Held::default()
+        };
         self.loops = loops;
     }
 
@@ -1199,8 +1225,10 @@ impl Controller for Walker {
 
     fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
         if self.tick > 0 && self.held.since + 1 < self.options.plan_every_ticks {
-            // Between solves (`plan_every_ticks`): the joint PD alone.
+            // Between solves (`plan_every_ticks`): the joint PD, toward the last solve's
+            // targets moved by the tilt feedback since.
             self.held.since += 1;
+            self.hold_targets(observation);
             self.joint_torques(observation, command);
             self.publish_diagnostics(observation.time_secs);
             self.physics_tick += 1;
@@ -1399,20 +1427,14 @@ impl Controller for Walker {
         let yaw_l = foot_targets[0].0.yaw;
         let yaw_r = foot_targets[1].0.yaw;
         let heading = yaw_r + wrap(yaw_l - yaw_r) / 2.0;
-        let (tilt, rate) = self.tilt(observation);
-        let (lean, tilt, rate) = self.hip_lean(zmp_cmd, dcm, &feet, swinging.and(stance_side), heading, tilt, rate);
+        let (tilt_raw, rate_raw) = self.tilt(observation);
+        let (lean, tilt, rate) =
+            self.hip_lean(zmp_cmd, dcm, &feet, swinging.and(stance_side), heading, tilt_raw, rate_raw);
         // (Without a lean the correction alone, bit for bit.)
         let lean_plus = |k: usize, c: f64| if lean[k] == 0.0 { c } else { lean[k] + c };
-        let correction = [
-            -(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0]),
-            -(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1]),
-        ];
+        let correction = self.tilt_correction(tilt, rate);
         let pelvis_rot = kin::euler_quat(0.0, 0.0, heading)
-            * kin::euler_quat(
-                lean_plus(0, correction[0].clamp(-0.2, 0.2)),
-                lean_plus(1, correction[1].clamp(-0.2, 0.2)),
-                0.0,
-            );
+            * kin::euler_quat(lean_plus(0, correction[0]), lean_plus(1, correction[1]), 0.0);
         let off = Rotation2::new(heading) * self.pelvis_from_com.xy();
         let crouch = smooth(t / o.settle_secs.max(1e-9));
         let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
@@ -1459,6 +1481,11 @@ impl Controller for Walker {
             for (k, qk) in q.iter().enumerate().take(n) {
                 self.q_des[ik.qpos_adr(k)] = *qk;
             }
+        }
+        if o.plan_every_ticks > 1 {
+            let against =
+                ([tilt_raw[0] - tilt[0], tilt_raw[1] - tilt[1]], [rate_raw[0] - rate[0], rate_raw[1] - rate[1]]);
+            self.hold_tilt_map(observation, correction, lean_plus(0, correction[0]), against);
         }
         // The commanded configuration's CoM offset, for the next ticks: refreshed at the
         // preview rate (it changes slowly with the legs' posture; a whole-tree pass per tick
@@ -1613,14 +1640,104 @@ impl Walker {
     /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
     fn joint_torques(&self, observation: &Observation<'_>, command: &mut [f64]) {
         command.fill(0.0);
-        for (l, &ff) in self.loops.iter().zip(&self.held.ff) {
+        for ((l, &ff), &dq) in self.loops.iter().zip(&self.held.ff).zip(&self.held.dq) {
             let (kp, kd) = match (l.leg, self.held.swinging) {
                 (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
                 _ => (l.kp, l.kd),
             };
-            let q_target = self.q_des[l.qpos_adr];
+            // (`dq` is zero on a solve's step.)
+            let q_target = self.q_des[l.qpos_adr] + dq;
             let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
             command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+        }
+    }
+
+    /// The pelvis's counter-rotation (roll, pitch, heading frame, rad) against the torso's
+    /// `tilt` and its `rate` (rad, rad/s), within ±0.2 rad.
+    fn tilt_correction(&self, tilt: [f64; 2], rate: [f64; 2]) -> [f64; 2] {
+        let o = &self.options;
+        [
+            (-(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0])).clamp(-0.2, 0.2),
+            (-(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1])).clamp(-0.2, 0.2),
+        ]
+    }
+
+    /// On a solve's step with steps held after it (`plan_every_ticks` > 1): how each leg's
+    /// targets, just solved, follow the tilt feedback until the next solve. The stance leg
+    /// carries the pelvis, whose commanded roll and pitch counter-rotate against the torso's
+    /// tilt rate, and that loop minds the delay: held for the steps between solves it lets the
+    /// walk fall more (`plan_every_ticks` docs). Linear about the solve ([`LegIk::base_motion_map`],
+    /// feet held where they are): the commanded pelvis's correction `correction` (its roll
+    /// `roll`, lean included), the tilt and rate offsets it was measured against (`against`),
+    /// and, for a leg placed from the measured pelvis, that pose.
+    fn hold_tilt_map(
+        &mut self,
+        observation: &Observation<'_>,
+        correction: [f64; 2],
+        roll: f64,
+        against: ([f64; 2], [f64; 2]),
+    ) {
+        let h = &mut self.held;
+        h.correction = correction;
+        (h.lean, h.lean_rate) = against;
+        h.dq.fill(0.0);
+        // Pelvis rotation (in its frame) per unit correction: roll about x; pitch about the
+        // pitch axis, y turned by the roll (`euler_quat`: yaw · pitch · roll).
+        let (sin_roll, cos_roll) = roll.sin_cos();
+        let mut maps = [[[0.0; 6]; 12]; 2];
+        for (leg, map) in maps.iter_mut().enumerate() {
+            let ik = &self.ik[leg];
+            let n = ik.len().min(12);
+            let mut q = [0.0; 12];
+            for (k, qk) in q.iter_mut().enumerate().take(n) {
+                *qk = self.q_des[ik.qpos_adr(k)];
+            }
+            ik.base_motion_map(&q[..n], 1e-3, &mut map[..n]);
+        }
+        let measured = self.measured_frame;
+        for (i, l) in self.loops.iter().enumerate() {
+            let Some((leg, k)) = l.leg.filter(|&(_, k)| k < 12) else { continue };
+            let m = &maps[leg][k];
+            let w = measured[leg];
+            h.tilt_map[i] = [(1.0 - w) * m[3], (1.0 - w) * (m[4] * cos_roll - m[5] * sin_roll)];
+            h.pelvis_map[i] = m.map(|v| w * v);
+        }
+        h.pelvis = measured.iter().any(|&w| w > 0.0).then(|| {
+            let (q, b) = (observation.qpos, self.body.base_qpos);
+            (Vector3::new(q[b], q[b + 1], q[b + 2]), kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]]))
+        });
+    }
+
+    /// On a step between solves: each leg's targets moved from the last solve's by the change
+    /// of the tilt feedback's pelvis correction since (this step's IMU against the held lean),
+    /// and of the measured pelvis pose for a leg placed from it, through the maps of
+    /// [`Walker::hold_tilt_map`]; into `held.dq`.
+    fn hold_targets(&mut self, observation: &Observation<'_>) {
+        let (tilt, rate) = self.tilt(observation);
+        let h = &self.held;
+        let c = self.tilt_correction(
+            [tilt[0] - h.lean[0], tilt[1] - h.lean[1]],
+            [rate[0] - h.lean_rate[0], rate[1] - h.lean_rate[1]],
+        );
+        let dc = [c[0] - h.correction[0], c[1] - h.correction[1]];
+        let twist = h.pelvis.map(|(pos0, rot0)| {
+            let (q, b) = (observation.qpos, self.body.base_qpos);
+            let inv = rot0.inverse();
+            let dp = inv * (Vector3::new(q[b], q[b + 1], q[b + 2]) - pos0);
+            let dw = (inv * kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]])).scaled_axis();
+            [dp.x, dp.y, dp.z, dw.x, dw.y, dw.z]
+        });
+        let h = &mut self.held;
+        for (i, l) in self.loops.iter().enumerate() {
+            if l.leg.is_none() {
+                continue;
+            }
+            let t = &h.tilt_map[i];
+            let mut dq = t[0] * dc[0] + t[1] * dc[1];
+            if let Some(v) = &twist {
+                dq += h.pelvis_map[i].iter().zip(v).map(|(a, b)| a * b).sum::<f64>();
+            }
+            h.dq[i] = dq;
         }
     }
 
