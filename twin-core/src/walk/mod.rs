@@ -526,22 +526,23 @@ struct Held {
     /// Each joint loop's target offset from `q_des` on the steps between solves, rad (m on a
     /// slide): the legs' share of the tilt feedback since the solve ([`Walker::hold_targets`]).
     dq: Vec<f64>,
-    /// Each loop's target change per unit change of the pelvis correction (roll, pitch, rad)
-    /// through its leg's IK with the foot held (zero off the legs, and on a leg placed from
-    /// the measured pelvis).
-    tilt_map: Vec<[f64; 2]>,
-    /// Each loop's target change per unit motion of the measured pelvis (translation m,
-    /// rotation rad, in its frame at the solve), on a leg whose IK base is (partly) the
-    /// measured pelvis (`swing_from_measured_pelvis`); zero elsewhere.
-    pelvis_map: Vec<[f64; 6]>,
+    /// Per leg and chain joint, its change per unit pelvis motion with the foot held
+    /// ([`LegIk::base_motion_map`]), refreshed every [`TILT_MAP_SECS`] (from the first solve).
+    leg_maps: [[[f64; 6]; 12]; 2],
+    /// Per leg, the share of its IK base that is the measured pelvis at the solve
+    /// (`measured_frame`; the rest is the commanded pelvis).
+    measured: [f64; 2],
+    /// The commanded pelvis's pitch axis in its frame (y turned by its roll): the y and z
+    /// components, at the solve.
+    pitch_axis: [f64; 2],
     /// The pelvis correction (roll, pitch) the solve commanded, rad.
     correction: [f64; 2],
     /// What the tilt feedback measured the tilt and its rate against at the solve (the hip
     /// strategy's lean and its rate: roll, pitch, rad and rad/s).
     lean: [f64; 2],
     lean_rate: [f64; 2],
-    /// The measured pelvis pose (`qpos` of the free joint) at the solve, when a leg's map
-    /// needs it.
+    /// The measured pelvis pose (`qpos` of the free joint) at the solve, when a leg is
+    /// placed from it.
     pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
 }
 
@@ -574,6 +575,13 @@ const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
 /// Largest `plan_every_ticks`: beyond a few physics steps between solves the held targets
 /// and feed-forward are no longer a control of the same body.
 const MAX_PLAN_EVERY_TICKS: u64 = 10;
+
+/// How often the held steps' maps of the pelvis's motion into the legs' targets
+/// ([`Walker::hold_tilt_map`]) are refreshed, s: they change with the legs' configuration,
+/// which moves by hundredths of a radian in that time, and a refresh of both costs more than
+/// the legs' IK (randomized `walk.toml` at `plan_every_ticks` 2, seed 0: 182 of 200 passed
+/// refreshed every 12 ms, 182 on every solve).
+const TILT_MAP_SECS: f64 = 0.01;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -895,13 +903,7 @@ impl Walker {
                 }
             }
         }
-        self.held = Held {
-            ff: vec![0.0; loops.len()],
-            dq: vec![0.0; loops.len()],
-            tilt_map: vec![[0.0; 2]; loops.len()],
-            pelvis_map: vec![[0.0; 6]; loops.len()],
-            ..Held::default()
-        };
+        self.held = Held { ff: vec![0.0; loops.len()], dq: vec![0.0; loops.len()], ..Held::default() };
         self.loops = loops;
     }
 
@@ -1662,14 +1664,15 @@ impl Walker {
         ]
     }
 
-    /// On a solve's step with steps held after it (`plan_every_ticks` > 1): how each leg's
-    /// targets, just solved, follow the tilt feedback until the next solve. The stance leg
-    /// carries the pelvis, whose commanded roll and pitch counter-rotate against the torso's
-    /// tilt rate, and that loop minds the delay: held for the steps between solves it lets the
-    /// walk fall more (`plan_every_ticks` docs). Linear about the solve ([`LegIk::base_motion_map`],
-    /// feet held where they are): the commanded pelvis's correction `correction` (its roll
-    /// `roll`, lean included), the tilt and rate offsets it was measured against (`against`),
-    /// and, for a leg placed from the measured pelvis, that pose.
+    /// On a solve's step with steps held after it (`plan_every_ticks` > 1): what the steps
+    /// until the next solve need to move each leg's targets, just solved, with the tilt
+    /// feedback ([`Walker::hold_targets`]). The stance leg carries the pelvis, whose commanded
+    /// roll and pitch counter-rotate against the torso's tilt rate, and that loop minds the
+    /// delay: held for the steps between solves it lets the walk fall more
+    /// (`plan_every_ticks` docs). Linear about the solve ([`LegIk::base_motion_map`], feet held
+    /// where they are): the commanded pelvis's correction `correction` (its roll `roll`, lean
+    /// included), the tilt and rate offsets it was measured against (`against`) and, for a leg
+    /// placed from the measured pelvis (`swing_from_measured_pelvis`), that pose.
     fn hold_tilt_map(
         &mut self,
         observation: &Observation<'_>,
@@ -1684,25 +1687,19 @@ impl Walker {
         // Pelvis rotation (in its frame) per unit correction: roll about x; pitch about the
         // pitch axis, y turned by the roll (`euler_quat`: yaw · pitch · roll).
         let (sin_roll, cos_roll) = roll.sin_cos();
-        let mut maps = [[[0.0; 6]; 12]; 2];
-        for (leg, map) in maps.iter_mut().enumerate() {
-            let ik = &self.ik[leg];
-            let n = ik.len().min(12);
-            let mut q = [0.0; 12];
-            for (k, qk) in q.iter_mut().enumerate().take(n) {
-                *qk = self.q_des[ik.qpos_adr(k)];
+        h.pitch_axis = [cos_roll, -sin_roll];
+        if self.tick.is_multiple_of(((TILT_MAP_SECS / self.dt).round() as u64).max(1)) {
+            for (ik, map) in self.ik.iter().zip(h.leg_maps.iter_mut()) {
+                let n = ik.len().min(12);
+                let mut q = [0.0; 12];
+                for (k, qk) in q.iter_mut().enumerate().take(n) {
+                    *qk = self.q_des[ik.qpos_adr(k)];
+                }
+                ik.base_motion_map(&q[..n], 1e-3, &mut map[..n]);
             }
-            ik.base_motion_map(&q[..n], 1e-3, &mut map[..n]);
         }
-        let measured = self.measured_frame;
-        for (i, l) in self.loops.iter().enumerate() {
-            let Some((leg, k)) = l.leg.filter(|&(_, k)| k < 12) else { continue };
-            let m = &maps[leg][k];
-            let w = measured[leg];
-            h.tilt_map[i] = [(1.0 - w) * m[3], (1.0 - w) * (m[4] * cos_roll - m[5] * sin_roll)];
-            h.pelvis_map[i] = m.map(|v| w * v);
-        }
-        h.pelvis = measured.iter().any(|&w| w > 0.0).then(|| {
+        h.measured = self.measured_frame;
+        h.pelvis = h.measured.iter().any(|&w| w > 0.0).then(|| {
             let (q, b) = (observation.qpos, self.body.base_qpos);
             (Vector3::new(q[b], q[b + 1], q[b + 2]), kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]]))
         });
@@ -1720,22 +1717,26 @@ impl Walker {
             [rate[0] - h.lean_rate[0], rate[1] - h.lean_rate[1]],
         );
         let dc = [c[0] - h.correction[0], c[1] - h.correction[1]];
-        let twist = h.pelvis.map(|(pos0, rot0)| {
+        // The commanded pelvis's rotation since the solve, in its frame (x, y, z).
+        let turn = [dc[0], dc[1] * h.pitch_axis[0], dc[1] * h.pitch_axis[1]];
+        // The measured pelvis's motion since the solve, in its frame at the solve: a few
+        // milliseconds' rotation is twice the vector part of its quaternion.
+        let moved = h.pelvis.map(|(pos0, rot0)| {
             let (q, b) = (observation.qpos, self.body.base_qpos);
             let inv = rot0.inverse();
             let dp = inv * (Vector3::new(q[b], q[b + 1], q[b + 2]) - pos0);
-            let dw = (inv * kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]])).scaled_axis();
-            [dp.x, dp.y, dp.z, dw.x, dw.y, dw.z]
+            let dr = (inv * kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]])).into_inner();
+            let s = 2.0f64.copysign(dr.w);
+            [dp.x, dp.y, dp.z, s * dr.i, s * dr.j, s * dr.k]
         });
         let h = &mut self.held;
         for (i, l) in self.loops.iter().enumerate() {
-            if l.leg.is_none() {
-                continue;
-            }
-            let t = &h.tilt_map[i];
-            let mut dq = t[0] * dc[0] + t[1] * dc[1];
-            if let Some(v) = &twist {
-                dq += h.pelvis_map[i].iter().zip(v).map(|(a, b)| a * b).sum::<f64>();
+            let Some((leg, k)) = l.leg.filter(|&(_, k)| k < 12) else { continue };
+            let m = &h.leg_maps[leg][k];
+            let w = h.measured[leg];
+            let mut dq = (1.0 - w) * (m[3] * turn[0] + m[4] * turn[1] + m[5] * turn[2]);
+            if let (Some(v), true) = (&moved, w > 0.0) {
+                dq += w * m.iter().zip(v).map(|(a, b)| a * b).sum::<f64>();
             }
             h.dq[i] = dq;
         }
