@@ -29,7 +29,8 @@
 //!    holds every subtree against gravity and the planned contact forces.
 //!
 //! Steps 1–6 are the solve; with `plan_every_ticks` > 1 it runs on one physics step in that
-//! many, and the joint PD on every one, toward the last solve's targets.
+//! many, and the joint PD on every one, toward the last solve's targets moved by the tilt
+//! feedback since (the IMU read on every step, through a linear map of the legs' IK).
 //!
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
@@ -191,12 +192,12 @@ pub struct WalkOptions {
     pub hip_return_secs: f64,
     /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
     /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
-    /// runs on every step toward the last solve's targets, with its feed-forward and gains
-    /// (default: 1, every step: at 2 the walker costs about half, but the randomized
-    /// `walk.toml` falls more, 47 and 50 of 200 on seeds 0 and 11 against 36 and 37; with
-    /// the targets moved on between solves at the rate of the last two, 50 and 58: that rate
-    /// carries the sensor noise the feedback passes into the targets; `walk.toml`'s 0.35-s
-    /// steps at 2, 138 of 200 passed on seed 0 against 180).
+    /// runs on every step toward the last solve's targets, with its feed-forward and gains,
+    /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
+    /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`]; held,
+    /// the randomized `walk.toml` at 2 passed 163 of 200 on seed 0 against 186 solving every
+    /// step; with the map, 182 and 188 of 200 on seeds 0 and 11 against 186 and 187)
+    /// (default: 1, every step: at 2 the walker costs about half).
     pub plan_every_ticks: u64,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
