@@ -1649,4 +1649,42 @@ mod tests {
             assert!((ik.range[k][0]..=ik.range[k][1]).contains(&q[k]), "joint {k}: {q:?}");
         }
     }
+
+    /// The held steps' map (`LegIk::base_motion_map`) is the IK's own answer to a small pelvis
+    /// motion with the foot held: each column against the solved angles' change for a 1-mm /
+    /// 1-mrad move of the base, within a per cent of the largest entry.
+    #[test]
+    fn base_motion_map_matches_the_ik_of_a_moved_pelvis() {
+        let (model, legs) = humanoid_legs();
+        for leg in &legs {
+            let ik = LegIk::new(&model, leg);
+            let n = ik.len();
+            // A crouched stance: knee bent, hip and ankle pitched against it.
+            let mut q: Vec<f64> = (0..n).map(|k| model.qpos0()[ik.qpos_adr(k)]).collect();
+            ik.bend_knee(&mut q, 0.6);
+            let (p, r) = ik.foot_pose(&q);
+            let mut map = vec![[0.0; 6]; n];
+            ik.base_motion_map(&q, 1e-3, &mut map);
+            let biggest = map.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+            assert!(biggest > 0.5, "{map:?}");
+            let h = 1e-3;
+            for j in 0..6 {
+                // The base moved by `h` along (or about) axis j: the foot's pose in its frame.
+                let e = Vector3::ith(j % 3, h);
+                let target = if j < 3 {
+                    (p - e, r)
+                } else {
+                    let turn = UnitQuaternion::from_scaled_axis(e).inverse();
+                    (turn * p, turn * r)
+                };
+                let mut moved = q.clone();
+                let res = ik.solve(target, &mut moved, 50, 1e-6);
+                assert!(res.position_error_m < 1e-7, "{res:?}");
+                for k in 0..n {
+                    let fd = (moved[k] - q[k]) / h;
+                    assert!((fd - map[k][j]).abs() < 0.01 * biggest, "joint {k}, axis {j}: {fd} vs {}", map[k][j]);
+                }
+            }
+        }
+    }
 }
