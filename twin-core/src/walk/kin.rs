@@ -1680,9 +1680,9 @@ mod tests {
                 let mut moved = q.clone();
                 let res = ik.solve(target, &mut moved, 50, 1e-6);
                 assert!(res.position_error_m < 1e-7, "{res:?}");
-                for k in 0..n {
-                    let fd = (moved[k] - q[k]) / h;
-                    assert!((fd - map[k][j]).abs() < 0.01 * biggest, "joint {k}, axis {j}: {fd} vs {}", map[k][j]);
+                for (k, ((after, before), row)) in moved.iter().zip(&q).zip(&map).enumerate() {
+                    let fd = (after - before) / h;
+                    assert!((fd - row[j]).abs() < 0.01 * biggest, "joint {k}, axis {j}: {fd} vs {}", row[j]);
                 }
             }
         }
