@@ -1044,6 +1044,44 @@ impl LegIk {
         }
         result
     }
+
+    /// How the chain's angles follow a small motion of the pelvis (the IK's base) with the
+    /// foot held where it is in the world, at angles `q`: `out[k]` is joint `k`'s change, rad,
+    /// per unit pelvis translation (x, y, z, m) and rotation (x, y, z, rad), both in the
+    /// pelvis's own frame; through the damped least-squares inverse (`damping`) of the leg's
+    /// Jacobian, the linear part of [`LegIk::solve`] about `q`.
+    pub fn base_motion_map(&self, q: &[f64], damping: f64, out: &mut [[f64; 6]]) {
+        let n = self.len().min(12).min(out.len());
+        let mut anchors = [Vector3::zeros(); 12];
+        let mut axes = [Vector3::zeros(); 12];
+        let (p, _) = self.fk(q, &mut anchors[..n], &mut axes[..n]);
+        let mut jjt = Matrix6::<f64>::identity() * (damping * damping);
+        let mut cols = [Vector6::zeros(); 12];
+        for k in 0..n {
+            let lin = axes[k].cross(&(p - anchors[k]));
+            cols[k] = Vector6::new(lin.x, lin.y, lin.z, axes[k].x, axes[k].y, axes[k].z);
+            jjt += cols[k] * cols[k].transpose();
+        }
+        // The foot's target in the pelvis frame, per unit pelvis motion: a translation `d`
+        // moves it by −d, a rotation `w` by −w × p (position) and −w (orientation).
+        let mut moves = Matrix6::<f64>::zeros();
+        for j in 0..3 {
+            let e = Vector3::ith(j, 1.0);
+            let turn = p.cross(&e);
+            moves.fixed_view_mut::<3, 1>(0, j).copy_from(&-e);
+            moves.fixed_view_mut::<3, 1>(0, 3 + j).copy_from(&turn);
+            moves.fixed_view_mut::<3, 1>(3, 3 + j).copy_from(&-e);
+        }
+        let Some(y) = jjt.cholesky().map(|c| c.solve(&moves)) else {
+            out.iter_mut().for_each(|row| *row = [0.0; 6]);
+            return;
+        };
+        for (k, row) in out.iter_mut().enumerate().take(n) {
+            for (j, v) in row.iter_mut().enumerate() {
+                *v = cols[k].dot(&y.column(j));
+            }
+        }
+    }
 }
 
 /// Closed-form IK of the usual humanoid leg: six hinges, the first three (hip) with axes
@@ -1641,6 +1679,44 @@ mod tests {
         assert!((r.position_error_m - (aim.norm() - 0.56)).abs() < 1e-9, "{r:?}");
         for k in 0..6 {
             assert!((ik.range[k][0]..=ik.range[k][1]).contains(&q[k]), "joint {k}: {q:?}");
+        }
+    }
+
+    /// The held steps' map (`LegIk::base_motion_map`) is the IK's own answer to a small pelvis
+    /// motion with the foot held: each column against the solved angles' change for a 1-mm /
+    /// 1-mrad move of the base, within a per cent of the largest entry.
+    #[test]
+    fn base_motion_map_matches_the_ik_of_a_moved_pelvis() {
+        let (model, legs) = humanoid_legs();
+        for leg in &legs {
+            let ik = LegIk::new(&model, leg);
+            let n = ik.len();
+            // A crouched stance: knee bent, hip and ankle pitched against it.
+            let mut q: Vec<f64> = (0..n).map(|k| model.qpos0()[ik.qpos_adr(k)]).collect();
+            ik.bend_knee(&mut q, 0.6);
+            let (p, r) = ik.foot_pose(&q);
+            let mut map = vec![[0.0; 6]; n];
+            ik.base_motion_map(&q, 1e-3, &mut map);
+            let biggest = map.iter().flatten().fold(0.0_f64, |m, v| m.max(v.abs()));
+            assert!(biggest > 0.5, "{map:?}");
+            let h = 1e-3;
+            for j in 0..6 {
+                // The base moved by `h` along (or about) axis j: the foot's pose in its frame.
+                let e = Vector3::ith(j % 3, h);
+                let target = if j < 3 {
+                    (p - e, r)
+                } else {
+                    let turn = UnitQuaternion::from_scaled_axis(e).inverse();
+                    (turn * p, turn * r)
+                };
+                let mut moved = q.clone();
+                let res = ik.solve(target, &mut moved, 50, 1e-6);
+                assert!(res.position_error_m < 1e-7, "{res:?}");
+                for (k, ((after, before), row)) in moved.iter().zip(&q).zip(&map).enumerate() {
+                    let fd = (after - before) / h;
+                    assert!((fd - row[j]).abs() < 0.01 * biggest, "joint {k}, axis {j}: {fd} vs {}", row[j]);
+                }
+            }
         }
     }
 }

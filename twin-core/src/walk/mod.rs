@@ -29,7 +29,8 @@
 //!    holds every subtree against gravity and the planned contact forces.
 //!
 //! Steps 1–6 are the solve; with `plan_every_ticks` > 1 it runs on one physics step in that
-//! many, and the joint PD on every one, toward the last solve's targets.
+//! many, and the joint PD on every one, toward the last solve's targets moved by the tilt
+//! feedback since (the IMU read on every step, through a linear map of the legs' IK).
 //!
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
@@ -48,7 +49,7 @@ use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, 
 use crate::error::{Error, Result};
 use crate::mj::{JointType, Model};
 use kin::{Body, Frames, LegIk, Tree};
-use nalgebra::{Vector2, Vector3};
+use nalgebra::{UnitQuaternion, Vector2, Vector3};
 use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, rotation, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
 use std::sync::Arc;
@@ -186,12 +187,12 @@ pub struct WalkOptions {
     pub hip_return_secs: f64,
     /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
     /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
-    /// runs on every step toward the last solve's targets, with its feed-forward and gains
-    /// (default: 1, every step: at 2 the walker costs about half, but the randomized
-    /// `walk.toml` falls more, 47 and 50 of 200 on seeds 0 and 11 against 36 and 37; with
-    /// the targets moved on between solves at the rate of the last two, 50 and 58: that rate
-    /// carries the sensor noise the feedback passes into the targets; `walk.toml`'s 0.35-s
-    /// steps at 2, 138 of 200 passed on seed 0 against 180).
+    /// runs on every step toward the last solve's targets, with its feed-forward and gains,
+    /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
+    /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`]; held,
+    /// the randomized `walk.toml` at 2 passed 163 of 200 on seed 0 against 186 solving every
+    /// step; with the map, 182 and 188 of 200 on seeds 0 and 11 against 186 and 187)
+    /// (default: 1, every step: at 2 the walker costs about half).
     pub plan_every_ticks: u64,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
@@ -516,6 +517,27 @@ struct Held {
     swinging: Option<usize>,
     /// Physics steps since the last solve.
     since: u64,
+    /// Each joint loop's target offset from `q_des` on the steps between solves, rad (m on a
+    /// slide): the legs' share of the tilt feedback since the solve ([`Walker::hold_targets`]).
+    dq: Vec<f64>,
+    /// Per leg and chain joint, its change per unit pelvis motion with the foot held
+    /// ([`LegIk::base_motion_map`]), refreshed every [`TILT_MAP_SECS`] (from the first solve).
+    leg_maps: [[[f64; 6]; 12]; 2],
+    /// Per leg, the share of its IK base that is the measured pelvis at the solve
+    /// (`measured_frame`; the rest is the commanded pelvis).
+    measured: [f64; 2],
+    /// The commanded pelvis's pitch axis in its frame (y turned by its roll): the y and z
+    /// components, at the solve.
+    pitch_axis: [f64; 2],
+    /// The pelvis correction (roll, pitch) the solve commanded, rad.
+    correction: [f64; 2],
+    /// What the tilt feedback measured the tilt and its rate against at the solve (the hip
+    /// strategy's lean and its rate: roll, pitch, rad and rad/s).
+    lean: [f64; 2],
+    lean_rate: [f64; 2],
+    /// The measured pelvis pose (`qpos` of the free joint) at the solve, when a leg is
+    /// placed from it.
+    pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
 }
 
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
@@ -547,6 +569,13 @@ const MEASURED_FRAME_RELEASE_SECS: f64 = 0.1;
 /// Largest `plan_every_ticks`: beyond a few physics steps between solves the held targets
 /// and feed-forward are no longer a control of the same body.
 const MAX_PLAN_EVERY_TICKS: u64 = 10;
+
+/// How often the held steps' maps of the pelvis's motion into the legs' targets
+/// ([`Walker::hold_tilt_map`]) are refreshed, s: they change with the legs' configuration,
+/// which moves by hundredths of a radian in that time, and a refresh of both costs more than
+/// the legs' IK (randomized `walk.toml` at `plan_every_ticks` 2, seed 0: 182 of 200 passed
+/// refreshed every 12 ms, 182 on every solve).
+const TILT_MAP_SECS: f64 = 0.01;
 
 /// Rate of the walker's diagnostic topics, Hz.
 const DIAGNOSTICS_RATE_HZ: f64 = 100.0;
@@ -868,7 +897,7 @@ impl Walker {
                 }
             }
         }
-        self.held = Held { ff: vec![0.0; loops.len()], ..Held::default() };
+        self.held = Held { ff: vec![0.0; loops.len()], dq: vec![0.0; loops.len()], ..Held::default() };
         self.loops = loops;
     }
 
@@ -1192,8 +1221,10 @@ impl Controller for Walker {
 
     fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
         if self.tick > 0 && self.held.since + 1 < self.options.plan_every_ticks {
-            // Between solves (`plan_every_ticks`): the joint PD alone.
+            // Between solves (`plan_every_ticks`): the joint PD, toward the last solve's
+            // targets moved by the tilt feedback since.
             self.held.since += 1;
+            self.hold_targets(observation);
             self.joint_torques(observation, command);
             self.publish_diagnostics(observation.time_secs);
             self.physics_tick += 1;
@@ -1392,20 +1423,14 @@ impl Controller for Walker {
         let yaw_l = foot_targets[0].0.yaw;
         let yaw_r = foot_targets[1].0.yaw;
         let heading = yaw_r + wrap(yaw_l - yaw_r) / 2.0;
-        let (tilt, rate) = self.tilt(observation);
-        let (lean, tilt, rate) = self.hip_lean(zmp_cmd, dcm, &feet, swinging.and(stance_side), heading, tilt, rate);
+        let (tilt_raw, rate_raw) = self.tilt(observation);
+        let (lean, tilt, rate) =
+            self.hip_lean(zmp_cmd, dcm, &feet, swinging.and(stance_side), heading, tilt_raw, rate_raw);
         // (Without a lean the correction alone, bit for bit.)
         let lean_plus = |k: usize, c: f64| if lean[k] == 0.0 { c } else { lean[k] + c };
-        let correction = [
-            -(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0]),
-            -(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1]),
-        ];
+        let correction = self.tilt_correction(tilt, rate);
         let pelvis_rot = kin::euler_quat(0.0, 0.0, heading)
-            * kin::euler_quat(
-                lean_plus(0, correction[0].clamp(-0.2, 0.2)),
-                lean_plus(1, correction[1].clamp(-0.2, 0.2)),
-                0.0,
-            );
+            * kin::euler_quat(lean_plus(0, correction[0]), lean_plus(1, correction[1]), 0.0);
         let off = rotation(heading) * self.pelvis_from_com.xy();
         let crouch = smooth(t / o.settle_secs.max(1e-9));
         let pelvis_z = self.pelvis_z0 + (self.pelvis_z - self.pelvis_z0) * crouch;
@@ -1449,6 +1474,11 @@ impl Controller for Walker {
             for (k, qk) in q.iter().enumerate().take(n) {
                 self.q_des[ik.qpos_adr(k)] = *qk;
             }
+        }
+        if o.plan_every_ticks > 1 {
+            let against =
+                ([tilt_raw[0] - tilt[0], tilt_raw[1] - tilt[1]], [rate_raw[0] - rate[0], rate_raw[1] - rate[1]]);
+            self.hold_tilt_map(observation, correction, lean_plus(0, correction[0]), against);
         }
         // The commanded configuration's CoM offset, for the next ticks: refreshed at the
         // preview rate (it changes slowly with the legs' posture; a whole-tree pass per tick
@@ -1603,14 +1633,103 @@ impl Walker {
     /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
     fn joint_torques(&self, observation: &Observation<'_>, command: &mut [f64]) {
         command.fill(0.0);
-        for (l, &ff) in self.loops.iter().zip(&self.held.ff) {
+        for ((l, &ff), &dq) in self.loops.iter().zip(&self.held.ff).zip(&self.held.dq) {
             let (kp, kd) = match (l.leg, self.held.swinging) {
                 (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
                 _ => (l.kp, l.kd),
             };
-            let q_target = self.q_des[l.qpos_adr];
+            // (`dq` is zero on a solve's step.)
+            let q_target = self.q_des[l.qpos_adr] + dq;
             let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
             command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+        }
+    }
+
+    /// The pelvis's counter-rotation (roll, pitch, heading frame, rad) against the torso's
+    /// `tilt` and its `rate` (rad, rad/s), within ±0.2 rad.
+    fn tilt_correction(&self, tilt: [f64; 2], rate: [f64; 2]) -> [f64; 2] {
+        let o = &self.options;
+        [
+            (-(o.tilt_gain * tilt[0] + o.tilt_rate_gain * rate[0])).clamp(-0.2, 0.2),
+            (-(o.tilt_gain * tilt[1] + o.tilt_rate_gain * rate[1])).clamp(-0.2, 0.2),
+        ]
+    }
+
+    /// On a solve's step with steps held after it (`plan_every_ticks` > 1): what the steps
+    /// until the next solve need to move each leg's targets, just solved, with the tilt
+    /// feedback ([`Walker::hold_targets`]). The stance leg carries the pelvis, whose commanded
+    /// roll and pitch counter-rotate against the torso's tilt rate, and that loop minds the
+    /// delay: held for the steps between solves it lets the walk fall more
+    /// (`plan_every_ticks` docs). Linear about the solve ([`LegIk::base_motion_map`], feet held
+    /// where they are): the commanded pelvis's correction `correction` (its roll `roll`, lean
+    /// included), the tilt and rate offsets it was measured against (`against`) and, for a leg
+    /// placed from the measured pelvis (`swing_from_measured_pelvis`), that pose.
+    fn hold_tilt_map(
+        &mut self,
+        observation: &Observation<'_>,
+        correction: [f64; 2],
+        roll: f64,
+        against: ([f64; 2], [f64; 2]),
+    ) {
+        let h = &mut self.held;
+        h.correction = correction;
+        (h.lean, h.lean_rate) = against;
+        h.dq.fill(0.0);
+        // Pelvis rotation (in its frame) per unit correction: roll about x; pitch about the
+        // pitch axis, y turned by the roll (`euler_quat`: yaw · pitch · roll).
+        let (sin_roll, cos_roll) = roll.sin_cos();
+        h.pitch_axis = [cos_roll, -sin_roll];
+        if self.tick.is_multiple_of(((TILT_MAP_SECS / self.dt).round() as u64).max(1)) {
+            for (ik, map) in self.ik.iter().zip(h.leg_maps.iter_mut()) {
+                let n = ik.len().min(12);
+                let mut q = [0.0; 12];
+                for (k, qk) in q.iter_mut().enumerate().take(n) {
+                    *qk = self.q_des[ik.qpos_adr(k)];
+                }
+                ik.base_motion_map(&q[..n], 1e-3, &mut map[..n]);
+            }
+        }
+        h.measured = self.measured_frame;
+        h.pelvis = h.measured.iter().any(|&w| w > 0.0).then(|| {
+            let (q, b) = (observation.qpos, self.body.base_qpos);
+            (Vector3::new(q[b], q[b + 1], q[b + 2]), kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]]))
+        });
+    }
+
+    /// On a step between solves: each leg's targets moved from the last solve's by the change
+    /// of the tilt feedback's pelvis correction since (this step's IMU against the held lean),
+    /// and of the measured pelvis pose for a leg placed from it, through the maps of
+    /// [`Walker::hold_tilt_map`]; into `held.dq`.
+    fn hold_targets(&mut self, observation: &Observation<'_>) {
+        let (tilt, rate) = self.tilt(observation);
+        let h = &self.held;
+        let c = self.tilt_correction(
+            [tilt[0] - h.lean[0], tilt[1] - h.lean[1]],
+            [rate[0] - h.lean_rate[0], rate[1] - h.lean_rate[1]],
+        );
+        let dc = [c[0] - h.correction[0], c[1] - h.correction[1]];
+        // The commanded pelvis's rotation since the solve, in its frame (x, y, z).
+        let turn = [dc[0], dc[1] * h.pitch_axis[0], dc[1] * h.pitch_axis[1]];
+        // The measured pelvis's motion since the solve, in its frame at the solve: a few
+        // milliseconds' rotation is twice the vector part of its quaternion.
+        let moved = h.pelvis.map(|(pos0, rot0)| {
+            let (q, b) = (observation.qpos, self.body.base_qpos);
+            let inv = rot0.inverse();
+            let dp = inv * (Vector3::new(q[b], q[b + 1], q[b + 2]) - pos0);
+            let dr = (inv * kin::quat([q[b + 3], q[b + 4], q[b + 5], q[b + 6]])).into_inner();
+            let s = 2.0f64.copysign(dr.w);
+            [dp.x, dp.y, dp.z, s * dr.i, s * dr.j, s * dr.k]
+        });
+        let h = &mut self.held;
+        for (i, l) in self.loops.iter().enumerate() {
+            let Some((leg, k)) = l.leg.filter(|&(_, k)| k < 12) else { continue };
+            let m = &h.leg_maps[leg][k];
+            let w = h.measured[leg];
+            let mut dq = (1.0 - w) * (m[3] * turn[0] + m[4] * turn[1] + m[5] * turn[2]);
+            if let (Some(v), true) = (&moved, w > 0.0) {
+                dq += w * m.iter().zip(v).map(|(a, b)| a * b).sum::<f64>();
+            }
+            h.dq[i] = dq;
         }
     }
 
