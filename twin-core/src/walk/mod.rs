@@ -189,10 +189,10 @@ pub struct WalkOptions {
     /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
     /// runs on every step toward the last solve's targets, with its feed-forward and gains,
     /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
-    /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`]; held,
-    /// the randomized `walk.toml` at 2 passed 163 of 200 on seed 0 against 186 solving every
-    /// step; with the map, 182 and 188 of 200 on seeds 0 and 11 against 186 and 187)
-    /// (default: 1, every step: at 2 the walker costs about half).
+    /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`])
+    /// (default: 1, every step; at 2 the walker costs a third less: the randomized `walk.toml`
+    /// passed 182 and 188 of 200 on seeds 0 and 11 against 186 and 187 solving every step,
+    /// and 163 on seed 0 with the targets held between solves).
     pub plan_every_ticks: u64,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
