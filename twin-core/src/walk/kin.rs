@@ -12,6 +12,25 @@ use crate::mj::{JointType, Model, ObjType};
 use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 use std::cell::Cell;
 
+/// A chain's Jacobian at its end point `p` (world or base frame, like the joints' `anchors`
+/// and unit `axes`): its columns `[a × (p − anchor); a]` and `J·Jᵀ + damping²·I`, what a
+/// damped least-squares step inverts.
+fn damped_jacobian(
+    p: Vector3<f64>,
+    anchors: &[Vector3<f64>],
+    axes: &[Vector3<f64>],
+    damping: f64,
+) -> ([Vector6<f64>; 12], Matrix6<f64>) {
+    let mut jjt = Matrix6::<f64>::identity() * (damping * damping);
+    let mut cols = [Vector6::zeros(); 12];
+    for (k, (anchor, a)) in anchors.iter().zip(axes).enumerate().take(12) {
+        let lin = a.cross(&(p - anchor));
+        cols[k] = Vector6::new(lin.x, lin.y, lin.z, a.x, a.y, a.z);
+        jjt += cols[k] * cols[k].transpose();
+    }
+    (cols, jjt)
+}
+
 /// Unit quaternion from MuJoCo's `w x y z`.
 pub fn quat(q: [f64; 4]) -> UnitQuaternion<f64> {
     UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(q[0], q[1], q[2], q[3]))
@@ -1028,14 +1047,7 @@ impl LegIk {
                 break;
             }
             let e = Vector6::new(dp.x, dp.y, dp.z, dr.x, dr.y, dr.z);
-            // J columns: [a × (p − anchor); a].
-            let mut jjt = Matrix6::<f64>::identity() * (damping * damping);
-            let mut cols = [Vector6::zeros(); 12];
-            for k in 0..n {
-                let lin = axes[k].cross(&(p - anchors[k]));
-                cols[k] = Vector6::new(lin.x, lin.y, lin.z, axes[k].x, axes[k].y, axes[k].z);
-                jjt += cols[k] * cols[k].transpose();
-            }
+            let (cols, jjt) = damped_jacobian(p, &anchors[..n], &axes[..n], damping);
             let Some(y) = jjt.cholesky().map(|c| c.solve(&e)) else { break };
             for k in 0..n {
                 let step = cols[k].dot(&y).clamp(-0.5, 0.5);
@@ -1055,13 +1067,7 @@ impl LegIk {
         let mut anchors = [Vector3::zeros(); 12];
         let mut axes = [Vector3::zeros(); 12];
         let (p, _) = self.fk(q, &mut anchors[..n], &mut axes[..n]);
-        let mut jjt = Matrix6::<f64>::identity() * (damping * damping);
-        let mut cols = [Vector6::zeros(); 12];
-        for k in 0..n {
-            let lin = axes[k].cross(&(p - anchors[k]));
-            cols[k] = Vector6::new(lin.x, lin.y, lin.z, axes[k].x, axes[k].y, axes[k].z);
-            jjt += cols[k] * cols[k].transpose();
-        }
+        let (cols, jjt) = damped_jacobian(p, &anchors[..n], &axes[..n], damping);
         // The foot's target in the pelvis frame, per unit pelvis motion: a translation `d`
         // moves it by −d, a rotation `w` by −w × p (position) and −w (orientation).
         let mut moves = Matrix6::<f64>::zeros();
