@@ -463,6 +463,8 @@ pub struct Walker {
     physics_tick: u64,
     preview: PreviewGains,
     preview_ratio: u64,
+    /// Solves between refreshes of the held steps' leg maps ([`TILT_MAP_SECS`]).
+    tilt_map_every: u64,
     axes: [PreviewAxis; 2],
     zmp_buf: [Vec<f64>; 2],
     schedule: Schedule,
@@ -639,6 +641,7 @@ impl Walker {
             physics_tick: 0,
             preview,
             preview_ratio,
+            tilt_map_every: ((TILT_MAP_SECS / dt).round() as u64).max(1),
             axes: [PreviewAxis::default(); 2],
             zmp_buf: [vec![0.0; horizon + 1], vec![0.0; horizon + 1]],
             schedule: Schedule::default(),
@@ -1679,7 +1682,7 @@ impl Walker {
         // pitch axis, y turned by the roll (`euler_quat`: yaw · pitch · roll).
         let (sin_roll, cos_roll) = roll.sin_cos();
         h.pitch_axis = [cos_roll, -sin_roll];
-        if self.tick.is_multiple_of(((TILT_MAP_SECS / self.dt).round() as u64).max(1)) {
+        if self.tick.is_multiple_of(self.tilt_map_every) {
             for (ik, map) in self.ik.iter().zip(h.leg_maps.iter_mut()) {
                 let n = ik.len().min(12);
                 let mut q = [0.0; 12];
