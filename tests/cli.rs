@@ -37,5 +37,7 @@ mod shards;
 mod sim;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[path = "../twin-core/tests/it/test_python.rs"]
+mod test_python;
 #[path = "cli/walk.rs"]
 mod walk;

@@ -189,7 +189,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         None => robot,
     };
     let trajectory = match (&args.trajectory, controller_name.as_str()) {
-        (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
+        (Some(file), "replay") => {
+            let trajectory = JointTrajectory::load(file, &args.trajectory_topic)?;
+            for w in &trajectory.warnings {
+                eprintln!("warning: {}: {w}", file.display());
+            }
+            Some(trajectory)
+        }
         (Some(_), _) => bail!("--trajectory is for --controller replay"),
         (None, "replay") => {
             bail!("--controller replay needs --trajectory LOG_OR_CSV (a ROS 2 log or a CSV time_sec,<joint>,…)")
@@ -228,6 +234,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     twin_core::fsio::cooperate();
     let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
+    if recording_wanted || args.ros {
+        for note in twin_core::sense::unrendered_cameras(&robot) {
+            eprintln!("note: {note}");
+        }
+    }
     #[cfg(feature = "ros")]
     let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
     #[cfg(not(feature = "ros"))]
@@ -358,6 +369,29 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         }
         if let Some((file, bytes)) = &s.rrd {
             writeln!(out, "{}: {bytes} bytes", file.display())?;
+        }
+        for c in &s.sensors {
+            writeln!(
+                out,
+                "sensor {}: {} readings of {} rays at {} Hz, {:.2} ms each: {:.0} ms per simulated second",
+                c.name,
+                c.readings,
+                c.rays,
+                c.rate_hz,
+                c.secs_per_reading * 1e3,
+                c.secs_per_sim_sec() * 1e3
+            )?;
+            // The budget: real time on the core that casts the sensor's rays.
+            if c.secs_per_sim_sec() > 1.0 {
+                eprintln!(
+                    "warning: sensor {} alone keeps the run below real time: {:.1} ms a reading × {} Hz = {:.2} s per \
+                     simulated second; lower its resolution or rate, or leave its topics out (--topics)",
+                    c.name,
+                    c.secs_per_reading * 1e3,
+                    c.rate_hz,
+                    c.secs_per_sim_sec()
+                );
+            }
         }
     }
     #[cfg(feature = "ros")]

@@ -6,8 +6,8 @@
 //! domain id of their own per test, and every wait is bounded (the peer's `--timeout`, twin's
 //! `--lockstep-timeout` / `--wait-for-subscriber`, [`wait`] here).
 //!
-//! Python comes from `TWIN_PYTHON` (default `python3`) and must have `cyclonedds` (see
-//! `.ci/requirements.txt`): without it these tests FAIL.
+//! Python is the tests' venv (`test_python.rs`: `cyclonedds` from `.ci/requirements.txt`);
+//! without it these tests FAIL.
 
 use super::common::{output_of, repo_root, twin};
 use serde_json::{Value as Json, json};
@@ -32,17 +32,8 @@ fn domain(k: u32) -> u32 {
     10 + (std::process::id() % 40) * 5 + k
 }
 
-fn python() -> String {
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&exe).args(["-c", "import cyclonedds.domain"]).output();
-    match ok {
-        Ok(o) if o.status.success() => exe,
-        Ok(o) => panic!(
-            "{exe} has no cyclonedds ({}): pip install -r .ci/requirements.txt and set TWIN_PYTHON",
-            String::from_utf8_lossy(&o.stderr).trim()
-        ),
-        Err(e) => panic!("cannot run {exe} ({e}): set TWIN_PYTHON to a Python with cyclonedds"),
-    }
+fn python() -> PathBuf {
+    crate::test_python::python()
 }
 
 /// Waits for `child` at most `limit`, killing it after that.

@@ -19,7 +19,7 @@ pub mod record;
 
 #[cfg(feature = "rerun")]
 pub use record::RerunSink;
-pub use record::{McapSink, RecordOptions, RecordSummary, Recording};
+pub use record::{McapSink, RecordOptions, RecordSummary, Recording, SensorCost};
 
 pub use crate::robot::Robot;
 

@@ -110,6 +110,31 @@ pub struct RecordSummary {
     pub mcap: Option<(PathBuf, WriteSummary)>,
     /// The `.rrd` file and its size, bytes.
     pub rrd: Option<(PathBuf, u64)>,
+    /// What each ray-cast sensor that was read cost ([`SensorCost`]), in the robot's order.
+    pub sensors: Vec<SensorCost>,
+}
+
+/// What a ray-cast sensor cost a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorCost {
+    /// The sensor's name.
+    pub name: String,
+    /// Rays per reading (pixels of a camera, beams of a LiDAR).
+    pub rays: usize,
+    /// Its rate, Hz.
+    pub rate_hz: f64,
+    /// Readings taken.
+    pub readings: u64,
+    /// Mean wall time of a reading on its thread pool, seconds.
+    pub secs_per_reading: f64,
+}
+
+impl SensorCost {
+    /// The sensor's time per simulated second, seconds: above 1 it alone keeps a run from real
+    /// time on the core that casts its rays.
+    pub fn secs_per_sim_sec(&self) -> f64 {
+        self.secs_per_reading * self.rate_hz
+    }
 }
 
 impl RecordSummary {
@@ -1018,7 +1043,21 @@ impl Recording {
                 write_reading(&mut self.out, s, &reading)?;
             }
         }
-        let mut summary = RecordSummary { topics: self.out.counts, ..RecordSummary::default() };
+        let sensors = self
+            .sense
+            .iter()
+            .map(|s| {
+                let (readings, secs) = s.pipe.cost();
+                SensorCost {
+                    name: s.sensor.name.clone(),
+                    rays: s.sensor.rays(),
+                    rate_hz: s.sensor.rate_hz,
+                    readings,
+                    secs_per_reading: if readings > 0 { secs / readings as f64 } else { 0.0 },
+                }
+            })
+            .collect();
+        let mut summary = RecordSummary { topics: self.out.counts, sensors, ..RecordSummary::default() };
         for mut slot in self.out.sinks {
             slot.sink().finish()?;
             match slot {
