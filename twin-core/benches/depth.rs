@@ -99,9 +99,9 @@ fn main() {
         rayon::current_num_threads()
     );
     println!(
-        "| frame | twin, 1 thread: median wall / mean CPU ms | twin, all threads: median wall ms | valid pixels | mj_multiRay: wall ms (frames) | rays that differ |"
+        "| frame | twin, 1 thread: median wall / mean CPU ms | twin, all threads: median wall ms | valid pixels | mj_multiRay: wall ms (frames) | rays that differ | bounding-sphere / exact tests per ray |"
     );
-    println!("|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|");
     for (label, cam, opts) in [
         ("external, 640×480", "bench_front", DepthCameraOptions { width: 640, height: 480, ..Default::default() }),
         (
@@ -172,10 +172,13 @@ fn main() {
         // mj_multiRay has no near clip: from inside the head it sees the head.
         let differ =
             if opts.min_range_m > 0.1 { "n/a (no near clip in mj_multiRay)".to_string() } else { differ.to_string() };
+        let st = one.last_ray_stats();
         println!(
-            "| {label} | {wall1:.2} / {cpu1:.2} | {wall_all:.2} | {valid} of {} | {:.1} ({mj_frames}) | {differ} |",
+            "| {label} | {wall1:.2} / {cpu1:.2} | {wall_all:.2} | {valid} of {} | {:.1} ({mj_frames}) | {differ} | {:.2} / {:.2} |",
             k.len(),
-            median(mj_times)
+            median(mj_times),
+            st.sphere_tests as f64 / st.rays as f64,
+            st.exact_tests as f64 / st.rays as f64
         );
     }
 }

@@ -293,6 +293,8 @@ model_arrays! {
     geom_size: f64 x 3 = ngeom;
     /// Radius of each geom's bounding sphere, metres (len `ngeom`).
     geom_rbound: f64 = ngeom;
+    /// Each geom's bounding box in its own frame: centre then half-sizes, metres (len `ngeom`).
+    geom_aabb: f64 x 6 = ngeom;
     /// Transmission type of each actuator (`mjtTrn`) (len `nu`).
     actuator_trntype: i32 = nu;
     /// Transmission target ids of each actuator (len `nu`).

@@ -104,6 +104,8 @@ struct SceneGeom {
     mat: [f64; 9],
     /// Bounding-sphere radius about `pos`; infinite for planes.
     rbound: f64,
+    /// Bounding box in the geom's frame: centre, half-sizes (MuJoCo's `geom_aabb`).
+    aabb: [f64; 6],
 }
 
 /// A geom as seen from one ray origin (see [`RayScene::seen_from`]): what a ray test needs,
@@ -203,7 +205,8 @@ impl<'a> RayScene<'a> {
     /// (its `geom_xpos`/`geom_xmat`).
     pub fn new(data: &'a Data, filter: &RayFilter) -> RayScene<'a> {
         let model: &Model = data.model();
-        let (types, sizes, rbound) = (model.geom_type(), model.geom_size(), model.geom_rbound());
+        let (types, sizes, rbound, aabb) =
+            (model.geom_type(), model.geom_size(), model.geom_rbound(), model.geom_aabb());
         let (xpos, xmat) = (data.geom_xpos(), data.geom_xmat());
         let geoms = (0..model.ngeom())
             .filter(|&g| filter.sees(model, g))
@@ -215,7 +218,7 @@ impl<'a> RayScene<'a> {
                     _ => Kind::Primitive(Shape::of(ty, sizes[g])?),
                 };
                 let r = if ty == sys::mjtGeom_mjGEOM_PLANE { f64::INFINITY } else { rbound[g] };
-                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r })
+                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r, aabb: aabb[g] })
             })
             .collect();
         RayScene { model, data, geoms: without_twins(geoms) }
@@ -243,7 +246,7 @@ impl<'a> RayScene<'a> {
             .filter_map(|(k, g)| {
                 let v = sub(g.pos, origin);
                 let d = dot(v, v).sqrt();
-                if d + g.rbound < clip_m {
+                if d + g.rbound < clip_m || (clip_m > 0.0 && g.rbound.is_finite() && box_within(g, origin, clip_m)) {
                     return None;
                 }
                 let (near, always, sin_b) = if g.rbound.is_infinite() {
@@ -268,14 +271,14 @@ impl<'a> RayScene<'a> {
                     local_origin: to_local(&g.mat, sub(origin, g.pos)),
                     mat: g.mat,
                     kind: g.kind,
-                    corners: box_half(g).map(|h| {
+                    corners: box_half(g).map(|(centre, h)| {
                         // A hair larger, so that rounding never culls a geom a ray touches.
                         let h = h.map(|x| x * (1.0 + 1e-9) + 1e-12);
                         std::array::from_fn(|c| {
                             let l = [
-                                if c & 1 == 0 { -h[0] } else { h[0] },
-                                if c & 2 == 0 { -h[1] } else { h[1] },
-                                if c & 4 == 0 { -h[2] } else { h[2] },
+                                centre[0] + if c & 1 == 0 { -h[0] } else { h[0] },
+                                centre[1] + if c & 2 == 0 { -h[1] } else { h[1] },
+                                centre[2] + if c & 4 == 0 { -h[2] } else { h[2] },
                             ];
                             let m = &g.mat;
                             [
@@ -569,19 +572,55 @@ fn without_twins(geoms: Vec<SceneGeom>) -> Vec<SceneGeom> {
     kept
 }
 
-/// Half-sizes of a box about the geom's centre, in its frame, that holds it; `None` for an
-/// infinite plane.
-fn box_half(g: &SceneGeom) -> Option<[f64; 3]> {
-    let r = g.rbound;
+/// Whether every corner of `g`'s bounding box (MuJoCo's `geom_aabb`) is nearer to `origin`
+/// than `radius_m`: the geom lies wholly inside the sphere whose geometry is clipped (a camera's
+/// own head mesh, whose bounding sphere is larger).
+fn box_within(g: &SceneGeom, origin: [f64; 3], radius_m: f64) -> bool {
+    let [cx, cy, cz, hx, hy, hz] = g.aabb;
+    let r2 = radius_m * radius_m;
+    (0..8).all(|c| {
+        let l = [
+            cx + if c & 1 == 0 { -hx } else { hx },
+            cy + if c & 2 == 0 { -hy } else { hy },
+            cz + if c & 4 == 0 { -hz } else { hz },
+        ];
+        let m = &g.mat;
+        let w = [
+            g.pos[0] + m[0] * l[0] + m[1] * l[1] + m[2] * l[2] - origin[0],
+            g.pos[1] + m[3] * l[0] + m[4] * l[1] + m[5] * l[2] - origin[1],
+            g.pos[2] + m[6] * l[0] + m[7] * l[1] + m[8] * l[2] - origin[2],
+        ];
+        dot(w, w) < r2
+    })
+}
+
+/// A box that holds the geom, in its frame: its centre and half-sizes; `None` for an infinite
+/// plane.
+fn box_half(g: &SceneGeom) -> Option<([f64; 3], [f64; 3])> {
+    let at_centre = |h: [f64; 3]| Some(([0.0; 3], h));
     match g.kind {
-        Kind::Primitive(Shape::Plane { half }) => (half[0] > 0.0 && half[1] > 0.0).then_some([half[0], half[1], 0.0]),
-        Kind::Primitive(Shape::Sphere { radius }) => Some([radius; 3]),
-        Kind::Primitive(Shape::Capsule { radius, half_len }) => Some([radius, radius, half_len + radius]),
-        Kind::Primitive(Shape::Ellipsoid { inv_sq }) => Some(inv_sq.map(|s| 1.0 / s.sqrt())),
-        Kind::Primitive(Shape::Cylinder { radius, half_len }) => Some([radius, radius, half_len]),
-        Kind::Primitive(Shape::Box { half }) => Some(half),
-        // The cube about the bounding sphere.
-        Kind::Mesh | Kind::Hfield => r.is_finite().then_some([r; 3]),
+        Kind::Primitive(Shape::Plane { half }) => {
+            if half[0] > 0.0 && half[1] > 0.0 {
+                at_centre([half[0], half[1], 0.0])
+            } else {
+                None
+            }
+        }
+        Kind::Primitive(Shape::Sphere { radius }) => at_centre([radius; 3]),
+        Kind::Primitive(Shape::Capsule { radius, half_len }) => at_centre([radius, radius, half_len + radius]),
+        Kind::Primitive(Shape::Ellipsoid { inv_sq }) => at_centre(inv_sq.map(|s| 1.0 / s.sqrt())),
+        Kind::Primitive(Shape::Cylinder { radius, half_len }) => at_centre([radius, radius, half_len]),
+        Kind::Primitive(Shape::Box { half }) => at_centre(half),
+        // MuJoCo's bounding box of the mesh or height field (tighter than the bounding sphere's
+        // cube for long or flat meshes: a torso, a thigh), when it has one.
+        Kind::Mesh | Kind::Hfield => {
+            let [cx, cy, cz, hx, hy, hz] = g.aabb;
+            if hx > 0.0 && hy > 0.0 && hz > 0.0 && [cx, cy, cz, hx, hy, hz].iter().all(|x| x.is_finite()) {
+                Some(([cx, cy, cz], [hx, hy, hz]))
+            } else {
+                g.rbound.is_finite().then_some(([0.0; 3], [g.rbound; 3]))
+            }
+        }
     }
 }
 
