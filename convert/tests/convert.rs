@@ -203,7 +203,7 @@ fn gazebo_contact_stiffness_uses_the_measured_effective_mass() {
     let k = (1.0 - d) * 100_000.0 / mass;
     let cone = 1.0 * (1.0 + 1.0) / 2.0;
     assert!((solref[0] + k * cone).abs() < 1e-9 * k, "{solref:?} vs K = {k}");
-    let b = ((1.0 - d) as f64).sqrt() * 100.0 / mass;
+    let b = f64::sqrt(1.0 - d) * 100.0 / mass;
     let b = b.max(2.0 * (k / d).sqrt());
     assert!((solref[1] + b * cone.sqrt()).abs() < 1e-9 * b, "{solref:?} vs B = {b}");
 }
