@@ -110,7 +110,7 @@ fn main() {
             DepthCameraOptions {
                 width: 640,
                 height: 480,
-                hfov_rad: Some(1.0471975512),
+                hfov_rad: Some(std::f64::consts::FRAC_PI_3),
                 min_range_m: near,
                 max_range_m: far,
                 ..Default::default()

@@ -495,8 +495,7 @@ impl<'a> RayScene<'a> {
         // its group's candidates: most geoms are dropped once per group, not once per bundle.
         let group = bundle * GROUP_BUNDLES;
         let m = world_from_sensor;
-        let run = |(first, (dirs_sensor, out)): (usize, (&[[f64; 3]], &mut [Option<RayHit>])),
-                   scratch: &mut Scratch| {
+        let run = |(first, (dirs_sensor, out)): GroupChunk<'_>, scratch: &mut Scratch| {
             let Scratch { in_group, candidates, dirs } = scratch;
             dirs.clear();
             dirs.extend(dirs_sensor.iter().map(|d| {
@@ -544,6 +543,9 @@ impl<'a> RayScene<'a> {
         Ok(stats)
     }
 }
+
+/// One group of a cast: the index of its first ray, its rays (sensor frame) and their hits.
+type GroupChunk<'a> = (usize, (&'a [[f64; 3]], &'a mut [Option<RayHit>]));
 
 /// Per-thread lists of one group's cast: its candidates, a bundle's, its rays in the world.
 #[derive(Default)]

@@ -341,6 +341,10 @@ impl Device {
     }
 }
 
+/// What a pool thread hands back: the device, its scratch state, the reading and its wall
+/// time, seconds.
+type Finished = (Device, Data, Result<Reading>, f64);
+
 /// A device read on another thread while the simulation goes on: the reading asked for at one
 /// tick comes back at the next ([`Pipelined::submit`]) or at the end ([`Pipelined::finish`]),
 /// whatever the threads' timing, so recordings stay the same run to run. The simulation thread
@@ -351,7 +355,7 @@ impl Device {
 /// simulation's core: on 2 cores a 15 Hz camera at 2 ms a frame fills a sixth of the other one.
 pub struct Pipelined {
     idle: Option<(Device, Data)>,
-    pending: Option<std::sync::mpsc::Receiver<(Device, Data, Result<Reading>, f64)>>,
+    pending: Option<std::sync::mpsc::Receiver<Finished>>,
     pool: rayon::ThreadPool,
     readings: u64,
     read_secs: f64,
