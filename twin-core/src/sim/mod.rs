@@ -207,10 +207,13 @@ mod tests {
     use crate::control::{Observation, PdHold, PdHoldOptions};
     use crate::log::{Imu, JointState, Log, ReadOptions};
 
-    /// pd-hold that keeps every observation it is given: (time ns, qpos, qvel, sensordata).
+    /// An observation as kept: qpos, qvel, sensordata.
+    type Seen = (Vec<f64>, Vec<f64>, Vec<f64>);
+
+    /// pd-hold that keeps every observation it is given, by time (ns).
     struct Watching {
         hold: PdHold,
-        seen: std::collections::HashMap<u64, (Vec<f64>, Vec<f64>, Vec<f64>)>,
+        seen: std::collections::HashMap<u64, Seen>,
     }
 
     impl Controller for Watching {
