@@ -19,7 +19,7 @@
 //! - Feet and end-effectors come from the kinematic tree and the geometry, never from names.
 
 use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, SensorMeta};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::mj::{Data, FreeJoint, JointType, Model, ObjType};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -163,8 +163,8 @@ impl Robot {
     /// scene.
     ///
     /// # Errors
-    /// [`Error::Io`] if the file can't be read; the converter's errors for a URDF;
-    /// [`Error::Load`] if MuJoCo refuses the model.
+    /// [`Error::Io`](crate::Error::Io) if the file can't be read; the converter's errors for a URDF;
+    /// [`Error::Load`](crate::Error::Load) if MuJoCo refuses the model.
     pub fn load(path: impl AsRef<Path>) -> Result<Robot> {
         Robot::load_with(path, &ConvertOptions::default())
     }
@@ -179,43 +179,30 @@ impl Robot {
 
     /// [`Robot::load_with`], with `extra_mjcf` (MJCF elements such as `<option>`) added inside
     /// the converted URDF's `<mujoco>` element (e.g. `twin sysid`'s timestep and flags).
-    /// Ignored for MJCF files.
+    /// Ignored for MJCF files. The one path from a file is [`crate::convert::load`].
     ///
     /// # Errors
     /// As [`Robot::load`].
     pub fn load_with_extra(path: impl AsRef<Path>, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
         let path = path.as_ref();
-        let text = crate::fsio::read_to_string(path)?;
-        if crate::urdf::is_urdf(&text) {
-            let converted = crate::convert::convert_urdf_str(path, &text, options)?;
-            let mjcf = match converted.mjcf.rfind("</mujoco>") {
-                Some(end) if !extra_mjcf.is_empty() => {
-                    format!("{}{extra_mjcf}\n{}", &converted.mjcf[..end], &converted.mjcf[end..])
-                }
-                _ => converted.mjcf,
-            };
-            let model = Model::from_xml_str(&mjcf).map_err(|e| match e {
-                Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-                other => other,
-            })?;
-            let meta = RobotMetadata {
+        let loaded = crate::convert::load(path, options, extra_mjcf)?;
+        let meta = match loaded.converted {
+            Some(converted) => Some(RobotMetadata {
                 name: Some(converted.robot_name),
                 imus: converted.imus,
                 joints: converted.joints,
                 sensors: converted.sensors,
-            };
-            return Robot::from_parts(Arc::new(model), path, Some(meta));
-        }
-        let model = Model::from_mujoco_file(path)?;
-        let meta = RobotMetadata::from_mjcf(&model);
-        Robot::from_parts(Arc::new(model), path, meta)
+            }),
+            None => RobotMetadata::from_mjcf(&loaded.model),
+        };
+        Robot::from_parts(Arc::new(loaded.model), path, meta)
     }
 
     /// A robot from a compiled model alone, named `name` (IMUs, limits and interfaces as the
     /// model holds them). [`Robot::from_parts`] with no metadata takes the model's own name.
     ///
     /// # Errors
-    /// [`Error::MuJoCo`] if MuJoCo fails while posing the model to find its feet.
+    /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
     pub fn from_model(model: Arc<Model>, name: &str, path: &Path) -> Result<Robot> {
         let meta = RobotMetadata { name: Some(name.to_string()), ..RobotMetadata::default() };
         Robot::from_parts(model, path, Some(meta))
@@ -224,7 +211,7 @@ impl Robot {
     /// A robot from a compiled model of `path` and the metadata its file gives.
     ///
     /// # Errors
-    /// [`Error::MuJoCo`] if MuJoCo fails while posing the model to find its feet.
+    /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
     pub fn from_parts(model: Arc<Model>, path: &Path, meta: Option<RobotMetadata>) -> Result<Robot> {
         let meta = meta.unwrap_or_default();
         let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
@@ -303,7 +290,7 @@ impl Robot {
     /// every id and address stays valid.
     ///
     /// # Errors
-    /// [`Error::Size`] when `model` does not have this robot's layout.
+    /// [`Error::Size`](crate::Error::Size) when `model` does not have this robot's layout.
     pub fn with_model(&self, model: Arc<Model>) -> Result<Robot> {
         crate::mj::ModelLayout::of(&self.model).require_same(&crate::mj::ModelLayout::of(&model))?;
         Ok(Robot { model, ..self.clone() })
@@ -411,7 +398,7 @@ const FOOT_TOLERANCE_M: f64 = 0.01;
 /// base (a toe body under a touching foot belongs to that foot). Sorted by body id.
 ///
 /// # Errors
-/// [`Error::MuJoCo`] if MuJoCo fails while posing the model.
+/// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model.
 pub fn find_feet(model: &Model) -> Result<Vec<usize>> {
     let mut data = Data::new(Arc::new(model.try_clone()?))?;
     reset_to_home(&mut data)?;
