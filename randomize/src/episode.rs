@@ -36,7 +36,7 @@ pub struct EpisodeOptions {
     /// The robot has fallen when its base tilts more than this from upright, radians.
     /// (default: 1.0, about 57°)
     pub fall_tilt_rad: f64,
-    /// Controller name, one of `twin_core::control::CONTROLLERS`, used unless the batch is
+    /// Controller name, one of `twin_core::registry::CONTROLLERS`, used unless the batch is
     /// given a controller factory ([`Batch::with_controller`]). (default: `pd-hold`)
     pub controller: String,
 }
@@ -95,7 +95,7 @@ impl Batch {
             )));
         }
         let name = options.controller.clone();
-        let factory: Arc<ControllerFactory> = Arc::new(move |r: &Robot| twin_core::control::by_name(&name, &r.model));
+        let factory: Arc<ControllerFactory> = Arc::new(move |r: &Robot| twin_core::registry::by_name(&name, &r.model));
         let batch = Batch {
             nominal: robot.model.clone(),
             robot,

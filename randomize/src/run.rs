@@ -145,6 +145,10 @@ fn worse(a: &EpisodeResult, b: &EpisodeResult) -> std::cmp::Ordering {
     y.0.cmp(&x.0).then(y.1.total_cmp(&x.1)).then(y.2.total_cmp(&x.2)).then(y.3.cmp(&x.3))
 }
 
+/// Rows finished so far by a running batch or shard (renamed to `episodes.csv` when it
+/// completes; `twin randomize merge --status` counts them).
+pub const PARTIAL_CSV: &str = ".episodes.csv.tmp";
+
 /// Writes what `f` produces to `path` with twin's one atomic writer ([`twin_core::fsio`]),
 /// keeping an existing file as a numbered backup (`<name>.bak`, `.bak.1`, …).
 pub(crate) fn write_atomic(path: &Path, f: impl FnOnce(&mut Vec<u8>) -> Result<()>) -> Result<()> {
@@ -184,7 +188,7 @@ pub fn run_batch(
     let tmp_csv;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
-        tmp_csv = dir.join(crate::merge::PARTIAL_CSV);
+        tmp_csv = dir.join(PARTIAL_CSV);
         let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
         let checks = batch.check_verdicts()?;

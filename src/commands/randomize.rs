@@ -222,7 +222,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(out) = &args.out {
         let cwd = std::env::current_dir().context("current folder")?;
         if let Some(manifest) =
-            randomize::ShardManifest::new(&run_info, super::VERSION_LINE, std::env::args().collect(), cwd)
+            randomize::ShardManifest::new(&run_info, &super::VERSION_LINE, std::env::args().collect(), cwd)
             && let randomize::ShardStart::AlreadyDone(done) = randomize::merge::start_shard(out, &manifest)?
         {
             print!("{}", done.summary.to_text(requested));

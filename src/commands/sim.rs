@@ -1,5 +1,5 @@
 //! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay|walk …`: runs the twin
-//! under a controller of twin's registry (`twin_core::control::by_name_with`) and records ROS 2
+//! under a controller of twin's registry (`twin_core::registry::by_name_with`) and records ROS 2
 //! topics (MCAP) and a rerun recording, stamped in simulation time. `--scenario FILE` runs a
 //! scenario (`twin_core::scenario`): its model, controller, pushes and checks, printing the gait
 //! metrics and each check as PASS/FAIL; `--controller walk` alone runs the default scenario.
@@ -15,9 +15,10 @@
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use twin_core::control::{Controller, ControllerOptions, JointTrajectory};
+use twin_core::control::{Controller, JointTrajectory};
 use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
+use twin_core::registry::ControllerOptions;
 use twin_core::robot::Robot;
 use twin_core::scenario::Scenario;
 use twin_core::sim::{self, RecordOptions, Recording, SimOptions};
@@ -156,7 +157,7 @@ pub enum InterfaceKind {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let plan = Plan::of(&args)?;
     let (robot, mut stribeck) = load_robot(&args, &plan)?;
-    let mut controller = twin_core::control::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?;
+    let mut controller = twin_core::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?;
     // A scenario's pushes and its gait metrics and checks.
     let mut pushes = plan.scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
     let mut check = plan.scenario.as_ref().map(|s| s.check(&robot.model)).transpose()?;

@@ -786,7 +786,7 @@ impl FrictionReport {
 
     /// The terminal table.
     pub fn table(&self) -> String {
-        let g = crate::writeback::format_number;
+        let g = crate::number::format_number;
         let mut out = String::from("Friction from constant-velocity sweeps (95 % intervals; — : not in the model):\n");
         let _ = writeln!(
             out,
@@ -911,7 +911,7 @@ impl Default for SweepOptions {
 /// # Errors
 /// Loading errors of the URDF; [`Error::Core`] if MuJoCo fails.
 pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptions) -> Result<JointLog> {
-    use crate::synth::Rng;
+    use crate::rng::Rng;
     use std::f64::consts::PI;
     let model = std::sync::Arc::new(crate::model::load_urdf_in_mujoco(urdf, "")?);
     let robot = crate::model::RobotModel::from_model(urdf, model.clone())?;

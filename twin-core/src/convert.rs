@@ -160,38 +160,60 @@ pub fn actuated_joints(model: &Model) -> Vec<(usize, usize)> {
     out
 }
 
+/// A robot file compiled: the model and, for a URDF, the conversion (its metadata and notes).
+#[derive(Debug)]
+pub struct Loaded {
+    /// The compiled model.
+    pub model: Model,
+    /// What the converter produced, when the file is a URDF (`None` for an MJCF or scene).
+    pub converted: Option<ConvertedModel>,
+}
+
+/// The one way from a robot file to a compiled model, used by [`Model::from_file`],
+/// [`Model::from_urdf`] and [`crate::robot::Robot::load_with_extra`] (so by every command): a
+/// URDF (root `<robot>`) goes through the converter with `options`, with `extra_mjcf` (MJCF
+/// elements such as `<option>`) added inside its `<mujoco>` element; anything else goes to
+/// MuJoCo's own parser as it is (`options` and `extra_mjcf` unused).
+///
+/// # Errors
+/// [`Error::Io`] if the file can't be read, [`Error::Urdf`]/[`Error::Xml`] for an invalid
+/// URDF, [`Error::Load`] naming the file with MuJoCo's message if MuJoCo refuses it.
+pub fn load(path: &Path, options: &ConvertOptions, extra_mjcf: &str) -> Result<Loaded> {
+    crate::mj::init()?;
+    let text = crate::fsio::read_to_string(path)?;
+    if !urdf::is_urdf(&text) {
+        return Ok(Loaded { model: Model::from_mujoco_file(path)?, converted: None });
+    }
+    let converted = convert_urdf_str(path, &text, options)?;
+    let model = match converted.mjcf.rfind("</mujoco>") {
+        Some(end) if !extra_mjcf.is_empty() => {
+            Model::from_xml_str(&format!("{}{extra_mjcf}\n{}", &converted.mjcf[..end], &converted.mjcf[end..]))
+        }
+        _ => Model::from_xml_str(&converted.mjcf),
+    }
+    .map_err(|e| match e {
+        Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
+        other => other,
+    })?;
+    Ok(Loaded { model, converted: Some(converted) })
+}
+
 impl Model {
-    /// Loads an MJCF or URDF file. A URDF (root `<robot>`) goes through twin's converter
-    /// ([`twin_convert`]) with default options: free-floating base placed on a floor, one
-    /// actuator per transmission, IMU and joint sensors, keyframe `home`.
+    /// Loads an MJCF or URDF file ([`load`]). A URDF goes through twin's converter with
+    /// default options: free-floating base placed on a floor, one actuator per transmission,
+    /// IMU and joint sensors, keyframe `home`.
     ///
     /// # Errors
-    /// [`Error::Io`] if the file can't be read, [`Error::Urdf`]/[`Error::Xml`] for an invalid
-    /// URDF, [`Error::Load`] with MuJoCo's message (element and line) if MuJoCo refuses it.
+    /// As [`load`].
     pub fn from_file(path: impl AsRef<Path>) -> Result<Model> {
-        crate::mj::init()?;
-        let path = path.as_ref();
-        let text = crate::fsio::read_to_string(path)?;
-        if urdf::is_urdf(&text) {
-            let converted = convert_urdf_str(path, &text, &ConvertOptions::default())?;
-            return Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
-                Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-                other => other,
-            });
-        }
-        Self::from_mujoco_file(path)
+        Ok(load(path.as_ref(), &ConvertOptions::default(), "")?.model)
     }
 
-    /// Converts the URDF at `path` with `opts` ([`convert_urdf`]) and compiles it.
+    /// Loads a robot file with converter `opts` ([`load`]; `opts` apply to a URDF only).
     ///
     /// # Errors
-    /// As [`convert_urdf`].
+    /// As [`load`].
     pub fn from_urdf(path: impl AsRef<Path>, opts: &ConvertOptions) -> Result<Model> {
-        let path = path.as_ref();
-        let converted = convert_urdf(path, opts)?;
-        Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
-            Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-            other => other,
-        })
+        Ok(load(path.as_ref(), opts, "")?.model)
     }
 }

@@ -1,7 +1,7 @@
 //! The building blocks of twin: a safe MuJoCo wrapper ([`mj`]), URDF checks ([`urdf`]), the
 //! URDF/Gazebo → MJCF converter ([`convert`]), the robot loaded once ([`robot`]), the one
 //! rollout engine ([`engine`]), the step-by-step model validation ([`check`]), controllers
-//! ([`control`]), model-based walking with gait metrics ([`walk`]), scenario files
+//! ([`control`]) and their registry by name ([`registry`]), model-based walking with gait metrics ([`walk`]), scenario files
 //! ([`scenario`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
 //! simulation runs with recording ([`sim`]), depth cameras, LiDARs and cup detection by ray
 //! casting ([`sense`]) and, with the cargo feature `rerun`, rerun
@@ -28,6 +28,7 @@
 #![deny(unsafe_code)]
 
 pub mod check;
+pub mod checks;
 pub mod control;
 pub mod convert;
 pub mod engine;
@@ -40,6 +41,7 @@ pub mod live;
 pub mod log;
 #[allow(unsafe_code)]
 pub mod mj;
+pub mod registry;
 pub mod robot;
 pub mod scenario;
 pub mod sense;

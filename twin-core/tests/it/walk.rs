@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use twin_core::engine::{Check, Disturbance, Flow, Observer, StepView};
-use twin_core::scenario::{Push, Scenario, Verdict};
+use twin_core::scenario::{Push, Scenario, Threshold};
 use twin_core::sim::{self, SimOptions};
 use twin_core::walk::{GaitSummary, WalkOptions, Walker};
 
@@ -28,7 +28,7 @@ impl Observer for Last {
 
 /// Runs `scenario` (with `edit` applied) on the rollout engine and returns the gait metrics,
 /// the verdicts and the final state.
-fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Verdict>, Vec<f64>) {
+fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Threshold>, Vec<f64>) {
     edit(&mut scenario);
     let robot = scenario.robot(&humanoid()).unwrap();
     let mut controller = scenario.controller(&robot.model).unwrap();
