@@ -12,6 +12,9 @@ mod deploy;
 mod engine;
 #[path = "../twin-core/tests/it/example_robot_data.rs"]
 mod example_robot_data;
+#[cfg(feature = "ros")]
+#[path = "cli/extctl.rs"]
+mod extctl;
 #[path = "cli/excite.rs"]
 mod excite;
 #[path = "cli/gap.rs"]

@@ -10,6 +10,7 @@ pub mod log;
 pub mod randomize;
 pub mod sim;
 pub mod sysid;
+pub mod test;
 pub mod view;
 
 use crate::cli::{Cli, Command};
@@ -32,6 +33,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Calibrate(args) => calibrate::run(args),
         Command::Excite(args) => excite::run(args),
         Command::Gap(args) => gap::run(args),
+        Command::Test(args) => test::run(args),
     }
 }
 

@@ -32,6 +32,7 @@ pub mod control;
 pub mod convert;
 pub mod engine;
 pub mod error;
+pub mod external;
 pub mod fsio;
 pub mod grasp;
 #[cfg(feature = "ros")]
@@ -44,6 +45,7 @@ pub mod scenario;
 pub mod sense;
 pub mod sim;
 pub mod topics;
+pub mod tracking;
 pub mod urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;

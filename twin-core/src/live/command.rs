@@ -210,6 +210,21 @@ impl Commander {
     }
 }
 
+/// What the tracking metrics ([`crate::tracking`]) compare the joints with.
+impl Commander {
+    /// The position targets of the current command: `emit(qpos address, target)` for a hold
+    /// and for position commands (none for velocity and effort commands, nor trajectories).
+    pub fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        let targets = match (&self.mode, self.interface) {
+            (Mode::Hold(t), _) | (Mode::Direct(t), CommandInterface::Position) => t,
+            _ => return,
+        };
+        for (l, &t) in self.loops.iter().zip(targets) {
+            emit(l.qpos_adr, t);
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
