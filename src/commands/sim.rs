@@ -8,7 +8,7 @@ use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
 use twin_core::control::{Controller, ControllerOptions, JointTrajectory};
-use twin_core::engine::{Check, Disturbance, Observer};
+use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
 use twin_core::robot::Robot;
 use twin_core::scenario::Scenario;

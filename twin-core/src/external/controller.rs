@@ -66,6 +66,9 @@ pub struct ExternalController {
     hold: PdHold,
     step: u64,
     steps_per_period: u64,
+    /// Steps held at the start of this episode: one control period, two under a kept process
+    /// (see [`ExternalController::compute`]).
+    hold_steps: u64,
     /// Episodes started on this controller.
     runs: u64,
     stop: &'static AtomicBool,
@@ -147,6 +150,7 @@ pub fn external(
         process: None,
         hold: PdHold::new(&robot.model, PdHoldOptions::default()),
         step: 0,
+        hold_steps: 0,
         runs: 0,
         stop,
         matched: vec![0; 3 + options.subscribes.len()],
@@ -356,6 +360,7 @@ impl Controller for ExternalController {
         }
         let stats = self.inner.stats();
         self.stats_at_reset = (stats.periods, stats.commands_applied);
+        self.hold_steps = if fresh { self.steps_per_period } else { 2 * self.steps_per_period };
         if fresh {
             self.start_process()?;
         } else {
@@ -364,16 +369,22 @@ impl Controller for ExternalController {
         Ok(())
     }
 
+    /// The first control period holds the start pose while the state goes out; then the
+    /// process commands, one command per period. Under a kept process (`restart = "never"`)
+    /// the hold lasts two periods and the second one's start is said on `/clock`: a sim-time
+    /// timer that saw time jump back (ROS resets it to fire one period after the jump) fires
+    /// again at the first lockstep period.
     fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
         self.time_secs = observation.time_secs;
-        // The first control period holds the start pose while the state goes out; then the
-        // process commands, one command per period.
-        if self.failed || self.step < self.steps_per_period {
+        if self.failed || self.step < self.hold_steps {
+            if !self.failed && self.step == self.hold_steps - self.steps_per_period && self.step > 0 {
+                self.inner.announce_time(observation.time_secs);
+            }
             self.hold.compute(model, observation, command);
             self.step += 1;
             return;
         }
-        if (self.step - self.steps_per_period).is_multiple_of(self.steps_per_period)
+        if (self.step - self.hold_steps).is_multiple_of(self.steps_per_period)
             && let Some(why) = self.exit_reason()
         {
             self.fail(why);
@@ -449,7 +460,7 @@ impl Controller for ExternalController {
     }
 
     fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
-        if self.failed || self.step <= self.steps_per_period {
+        if self.failed || self.step <= self.hold_steps {
             self.hold.position_targets(emit);
         } else {
             self.inner.position_targets(emit);

@@ -828,6 +828,12 @@ impl LiveController {
         self.commander.position_targets(emit);
     }
 
+    /// Publishes (and records) `/clock` = `t_secs` outside the lockstep periods: after a reset
+    /// under a running controller, so that its sim-time timers start again from there.
+    pub fn announce_time(&mut self, t_secs: f64) {
+        self.publish_clock((t_secs * 1e9).round().max(0.0) as u64);
+    }
+
     /// Drops every command and trajectory waiting in the readers (a new episode must not
     /// start on a command meant for the last one).
     pub fn discard_pending(&mut self) {
