@@ -22,6 +22,7 @@ class HoldPose(Node):
         robot = self.declare_parameter("robot", "humanoid").value
         self.hold = None
         self.stamp = None
+        self.owed = False  # a tick came before the first /joint_states
         self.create_subscription(JointState, "/joint_states", self.on_joints, 10)
         self.pub = self.create_publisher(Float64MultiArray, f"/{robot}/joint_commands", 10)
         self.create_timer(0.01, self.tick)  # 100 Hz of simulation time
@@ -32,9 +33,16 @@ class HoldPose(Node):
         if self.hold is None or stamp < self.stamp:
             self.hold = list(msg.position)
         self.stamp = stamp
+        # Discovery may deliver the first state after the first /clock tick: answer that tick
+        # now (in lockstep twin waits for exactly one command per period).
+        if self.owed:
+            self.owed = False
+            self.pub.publish(Float64MultiArray(data=self.hold))
 
     def tick(self):
-        if self.hold is not None:
+        if self.hold is None:
+            self.owed = True
+        else:
             self.pub.publish(Float64MultiArray(data=self.hold))
 
 
