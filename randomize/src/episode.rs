@@ -448,7 +448,15 @@ impl Worker {
         let episode = Episode {
             initial_qpos: Some(init_qpos),
             steps: batch.steps_per_episode(),
-            sensors: SensorModel { qpos_noise_std, sensor_noise_std, sensor_bias, latency_steps },
+            // The robot's IMU bias processes (twin's one sensor model, `twin_core::sim::sensor_model`)
+            // with the drawn white noise, bias and latency.
+            sensors: SensorModel {
+                qpos_noise_std,
+                sensor_noise_std,
+                sensor_bias,
+                bias_processes: twin_core::sim::sensor_model(&batch.robot).bias_processes,
+                latency_steps,
+            },
             command_scale,
         };
         let mut push = push_interval_secs.map(|every| Push::new(every, push_speed_mps, batch.layout.push_body));

@@ -320,8 +320,7 @@ pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path) -> Resul
         let options = twin_core::sim::RecordOptions {
             mcap: Some(mcap.clone()),
             rrd: cfg!(feature = "rerun").then(|| rrd.clone()),
-            // The episode's own sensor-noise stream is separate; this seeds the IMU messages.
-            seed: batch.seed ^ original.index,
+            // The IMU and /joint_states recorded are the episode's observations (its own noise).
             ..Default::default()
         };
         let mut recording = twin_core::sim::Recording::new(robot, &options)?;

@@ -247,7 +247,7 @@ pub struct Scenario {
     pub model: Option<PathBuf>,
     /// Simulated seconds.
     pub duration_secs: f64,
-    /// Seed (sensor noise of recordings).
+    /// Seed of the run's random stream (sensor noise and biases, random disturbances).
     pub seed: u64,
     /// Controller name.
     pub controller: String,
@@ -326,6 +326,29 @@ fn line_of_key(text: &str, section: Option<&str>, key: &str) -> Option<usize> {
 }
 
 impl Scenario {
+    /// The scenario of a command line without a file: `controller` for `duration_secs`, every
+    /// other key at its default (what a file with only these two keys gives), named
+    /// `<command line>`.
+    pub fn defaults(controller: &str, duration_secs: f64) -> Scenario {
+        Scenario {
+            path: PathBuf::from("<command line>"),
+            model: None,
+            duration_secs,
+            seed: 0,
+            controller: controller.to_string(),
+            armature: WALK_ARMATURE,
+            friction: None,
+            walk: WalkOptions::default(),
+            pushes: Vec::new(),
+            checks: Checks::default(),
+            world: None,
+            impratio: None,
+            cup: None,
+            grasp: crate::grasp::GraspOptions::default(),
+            randomize: None,
+        }
+    }
+
     /// Reads and checks `path`.
     ///
     /// # Errors

@@ -125,6 +125,7 @@ pub fn external(
         pacing: Pacing::Lockstep,
         silence_timeout_secs: options.period_timeout_secs,
         lockstep_timeout_secs: options.period_timeout_secs,
+        join_timeout_secs: options.join_timeout_secs,
     };
     let stop = crate::fsio::interrupt_flag();
     let warnings = log.to_path_buf();
@@ -133,7 +134,9 @@ pub fn external(
             let _ = writeln!(f, "--- twin warning: {m}");
         }
     });
-    let (sink, inner) = live::start(robot, &live_options, stop, warn)?;
+    let (sink, mut inner) = live::start(robot, &live_options, stop, warn)?;
+    // The process's join and the first period's hold are done here, per episode.
+    inner.mark_joined();
     let shared = Arc::new(Mutex::new(Shared::default()));
     let controller = ExternalController {
         options: options.clone(),

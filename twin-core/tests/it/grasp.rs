@@ -60,7 +60,7 @@ fn run(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> Run {
         .collect();
     let cup = model.require_id(ObjType::Body, "cup").unwrap();
     let mut watch = Watch { cup, arm_qpos, q0: Vec::new(), cup_start: None, max_arm_move: 0.0 };
-    let options = SimOptions { duration_secs: scenario.duration_secs };
+    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
     sim::simulate_with(&robot, &mut grasper, &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut watch])
         .unwrap();
     let verdicts = check.verdicts();
