@@ -12,11 +12,11 @@ mod deploy;
 mod engine;
 #[path = "../twin-core/tests/it/example_robot_data.rs"]
 mod example_robot_data;
+#[path = "cli/excite.rs"]
+mod excite;
 #[cfg(feature = "ros")]
 #[path = "cli/extctl.rs"]
 mod extctl;
-#[path = "cli/excite.rs"]
-mod excite;
 #[path = "cli/gap.rs"]
 mod gap;
 #[path = "cli/grasp.rs"]

@@ -29,8 +29,7 @@ pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>>
 /// external controller ([`twin_core::external`]) comes with the check that publishes the
 /// robot's state to its process and judges its health, so a controller that crashes or hangs
 /// fails its episode, not the batch.
-pub type DriverFactory =
-    dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
+pub type DriverFactory = dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
 
 /// How an episode runs and when it ends early.
 #[derive(Debug, Clone, PartialEq)]
@@ -149,10 +148,7 @@ impl Batch {
     /// The factory's error for the nominal robot.
     pub fn with_driver(
         mut self,
-        factory: impl Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)>
-        + Send
-        + Sync
-        + 'static,
+        factory: impl Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync + 'static,
     ) -> Result<Batch> {
         // Made once here so a bad controller fails the batch before any episode runs.
         let (controller, checks) = factory(&self.robot)?;
@@ -204,7 +200,11 @@ impl Batch {
     ///
     /// # Errors
     /// As [`Batch::with_scenario`].
-    pub fn with_scenario_logs(self, scenario: Arc<twin_core::scenario::Scenario>, logs: &std::path::Path) -> Result<Batch> {
+    pub fn with_scenario_logs(
+        self,
+        scenario: Arc<twin_core::scenario::Scenario>,
+        logs: &std::path::Path,
+    ) -> Result<Batch> {
         let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
         let batch = if scenario.is_external() {
             self.with_external(&scenario, logs)?
@@ -226,7 +226,10 @@ impl Batch {
     #[cfg(feature = "ros")]
     fn with_external(self, scenario: &twin_core::scenario::Scenario, logs: &std::path::Path) -> Result<Batch> {
         let Some(options) = scenario.ros.clone() else {
-            return Err(Error::Options(format!("{}: controller = \"ros\" needs a [ros] table", scenario.path.display())));
+            return Err(Error::Options(format!(
+                "{}: controller = \"ros\" needs a [ros] table",
+                scenario.path.display()
+            )));
         };
         let folder = scenario.folder();
         let logs = logs.to_path_buf();
@@ -385,7 +388,12 @@ impl Worker {
         if let Some(f) = &batch.checks {
             checks.extend(f(&batch.robot)?);
         }
-        Ok(Worker { engine: Engine::new(), controller, checks, touchdowns: Touchdowns::new(&batch.nominal, &batch.robot.feet) })
+        Ok(Worker {
+            engine: Engine::new(),
+            controller,
+            checks,
+            touchdowns: Touchdowns::new(&batch.nominal, &batch.robot.feet),
+        })
     }
 
     /// The simulation as the last episode left it.

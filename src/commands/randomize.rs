@@ -217,7 +217,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             None => std::env::temp_dir().join(format!("twin-controller-logs-{}", std::process::id())),
         };
         if s.is_external() {
-            eprintln!("external controller `{}`: its output goes to {}", s.ros.as_ref().map_or("", |r| &r.command), logs.display());
+            eprintln!(
+                "external controller `{}`: its output goes to {}",
+                s.ros.as_ref().map_or("", |r| &r.command),
+                logs.display()
+            );
         }
         batch = batch.with_scenario_logs(std::sync::Arc::new(s), &logs)?;
     }

@@ -531,21 +531,33 @@ mod external {
     /// beside `record` (`<record>.controller.log`), or to `<scenario>.controller.log` in the
     /// current folder.
     #[cfg(feature = "ros")]
-    pub fn start(s: &Scenario, robot: &Robot, record: Option<&Path>) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
-        let Some(options) = &s.ros else { anyhow::bail!("{}: controller = \"ros\" needs a [ros] table", s.path.display()) };
+    pub fn start(
+        s: &Scenario,
+        robot: &Robot,
+        record: Option<&Path>,
+    ) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
+        let Some(options) = &s.ros else {
+            anyhow::bail!("{}: controller = \"ros\" needs a [ros] table", s.path.display())
+        };
         let stem = |p: &Path| p.file_stem().map_or_else(|| "run".into(), |n| n.to_string_lossy().into_owned());
         let log = match record {
             Some(r) => r.with_file_name(format!("{}.controller.log", stem(r))),
             None => Path::new(".").join(format!("{}.controller.log", stem(&s.path))),
         };
         let (c, h) = twin_core::external::external(robot, options, &s.folder(), &log)?;
-        eprintln!("external controller `{}` on ROS domain {}: its output goes to {}", options.command, c.domain_id(), log.display());
+        eprintln!(
+            "external controller `{}` on ROS domain {}: its output goes to {}",
+            options.command,
+            c.domain_id(),
+            log.display()
+        );
         Ok((Box::new(c), Box::new(h)))
     }
 
     #[cfg(not(feature = "ros"))]
     pub fn start(_: &Scenario, _: &Robot, _: Option<&Path>) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
-        Err(twin_core::Error::FeatureMissing { feature: "ros", what: "controller = \"ros\" (your ROS 2 node)".into() }.into())
+        Err(twin_core::Error::FeatureMissing { feature: "ros", what: "controller = \"ros\" (your ROS 2 node)".into() }
+            .into())
     }
 }
 

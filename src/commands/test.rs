@@ -51,9 +51,12 @@ struct Suite {
 
 /// Runs `twin test`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let paths = if args.scenarios.is_empty() { default_scenarios(Path::new("scenarios"))? } else { args.scenarios.clone() };
+    let paths =
+        if args.scenarios.is_empty() { default_scenarios(Path::new("scenarios"))? } else { args.scenarios.clone() };
     if paths.is_empty() {
-        anyhow::bail!("no scenarios: give scenario files (twin test scenarios/stand.toml) or run where ./scenarios has some");
+        anyhow::bail!(
+            "no scenarios: give scenario files (twin test scenarios/stand.toml) or run where ./scenarios has some"
+        );
     }
     if let Some(j) = &args.junit {
         let inputs: Vec<&Path> = paths.iter().map(PathBuf::as_path).collect();
@@ -168,7 +171,12 @@ fn test_scenario(s: &Scenario, args: &Args, stop: &std::sync::atomic::AtomicBool
         let spec = s.randomize.as_deref().map(Spec::from_file).transpose()?;
         let (batch, spec) = batch(s, spec.as_ref(), s.test.seed, &logs)?;
         let run = randomize::run_info(&batch, &s.path.display().to_string(), &spec, s.test.episodes, None);
-        let options = RunOptions { episodes: s.test.episodes, threads: args.threads, out_dir: out.clone(), ..RunOptions::default() };
+        let options = RunOptions {
+            episodes: s.test.episodes,
+            threads: args.threads,
+            out_dir: out.clone(),
+            ..RunOptions::default()
+        };
         let report = randomize::run_batch(&batch, run, &options, stop, &|| {})
             .with_context(|| format!("randomized episodes of {}", s.path.display()))?;
         let sum = &report.summary;
@@ -192,7 +200,12 @@ fn test_scenario(s: &Scenario, args: &Args, stop: &std::sync::atomic::AtomicBool
         cases.push(Case {
             name: "randomized",
             secs: started.elapsed().as_secs_f64(),
-            summary: format!("{} {}/{} lower95 {lower:.3} (min {threshold})", if passed { "PASS" } else { "FAIL" }, sum.succeeded, sum.episodes),
+            summary: format!(
+                "{} {}/{} lower95 {lower:.3} (min {threshold})",
+                if passed { "PASS" } else { "FAIL" },
+                sum.succeeded,
+                sum.episodes
+            ),
             failure: (!passed).then_some(message),
         });
     }
@@ -251,7 +264,10 @@ fn junit(suites: &[Suite]) -> String {
     let failures: usize = suites.iter().map(|s| s.cases.iter().filter(|c| c.failure.is_some()).count()).sum();
     let secs: f64 = suites.iter().flat_map(|s| s.cases.iter().map(|c| c.secs)).sum();
     let mut x = String::from("<?xml version=\"1.0\" encoding=\"UTF-8\"?>\n");
-    let _ = writeln!(x, "<testsuites name=\"twin test\" tests=\"{tests}\" failures=\"{failures}\" errors=\"0\" time=\"{secs:.3}\">");
+    let _ = writeln!(
+        x,
+        "<testsuites name=\"twin test\" tests=\"{tests}\" failures=\"{failures}\" errors=\"0\" time=\"{secs:.3}\">"
+    );
     for s in suites {
         let name = xml(&s.path.display().to_string());
         let classname = xml(&s.path.file_stem().map_or_else(String::new, |n| n.to_string_lossy().into_owned()));
@@ -267,7 +283,13 @@ fn junit(suites: &[Suite]) -> String {
             match &c.failure {
                 None => x.push_str("/>\n"),
                 Some(m) => {
-                    let _ = writeln!(x, ">\n      <failure message=\"{}\" type=\"twin.{}\">{}</failure>\n    </testcase>", xml(m), c.name, xml(m));
+                    let _ = writeln!(
+                        x,
+                        ">\n      <failure message=\"{}\" type=\"twin.{}\">{}</failure>\n    </testcase>",
+                        xml(m),
+                        c.name,
+                        xml(m)
+                    );
                 }
             }
         }

@@ -14,9 +14,7 @@ use std::time::{Duration, Instant};
 
 fn python() -> String {
     let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&exe)
-        .args(["-c", "import rclpy, sensor_msgs.msg, std_msgs.msg, junitparser"])
-        .output();
+    let ok = Command::new(&exe).args(["-c", "import rclpy, sensor_msgs.msg, std_msgs.msg, junitparser"]).output();
     match ok {
         Ok(o) if o.status.success() => exe,
         Ok(o) => panic!(
@@ -46,7 +44,11 @@ fn processes_with(tag: &str) -> Vec<String> {
             // A zombie has an empty command line; a process of ours carries the tag.
             if cmd.contains(tag) {
                 let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
-                found.push(format!("{} {cmd} [{}]", e.file_name().to_string_lossy(), stat.split(' ').nth(2).unwrap_or("?")));
+                found.push(format!(
+                    "{} {cmd} [{}]",
+                    e.file_name().to_string_lossy(),
+                    stat.split(' ').nth(2).unwrap_or("?")
+                ));
             }
         }
     }
@@ -144,19 +146,21 @@ fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
 fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_nothing() {
     let python = python();
     let dir = tempfile::tempdir().unwrap();
-    let bounds = "join_timeout_secs = 8.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5";
+    let bounds = "join_timeout_secs = 30.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5";
     for (mode, kind, why) in [
         ("crash", "controller: exited", "exit status: 3 at t = 0.100 s"),
         ("hang", "controller: no command", "after /clock = 0.100 s"),
         ("ignore", "controller: never joined", "it had not subscribed to /clock"),
     ] {
         let tag = tag(mode);
-        let s = scenario(dir.path(), &format!("{mode}.toml"), 0.5, &bad(&python, mode, &tag), bounds);
+        // A node that never joins is given 6 s; the others up to 30 s (a loaded machine).
+        let b = if mode == "ignore" { bounds.replace("30.0", "6.0") } else { bounds.to_string() };
+        let s = scenario(dir.path(), &format!("{mode}.toml"), 0.5, &bad(&python, mode, &tag), &b);
         let out = dir.path().join(mode);
         let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 2);
         // The batch itself runs to its end; each episode fails with its reason.
         assert!(ok, "{mode}: {stdout}\n{stderr}");
-        assert!(secs < 40.0, "{mode}: {secs} s");
+        assert!(secs < 60.0, "{mode}: {secs} s");
         let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
         assert_eq!(column(&csv, "success"), vec!["0"; 2], "{mode}: {csv}");
         for line in csv.lines().skip(1) {
@@ -257,7 +261,8 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
     let pass = write(dir.path(), "pass.toml", &body(0.5));
     let fail = write(dir.path(), "fail.toml", &body(0.6));
     let junit = dir.path().join("report.xml");
-    let o = twin().arg("test").arg(&pass).arg(&fail).arg("--junit").arg(&junit).args(["--threads", "2"]).output().unwrap();
+    let o =
+        twin().arg("test").arg(&pass).arg(&fail).arg("--junit").arg(&junit).args(["--threads", "2"]).output().unwrap();
     let (ok, stdout, stderr) = output_of(o);
     assert!(!ok, "a failed threshold must fail: {stdout}\n{stderr}");
     assert!(stdout.contains("PASS 4/4 lower95 0.510 (min 0.5)"), "{stdout}");
@@ -284,7 +289,8 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
     assert_eq!(lines[1], "pass.toml 2 0 pass randomized []");
     assert_eq!(lines[2], "fail.toml 2 1 fail nominal []");
     assert!(
-        lines[3].starts_with("fail.toml 2 1 fail randomized ['Failure:success 4/4 = 100.0 %, 95 % lower bound 0.510 < 0.6"),
+        lines[3]
+            .starts_with("fail.toml 2 1 fail randomized ['Failure:success 4/4 = 100.0 %, 95 % lower bound 0.510 < 0.6"),
         "{text}"
     );
     // All passing: exit 0.

@@ -346,6 +346,8 @@ impl Scenario {
             cup: None,
             grasp: crate::grasp::GraspOptions::default(),
             randomize: None,
+            ros: None,
+            test: TestOptions::default(),
         }
     }
 

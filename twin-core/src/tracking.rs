@@ -59,7 +59,11 @@ impl TrackingSummary {
 impl std::fmt::Display for TrackingSummary {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
         if self.joints.is_empty() {
-            return write!(f, "tracking: the controller gave no position targets; saturated {:.3} s", self.saturated_secs);
+            return write!(
+                f,
+                "tracking: the controller gave no position targets; saturated {:.3} s",
+                self.saturated_secs
+            );
         }
         let worst: Vec<String> =
             self.joints.iter().take(3).map(|j| format!("{} {:.4}/{:.4}", j.joint, j.rms, j.max)).collect();

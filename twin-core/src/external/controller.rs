@@ -327,11 +327,7 @@ impl ExternalController {
     /// Why the process can't go on, if it has exited.
     fn exit_reason(&mut self) -> Option<String> {
         let status = self.process.as_mut()?.exited()?;
-        Some(format!(
-            "exited: {status} at t = {:.3} s (see {})",
-            self.time_secs,
-            self.log.display()
-        ))
+        Some(format!("exited: {status} at t = {:.3} s (see {})", self.time_secs, self.log.display()))
     }
 }
 

@@ -131,7 +131,11 @@ impl RosOptions {
             return Err(("command", "must be a command line (e.g. \"python3 my_controller.py\")".into()));
         }
         let positive = |key: &'static str, v: f64, unit: &str| {
-            if v > 0.0 && v.is_finite() { Ok(()) } else { Err((key, format!("must be a positive number of {unit} (got {v})"))) }
+            if v > 0.0 && v.is_finite() {
+                Ok(())
+            } else {
+                Err((key, format!("must be a positive number of {unit} (got {v})")))
+            }
         };
         positive("control_rate_hz", self.control_rate_hz, "Hz")?;
         positive("join_timeout_secs", self.join_timeout_secs, "seconds")?;

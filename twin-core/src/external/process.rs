@@ -177,7 +177,13 @@ impl ControllerProcess {
         let child = cmd.spawn().map_err(|e| Error::Live {
             message: format!("cannot start the controller `{command}` in {}: {e}", folder.display()),
         })?;
-        Ok(ControllerProcess { child, command: command.to_string(), log: log.to_path_buf(), started: Instant::now(), status: None })
+        Ok(ControllerProcess {
+            child,
+            command: command.to_string(),
+            log: log.to_path_buf(),
+            started: Instant::now(),
+            status: None,
+        })
     }
 
     /// Its process id (also its process group id).
@@ -265,14 +271,9 @@ mod tests {
         let dir = tempfile::tempdir().unwrap();
         let log = dir.path().join("c.log");
         // Ignores SIGINT and SIGTERM; a child in the same group does too.
-        let mut p = ControllerProcess::start(
-            "trap '' INT TERM; sleep 30 & echo started; wait",
-            dir.path(),
-            &[],
-            &log,
-            "test",
-        )
-        .unwrap();
+        let mut p =
+            ControllerProcess::start("trap '' INT TERM; sleep 30 & echo started; wait", dir.path(), &[], &log, "test")
+                .unwrap();
         std::thread::sleep(Duration::from_millis(200));
         let t = Instant::now();
         assert_eq!(p.stop(Duration::from_millis(200)), Stopped::BySignal("SIGKILL"));
