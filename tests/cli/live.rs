@@ -531,12 +531,12 @@ fn run_rclpy(k: u32, twin_args: &[String], script: Option<&Path>, node_args: &[S
         cmd.env(key, v);
     }
     let twin = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("twin starts");
-    let readme_node;
+    let readme_script;
     let script = match script {
         Some(s) => s,
         None => {
-            readme_node = readme_node(dir.path());
-            &readme_node
+            readme_script = readme_node(dir.path());
+            &readme_script
         }
     };
     let node_args: Vec<String> =
