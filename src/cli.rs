@@ -41,6 +41,9 @@ pub enum Command {
     /// Measure the reality gap: replay a real log's efforts on the twin open loop and compare
     /// joint positions, velocities and torques.
     Gap(crate::commands::gap::Args),
+    /// Test controllers for CI: each scenario nominal and randomized, its checks and a
+    /// threshold on the success rate; a table, JUnit XML, exit 0 only when all pass.
+    Test(crate::commands::test::Args),
 }
 
 impl Cli {

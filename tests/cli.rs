@@ -14,6 +14,9 @@ mod engine;
 mod example_robot_data;
 #[path = "cli/excite.rs"]
 mod excite;
+#[cfg(feature = "ros")]
+#[path = "cli/extctl.rs"]
+mod extctl;
 #[path = "cli/gap.rs"]
 mod gap;
 #[path = "cli/grasp.rs"]

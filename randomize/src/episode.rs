@@ -25,6 +25,12 @@ pub type DisturbanceFactory = dyn Fn(&Model) -> Vec<Box<dyn Disturbance>> + Send
 /// verdict is part of every episode's result, and a failed check fails the episode.
 pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>> + Send + Sync;
 
+/// Makes a batch's controller together with the checks that watch it, for a worker thread: an
+/// external controller ([`twin_core::external`]) comes with the check that publishes the
+/// robot's state to its process and judges its health, so a controller that crashes or hangs
+/// fails its episode, not the batch.
+pub type DriverFactory = dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
+
 /// How an episode runs and when it ends early.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeOptions {
@@ -68,6 +74,9 @@ pub struct Batch {
     controller_name: String,
     checks: Option<Arc<CheckFactory>>,
     disturbances: Option<Arc<DisturbanceFactory>>,
+    /// A controller with its own checks, instead of `controller` (see [`DriverFactory`]), and
+    /// the verdicts of those checks before any episode (their CSV columns).
+    driver: Option<(Arc<DriverFactory>, Vec<Verdict>)>,
 }
 
 impl Batch {
@@ -106,6 +115,7 @@ impl Batch {
             controller: factory,
             checks: None,
             disturbances: None,
+            driver: None,
         };
         let factory = batch.controller.clone();
         batch.with_controller_factory(factory)
@@ -128,6 +138,25 @@ impl Batch {
         self.controller_name = factory(&self.robot)?.name().to_string();
         self.options.controller = self.controller_name.clone();
         self.controller = factory;
+        Ok(self)
+    }
+
+    /// The batch driven by controllers that come with checks of their own, from `factory` (one
+    /// pair per worker thread), instead of the named controller.
+    ///
+    /// # Errors
+    /// The factory's error for the nominal robot.
+    pub fn with_driver(
+        mut self,
+        factory: impl Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync + 'static,
+    ) -> Result<Batch> {
+        // Made once here so a bad controller fails the batch before any episode runs.
+        let (controller, checks) = factory(&self.robot)?;
+        self.controller_name = controller.name().to_string();
+        self.options.controller = self.controller_name.clone();
+        let verdicts = checks.iter().map(|c| c.verdict()).collect();
+        drop((controller, checks));
+        self.driver = Some((Arc::new(factory), verdicts));
         Ok(self)
     }
 
@@ -162,9 +191,27 @@ impl Batch {
     /// # Errors
     /// The scenario's controller or check error for the nominal robot.
     pub fn with_scenario(self, scenario: Arc<twin_core::scenario::Scenario>) -> Result<Batch> {
+        let logs = std::env::temp_dir().join("twin-controller-logs");
+        self.with_scenario_logs(scenario, &logs)
+    }
+
+    /// [`Batch::with_scenario`], an external controller's process output going to
+    /// `logs/worker-<k>.log` (one log per worker, each process start marked in it).
+    ///
+    /// # Errors
+    /// As [`Batch::with_scenario`].
+    pub fn with_scenario_logs(
+        self,
+        scenario: Arc<twin_core::scenario::Scenario>,
+        logs: &std::path::Path,
+    ) -> Result<Batch> {
         let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
-        Ok(self
-            .with_controller(move |r| scenario.controller(&r.model))?
+        let batch = if scenario.is_external() {
+            self.with_external(&scenario, logs)?
+        } else {
+            self.with_controller(move |r| scenario.controller(&r.model))?
+        };
+        Ok(batch
             .with_checks(move |r| {
                 let check: Box<dyn Check> = Box::new(for_checks.check(&r.model)?);
                 Ok(vec![check])
@@ -172,6 +219,36 @@ impl Batch {
             .with_disturbances(move |m| {
                 for_pushes.disturbances(m).into_iter().map(|d| Box::new(d) as Box<dyn Disturbance>).collect()
             }))
+    }
+
+    /// The scenario's external controller ([`twin_core::external`]) on each worker: a domain,
+    /// a bridge and a process of its own.
+    #[cfg(feature = "ros")]
+    fn with_external(self, scenario: &twin_core::scenario::Scenario, logs: &std::path::Path) -> Result<Batch> {
+        let Some(options) = scenario.ros.clone() else {
+            return Err(Error::Options(format!(
+                "{}: controller = \"ros\" needs a [ros] table",
+                scenario.path.display()
+            )));
+        };
+        let folder = scenario.folder();
+        let logs = logs.to_path_buf();
+        let workers = std::sync::atomic::AtomicU64::new(0);
+        self.with_driver(move |r| {
+            let k = workers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let log = logs.join(format!("worker-{k}.log"));
+            let (controller, health) = twin_core::external::external(r, &options, &folder, &log)?;
+            Ok((Box::new(controller) as Box<dyn Controller>, vec![Box::new(health) as Box<dyn Check>]))
+        })
+    }
+
+    #[cfg(not(feature = "ros"))]
+    fn with_external(self, _scenario: &twin_core::scenario::Scenario, _logs: &std::path::Path) -> Result<Batch> {
+        Err(twin_core::Error::FeatureMissing {
+            feature: "ros",
+            what: "controller = \"ros\" (your ROS 2 node through the live bridge)".into(),
+        }
+        .into())
     }
 
     /// Name of the controller.
@@ -185,10 +262,11 @@ impl Batch {
     /// # Errors
     /// The check factory's error.
     pub fn check_verdicts(&self) -> Result<Vec<Verdict>> {
-        Ok(match &self.checks {
-            Some(f) => f(&self.robot)?.iter().map(|c| c.verdict()).collect(),
-            None => Vec::new(),
-        })
+        let mut verdicts = self.driver.as_ref().map(|(_, v)| v.clone()).unwrap_or_default();
+        if let Some(f) = &self.checks {
+            verdicts.extend(f(&self.robot)?.iter().map(|c| c.verdict()));
+        }
+        Ok(verdicts)
     }
 
     /// Names of the bodies counted as feet.
@@ -303,13 +381,17 @@ impl Worker {
     /// # Errors
     /// [`Error::Core`] from the controller or check factory.
     pub fn new(batch: &Batch) -> Result<Worker> {
+        let (controller, mut checks) = match &batch.driver {
+            Some((f, _)) => f(&batch.robot)?,
+            None => ((batch.controller)(&batch.robot)?, Vec::new()),
+        };
+        if let Some(f) = &batch.checks {
+            checks.extend(f(&batch.robot)?);
+        }
         Ok(Worker {
             engine: Engine::new(),
-            controller: (batch.controller)(&batch.robot)?,
-            checks: match &batch.checks {
-                Some(f) => f(&batch.robot)?,
-                None => Vec::new(),
-            },
+            controller,
+            checks,
             touchdowns: Touchdowns::new(&batch.nominal, &batch.robot.feet),
         })
     }

@@ -195,18 +195,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let controller =
         args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    let external = controller == twin_core::scenario::EXTERNAL_CONTROLLER;
     let options = EpisodeOptions {
         duration_secs: duration,
         fall_height_fraction: args.fall_height_fraction,
         fall_tilt_rad: args.fall_tilt,
-        controller: controller.clone(),
+        // An external controller comes with the scenario (below).
+        controller: if external { "pd-hold".into() } else { controller.clone() },
     };
+    if external && scenario.is_none() {
+        anyhow::bail!("--controller ros needs --scenario FILE with a [ros] table (the command that starts your node)");
+    }
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(mut s) = scenario {
         // The scenario's walker (its options, the --controller override) on each worker, its
         // checks, and its scripted pushes besides the spec's random ones.
         s.controller = controller;
-        batch = batch.with_scenario(std::sync::Arc::new(s))?;
+        // An external controller's output: OUT/controller_logs/worker-<k>.log.
+        let logs = match &args.out {
+            Some(out) => out.join("controller_logs"),
+            None => std::env::temp_dir().join(format!("twin-controller-logs-{}", std::process::id())),
+        };
+        if s.is_external() {
+            eprintln!(
+                "external controller `{}`: its output goes to {}",
+                s.ros.as_ref().map_or("", |r| &r.command),
+                logs.display()
+            );
+        }
+        batch = batch.with_scenario_logs(std::sync::Arc::new(s), &logs)?;
     }
     let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
     let run_options = RunOptions {

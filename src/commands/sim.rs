@@ -157,7 +157,18 @@ pub enum InterfaceKind {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let plan = Plan::of(&args)?;
     let (robot, mut stribeck) = load_robot(&args, &plan)?;
-    let mut controller = twin_core::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?;
+    // A scenario's own ROS 2 node (`controller = "ros"`): started, driven in lockstep, stopped.
+    let external = plan.scenario.as_ref().filter(|s| s.is_external() && plan.controller == "ros");
+    let (mut controller, mut health) = match external {
+        Some(s) => {
+            if args.ros {
+                bail!("--ros is for driving the twin from a node you start; {} starts its own", s.path.display());
+            }
+            let (c, h) = external::start(s, &robot, args.record.as_deref())?;
+            (c, Some(h))
+        }
+        None => (twin_core::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?, None),
+    };
     // A scenario's pushes and its gait metrics and checks.
     let mut pushes = plan.scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
     let mut check = plan.scenario.as_ref().map(|s| s.check(&robot.model)).transpose()?;
@@ -171,17 +182,31 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(f) = stribeck.as_mut() {
         disturbances.push(f);
     }
-    let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
+    let mut observers: Vec<&mut dyn Observer> = health.iter_mut().map(|h| h.as_mut() as &mut dyn Observer).collect();
+    observers.extend(check.iter_mut().map(|c| c as &mut dyn Observer));
+    // Commanded vs actual joint positions, for every controller that says its targets.
+    let mut tracking = twin_core::tracking::Tracking::new();
+    observers.push(&mut tracking);
     observers.push(&mut stop);
     let (report, ran) = outputs.simulate(&robot, controller.as_mut(), &plan, &mut disturbances, &mut observers)?;
     drop(observers);
     let mut out = std::io::stdout().lock();
     outputs.print(&mut out, &plan, &robot, &report, &ran)?;
+    writeln!(out, "{}", tracking.summary())?;
 
     // A live run also ends on the flag, through its controller.
     let interrupted = twin_core::fsio::interrupted();
     if interrupted {
         writeln!(out, "stopped by Ctrl-C at {:.3} s of {} s simulated", report.sim_secs, plan.duration_secs)?;
+    }
+    if let Some(h) = &health
+        && let Some(cause) = h.verdict().cause
+    {
+        writeln!(out, "FAIL controller: {cause}")?;
+        out.flush()?;
+        if !interrupted {
+            bail!("the external controller failed: {cause}");
+        }
     }
     if let (Some(c), Some(s)) = (&check, &plan.scenario) {
         print_verdicts(&mut out, c, s, interrupted)?;
@@ -526,6 +551,49 @@ fn print_verdicts(
         bail!("{failed} of {} checks of {} failed", verdicts.len(), scenario.path.display());
     }
     Ok(())
+}
+
+/// `controller = "ros"` in a scenario: the user's node as the controller
+/// (`twin_core::external`).
+mod external {
+    use std::path::Path;
+    use twin_core::control::Controller;
+    use twin_core::engine::Check;
+    use twin_core::robot::Robot;
+    use twin_core::scenario::Scenario;
+
+    /// The scenario's external controller and its health check; the process's output goes
+    /// beside `record` (`<record>.controller.log`), or to `<scenario>.controller.log` in the
+    /// current folder.
+    #[cfg(feature = "ros")]
+    pub fn start(
+        s: &Scenario,
+        robot: &Robot,
+        record: Option<&Path>,
+    ) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
+        let Some(options) = &s.ros else {
+            anyhow::bail!("{}: controller = \"ros\" needs a [ros] table", s.path.display())
+        };
+        let stem = |p: &Path| p.file_stem().map_or_else(|| "run".into(), |n| n.to_string_lossy().into_owned());
+        let log = match record {
+            Some(r) => r.with_file_name(format!("{}.controller.log", stem(r))),
+            None => Path::new(".").join(format!("{}.controller.log", stem(&s.path))),
+        };
+        let (c, h) = twin_core::external::external(robot, options, &s.folder(), &log)?;
+        eprintln!(
+            "external controller `{}` on ROS domain {}: its output goes to {}",
+            options.command,
+            c.domain_id(),
+            log.display()
+        );
+        Ok((Box::new(c), Box::new(h)))
+    }
+
+    #[cfg(not(feature = "ros"))]
+    pub fn start(_: &Scenario, _: &Robot, _: Option<&Path>) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
+        Err(twin_core::Error::FeatureMissing { feature: "ros", what: "controller = \"ros\" (your ROS 2 node)".into() }
+            .into())
+    }
 }
 
 /// The `--ros` side of `twin sim`: the live bridge's two halves, started, announced and

@@ -33,6 +33,7 @@ pub mod control;
 pub mod convert;
 pub mod engine;
 pub mod error;
+pub mod external;
 /// How twin opens its inputs and rewrites the files a user owns ([`twin_fsio`]).
 pub use twin_fsio as fsio;
 pub mod grasp;
@@ -47,6 +48,7 @@ pub mod scenario;
 pub mod sense;
 pub mod sim;
 pub mod topics;
+pub mod tracking;
 /// URDF checks ([`twin_convert::urdf`]).
 pub use twin_convert::urdf;
 #[cfg(feature = "rerun")]

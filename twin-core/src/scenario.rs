@@ -42,6 +42,20 @@
 //! min_hold_secs = 2.0
 //! ```
 //!
+//! Your own ROS 2 node as the controller (`controller = "ros"`, see [`crate::external`] and
+//! `scenarios/hold_pose.toml`), and what `twin test` asks of the scenario:
+//!
+//! ```toml
+//! controller = "ros"
+//! [ros]                               # external::RosOptions, by field name
+//! command = "python3 controllers/hold_pose.py --ros-args -p use_sim_time:=true"
+//! period_timeout_secs = 5.0
+//!
+//! [test]                              # TestOptions: `twin test`
+//! episodes = 20
+//! min_success_lower_95 = 0.8
+//! ```
+//!
 //! Unknown keys, wrong types and impossible values are errors naming the file, the line and the
 //! key.
 //!
@@ -61,6 +75,9 @@ use crate::robot::Robot;
 use crate::walk::{GaitMetrics, GaitSummary, GaitTargets, WALK_ARMATURE, WalkOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// The `controller` of a scenario driven by the user's own ROS 2 node (see [`crate::external`]).
+pub const EXTERNAL_CONTROLLER: &str = "ros";
 
 /// A push: a constant force on a body for a while.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
@@ -120,6 +137,9 @@ struct File {
     #[serde(default)]
     grasp: crate::grasp::GraspOptions,
     randomize: Option<PathBuf>,
+    ros: Option<crate::external::RosOptions>,
+    #[serde(default)]
+    test: TestOptions,
 }
 
 fn default_controller() -> String {
@@ -160,6 +180,33 @@ pub struct Scenario {
     /// The randomization spec `twin randomize --scenario` uses without `--config`, resolved
     /// against the scenario's folder.
     pub randomize: Option<PathBuf>,
+    /// The external controller (`controller = "ros"`, [`crate::external`]).
+    pub ros: Option<crate::external::RosOptions>,
+    /// What `twin test` asks of this scenario.
+    pub test: TestOptions,
+}
+
+/// A scenario's `[test]` table: what `twin test` runs and asks.
+///
+/// ```toml
+/// [test]
+/// episodes = 20                 # randomized episodes (0: the nominal run only)
+/// min_success_lower_95 = 0.8    # least lower bound of the success rate's 95 % Wilson interval
+/// seed = 1                      # master seed of the randomized episodes
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TestOptions {
+    /// Randomized episodes (spec: the scenario's `randomize` file, or twin's default spec)
+    /// (default: 0, the nominal run only).
+    #[serde(default)]
+    pub episodes: u64,
+    /// Least lower bound of the success rate's 95 % Wilson interval over the randomized
+    /// episodes, 0–1 (default: 0.5 when `episodes` > 0).
+    pub min_success_lower_95: Option<f64>,
+    /// Master seed of the randomized episodes (default: 0).
+    #[serde(default)]
+    pub seed: u64,
 }
 
 /// 1-based line of byte `offset` in `text`.
@@ -207,6 +254,8 @@ impl Scenario {
             cup: None,
             grasp: crate::grasp::GraspOptions::default(),
             randomize: None,
+            ros: None,
+            test: TestOptions::default(),
         }
     }
 
@@ -246,12 +295,13 @@ impl Scenario {
         if !(file.duration > 0.0 && file.duration.is_finite()) {
             return Err(bad(None, "duration", format!("must be a positive number of seconds (got {})", file.duration)));
         }
-        if !crate::registry::CONTROLLERS.contains(&file.controller.as_str()) {
+        let external = file.controller == EXTERNAL_CONTROLLER;
+        if !external && !crate::registry::CONTROLLERS.contains(&file.controller.as_str()) {
             return Err(bad(
                 None,
                 "controller",
                 format!(
-                    "unknown controller \"{}\" (available: {})",
+                    "unknown controller \"{}\" (available: {}, or {EXTERNAL_CONTROLLER} for your own ROS 2 node with a [ros] table)",
                     file.controller,
                     crate::registry::CONTROLLERS.join(", ")
                 ),
@@ -268,6 +318,27 @@ impl Scenario {
             return Err(bad(None, "friction", format!("must be a non-negative coefficient (got {f})")));
         }
         file.walk.validate().map_err(|(key, m)| bad(Some("walk"), key, m))?;
+        match (&file.ros, external) {
+            (Some(r), true) => r.validate().map_err(|(key, m)| bad(Some("ros"), key, m))?,
+            (None, true) => {
+                return Err(bad(
+                    None,
+                    "controller",
+                    "controller = \"ros\" needs a [ros] table with the command that starts your node \
+                     (e.g. command = \"python3 my_controller.py --ros-args -p use_sim_time:=true\")"
+                        .into(),
+                ));
+            }
+            (Some(_), false) => {
+                return Err(bad(None, "controller", "a [ros] table is for controller = \"ros\"".into()));
+            }
+            (None, false) => {}
+        }
+        if let Some(p) = file.test.min_success_lower_95
+            && !(0.0..=1.0).contains(&p)
+        {
+            return Err(bad(Some("test"), "min_success_lower_95", format!("must be within 0..=1 (got {p})")));
+        }
         file.grasp.validate().map_err(|(key, m)| bad(Some("grasp"), key, m))?;
         if let Some(r) = file.impratio
             && !(r > 0.0 && r.is_finite())
@@ -309,7 +380,22 @@ impl Scenario {
             cup: file.cup,
             grasp: file.grasp,
             randomize,
+            ros: file.ros,
+            test: file.test,
         })
+    }
+
+    /// Whether the scenario's controller is an external ROS 2 node (`controller = "ros"`).
+    pub fn is_external(&self) -> bool {
+        self.controller == EXTERNAL_CONTROLLER
+    }
+
+    /// The folder of the scenario file (where relative paths and a `[ros]` command start).
+    pub fn folder(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
     }
 
     /// Loads the scenario's robot (`default_model` when it names none) with its physics
@@ -376,6 +462,12 @@ impl Scenario {
     /// [`Error::Walk`] when the walker can't drive the model (e.g. unreachable steps); as
     /// [`crate::registry::by_name_with`].
     pub fn controller(&self, model: &Model) -> Result<Box<dyn Controller>> {
+        if self.is_external() {
+            return Err(Error::Options(format!(
+                "{}: controller = \"ros\" is a process twin starts (twin_core::external), not one of twin's own",
+                self.path.display()
+            )));
+        }
         let options =
             ControllerOptions { walk: self.walk.clone(), grasp: self.grasp.clone(), ..ControllerOptions::default() };
         crate::registry::by_name_with(&self.controller, model, &options)

@@ -122,6 +122,11 @@ pub trait Controller: Send {
     /// start a control period, at the rate it declared). Messages borrow the controller's own
     /// buffers, so nothing is allocated per call. Default: nothing.
     fn diagnostics(&self, _emit: &mut dyn FnMut(usize, u64, crate::topics::TypedMessage<'_>)) {}
+
+    /// The joint positions the last `compute` steers to, for the tracking metrics
+    /// ([`crate::tracking`]): `emit(qpos address, target)`, rad (m) — a PD hold's or a position
+    /// servo's targets. Default: none (torque or velocity commands without a position target).
+    fn position_targets(&self, _emit: &mut dyn FnMut(usize, f64)) {}
 }
 
 #[cfg(test)]

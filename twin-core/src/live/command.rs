@@ -293,6 +293,29 @@ fn servo(l: &PdLoop, s: &Setpoint, q: f64, qd: f64) -> f64 {
     u.clamp(l.limits[0], l.limits[1])
 }
 
+/// What the tracking metrics ([`crate::tracking`]) compare the joints with.
+impl Commander {
+    /// The position targets of the current command: `emit(qpos address, target)` for a hold
+    /// and for commands with positions (none for velocity or effort commands, nor trajectories).
+    pub fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        match &self.mode {
+            Mode::Hold(t) => {
+                for (l, &t) in self.loops.iter().zip(t) {
+                    emit(l.qpos_adr, t);
+                }
+            }
+            Mode::Direct(s) => {
+                for (l, s) in self.loops.iter().zip(s) {
+                    if let Some(p) = s.position {
+                        emit(l.qpos_adr, p);
+                    }
+                }
+            }
+            Mode::Trajectory { .. } => {}
+        }
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

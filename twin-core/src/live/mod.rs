@@ -1041,3 +1041,77 @@ impl Drop for LiveController {
         }
     }
 }
+
+/// Who has joined: for [`crate::external`], which starts a controller process and waits until
+/// it has subscribed and published before simulated time starts.
+impl LiveController {
+    /// The cumulative numbers of subscriptions matched on `/clock`, of publications matched on
+    /// the command topic (`Float64MultiArray`) and on the trajectory topic since the bridge
+    /// started, as the latest match events say (`None`: no event since the last call). Takes
+    /// the writer's and readers' status events.
+    pub fn match_totals(&mut self) -> [Option<i32>; 3] {
+        use rustdds::StatusEvented;
+        let mut out = [None; 3];
+        while let Some(status) = self.clock.try_recv_status() {
+            if let rustdds::DataWriterStatus::PublicationMatched { total, .. } = status {
+                out[0] = Some(total.count());
+            }
+        }
+        for (k, reader) in [&self.commands, &self.trajectories].into_iter().enumerate() {
+            while let Some(status) = reader.try_recv_status() {
+                if let rustdds::DataReaderStatus::SubscriptionMatched { total, .. } = status {
+                    out[k + 1] = Some(total.count());
+                }
+            }
+        }
+        out
+    }
+
+    /// The position targets of the command in force ([`Commander::position_targets`]).
+    pub fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        self.commander.position_targets(emit);
+    }
+
+    /// Says that the caller ([`crate::external`], which starts the controller itself) has waited
+    /// for it to join and has held the first control period: lockstep then asks for a command
+    /// from the bridge's first period on (no join, no period under hold here).
+    pub fn mark_joined(&mut self) {
+        if self.started.is_none() {
+            self.started = Some((Instant::now(), 0.0));
+        }
+    }
+
+    /// Publishes (and records) `/clock` = `t_secs` outside the lockstep periods: after a reset
+    /// under a running controller, so that its sim-time timers start again from there.
+    pub fn announce_time(&mut self, t_secs: f64) {
+        self.publish_clock((t_secs * 1e9).round().max(0.0) as u64);
+    }
+
+    /// Drops every command and trajectory waiting in the readers (a new episode must not
+    /// start on a command meant for the last one).
+    pub fn discard_pending(&mut self) {
+        while let Ok(Some(_)) = self.commands.take_next_sample() {}
+        while let Ok(Some(_)) = self.trajectories.take_next_sample() {}
+    }
+}
+
+impl LiveSink {
+    /// The cumulative number of subscriptions matched on `topic`'s writer, as its latest match
+    /// event says (`None`: no writer for it, or no event since the last call).
+    pub fn subscription_total(&mut self, topic: &str) -> Option<i32> {
+        use rustdds::StatusEvented;
+        let w = self.writers.get(topic)?;
+        let mut last = None;
+        while let Some(status) = w.try_recv_status() {
+            if let rustdds::DataWriterStatus::PublicationMatched { total, .. } = status {
+                last = Some(total.count());
+            }
+        }
+        last
+    }
+
+    /// Whether the sink has a writer for `topic` (it offered it).
+    pub fn publishes(&self, topic: &str) -> bool {
+        self.writers.contains_key(topic)
+    }
+}
