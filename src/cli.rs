@@ -61,6 +61,7 @@ impl Cli {
             Command::Calibrate(args) => commands::calibrate::run(args),
             Command::Excite(args) => commands::excite::run(args),
             Command::Gap(args) => commands::gap::run(args),
+            Command::Test(args) => commands::test::run(args),
         }
     }
 }
