@@ -8,6 +8,8 @@ mod common;
 mod convert;
 #[path = "cli/deploy.rs"]
 mod deploy;
+#[path = "cli/diagnose.rs"]
+mod diagnose;
 #[path = "cli/engine.rs"]
 mod engine;
 #[path = "../twin-core/tests/it/example_robot_data.rs"]
@@ -37,5 +39,8 @@ mod shards;
 mod sim;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[cfg(feature = "ros")]
+#[path = "cli/viewers.rs"]
+mod viewers;
 #[path = "cli/walk.rs"]
 mod walk;

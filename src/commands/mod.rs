@@ -11,6 +11,7 @@ pub mod randomize;
 pub mod sim;
 pub mod sysid;
 pub mod view;
+pub mod viewers;
 
 use crate::cli::{Cli, Command};
 use std::path::PathBuf;

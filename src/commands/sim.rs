@@ -120,6 +120,17 @@ pub struct Args {
     /// their current pose.
     #[arg(long, default_value_t = 0.5, value_name = "SECS")]
     pub silence_timeout: f64,
+    /// Serve the run to Foxglove/Lichtblick over WebSocket at PORT (loopback) or ADDR:PORT:
+    /// every topic live (CDR), /robot_description and its package:// meshes, the
+    /// /twin/pause, /twin/resume, /twin/step and /twin/reset services, and joint position
+    /// commands published by a client. Paced at --rtf unless --ros paces the run.
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    pub foxglove: Option<String>,
+    /// Serve the run to Unity's ROS-TCP-Connector (the ROS-TCP-Endpoint protocol, ROS 2 CDR)
+    /// at PORT (loopback; 10000 when no port is given) or ADDR:PORT: Unity subscribes to
+    /// /joint_states and the other topics and publishes joint position commands.
+    #[arg(long, value_name = "[ADDR:]PORT", num_args = 0..=1, default_missing_value = "10000")]
+    pub unity: Option<String>,
     /// With --ros: wait up to this long for a subscriber on /clock before starting, seconds.
     #[arg(long, default_value_t = 0.0, value_name = "SECS")]
     pub wait_for_subscriber: f64,
@@ -228,6 +239,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     twin_core::fsio::cooperate();
     let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
+    let mut viewer = viewer_start(&args, &robot)?;
+    if let Some(v) = &viewer
+        && !args.ros
+    {
+        controller = v.wrap(controller, &robot.model);
+    }
     #[cfg(feature = "ros")]
     let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
     #[cfg(not(feature = "ros"))]
@@ -244,9 +261,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
                 ..options
             };
-            (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
+            let mut sinks: Vec<Box<dyn twin_core::topics::Sink>> = vec![Box::new(sink)];
+            sinks.extend(viewer.iter().flat_map(|v| v.sinks()));
+            (Some(Recording::with_sinks(&robot, &options, sinks)?), Some(controller))
         }
-        None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
+        None => match &viewer {
+            Some(v) => (Some(Recording::with_sinks(&robot, &options, v.sinks())?), None),
+            None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
+        },
     };
     #[cfg(not(feature = "ros"))]
     let mut recording = if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None };
@@ -284,14 +306,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             b.set_position((f * 1000.0) as u64);
         }
     };
+    let mut viewer_reset = viewer.as_ref().map(|v| v.reset_disturbance());
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
     #[cfg(feature = "ros")]
     disturbances.extend(live_reset.iter_mut().map(|r| r as &mut dyn Disturbance));
     if let Some(f) = stribeck.as_mut() {
         disturbances.push(f);
     }
+    disturbances.extend(viewer_reset.iter_mut().map(|r| r.as_mut() as &mut dyn Disturbance));
     let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
     observers.push(&mut stop);
+    observers.extend(viewer.as_mut().map(|v| v.observer()));
     let report = sim::simulate_with(
         &robot,
         controller,
@@ -364,6 +389,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(stats) = live_stats {
         live::report(&mut out, &stats)?;
     }
+    if let Some(v) = &viewer {
+        v.report(&mut out)?;
+    }
     for line in &controller_report {
         writeln!(out, "{line}")?;
     }
@@ -395,6 +423,34 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .into());
     }
     Ok(())
+}
+
+/// `--foxglove`, `--unity`: the servers, their hook and sinks (see `super::viewers`); paced at
+/// `--rtf` unless `--ros` paces the run.
+#[cfg(feature = "ros")]
+fn viewer_start(args: &Args, robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_none() && args.unity.is_none() {
+        return Ok(None);
+    }
+    let foxglove = args.foxglove.as_deref().map(|a| super::viewers::parse_addr("--foxglove", a)).transpose()?;
+    let unity = args.unity.as_deref().map(|a| super::viewers::parse_addr("--unity", a)).transpose()?;
+    let rtf = if args.ros || args.rtf.eq_ignore_ascii_case("max") {
+        None
+    } else {
+        match args.rtf.parse::<f64>() {
+            Ok(f) if f > 0.0 && f.is_finite() => Some(f),
+            _ => bail!("--rtf must be a positive real-time factor (1.0 = real time) or `max` (got {:?})", args.rtf),
+        }
+    };
+    Ok(Some(super::viewers::start(foxglove, unity, robot, rtf)?))
+}
+
+#[cfg(not(feature = "ros"))]
+fn viewer_start(args: &Args, _robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_some() || args.unity.is_some() {
+        return Err(super::viewers::unavailable());
+    }
+    Ok(None)
 }
 
 /// The `--ros` side of `twin sim`.

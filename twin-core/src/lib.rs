@@ -30,6 +30,7 @@
 pub mod check;
 pub mod control;
 pub mod convert;
+pub mod diagnose;
 pub mod engine;
 pub mod error;
 pub mod fsio;
@@ -39,12 +40,15 @@ pub mod live;
 pub mod log;
 #[allow(unsafe_code)]
 pub mod mj;
+pub mod plot;
 pub mod robot;
 pub mod scenario;
 pub mod sense;
 pub mod sim;
 pub mod topics;
 pub mod urdf;
+#[cfg(feature = "ros")]
+pub mod viewer;
 #[cfg(feature = "rerun")]
 pub mod viz;
 pub mod walk;
