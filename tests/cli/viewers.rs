@@ -133,8 +133,8 @@ fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
             "full",
             "package://twin_view_description/meshes/marker.stl",
             "/humanoid/joint_commands",
-            "left_elbow_joint",
-            "0.6",
+            "neck_yaw_joint",
+            "0.5",
         ],
     );
     let _ = Command::new("kill").args(["-INT", &sim.id().to_string()]).status();
@@ -158,16 +158,16 @@ fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
     // 50 steps of 2 ms.
     let stepped = b["calls"]["step"]["time_secs"].as_f64().unwrap() - paused_at;
     assert!((stepped - 0.1).abs() < 1e-9, "{stepped}: {b:#}");
-    // The published command moved the elbow to 0.6 rad.
+    // The published command turned the neck to 0.5 rad.
     let moved = b["moved"]["position"].as_f64().unwrap_or(f64::NAN);
-    assert!((moved - 0.6).abs() < 0.05, "{b:#}");
+    assert!((moved - 0.5).abs() < 0.05, "{b:#}");
     // Ctrl-C ends the run cleanly (status 130).
     assert_eq!(status.code(), Some(130), "{status:?}");
 }
 
 /// `twin sim --unity`: a client framed like Unity's ROS-TCP-Connector (tests/python, messages
 /// through rclpy's serializer) gets the handshake and the topic list, subscribes to
-/// /joint_states, decodes it, and publishes a Float64MultiArray that moves the elbow.
+/// /joint_states, decodes it, and publishes a Float64MultiArray that turns the neck.
 #[test]
 fn unity_client_handshakes_subscribes_and_moves_a_joint() {
     let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
@@ -198,7 +198,7 @@ fn unity_client_handshakes_subscribes_and_moves_a_joint() {
     assert_eq!(host, "127.0.0.1", "loopback by default");
     let out = Command::new(&python)
         .arg(repo_root().join("tests/python/unity_client.py"))
-        .args([host, port, "/humanoid/joint_commands", "left_elbow_joint", "0.6"])
+        .args([host, port, "/humanoid/joint_commands", "neck_yaw_joint", "0.5"])
         .output()
         .unwrap_or_else(|e| panic!("{python} (TWIN_PYTHON) with rclpy runs the Unity client: {e}"));
     let _ = Command::new("kill").args(["-INT", &sim.id().to_string()]).status();
@@ -217,6 +217,6 @@ fn unity_client_handshakes_subscribes_and_moves_a_joint() {
     assert!(v["errors"].as_array().unwrap().is_empty(), "{v:#}");
     assert_eq!(v["first"]["names"].as_array().unwrap().len(), 23, "{v:#}");
     let moved = v["moved"]["position"].as_f64().unwrap_or(f64::NAN);
-    assert!((moved - 0.6).abs() < 0.05, "{v:#}");
+    assert!((moved - 0.5).abs() < 0.05, "{v:#}");
     assert_eq!(status.code(), Some(130), "{status:?}");
 }

@@ -49,7 +49,7 @@ def send_command(name, params):
     send_frame(name, json.dumps(params).encode("utf-8") + b"\0")
 
 
-deadline = time.time() + 60
+deadline = time.time() + float(__import__("os").environ.get("UNITY_CLIENT_SECS", "60"))
 first = None
 moved = None
 sent_command = False
@@ -80,6 +80,8 @@ while time.time() < deadline:
             send_frame(command_topic, serialize_message(cmd))
             sent_command = True
             send_frame("", b"")  # a keepalive, as Unity sends when idle
+        if sent_command and out["joint_states"] % 100 == 0:
+            out.setdefault("trace", []).append([round(msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9, 3), round(msg.position[i], 4)])
         if sent_command and abs(msg.position[i] - target) < 0.05:
             moved = {"position": msg.position[i], "stamp": msg.header.stamp.sec + msg.header.stamp.nanosec * 1e-9}
             break
