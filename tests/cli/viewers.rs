@@ -220,3 +220,42 @@ fn unity_client_handshakes_subscribes_and_moves_a_joint() {
     assert!((moved - 0.5).abs() < 0.05, "{v:#}");
     assert_eq!(status.code(), Some(130), "{status:?}");
 }
+
+/// `twin view LOG --foxglove`: a recorded run played to the reference client, which decodes
+/// its /joint_states and IMU with the schemas the log carries; the receive times are the log's.
+#[test]
+fn foxglove_client_plays_a_recorded_log() {
+    let modules = node_modules();
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("run.mcap");
+    let (ok, out, err) = super::common::run(&["sim", "--duration", "1", "--record", mcap.to_str().unwrap()]);
+    assert!(ok, "{out}\n{err}");
+    let mut view = twin()
+        .args(["view", mcap.to_str().unwrap(), "--foxglove", "0", "--wait", "60"])
+        .stdout(Stdio::piped())
+        .stderr(Stdio::piped())
+        .spawn()
+        .unwrap();
+    let stdout = view.stdout.take().unwrap();
+    let (tx, rx) = mpsc::channel();
+    std::thread::spawn(move || {
+        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
+            let _ = tx.send(line);
+        }
+    });
+    let mut url = None;
+    while url.is_none() {
+        let line = rx.recv_timeout(Duration::from_secs(60)).expect("twin view says where the server listens");
+        url =
+            line.strip_prefix("foxglove: ws://").and_then(|l| l.split_whitespace().next()).map(|a| format!("ws://{a}"));
+    }
+    let a = client(&modules, &[&url.unwrap(), "foxglove.websocket.v1", "watch"]);
+    let status = view.wait().unwrap();
+    assert!(status.success(), "{status:?}");
+    assert_eq!(a["end"], "done", "{a:#}");
+    assert_eq!(a["firstJointState"]["name"].as_array().unwrap().len(), 23, "{a:#}");
+    // Played from the log's start: stamps (simulation time) are the receive times.
+    let first = &a["firstJointState"];
+    assert!((first["stamp"].as_f64().unwrap() - first["receive"].as_f64().unwrap()).abs() < 1e-9, "{a:#}");
+    assert!(first["stamp"].as_f64().unwrap() < 0.05, "{a:#}");
+}

@@ -75,7 +75,7 @@ fn axes(q: [f64; 4]) -> ([f64; 3], f64) {
 /// Finds the fall in `poses` (time s, orientation x y z w, position when known); fills the
 /// tilt and height signals of `data`.
 pub(crate) fn find(
-    poses: &[(f64, [f64; 4], Option<[f64; 3]>)],
+    poses: &[super::Pose],
     options: &FallOptions,
     data: &mut Data,
     notes: &mut Vec<String>,
@@ -107,7 +107,7 @@ pub(crate) fn find(
     // Initial height: median over the first 0.2 s (a planar odometry's z = 0 gives none).
     let mut early: Vec<f64> = samples.iter().take_while(|s| s.0 <= t_start + 0.2).map(|s| s.4).collect();
     let z0 = quantile(&mut early, 0.5);
-    let z_fall = (z0.is_finite() && z0 > 0.05).then(|| z0 * options.height_fraction);
+    let z_fall = (z0.is_finite() && z0 > 0.05).then_some(z0 * options.height_fraction);
     if z0.is_finite() && z0 <= 0.05 {
         notes.push(format!("base height at the start is {z0:.3} m (planar odometry?): falls by tilt only"));
     }

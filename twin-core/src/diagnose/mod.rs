@@ -189,6 +189,12 @@ pub struct Analysis {
     data: Data,
 }
 
+/// A base pose: time (s), orientation (x, y, z, w), position (m) when known.
+pub(crate) type Pose = (f64, [f64; 4], Option<[f64; 3]>);
+
+/// A contact topic with its force magnitude and tangential/normal signals.
+pub(crate) type ContactSignals<'a> = (String, &'a Signal, &'a Signal);
+
 /// The signals read, for the window and the plots.
 #[derive(Debug, Clone, Default)]
 pub(crate) struct Data {
@@ -390,7 +396,7 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     // Orientation and height: odometry (world-referenced), else the IMU's orientation.
     let imu_has_orientation =
         imu.iter().any(|(_, m)| m.orientation_covariance[0] != -1.0 && m.orientation_xyzw.iter().any(|q| *q != 0.0));
-    let poses: Vec<(f64, [f64; 4], Option<[f64; 3]>)> = if !odom.is_empty() {
+    let poses: Vec<Pose> = if !odom.is_empty() {
         odom.iter().map(|(s, m)| (secs(*s, origin), m.orientation_xyzw, Some(m.position))).collect()
     } else if imu_has_orientation {
         notes.push("no odometry: tilt from the IMU's orientation, no base height".into());
@@ -411,7 +417,7 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
                 "no odometry (base pose): the CoM, capture point and slip need the base pose with --model".into(),
             ),
             (Some(_), false, true) => {
-                let contact_by_topic: Vec<(String, &Signal, &Signal)> = contacts_raw
+                let contact_by_topic: Vec<ContactSignals<'_>> = contacts_raw
                     .iter()
                     .zip(data.contacts.iter().zip(&data.contact_ratios))
                     .map(|((t, _), (f, r))| (t.clone(), f, r))

@@ -146,6 +146,15 @@ fn beyond(pts: &[[f64; 2]], p: [f64; 2], dir: [f64; 2]) -> f64 {
     }
 }
 
+/// Per foot: world position, flat, loaded, normal force (N), tangential/normal ratio.
+type FootState = ([f64; 3], bool, bool, f64, Option<f64>);
+
+/// Per posed sample: per foot, its bottom points (world) that may support it.
+type Candidates = Vec<(usize, Vec<(usize, Vec<[f64; 3]>)>)>;
+
+/// A contact's force magnitude and tangential/normal ratio.
+type SignalPair<'a> = (&'a Signal, &'a Signal);
+
 /// One posed sample.
 struct Posed {
     t: f64,
@@ -154,7 +163,7 @@ struct Posed {
     support: Vec<[f64; 2]>,
     heading: f64,
     /// Per foot: world position, flat (tilt small), loaded.
-    feet: Vec<([f64; 3], bool, bool, f64, Option<f64>)>,
+    feet: Vec<FootState>,
 }
 
 /// Poses the model along the log and measures CoM, capture point, support and slip.
@@ -163,9 +172,9 @@ struct Posed {
 /// [`crate::Error::MuJoCo`] when posing fails.
 pub(crate) fn compute(
     robot: &Robot,
-    poses: &[(f64, [f64; 4], Option<[f64; 3]>)],
+    poses: &[super::Pose],
     positions: &[Signal],
-    contacts: &[(String, &Signal, &Signal)],
+    contacts: &[super::ContactSignals<'_>],
     fall: Option<&Fall>,
     slip_speed_mps: f64,
 ) -> Result<Stability> {
@@ -186,7 +195,7 @@ pub(crate) fn compute(
     let geoms = foot_geoms(model, &robot.feet);
     let foot_names: Vec<String> = robot.feet.iter().map(|&b| crate::topics::body_frame(robot, b)).collect();
     // Each foot's contact topic, if the log has one (`/contacts/<frame>`).
-    let foot_contacts: Vec<Option<(&Signal, &Signal)>> = foot_names
+    let foot_contacts: Vec<Option<SignalPair<'_>>> = foot_names
         .iter()
         .map(|n| {
             let topic = format!("/contacts/{}", crate::topics::topic_safe(n));
@@ -198,7 +207,7 @@ pub(crate) fn compute(
     let mut posed: Vec<Posed> = Vec::new();
     let mut lowest: Vec<(f64, f64)> = Vec::new();
     let mut pts3 = Vec::new();
-    let mut candidates: Vec<(usize, Vec<(usize, Vec<[f64; 3]>)>)> = Vec::new();
+    let mut candidates: Candidates = Vec::new();
     for &(t, q, p) in poses.iter().filter(|s| s.0 <= end) {
         let Some(p) = p else { continue };
         if posed.last().is_some_and(|l| t - l.t < 5e-4) {

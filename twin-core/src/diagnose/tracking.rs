@@ -60,12 +60,15 @@ pub struct Tracking {
     pub worst: usize,
 }
 
+/// Per command entry its joint (index in the JointState series), the kind the model says, and
+/// where the mapping comes from.
+type Mapping = (Vec<Option<usize>>, Option<CommandKind>, String);
+
+/// The tracking, and per compared joint its name, command and actual signals.
+type Compared = (Tracking, Vec<(String, Signal, Signal)>);
+
 /// Joint index (in the JointState series) of each command entry, and the kind the model says.
-fn mapping(
-    n: usize,
-    js: &JointStateSeries,
-    robot: Option<&Robot>,
-) -> std::result::Result<(Vec<Option<usize>>, Option<CommandKind>, String), String> {
+fn mapping(n: usize, js: &JointStateSeries, robot: Option<&Robot>) -> std::result::Result<Mapping, String> {
     let by_name = |name: &str| js.joints.iter().position(|j| j.name == name);
     if let Some(r) = robot {
         let model = &r.model;
@@ -104,7 +107,7 @@ fn mapping(
     ))
 }
 
-fn actual<'a>(data: &'a Data, kind: CommandKind, j: usize) -> &'a Signal {
+fn actual(data: &Data, kind: CommandKind, j: usize) -> &Signal {
     match kind {
         CommandKind::Position => &data.positions[j],
         CommandKind::Velocity => &data.velocities[j],
@@ -115,7 +118,7 @@ fn actual<'a>(data: &'a Data, kind: CommandKind, j: usize) -> &'a Signal {
 /// Best lag (s) of `a` behind `c`, both sampled at the same uniform-ish instants `dt` apart.
 fn lag(c: &[f64], a: &[f64], dt: f64) -> Option<f64> {
     let n = c.len().min(a.len());
-    if n < 20 || !(dt > 0.0) {
+    if n < 20 || dt.is_nan() || dt <= 0.0 {
         return None;
     }
     let max_k = ((0.5 / dt).round() as usize).min(n / 2).min(500);
@@ -156,7 +159,7 @@ pub(crate) fn compare(
     kind: Option<CommandKind>,
     end: Option<f64>,
     worst: usize,
-) -> std::result::Result<(Tracking, Vec<(String, Signal, Signal)>), String> {
+) -> std::result::Result<Compared, String> {
     let n = commands.iter().map(|(_, d)| d.len()).max().unwrap_or(0);
     if n == 0 {
         return Err(format!("{topic}: the commands are empty"));
@@ -371,7 +374,7 @@ pub(crate) fn oscillations(positions: &[Signal], until: Option<f64>) -> Vec<Osci
             continue;
         }
         let dt = s.median_dt();
-        if !(dt > 0.0) {
+        if dt.is_nan() || dt <= 0.0 {
             continue;
         }
         let half = ((0.05 / dt).round() as usize).max(1);

@@ -396,6 +396,8 @@ fn serve(stream: TcpStream, shared: &Arc<Shared>) {
     // The handshake is bounded.
     let _ = stream.set_read_timeout(Some(Duration::from_secs(5)));
     let mut chosen = "";
+    // tungstenite's callback type returns its (large) error response by value.
+    #[allow(clippy::result_large_err)]
     let callback = |req: &Request, mut res: Response| -> std::result::Result<Response, ErrorResponse> {
         let offered = req
             .headers()

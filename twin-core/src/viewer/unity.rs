@@ -243,8 +243,7 @@ fn serve(mut stream: TcpStream, shared: &Arc<Shared>) {
     let error = |text: String| {
         let _ = tx.try_send(command("__error", &json!({"text": text})));
     };
-    loop {
-        let Ok(Some(dlen)) = read_u32(&mut stream, &shared.stop) else { break };
+    while let Ok(Some(dlen)) = read_u32(&mut stream, &shared.stop) {
         if dlen > MAX_DESTINATION {
             error(format!("destination of {dlen} bytes (at most {MAX_DESTINATION}): not a ROS-TCP-Connector frame"));
             break;
