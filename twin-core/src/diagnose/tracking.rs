@@ -122,25 +122,29 @@ fn lag(c: &[f64], a: &[f64], dt: f64) -> Option<f64> {
         return None;
     }
     let max_k = ((0.5 / dt).round() as usize).min(n / 2).min(500);
-    let (mc, sc) = mean_std(&c[..n]);
-    let (ma, sa) = mean_std(&a[..n]);
+    let (_, sc) = mean_std(&c[..n]);
+    let (_, sa) = mean_std(&a[..n]);
     if !(sc > 1e-9 && sa > 1e-9) {
         return None;
     }
+    // Pearson correlation of the overlapping parts at each shift.
     let mut best = (0usize, f64::NEG_INFINITY);
     for k in 0..=max_k {
-        let m = n - k;
-        let mut s = 0.0;
-        let mut cnt = 0usize;
-        for i in 0..m {
-            let (x, y) = (c[i] - mc, a[i + k] - ma);
-            if x.is_finite() && y.is_finite() {
-                s += x * y;
-                cnt += 1;
-            }
+        let pairs: Vec<(f64, f64)> =
+            (0..n - k).map(|i| (c[i], a[i + k])).filter(|(x, y)| x.is_finite() && y.is_finite()).collect();
+        if pairs.len() < 10 {
+            continue;
         }
-        let r = if cnt > 0 { s / (cnt as f64 * sc * sa) } else { f64::NEG_INFINITY };
-        if r > best.1 + 1e-9 {
+        let m = pairs.len() as f64;
+        let (mx, my) = (pairs.iter().map(|p| p.0).sum::<f64>() / m, pairs.iter().map(|p| p.1).sum::<f64>() / m);
+        let (mut sxy, mut sxx, mut syy) = (0.0, 0.0, 0.0);
+        for (x, y) in &pairs {
+            sxy += (x - mx) * (y - my);
+            sxx += (x - mx) * (x - mx);
+            syy += (y - my) * (y - my);
+        }
+        let r = if sxx > 0.0 && syy > 0.0 { sxy / (sxx * syy).sqrt() } else { f64::NEG_INFINITY };
+        if r > best.1 + 1e-12 {
             best = (k, r);
         }
     }
