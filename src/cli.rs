@@ -21,7 +21,8 @@ pub enum Command {
     Convert(crate::commands::convert::Args),
     /// Validate a model step by step: physics, sensors, control, integration speed.
     Check(crate::commands::check::Args),
-    /// Inspect ROS 2 MCAP logs (`twin log info FILE`).
+    /// Inspect ROS 2 MCAP logs (`twin log info FILE`) and find why the robot fell (`twin log
+    /// analyze FILE`).
     Log(crate::commands::log::Args),
     /// Domain-randomized batch rollouts: how often and how the robot fails.
     Randomize(Box<crate::commands::randomize::Args>),

@@ -8,6 +8,8 @@ mod common;
 mod convert;
 #[path = "cli/deploy.rs"]
 mod deploy;
+#[path = "cli/diagnose.rs"]
+mod diagnose;
 #[path = "cli/engine.rs"]
 mod engine;
 #[path = "../twin-core/tests/it/example_robot_data.rs"]
@@ -42,5 +44,8 @@ mod sim;
 mod sysid;
 #[path = "../twin-core/tests/it/test_python.rs"]
 mod test_python;
+#[cfg(feature = "ros")]
+#[path = "cli/viewers.rs"]
+mod viewers;
 #[path = "cli/walk.rs"]
 mod walk;

@@ -13,6 +13,7 @@ pub mod sim;
 pub mod sysid;
 pub mod test;
 pub mod view;
+pub mod viewers;
 
 use std::path::PathBuf;
 use std::sync::LazyLock;

@@ -206,6 +206,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if external && scenario.is_none() {
         anyhow::bail!("--controller ros needs --scenario FILE with a [ros] table (the command that starts your node)");
     }
+    // The nominal robot, for `twin log analyze` of the worst episodes' recordings.
+    let nominal = (args.record_worst > 0).then(|| robot.clone());
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(mut s) = scenario {
         // The scenario's walker (its options, the --controller override) on each worker, its
@@ -293,6 +295,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 if cfg!(feature = "rerun") { ".csv, .mcap, .rrd" } else { ".csv, .mcap" },
                 out.join("worst").display()
             );
+            if let Some(robot) = &nominal {
+                let fall = twin_core::engine::observers::FallOptions {
+                    height_fraction: args.fall_height_fraction,
+                    tilt_rad: args.fall_tilt,
+                };
+                analyze_worst(&out.join("worst"), &report.worst, robot, fall)?;
+            }
         }
     }
     if report.interrupted {
@@ -300,5 +309,43 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             super::Interrupted(format!("{} of {} episodes finished", report.summary.episodes, requested)).into()
         );
     }
+    Ok(())
+}
+
+/// `twin log analyze` of each worst episode's recording (`worst_<i>.mcap`): the report as
+/// `worst_<i>.analysis.txt` and `.json`, the plots in `worst_<i>_plots/`, and its first finding
+/// on stderr.
+fn analyze_worst(
+    dir: &std::path::Path,
+    worst: &[u64],
+    robot: &Robot,
+    fall: twin_core::engine::observers::FallOptions,
+) -> anyhow::Result<()> {
+    let options = twin_core::diagnose::AnalyzeOptions { fall, ..Default::default() };
+    for &i in worst {
+        let mcap = dir.join(format!("worst_{i:06}.mcap"));
+        let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions::default())?;
+        let analysis = twin_core::diagnose::analyze(&log, Some(robot), &options)
+            .with_context(|| format!("analysing {}", mcap.display()))?;
+        twin_core::fsio::write_atomic(
+            &dir.join(format!("worst_{i:06}.analysis.txt")),
+            analysis.to_text().as_bytes(),
+            twin_core::fsio::Backup::None,
+        )?;
+        twin_core::fsio::write_atomic(
+            &dir.join(format!("worst_{i:06}.analysis.json")),
+            analysis.to_json().as_bytes(),
+            twin_core::fsio::Backup::None,
+        )?;
+        let plots = dir.join(format!("worst_{i:06}_plots"));
+        std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+        for (name, svg) in analysis.plots() {
+            twin_core::fsio::write_atomic(&plots.join(name), svg.as_bytes(), twin_core::fsio::Backup::None)?;
+        }
+        if let Some(d) = analysis.diagnosis.first() {
+            eprintln!("episode {i}: {} ({})", d.cause, d.evidence);
+        }
+    }
+    eprintln!("analyses (twin log analyze): worst_<i>.analysis.txt/.json and worst_<i>_plots/ in {}", dir.display());
     Ok(())
 }

@@ -137,6 +137,17 @@ pub struct Args {
     /// their current pose.
     #[arg(long, default_value_t = 0.5, value_name = "SECS")]
     pub silence_timeout: f64,
+    /// Serve the run to Foxglove/Lichtblick over WebSocket at PORT (loopback) or ADDR:PORT:
+    /// every topic live (CDR), /robot_description and its package:// meshes, the
+    /// /twin/pause, /twin/resume, /twin/step and /twin/reset services, and joint position
+    /// commands published by a client. Paced at --rtf unless --ros paces the run.
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    pub foxglove: Option<String>,
+    /// Serve the run to Unity's ROS-TCP-Connector (the ROS-TCP-Endpoint protocol, ROS 2 CDR)
+    /// at PORT (loopback; 10000 when no port is given) or ADDR:PORT: Unity subscribes to
+    /// /joint_states and the other topics and publishes joint position commands.
+    #[arg(long, value_name = "[ADDR:]PORT", num_args = 0..=1, default_missing_value = "10000")]
+    pub unity: Option<String>,
     /// With --ros: wait up to this long for a subscriber on /clock before starting, seconds.
     #[arg(long, default_value_t = 0.0, value_name = "SECS")]
     pub wait_for_subscriber: f64,
@@ -175,25 +186,38 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // From here on, Ctrl-C (or SIGTERM) ends the run after the current step: recordings are
     // closed, the summary printed, and twin exits with status 130; a second one aborts.
     twin_core::fsio::cooperate();
-    let mut outputs = Outputs::open(&args, &plan, &robot, controller.as_ref())?;
+    let mut viewer = viewer_start(&args, &robot)?;
+    if let Some(v) = &viewer
+        && !args.ros
+    {
+        controller = v.wrap(controller, &robot.model);
+    }
+    let viewer_sinks = viewer.as_ref().map(|v| v.sinks()).unwrap_or_default();
+    let mut outputs = Outputs::open(&args, &plan, &robot, controller.as_ref(), viewer_sinks)?;
+    let mut viewer_reset = viewer.as_ref().map(|v| v.reset_disturbance());
 
     let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
     if let Some(f) = stribeck.as_mut() {
         disturbances.push(f);
     }
+    disturbances.extend(viewer_reset.iter_mut().map(|r| r.as_mut() as &mut dyn Disturbance));
     let mut observers: Vec<&mut dyn Observer> = health.iter_mut().map(|h| h.as_mut() as &mut dyn Observer).collect();
     observers.extend(check.iter_mut().map(|c| c as &mut dyn Observer));
     // Commanded vs actual joint positions, for every controller that says its targets.
     let mut tracking = twin_core::tracking::Tracking::new();
     observers.push(&mut tracking);
     observers.push(&mut stop);
+    observers.extend(viewer.as_mut().map(|v| v.observer()));
     let (report, ran) = outputs.simulate(&robot, controller.as_mut(), &plan, &mut disturbances, &mut observers)?;
     drop(observers);
     let mut out = std::io::stdout().lock();
     outputs.print(&mut out, &plan, &robot, &report, &ran)?;
     writeln!(out, "{}", tracking.summary())?;
 
+    if let Some(v) = &viewer {
+        v.report(&mut out)?;
+    }
     // A live run also ends on the flag, through its controller.
     let interrupted = twin_core::fsio::interrupted();
     if interrupted {
@@ -221,6 +245,35 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     Ok(())
 }
+
+/// `--foxglove`, `--unity`: the servers, their hook and sinks (see `super::viewers`); paced at
+/// `--rtf` unless `--ros` paces the run.
+#[cfg(feature = "ros")]
+fn viewer_start(args: &Args, robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_none() && args.unity.is_none() {
+        return Ok(None);
+    }
+    let foxglove = args.foxglove.as_deref().map(|a| super::viewers::parse_addr("--foxglove", a)).transpose()?;
+    let unity = args.unity.as_deref().map(|a| super::viewers::parse_addr("--unity", a)).transpose()?;
+    let rtf = if args.ros || args.rtf.eq_ignore_ascii_case("max") {
+        None
+    } else {
+        match args.rtf.parse::<f64>() {
+            Ok(f) if f > 0.0 && f.is_finite() => Some(f),
+            _ => bail!("--rtf must be a positive real-time factor (1.0 = real time) or `max` (got {:?})", args.rtf),
+        }
+    };
+    Ok(Some(super::viewers::start(foxglove, unity, robot, rtf)?))
+}
+
+#[cfg(not(feature = "ros"))]
+fn viewer_start(args: &Args, _robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_some() || args.unity.is_some() {
+        return Err(super::viewers::unavailable());
+    }
+    Ok(None)
+}
+
 
 /// What to run: the scenario (a file, or the defaults of `--controller walk`), the controller
 /// and its options, the duration, the seed, the model file.
@@ -345,7 +398,13 @@ struct Ran {
 }
 
 impl Outputs {
-    fn open(args: &Args, plan: &Plan, robot: &Robot, controller: &dyn Controller) -> anyhow::Result<Outputs> {
+    fn open(
+        args: &Args,
+        plan: &Plan,
+        robot: &Robot,
+        controller: &dyn Controller,
+        viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
+    ) -> anyhow::Result<Outputs> {
         let options = RecordOptions {
             mcap: args.record.clone(),
             rrd: args.rerun.clone(),
@@ -372,10 +431,16 @@ impl Outputs {
             }
         }
         if args.ros {
-            let (live, recording) = live::Live::start(args, robot, options)?;
+            let (live, recording) = live::Live::start(args, robot, options, viewer_sinks)?;
             return Ok(Outputs { recording: Some(recording), recording_wanted, live: Some(live) });
         }
-        let recording = if recording_wanted { Some(Recording::new(robot, &options)?) } else { None };
+        let recording = if !viewer_sinks.is_empty() {
+            Some(Recording::with_sinks(robot, &options, viewer_sinks)?)
+        } else if recording_wanted {
+            Some(Recording::new(robot, &options)?)
+        } else {
+            None
+        };
         Ok(Outputs { recording, recording_wanted, live: None })
     }
 
@@ -677,7 +742,12 @@ mod live {
     impl Live {
         /// Joins the graph, opens the recording with the bridge as a sink, announces the
         /// bridge, and waits for a subscriber when asked.
-        pub fn start(args: &Args, robot: &Robot, record: RecordOptions) -> anyhow::Result<(Live, Recording)> {
+        pub fn start(
+            args: &Args,
+            robot: &Robot,
+            record: RecordOptions,
+            viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
+        ) -> anyhow::Result<(Live, Recording)> {
             let options = options(args)?;
             let stop = twin_core::fsio::interrupt_flag();
             let log = Box::new(|m: &str| eprintln!("warning: {m}"));
@@ -687,7 +757,9 @@ mod live {
                 controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
                 ..record
             };
-            let recording = Recording::with_sinks(robot, &record, vec![Box::new(sink)])?;
+            let mut sinks: Vec<Box<dyn twin_core::topics::Sink>> = vec![Box::new(sink)];
+            sinks.extend(viewer_sinks);
+            let recording = Recording::with_sinks(robot, &record, sinks)?;
             announce(args, robot, &controller, options.domain_id)?;
             if args.wait_for_subscriber > 0.0
                 && !controller.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber))
@@ -780,7 +852,12 @@ mod live {
     pub enum Live {}
 
     impl Live {
-        pub fn start(_: &Args, _: &Robot, _: RecordOptions) -> anyhow::Result<(Live, Recording)> {
+        pub fn start(
+            _: &Args,
+            _: &Robot,
+            _: RecordOptions,
+            _: Vec<Box<dyn twin_core::topics::Sink>>,
+        ) -> anyhow::Result<(Live, Recording)> {
             Err(twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }
                 .into())
         }

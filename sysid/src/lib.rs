@@ -139,7 +139,8 @@ pub mod mjcf;
 pub mod model;
 pub mod noise;
 pub mod number;
-pub mod plot;
+/// The SVG plots of the reports: twin-core's one plotting helper.
+pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
 pub mod rng;

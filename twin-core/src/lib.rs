@@ -31,6 +31,7 @@ pub mod check;
 pub mod checks;
 pub mod control;
 pub mod convert;
+pub mod diagnose;
 pub mod engine;
 pub mod error;
 pub mod external;
@@ -42,6 +43,7 @@ pub mod live;
 pub mod log;
 #[allow(unsafe_code)]
 pub mod mj;
+pub mod plot;
 pub mod registry;
 pub mod robot;
 pub mod scenario;
@@ -51,6 +53,8 @@ pub mod topics;
 pub mod tracking;
 /// URDF checks ([`twin_convert::urdf`]).
 pub use twin_convert::urdf;
+#[cfg(feature = "ros")]
+pub mod viewer;
 #[cfg(feature = "rerun")]
 pub mod viz;
 pub mod walk;
