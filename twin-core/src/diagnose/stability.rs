@@ -123,7 +123,7 @@ fn bottom_points(model: &Model, data: &Data, g: usize, out: &mut Vec<[f64; 3]>) 
         }
         mujoco_sys::mjtGeom_mjGEOM_SPHERE => out.push([c[0], c[1], c[2] - s[0]]),
         _ => {
-            if let Some(z) = crate::control::geom_lowest_z(model, data, g) {
+            if let Some(z) = crate::robot::geom_lowest_z(model, data, g) {
                 out.push([c[0], c[1], z]);
             }
         }
@@ -226,7 +226,7 @@ pub(crate) fn compute(
         data.qpos_mut().copy_from_slice(&qpos);
         data.kinematics_with_velocity()?;
         let com = data.subtree_com()[base.body];
-        lowest.push((t, crate::control::lowest_robot_point_z(model, &data)));
+        lowest.push((t, crate::robot::lowest_robot_point_z(model, &data)));
         let xm = data.xmat()[base.body];
         let heading = xm[3].atan2(xm[0]);
         let mut feet = Vec::new();
