@@ -27,6 +27,8 @@ mod live;
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
+#[path = "cli/sweep.rs"]
+mod sweep;
 #[path = "cli/reliab.rs"]
 mod reliab;
 #[path = "cli/sense.rs"]

@@ -138,7 +138,8 @@ pub mod log;
 pub mod mjcf;
 pub mod model;
 pub mod noise;
-pub mod plot;
+/// The SVG plots of the reports: twin-core's (shared with `twin randomize --sweep`).
+pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
 pub mod signal;

@@ -9,4 +9,5 @@ mod log_interop;
 mod physics;
 mod sense;
 mod sinks;
+mod terrain;
 mod walk;

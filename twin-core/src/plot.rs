@@ -1,5 +1,6 @@
 //! Minimal SVG plots (lines, points, shaded bands; linear or log axes) for calibration
-//! reports. Deterministic text: the same data give the same bytes.
+//! reports (sysid) and success-against-difficulty sweeps (`twin randomize --sweep`).
+//! Deterministic text: the same data give the same bytes.
 
 use std::fmt::Write as _;
 
