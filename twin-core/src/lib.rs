@@ -32,7 +32,8 @@ pub mod control;
 pub mod convert;
 pub mod engine;
 pub mod error;
-pub mod fsio;
+/// How twin opens its inputs and rewrites the files a user owns ([`twin_fsio`]).
+pub use twin_fsio as fsio;
 pub mod grasp;
 #[cfg(feature = "ros")]
 pub mod live;
@@ -46,7 +47,8 @@ pub mod sense;
 pub mod sim;
 pub mod terrain;
 pub mod topics;
-pub mod urdf;
+/// URDF checks ([`twin_convert::urdf`]).
+pub use twin_convert::urdf;
 #[cfg(feature = "rerun")]
 pub mod viz;
 pub mod walk;

@@ -120,7 +120,7 @@ impl RobotMetadata {
     /// MJCFs carry none beyond the model itself (sensor noise, `actuatorfrcrange`), which
     /// [`Robot::from_parts`] reads.
     pub fn from_mjcf(model: &Model) -> Option<RobotMetadata> {
-        crate::convert::RobotMeta::from_model(model).map(|m| RobotMetadata {
+        crate::convert::robot_meta(model).map(|m| RobotMetadata {
             name: Some(m.name),
             imus: m.imus,
             joints: m.joints,

@@ -24,7 +24,11 @@
 //!   ([`install_signal_handler`]), and, for a process killed with SIGKILL, by the next twin
 //!   writing the same file (temps whose process is gone are swept).
 
-use crate::{Error, Result};
+#![deny(unsafe_code)]
+
+mod error;
+
+pub use error::{Error, Result};
 use std::fs::{File, Metadata, OpenOptions};
 use std::io::{Read, Write};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
