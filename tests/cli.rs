@@ -27,8 +27,6 @@ mod live;
 mod log;
 #[path = "cli/randomize.rs"]
 mod randomize;
-#[path = "cli/sweep.rs"]
-mod sweep;
 #[path = "cli/reliab.rs"]
 mod reliab;
 #[path = "cli/sense.rs"]
@@ -37,6 +35,8 @@ mod sense;
 mod shards;
 #[path = "cli/sim.rs"]
 mod sim;
+#[path = "cli/sweep.rs"]
+mod sweep;
 #[path = "cli/sysid.rs"]
 mod sysid;
 #[path = "cli/walk.rs"]

@@ -56,7 +56,9 @@ impl std::str::FromStr for Sweep {
     type Err = Error;
 
     fn from_str(arg: &str) -> Result<Sweep> {
-        let bad = |m: String| Error::Options(format!("--sweep {arg}: {m} (expected NAME=FROM:TO:STEP, e.g. terrain.difficulty=0:1:0.2)"));
+        let bad = |m: String| {
+            Error::Options(format!("--sweep {arg}: {m} (expected NAME=FROM:TO:STEP, e.g. terrain.difficulty=0:1:0.2)"))
+        };
         let (name, range) = arg.split_once('=').ok_or_else(|| bad("no `=`".into()))?;
         let name = name.trim();
         if name.is_empty() || !name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_' || c == '.') {
@@ -67,7 +69,11 @@ impl std::str::FromStr for Sweep {
             return Err(bad(format!("`{range}` is not FROM:TO:STEP")));
         }
         let num = |s: &str, what: &str| -> Result<f64> {
-            s.trim().parse::<f64>().ok().filter(|v| v.is_finite()).ok_or_else(|| bad(format!("{what} `{s}` is not a finite number")))
+            s.trim()
+                .parse::<f64>()
+                .ok()
+                .filter(|v| v.is_finite())
+                .ok_or_else(|| bad(format!("{what} `{s}` is not a finite number")))
         };
         let (from, to, step) = (num(parts[0], "FROM")?, num(parts[1], "TO")?, num(parts[2], "STEP")?);
         if !(step > 0.0) {
@@ -163,7 +169,8 @@ pub fn spec_at(spec: &Spec, key: &str, level: f64) -> Result<Spec> {
 /// integer key gets a fractional level.
 pub fn scenario_text_at(text: &str, key: &str, level: f64) -> Result<String> {
     let bad = |m: String| Error::Options(format!("--sweep {key} = {level}: {m}"));
-    let mut doc: toml::Table = toml::from_str(text).map_err(|e| bad(format!("the scenario is not TOML: {}", e.message())))?;
+    let mut doc: toml::Table =
+        toml::from_str(text).map_err(|e| bad(format!("the scenario is not TOML: {}", e.message())))?;
     let parts: Vec<&str> = key.split('.').collect();
     let (last, path) = parts.split_last().ok_or_else(|| bad("empty key".into()))?;
     let mut table = &mut doc;
@@ -247,7 +254,14 @@ pub fn to_csv(name: &str, rows: &[LevelRow]) -> String {
         let _ = write!(
             s,
             "{},{},{},{},{},{},{},{}",
-            r.level, r.episodes, r.succeeded, r.fell, r.unstable, r.success_rate, r.success_rate_ci95[0], r.success_rate_ci95[1]
+            r.level,
+            r.episodes,
+            r.succeeded,
+            r.fell,
+            r.unstable,
+            r.success_rate,
+            r.success_rate_ci95[0],
+            r.success_rate_ci95[1]
         );
         for m in &r.medians {
             let _ = write!(s, ",{}", fmt_num(*m));
@@ -340,9 +354,11 @@ impl SweepManifest {
             return Ok(None);
         }
         let text = twin_core::fsio::read_to_string(&path)?;
-        serde_json::from_str(&text)
-            .map(Some)
-            .map_err(|e| Error::Results { path, line: Some(e.line() as u64), message: format!("not a sweep manifest: {e}") })
+        serde_json::from_str(&text).map(Some).map_err(|e| Error::Results {
+            path,
+            line: Some(e.line() as u64),
+            message: format!("not a sweep manifest: {e}"),
+        })
     }
 }
 
@@ -465,7 +481,9 @@ mod tests {
         assert_eq!(first_below(&rows, 0.8), Some(1.0));
         assert_eq!(first_below(&rows, 0.9), Some(0.5));
         let csv = to_csv("terrain.difficulty", &rows);
-        assert!(csv.starts_with("terrain.difficulty,episodes,succeeded,fell,unstable,success_rate,ci95_low,ci95_high,median_distance_m"));
+        assert!(csv.starts_with(
+            "terrain.difficulty,episodes,succeeded,fell,unstable,success_rate,ci95_low,ci95_high,median_distance_m"
+        ));
         assert_eq!(csv.lines().count(), 4);
         let svg = to_svg("terrain.difficulty", &rows, 0.8);
         assert!(svg.starts_with("<svg") && svg.contains("Success against terrain.difficulty"));

@@ -19,8 +19,17 @@ fn a_terrain_sweep_over_two_shards_merges_to_what_one_machine_writes() {
     let dir = tempfile::tempdir().unwrap();
     let d = |n: &str| dir.path().join(n).display().to_string();
     let scenario = repo_root().join("scenarios/walk_rough.toml").display().to_string();
-    let common =
-        ["randomize", "--scenario", &scenario, "--episodes", "4", "--duration", "1.5", "--sweep", "terrain.difficulty=0:1:0.5"];
+    let common = [
+        "randomize",
+        "--scenario",
+        &scenario,
+        "--episodes",
+        "4",
+        "--duration",
+        "1.5",
+        "--sweep",
+        "terrain.difficulty=0:1:0.5",
+    ];
     let text = ok(&[&common[..], &["--threads", "2", "--out", &d("one")]].concat());
     assert!(text.contains("success first below") || text.contains("success stays"), "{text}");
     ok(&[&common[..], &["--threads", "1", "--shard", "1/2", "--out", &d("s1")]].concat());

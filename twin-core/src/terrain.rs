@@ -245,8 +245,7 @@ impl TerrainOptions {
         let own = keys_of(&self.kind);
         for (key, present) in set {
             if present && !own.contains(&key) {
-                let users: Vec<&str> =
-                    KINDS.iter().copied().filter(|k| keys_of(k).contains(&key)).collect();
+                let users: Vec<&str> = KINDS.iter().copied().filter(|k| keys_of(k).contains(&key)).collect();
                 return Err((
                     key,
                     format!(
@@ -254,7 +253,11 @@ impl TerrainOptions {
                         self.kind,
                         users.join(", "),
                         self.kind,
-                        if own.is_empty() { "none besides difficulty, seed, start_m, direction_deg, width_m".into() } else { own.join(", ") }
+                        if own.is_empty() {
+                            "none besides difficulty, seed, start_m, direction_deg, width_m".into()
+                        } else {
+                            own.join(", ")
+                        }
                     ),
                 ));
             }
@@ -316,13 +319,18 @@ impl TerrainOptions {
         }
         let cell = self.get(self.cell_m, 0.05);
         if cell < 0.005 {
-            return Err(("cell_m", format!("must be at least 0.005 m (got {cell}): the heightfield would be too large")));
+            return Err((
+                "cell_m",
+                format!("must be at least 0.005 m (got {cell}): the heightfield would be too large"),
+            ));
         }
         let cells = (self.extent_along().1 - self.extent_along().0) / cell * self.get(self.width_m, 3.0) / cell;
         if matches!(self.kind.as_str(), "rough" | "slope") && cells > 4.0e6 {
             return Err((
                 "cell_m",
-                format!("the heightfield would have {cells:.0} cells (at most 4 000 000): use a larger cell_m or a smaller terrain"),
+                format!(
+                    "the heightfield would have {cells:.0} cells (at most 4 000 000): use a larger cell_m or a smaller terrain"
+                ),
             ));
         }
         Ok(())
@@ -717,7 +725,8 @@ impl TerrainGeometry {
     /// box count, or no heightfield where this one has one).
     pub fn write_into(&self, model: &Model) -> crate::Result<Model> {
         let ours = terrain_geoms(model);
-        let hfield_geom = ours.iter().copied().find(|&g| model.name(ObjType::Geom, g) == format!("{GEOM_PREFIX}_hfield"));
+        let hfield_geom =
+            ours.iter().copied().find(|&g| model.name(ObjType::Geom, g) == format!("{GEOM_PREFIX}_hfield"));
         let boxes: Vec<usize> = ours.iter().copied().filter(|&g| Some(g) != hfield_geom).collect();
         if boxes.len() != self.boxes.len() || hfield_geom.is_some() != self.hfield.is_some() {
             return Err(crate::Error::InvalidEdit(format!(
@@ -767,7 +776,12 @@ impl std::fmt::Display for Collision {
         write!(
             f,
             "{} ran into {} at {:.2} s (x {:.2} y {:.2} z {:.3} m)",
-            self.robot_body, self.terrain_geom, self.time_secs, self.position_m[0], self.position_m[1], self.position_m[2]
+            self.robot_body,
+            self.terrain_geom,
+            self.time_secs,
+            self.position_m[0],
+            self.position_m[1],
+            self.position_m[2]
         )
     }
 }
@@ -811,7 +825,8 @@ impl crate::engine::Observer for Collisions {
         let model = step.data.model();
         for (geoms, p) in step.data.contact_points() {
             let (Ok(a), Ok(b)) = (usize::try_from(geoms[0]), usize::try_from(geoms[1])) else { continue };
-            let (ground, robot) = match (self.terrain.iter().find(|t| t.0 == a), self.terrain.iter().find(|t| t.0 == b)) {
+            let (ground, robot) = match (self.terrain.iter().find(|t| t.0 == a), self.terrain.iter().find(|t| t.0 == b))
+            {
                 (Some(t), None) => (t, b),
                 (None, Some(t)) => (t, a),
                 _ => continue,

@@ -1500,7 +1500,8 @@ impl Controller for Walker {
         // (ankles that follow a slope, not stand on a heel).
         let ground_pitch = {
             let along = Vector2::new(heading.cos(), heading.sin());
-            let (d, dz) = ((self.planted[0].pos - self.planted[1].pos).dot(&along), self.ground_z[0] - self.ground_z[1]);
+            let (d, dz) =
+                ((self.planted[0].pos - self.planted[1].pos).dot(&along), self.ground_z[0] - self.ground_z[1]);
             if o.ground_pitch_gain != 0.0 && d.abs() > GROUND_SLOPE_MIN_BASE_M && dz != 0.0 {
                 -o.ground_pitch_gain * (dz / d).atan().clamp(-0.35, 0.35)
             } else {

@@ -49,7 +49,10 @@ fn mujoco_sees_the_generated_ground() {
                 let (x, y) = (0.8 + 0.2 * f64::from(i), -1.2 + 0.3 * f64::from(j));
                 let want = geometry.height_at(x, y);
                 let (got, geom) = ray_height(&mut data, x, y);
-                assert!((got - want).abs() < tol, "{terrain}: at ({x}, {y}) MuJoCo's ground is {got} ({geom}), the generator's {want}");
+                assert!(
+                    (got - want).abs() < tol,
+                    "{terrain}: at ({x}, {y}) MuJoCo's ground is {got} ({geom}), the generator's {want}"
+                );
                 checked += 1;
             }
         }
@@ -61,10 +64,9 @@ fn mujoco_sees_the_generated_ground() {
 fn the_robot_starts_seated_on_the_ground() {
     // Rough ground (mean 1 cm above the floor, flat start pad), and a step right under the
     // feet (start_m = 0): the lowest foot point rests on the ground, nothing penetrates.
-    for (terrain, ground) in [
-        ("kind = \"rough\"\namplitude_m = 0.01\n", 0.01),
-        ("kind = \"steps\"\nheight_m = 0.04\nstart_m = 0.0\n", 0.04),
-    ] {
+    for (terrain, ground) in
+        [("kind = \"rough\"\namplitude_m = 0.01\n", 0.01), ("kind = \"steps\"\nheight_m = 0.04\nstart_m = 0.0\n", 0.04)]
+    {
         let s = scenario(terrain);
         let robot = s.robot(&humanoid()).unwrap();
         let mut data = Data::new(robot.model.clone()).unwrap();
@@ -104,12 +106,10 @@ fn a_new_terrain_written_into_the_model_is_the_one_mujoco_sees() {
 
 #[test]
 fn bad_terrain_keys_name_the_line() {
-    let e = Scenario::parse(
-        std::path::Path::new("s.toml"),
-        "duration = 1\n[terrain]\nkind = \"rough\"\nslope_deg = 5\n",
-    )
-    .unwrap_err()
-    .to_string();
+    let e =
+        Scenario::parse(std::path::Path::new("s.toml"), "duration = 1\n[terrain]\nkind = \"rough\"\nslope_deg = 5\n")
+            .unwrap_err()
+            .to_string();
     assert!(e.starts_with("s.toml:4: `terrain.slope_deg`") && e.contains("does not apply"), "{e}");
     let e = Scenario::parse(std::path::Path::new("s.toml"), "duration = 1\n[terrain]\nkind = \"lava\"\n")
         .unwrap_err()
