@@ -605,11 +605,15 @@ impl TerrainGeometry {
                 num(h.half_m[1]),
                 num(if range > 0.0 { range } else { 1e-6 })
             );
-            for (k, v) in h.heights_m.iter().enumerate() {
-                if k > 0 {
-                    x.push(' ');
+            // MJCF's `elevation` lists rows from +y down, as an image does (MuJoCo flips them
+            // into its row 0 at −y); `heights_m` is in MuJoCo's order.
+            for (k, row) in h.heights_m.chunks(h.ncol).rev().enumerate() {
+                for (j, v) in row.iter().enumerate() {
+                    if k > 0 || j > 0 {
+                        x.push(' ');
+                    }
+                    x.push_str(&num(if range > 0.0 { (v - lo) / range } else { 0.0 }));
                 }
-                x.push_str(&num(if range > 0.0 { (v - lo) / range } else { 0.0 }));
             }
             x.push_str("\"/>\n</asset>\n");
         }
