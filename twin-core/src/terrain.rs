@@ -354,10 +354,10 @@ impl TerrainOptions {
         match self.kind.as_str() {
             "rough" => {
                 let a = d * self.get(self.amplitude_m, 0.05);
-                // Fades in over the half metre before the start; the mean height is `a`, so the
-                // lowest point is on the floor.
+                // Rises from the floor over the half metre before the start to heights within
+                // ±a of a mean a: the lowest point is on the floor, and so is the robot's start.
                 let fade = smooth((u - (start - 0.5)) / 0.5);
-                a + a * fade * lattice.at(u, v)
+                fade * (a + a * lattice.at(u, v))
             }
             "slope" => {
                 let tan = (d * self.get(self.slope_deg, 15.0)).to_radians().tan();
@@ -879,9 +879,9 @@ mod tests {
         let h = g.hfield.as_ref().unwrap();
         let (lo, hi) = h.range_m();
         assert!(lo >= -1e-12 && hi <= 0.02 + 1e-12 && hi - lo > 0.015, "{lo} {hi}");
-        // The start pad (up to start − 0.5 m) is flat at the mean height.
+        // The start pad (up to start − 0.5 m) is the floor.
         for x in [-0.5, 0.0, 0.3, 0.5] {
-            assert!((g.height_at(x, 0.05) - 0.01).abs() < 1e-12, "{x}");
+            assert_eq!(g.height_at(x, 0.05), 0.0, "{x}");
         }
         assert_eq!(g, o.build());
         o.seed = 1;

@@ -62,10 +62,10 @@ fn mujoco_sees_the_generated_ground() {
 
 #[test]
 fn the_robot_starts_seated_on_the_ground() {
-    // Rough ground (mean 1 cm above the floor, flat start pad), and a step right under the
-    // feet (start_m = 0): the lowest foot point rests on the ground, nothing penetrates.
+    // Rough ground (its start pad on the floor), and a step right under the feet
+    // (start_m = 0): the lowest foot point rests on the ground, nothing penetrates.
     for (terrain, ground) in
-        [("kind = \"rough\"\namplitude_m = 0.01\n", 0.01), ("kind = \"steps\"\nheight_m = 0.04\nstart_m = 0.0\n", 0.04)]
+        [("kind = \"rough\"\namplitude_m = 0.01\n", 0.0), ("kind = \"steps\"\nheight_m = 0.04\nstart_m = 0.0\n", 0.04)]
     {
         let s = scenario(terrain);
         let robot = s.robot(&humanoid()).unwrap();
