@@ -175,6 +175,9 @@ pub struct Heightfield {
 /// The terrain as geometry (see the [module docs](self)).
 #[derive(Debug, Clone, PartialEq, Default)]
 pub struct TerrainGeometry {
+    /// Height of the floor plane, m: 0, or below it for ground that goes below the start's
+    /// level (rough ground: −amplitude).
+    pub floor_z_m: f64,
     /// The heightfield, if the kind has one.
     pub hfield: Option<Heightfield>,
     /// Static boxes.
@@ -354,10 +357,10 @@ impl TerrainOptions {
         match self.kind.as_str() {
             "rough" => {
                 let a = d * self.get(self.amplitude_m, 0.05);
-                // Rises from the floor over the half metre before the start to heights within
-                // ±a of a mean a: the lowest point is on the floor, and so is the robot's start.
+                // Heights within ±a of the start's level, faded in over the half metre before
+                // the start (the floor plane goes down to −a, see `floor_z_m`).
                 let fade = smooth((u - (start - 0.5)) / 0.5);
-                fade * (a + a * lattice.at(u, v))
+                fade * a * lattice.at(u, v)
             }
             "slope" => {
                 let tan = (d * self.get(self.slope_deg, 15.0)).to_radians().tan();
@@ -395,6 +398,9 @@ impl TerrainOptions {
         };
         match self.kind.as_str() {
             "rough" | "slope" => {
+                if self.kind == "rough" {
+                    geometry.floor_z_m = -d * self.get(self.amplitude_m, 0.05);
+                }
                 let (u0, u1) = self.extent_along();
                 let cell = self.get(self.cell_m, 0.05);
                 let ncol = ((u1 - u0) / cell).round().max(1.0) as usize + 1;
@@ -558,7 +564,7 @@ impl TerrainGeometry {
     /// Height of the ground (the floor at 0, the heightfield, the tops of boxes) at world
     /// (x, y), m.
     pub fn height_at(&self, x: f64, y: f64) -> f64 {
-        let mut z: f64 = 0.0;
+        let mut z: f64 = self.floor_z_m;
         if let Some(h) = self.hfield.as_ref().and_then(|h| h.height_at(x, y)) {
             z = z.max(h);
         }
@@ -670,10 +676,17 @@ pub fn settle(model: &Model, geometry: &TerrainGeometry, feet: &[usize]) -> crat
                 .into(),
         ));
     }
-    let floor = model.id(ObjType::Geom, "floor").map_or(0, |g| model.geom_priority()[g]);
+    let floor = model.id(ObjType::Geom, "floor");
+    let priority = floor.map_or(0, |g| model.geom_priority()[g]);
     let mut edit = model.edit()?;
     for &g in &ours {
-        edit.set_geom_priority(g, floor)?;
+        edit.set_geom_priority(g, priority)?;
+    }
+    if let Some(g) = floor
+        && geometry.floor_z_m != 0.0
+    {
+        let p = model.geom_pos()[g];
+        edit.set_geom_pos(g, [p[0], p[1], geometry.floor_z_m])?;
     }
     let model = edit.finish()?;
     let (Some(free), Some(key)) = (model.free_joint(), model.id(ObjType::Key, "home")) else {
@@ -878,8 +891,9 @@ mod tests {
         let g = o.build();
         let h = g.hfield.as_ref().unwrap();
         let (lo, hi) = h.range_m();
-        assert!(lo >= -1e-12 && hi <= 0.02 + 1e-12 && hi - lo > 0.015, "{lo} {hi}");
-        // The start pad (up to start − 0.5 m) is the floor.
+        assert!(lo >= -0.01 - 1e-12 && hi <= 0.01 + 1e-12 && hi - lo > 0.015, "{lo} {hi}");
+        assert_eq!(g.floor_z_m, -0.01);
+        // The start pad (up to start − 0.5 m) is at the start's level.
         for x in [-0.5, 0.0, 0.3, 0.5] {
             assert_eq!(g.height_at(x, 0.05), 0.0, "{x}");
         }
