@@ -196,7 +196,7 @@ impl ModelEdit {
     pub fn set_hfield(&mut self, hfield: usize, elevation_m: f64, data: &[f32]) -> Result<&mut Self> {
         let count = self.model.raw().nhfield.max(0) as usize;
         check("heightfield id", hfield, count)?;
-        if !(elevation_m > 0.0 && elevation_m.is_finite()) || !data.iter().all(|v| (0.0..=1.0).contains(v)) {
+        if !(elevation_m > 0.0 && elevation_m.is_finite() && data.iter().all(|v| (0.0..=1.0).contains(v))) {
             return Err(Error::InvalidEdit(format!(
                 "heightfield {hfield}: elevation must be positive ({elevation_m}) and data within [0, 1]"
             )));
