@@ -76,7 +76,7 @@ impl std::str::FromStr for Sweep {
                 .ok_or_else(|| bad(format!("{what} `{s}` is not a finite number")))
         };
         let (from, to, step) = (num(parts[0], "FROM")?, num(parts[1], "TO")?, num(parts[2], "STEP")?);
-        if !(step > 0.0) {
+        if step <= 0.0 {
             return Err(bad(format!("STEP must be positive (got {step})")));
         }
         if to < from {
