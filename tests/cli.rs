@@ -40,6 +40,8 @@ mod sense;
 mod shards;
 #[path = "cli/sim.rs"]
 mod sim;
+#[path = "cli/sweep.rs"]
+mod sweep;
 #[path = "cli/sysid.rs"]
 mod sysid;
 #[path = "../twin-core/tests/it/test_python.rs"]

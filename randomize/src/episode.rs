@@ -77,6 +77,7 @@ pub struct Batch {
     /// A controller with its own checks, instead of `controller` (see [`DriverFactory`]), and
     /// the verdicts of those checks before any episode (their CSV columns).
     driver: Option<(Arc<DriverFactory>, Vec<Verdict>)>,
+    terrain: Option<twin_core::terrain::TerrainOptions>,
 }
 
 impl Batch {
@@ -116,6 +117,7 @@ impl Batch {
             checks: None,
             disturbances: None,
             driver: None,
+            terrain: None,
         };
         let factory = batch.controller.clone();
         batch.with_controller_factory(factory)
@@ -183,10 +185,20 @@ impl Batch {
         self
     }
 
+    /// The batch on a new terrain per episode: `terrain` (the nominal model's, as
+    /// `twin_core::scenario::Scenario::robot` built it) with its seed drawn from (its seed, the
+    /// master seed, the episode index), written into the episode's model, the robot seated on
+    /// it. Only the kinds with random parts (rough ground, obstacles) change.
+    pub fn with_terrain(mut self, terrain: twin_core::terrain::TerrainOptions) -> Batch {
+        self.terrain = matches!(terrain.kind.as_str(), "rough" | "obstacles").then_some(terrain);
+        self
+    }
+
     /// The batch run as `scenario` says (`twin randomize --scenario`): the scenario's
     /// controller, with its options, on each worker; its checks deciding each episode's success;
-    /// its scripted pushes besides the spec's random ones. The nominal robot should be
-    /// `scenario.robot(..)` (its armature and friction).
+    /// its scripted pushes besides the spec's random ones; a new terrain per episode
+    /// ([`Batch::with_terrain`]). The nominal robot should be `scenario.robot(..)` (its armature,
+    /// friction and terrain).
     ///
     /// # Errors
     /// The scenario's controller or check error for the nominal robot.
@@ -206,10 +218,14 @@ impl Batch {
         logs: &std::path::Path,
     ) -> Result<Batch> {
         let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
+        let batch = match scenario.terrain.clone() {
+            Some(t) => self.with_terrain(t),
+            None => self,
+        };
         let batch = if scenario.is_external() {
-            self.with_external(&scenario, logs)?
+            batch.with_external(&scenario, logs)?
         } else {
-            self.with_controller(move |r| scenario.controller(&r.model))?
+            batch.with_controller(move |r| scenario.controller(&r.model))?
         };
         Ok(batch
             .with_checks(move |r| {
@@ -366,6 +382,30 @@ impl Observer for TrajectoryRows<'_> {
     }
 }
 
+/// Episode `index`'s terrain: `terrain` with a seed from (its seed, the master seed, the
+/// index), written into the draw's model, the robot's start raised or lowered by as much as the
+/// ground under its feet differs from the nominal terrain's.
+fn episode_terrain(
+    batch: &Batch,
+    terrain: &twin_core::terrain::TerrainOptions,
+    index: u64,
+    draw: &mut Draw,
+) -> Result<()> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(terrain.seed ^ batch.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    rng.set_stream(index);
+    let options = twin_core::terrain::TerrainOptions { seed: rng.random(), ..terrain.clone() };
+    let geometry = options.build();
+    draw.model = geometry.write_into(&draw.model)?;
+    let lift = twin_core::terrain::seat_lift(&draw.model, &batch.layout.home_qpos, &geometry, &batch.robot.feet)?;
+    if let Some(free) = draw.model.free_joint()
+        && lift.abs() > 1e-9
+    {
+        draw.init_qpos[free.qpos_adr + 2] += lift;
+    }
+    Ok(())
+}
+
 /// Per-thread state: the rollout engine (one `Data` reused across episodes), the controller,
 /// the checks and the touch-down counter.
 pub struct Worker {
@@ -428,7 +468,10 @@ impl Worker {
         recording: Option<&mut dyn Observer>,
     ) -> Result<EpisodeResult> {
         let mut param_rng = episode_rng(batch.seed, index, 0);
-        let draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
+        let mut draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
+        if let Some(t) = &batch.terrain {
+            episode_terrain(batch, t, index, &mut draw)?;
+        }
         self.rollout(batch, index, draw, trajectory, recording)
     }
 

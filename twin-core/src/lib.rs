@@ -2,9 +2,9 @@
 //! URDF/Gazebo → MJCF converter ([`convert`]), the robot loaded once ([`robot`]), the one
 //! rollout engine ([`engine`]), the step-by-step model validation ([`check`]), controllers
 //! ([`control`]) and their registry by name ([`registry`]), model-based walking with gait metrics ([`walk`]), scenario files
-//! ([`scenario`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
+//! ([`scenario`]) and their terrain ([`terrain`]), the ROS 2 topic table and its sinks ([`topics`]), ROS 2 logs ([`log`]),
 //! simulation runs with recording ([`sim`]), depth cameras, LiDARs and cup detection by ray
-//! casting ([`sense`]) and, with the cargo feature `rerun`, rerun
+//! casting ([`sense`]), deterministic SVG plots ([`plot`]) and, with the cargo feature `rerun`, rerun
 //! recordings (`viz`).
 //!
 //! `unsafe` code is denied everywhere but in [`mj`], the MuJoCo wrapper.
@@ -49,6 +49,7 @@ pub mod robot;
 pub mod scenario;
 pub mod sense;
 pub mod sim;
+pub mod terrain;
 pub mod topics;
 pub mod tracking;
 /// URDF checks ([`twin_convert::urdf`]).

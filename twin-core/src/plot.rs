@@ -1,7 +1,8 @@
 //! Minimal SVG plots (lines, points, shaded bands, marker lines; linear or log axes): the one
-//! plotting helper of twin's reports (sysid's calibration and gap reports, `twin log analyze`).
-//! A report builds [`Plot`] panels from its series and [`stack_svg`] renders them into one
-//! document. Deterministic text: the same data give the same bytes.
+//! plotting helper of twin's reports (sysid's calibration and gap reports, `twin log analyze`,
+//! success-against-difficulty sweeps of `twin randomize --sweep`). A report builds [`Plot`]
+//! panels from its series and [`stack_svg`] renders them into one document. Deterministic
+//! text: the same data give the same bytes.
 
 use std::fmt::Write as _;
 

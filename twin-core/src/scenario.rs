@@ -56,6 +56,16 @@
 //! min_success_lower_95 = 0.8
 //! ```
 //!
+//! Walking scenarios may put the robot on terrain (see [`crate::terrain`] for every kind and
+//! key); the robot starts seated on it:
+//!
+//! ```toml
+//! [terrain]                           # terrain::TerrainOptions, by field name
+//! kind = "slope"                      # flat | rough | slope | steps | stairs | obstacles | gaps
+//! slope_deg = 5.0
+//! difficulty = 1.0                    # 0: flat … 1: the parameters as written
+//! ```
+//!
 //! Unknown keys, wrong types and impossible values are errors naming the file, the line and the
 //! key.
 //!
@@ -140,6 +150,7 @@ struct File {
     ros: Option<crate::external::RosOptions>,
     #[serde(default)]
     test: TestOptions,
+    terrain: Option<crate::terrain::TerrainOptions>,
 }
 
 fn default_controller() -> String {
@@ -184,6 +195,8 @@ pub struct Scenario {
     pub ros: Option<crate::external::RosOptions>,
     /// What `twin test` asks of this scenario.
     pub test: TestOptions,
+    /// The ground, if not the flat floor.
+    pub terrain: Option<crate::terrain::TerrainOptions>,
 }
 
 /// A scenario's `[test]` table: what `twin test` runs and asks.
@@ -340,6 +353,12 @@ impl Scenario {
             return Err(bad(Some("test"), "min_success_lower_95", format!("must be within 0..=1 (got {p})")));
         }
         file.grasp.validate().map_err(|(key, m)| bad(Some("grasp"), key, m))?;
+        if let Some(t) = &file.terrain {
+            t.validate().map_err(|(key, m)| bad(Some("terrain"), key, m))?;
+            if file.world.is_some() && t.kind != "flat" {
+                return Err(bad(None, "world", "a scenario has either a world or a [terrain], not both".into()));
+            }
+        }
         if let Some(r) = file.impratio
             && !(r > 0.0 && r.is_finite())
         {
@@ -382,6 +401,7 @@ impl Scenario {
             randomize,
             ros: file.ros,
             test: file.test,
+            terrain: file.terrain,
         })
     }
 
@@ -409,8 +429,22 @@ impl Scenario {
         // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where
         // `twin randomize` draws it per episode.
         let grasping = self.controller == "grasp";
-        let extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" };
-        let robot = Robot::load_with_extra(&path, &convert, extra)?;
+        let mut extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" }.to_string();
+        // Terrain: its geometry composed over the floor, the robot seated on it.
+        let terrain = self.terrain.as_ref().filter(|t| t.kind != "flat").map(|t| t.build());
+        if let Some(g) = &terrain {
+            extra.push_str(&g.to_mjcf(crate::terrain::FLOOR_FRICTION));
+        }
+        let mut robot = Robot::load_with_extra(&path, &convert, &extra)?;
+        if let Some(g) = &terrain {
+            let (model, _lift) = crate::terrain::settle(&robot.model, g, &robot.feet).map_err(|e| Error::Scenario {
+                path: self.path.clone(),
+                line: None,
+                key: Some("terrain".into()),
+                message: format!("{e} ({})", path.display()),
+            })?;
+            robot = robot.with_model(Arc::new(model))?;
+        }
         let mut model = prepare_model(&robot.model, self.armature, self.friction)?;
         if self.impratio.is_some() || self.cup.is_some() || grasping {
             let mut edit = model.edit()?;
@@ -517,7 +551,8 @@ impl Scenario {
                 self.grasp.grasp_bodies.clone(),
             )
         });
-        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp })
+        let collisions = self.terrain.as_ref().map(|_| crate::terrain::Collisions::new(model));
+        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp, collisions })
     }
 
     /// Each check against `summary`.
@@ -535,6 +570,8 @@ pub struct ScenarioCheck {
     checks: Checks,
     /// The grasp checks, when the scenario has grasp thresholds.
     pub grasp: Option<crate::grasp::GraspCheck>,
+    /// The robot's first run-in with the terrain's boxes, when the scenario has terrain.
+    pub collisions: Option<crate::terrain::Collisions>,
 }
 
 impl ScenarioCheck {
@@ -553,6 +590,9 @@ impl Observer for ScenarioCheck {
         if let Some(g) = self.grasp.as_mut() {
             g.start(model, data)?;
         }
+        if let Some(c) = self.collisions.as_mut() {
+            c.start(model, data)?;
+        }
         self.metrics.start(model, data)
     }
 
@@ -560,7 +600,17 @@ impl Observer for ScenarioCheck {
         if let Some(g) = self.grasp.as_mut() {
             g.observe(step)?;
         }
+        if let Some(c) = self.collisions.as_mut() {
+            c.observe(step)?;
+        }
         self.metrics.observe(step)
+    }
+}
+
+impl ScenarioCheck {
+    /// The robot's first collision with the terrain, if any.
+    pub fn collision(&self) -> Option<&crate::terrain::Collision> {
+        self.collisions.as_ref().and_then(|c| c.first.as_ref())
     }
 }
 
@@ -586,8 +636,16 @@ impl Check for ScenarioCheck {
                 .filter(|m| m.name != "fell")
                 .chain(self.grasp.iter().flat_map(|g| g.verdicts()).map(|v| Measurement::new(v.name, v.value, "")))
                 .collect(),
-            details: verdicts.iter().map(ToString::to_string).collect(),
-            cause: (!failed.is_empty()).then(|| format!("failed: {}", failed.join(", "))),
+            details: verdicts
+                .iter()
+                .map(ToString::to_string)
+                .chain(self.collision().map(|c| format!("collision: {c}")))
+                .collect(),
+            cause: (!failed.is_empty()).then(|| match self.collision() {
+                // Running into the terrain, not a mystery fall.
+                Some(c) => format!("failed: {} (first collision: {c})", failed.join(", ")),
+                None => format!("failed: {}", failed.join(", ")),
+            }),
         }
     }
 }

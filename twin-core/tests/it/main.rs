@@ -10,4 +10,5 @@ mod physics;
 mod sense;
 mod sinks;
 mod test_python;
+mod terrain;
 mod walk;
