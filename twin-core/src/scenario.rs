@@ -269,6 +269,7 @@ impl Scenario {
             randomize: None,
             ros: None,
             test: TestOptions::default(),
+            terrain: None,
         }
     }
 

@@ -724,7 +724,7 @@ pub fn seat_lift(model: &Model, qpos: &[f64], geometry: &TerrainGeometry, feet: 
         if !feet.contains(&body) || (shared.geom_contype()[g] == 0 && shared.geom_conaffinity()[g] == 0) {
             continue;
         }
-        let Some(lowest) = crate::control::geom_lowest_z(&shared, &data, g) else { continue };
+        let Some(lowest) = crate::robot::geom_lowest_z(&shared, &data, g) else { continue };
         let p = data.geom_xpos()[g];
         let r = shared.geom_rbound()[g];
         lift = lift.max(geometry.highest_under(p[0], p[1], [r, r]) - lowest);

@@ -71,7 +71,7 @@ fn the_robot_starts_seated_on_the_ground() {
         let robot = s.robot(&humanoid()).unwrap();
         let mut data = Data::new(robot.model.clone()).unwrap();
         twin_core::control::reset_to_home(&mut data).unwrap();
-        let lowest = twin_core::control::lowest_robot_point_z(&robot.model, &data);
+        let lowest = twin_core::robot::lowest_robot_point_z(&robot.model, &data);
         assert!((lowest - ground).abs() < 1e-9, "{terrain}: lowest robot point {lowest}, ground {ground}");
         let deepest = data.contacts().iter().map(|c| c.0).fold(0.0, f64::min);
         assert!(deepest > -1e-6, "{terrain}: penetrates by {deepest} m at reset");
