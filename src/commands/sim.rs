@@ -274,7 +274,6 @@ fn viewer_start(args: &Args, _robot: &Robot) -> anyhow::Result<Option<super::vie
     Ok(None)
 }
 
-
 /// What to run: the scenario (a file, or the defaults of `--controller walk`), the controller
 /// and its options, the duration, the seed, the model file.
 struct Plan {
