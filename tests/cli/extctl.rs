@@ -13,7 +13,7 @@ use std::process::Command;
 use std::time::{Duration, Instant};
 
 fn python() -> String {
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let exe = crate::test_python::python().to_string_lossy().into_owned();
     let ok = Command::new(&exe).args(["-c", "import rclpy, sensor_msgs.msg, std_msgs.msg, junitparser"]).output();
     match ok {
         Ok(o) if o.status.success() => exe,
@@ -164,7 +164,7 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
         let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
         assert_eq!(column(&csv, "success"), vec!["0"; 2], "{mode}: {csv}");
         for line in csv.lines().skip(1) {
-            assert!(line.contains(&format!("{kind}")) && line.contains(why), "{mode}: {line}");
+            assert!(line.contains(&kind.to_string()) && line.contains(why), "{mode}: {line}");
         }
         let summary: serde_json::Value =
             serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();

@@ -434,7 +434,7 @@ const README: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
 /// The Python of `TWIN_PYTHON` with rclpy and the message packages, or a failure saying what
 /// to install.
 fn rclpy_python() -> String {
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let exe = crate::test_python::python().to_string_lossy().into_owned();
     let probe = "import rclpy, sensor_msgs.msg, std_msgs.msg, rosgraph_msgs.msg, rmw_fastrtps_cpp";
     match Command::new(&exe).args(["-c", probe]).output() {
         Ok(o) if o.status.success() => exe,

@@ -170,7 +170,7 @@ fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
 /// /joint_states, decodes it, and publishes a Float64MultiArray that turns the neck.
 #[test]
 fn unity_client_handshakes_subscribes_and_moves_a_joint() {
-    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let python = crate::test_python::python().to_string_lossy().into_owned();
     let mut sim = twin()
         .args(["sim", "--duration", "120", "--unity", "0"])
         .stdout(Stdio::piped())
