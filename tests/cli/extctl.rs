@@ -193,6 +193,11 @@ fn ctrl_c_ends_a_batch_with_its_controllers() {
     let dir = tempfile::tempdir().unwrap();
     let tag = tag("ctrlc");
     let s = scenario(dir.path(), "long.toml", 600.0, &hold_pose(&python, &tag), "stop_timeout_secs = 1.0");
+    // No pushes (the default spec's would end episodes early by a fall): the episodes are still
+    // running when Ctrl-C comes.
+    let spec = repo_root().join("scenarios/hold_pose_randomize.toml");
+    let text = std::fs::read_to_string(&s).unwrap();
+    std::fs::write(&s, format!("randomize = {spec:?}\n{text}")).unwrap();
     let out = dir.path().join("out");
     let mut child = twin()
         .args(["randomize", "--scenario"])

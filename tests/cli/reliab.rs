@@ -701,8 +701,8 @@ fn randomize_worst_recordings_are_the_same_run_to_run() {
         }
         if name.contains(".analysis.") {
             // The analysis names the recording it read: the same up to the output folder.
-            let a_text = std::fs::read_to_string(&a).unwrap().replace(&d.join("a").display().to_string(), "OUT");
-            let b_text = std::fs::read_to_string(&b).unwrap().replace(&d.join("b").display().to_string(), "OUT");
+            let a_text = std::fs::read_to_string(&a).unwrap().replace("a/worst/", "OUT/worst/");
+            let b_text = std::fs::read_to_string(&b).unwrap().replace("b/worst/", "OUT/worst/");
             assert_eq!(a_text, b_text, "{name} differs");
             continue;
         }
