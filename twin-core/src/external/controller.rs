@@ -99,7 +99,7 @@ pub struct ControllerHealth {
 ///
 /// # Errors
 /// [`Error::Live`] when the bridge can't start or a `subscribes` topic is not one the robot
-/// publishes; [`Error::Io`] for the profile or the log.
+/// publishes; [`Error::File`] for the profile or the log.
 pub fn external(
     robot: &Robot,
     options: &RosOptions,
@@ -111,7 +111,7 @@ pub fn external(
     let profile_dir = tempfile::Builder::new()
         .prefix("twin-ros-")
         .tempdir()
-        .map_err(|source| Error::Io { path: std::env::temp_dir(), source })?;
+        .map_err(|source| Error::io(std::env::temp_dir(), source))?;
     let env = dds_environment(lease.id(), &profile_dir.path().join("fastdds_loopback.xml"))?;
     let live_options = LiveOptions {
         domain_id: lease.id(),

@@ -32,7 +32,7 @@ impl DomainLease {
     /// [`Error::Live`] when the lock folder can't be written or every id is held.
     pub fn acquire() -> Result<DomainLease> {
         let dir = std::env::temp_dir().join("twin-dds-domains");
-        std::fs::create_dir_all(&dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
+        std::fs::create_dir_all(&dir).map_err(|source| Error::io(dir.clone(), source))?;
         let n = u64::from(DOMAINS.end() - DOMAINS.start()) + 1;
         // Start where other processes are unlikely to: spread by pid and by lease count.
         let start = (u64::from(std::process::id()) * 7 + LEASES.fetch_add(1, Ordering::Relaxed) * 3) % n;
@@ -44,7 +44,7 @@ impl DomainLease {
                 .truncate(false)
                 .write(true)
                 .open(&path)
-                .map_err(|source| Error::Io { path: path.clone(), source })?;
+                .map_err(|source| Error::io(path.clone(), source))?;
             if file.try_lock().is_ok() {
                 return Ok(DomainLease { id, _lock: file });
             }
@@ -110,10 +110,10 @@ pub const CYCLONE_LOOPBACK_CONFIG: &str = "<CycloneDDS><Domain Id=\"any\"><Gener
 /// (`CYCLONEDDS_URI`).
 ///
 /// # Errors
-/// [`Error::Io`] when the profile can't be written.
+/// [`Error::File`] when the profile can't be written.
 pub fn dds_environment(domain: u16, profile: &Path) -> Result<Vec<(String, String)>> {
     std::fs::write(profile, FASTDDS_LOOPBACK_PROFILE)
-        .map_err(|source| Error::Io { path: profile.to_path_buf(), source })?;
+        .map_err(|source| Error::io(profile.to_path_buf(), source))?;
     Ok(vec![
         ("ROS_DOMAIN_ID".into(), domain.to_string()),
         ("ROS_AUTOMATIC_DISCOVERY_RANGE".into(), "LOCALHOST".into()),
@@ -149,7 +149,7 @@ impl ControllerProcess {
     /// what starts (`note`).
     ///
     /// # Errors
-    /// [`Error::Io`] when the log can't be opened; [`Error::Live`] when `sh` can't start.
+    /// [`Error::File`] when the log can't be opened; [`Error::Live`] when `sh` can't start.
     pub fn start(
         command: &str,
         folder: &Path,
@@ -158,9 +158,9 @@ impl ControllerProcess {
         note: &str,
     ) -> Result<ControllerProcess> {
         if let Some(dir) = log.parent() {
-            std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| Error::io(dir.to_path_buf(), source))?;
         }
-        let io = |source| Error::Io { path: log.to_path_buf(), source };
+        let io = |source| Error::io(log.to_path_buf(), source);
         let mut out = File::options().create(true).append(true).open(log).map_err(io)?;
         writeln!(out, "--- twin: {note}: sh -c {command:?} in {}", folder.display()).map_err(io)?;
         let err = out.try_clone().map_err(io)?;

@@ -94,7 +94,7 @@ impl Loopback {
     /// replacing earlier copies) for `domain_id`.
     ///
     /// # Errors
-    /// [`crate::Error::Io`] when a file can't be written.
+    /// [`crate::Error::File`] when a file can't be written.
     pub fn write(dir: &Path, domain_id: u16) -> Result<Loopback> {
         let fastdds_profile = dir.join("fastdds-loopback.xml");
         let cyclonedds_config = dir.join("cyclonedds-loopback.xml");
