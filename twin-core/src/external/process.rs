@@ -112,8 +112,7 @@ pub const CYCLONE_LOOPBACK_CONFIG: &str = "<CycloneDDS><Domain Id=\"any\"><Gener
 /// # Errors
 /// [`Error::File`] when the profile can't be written.
 pub fn dds_environment(domain: u16, profile: &Path) -> Result<Vec<(String, String)>> {
-    std::fs::write(profile, FASTDDS_LOOPBACK_PROFILE)
-        .map_err(|source| Error::io(profile.to_path_buf(), source))?;
+    std::fs::write(profile, FASTDDS_LOOPBACK_PROFILE).map_err(|source| Error::io(profile.to_path_buf(), source))?;
     Ok(vec![
         ("ROS_DOMAIN_ID".into(), domain.to_string()),
         ("ROS_AUTOMATIC_DISCOVERY_RANGE".into(), "LOCALHOST".into()),

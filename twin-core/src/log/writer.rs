@@ -173,8 +173,7 @@ impl Sink {
     fn finish(mut self) -> Result<WriteSummary> {
         let summary = self.w.finish().map_err(|e| Error::McapWrite { path: self.path.clone(), source: e })?;
         let path = self.path;
-        let file =
-            self.w.into_inner().into_inner().map_err(|e| Error::io(path.clone(), e.into_error()))?;
+        let file = self.w.into_inner().into_inner().map_err(|e| Error::io(path.clone(), e.into_error()))?;
         let io = |source| Error::io(path.clone(), source);
         file.sync_all().map_err(io)?;
         let bytes = file.metadata().map_err(io)?.len();
@@ -335,7 +334,10 @@ impl LogWriter {
             Backend::Thread { tx: None, .. } => {}
             Backend::Inline(sink) => {
                 let Some(s) = sink.as_mut() else {
-                    return Err(Error::io(self.path.clone(), std::io::Error::other("the MCAP writer stopped after an earlier error")));
+                    return Err(Error::io(
+                        self.path.clone(),
+                        std::io::Error::other("the MCAP writer stopped after an earlier error"),
+                    ));
                 };
                 let r = match job {
                     Job::Batch(b) => {
