@@ -65,63 +65,6 @@ impl DomainLease {
     }
 }
 
-/// A Fast DDS XML profile that keeps a participant on loopback: a UDPv4 transport allowed only
-/// 127.0.0.1, no builtin transports (no shared memory, no multicast), discovery by unicast to
-/// the initial peer 127.0.0.1.
-pub const FASTDDS_LOOPBACK_PROFILE: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
-<!-- Written by twin: keeps the controller's DDS traffic on loopback. -->
-<dds xmlns="http://www.eprosima.com">
-  <profiles>
-    <transport_descriptors>
-      <transport_descriptor>
-        <transport_id>twin_loopback</transport_id>
-        <type>UDPv4</type>
-        <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
-      </transport_descriptor>
-    </transport_descriptors>
-    <participant profile_name="twin_loopback" is_default_profile="true">
-      <rtps>
-        <userTransports><transport_id>twin_loopback</transport_id></userTransports>
-        <useBuiltinTransports>false</useBuiltinTransports>
-        <builtin>
-          <metatrafficUnicastLocatorList>
-            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
-          </metatrafficUnicastLocatorList>
-          <initialPeersList>
-            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
-          </initialPeersList>
-        </builtin>
-      </rtps>
-    </participant>
-  </profiles>
-</dds>
-"#;
-
-/// Cyclone DDS configuration (for `CYCLONEDDS_URI`) that keeps a participant on loopback:
-/// interface `lo` without multicast, unicast discovery to 127.0.0.1.
-pub const CYCLONE_LOOPBACK_CONFIG: &str = "<CycloneDDS><Domain Id=\"any\"><General><Interfaces>\
-<NetworkInterface name=\"lo\" multicast=\"false\"/></Interfaces><AllowMulticast>false</AllowMulticast></General>\
-<Discovery><Peers><Peer address=\"127.0.0.1\"/></Peers><ParticipantIndex>auto</ParticipantIndex>\
-<MaxAutoParticipantIndex>20</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>";
-
-/// The environment of a controller process in `domain`: `ROS_DOMAIN_ID`, loopback-only
-/// discovery for ROS 2 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`), Fast DDS (the profile
-/// written to `profile`, given by `FASTDDS_DEFAULT_PROFILES_FILE`) and Cyclone DDS
-/// (`CYCLONEDDS_URI`).
-///
-/// # Errors
-/// [`Error::File`] when the profile can't be written.
-pub fn dds_environment(domain: u16, profile: &Path) -> Result<Vec<(String, String)>> {
-    std::fs::write(profile, FASTDDS_LOOPBACK_PROFILE).map_err(|source| Error::io(profile.to_path_buf(), source))?;
-    Ok(vec![
-        ("ROS_DOMAIN_ID".into(), domain.to_string()),
-        ("ROS_AUTOMATIC_DISCOVERY_RANGE".into(), "LOCALHOST".into()),
-        ("ROS_STATIC_PEERS".into(), String::new()),
-        ("FASTDDS_DEFAULT_PROFILES_FILE".into(), profile.display().to_string()),
-        ("CYCLONEDDS_URI".into(), CYCLONE_LOOPBACK_CONFIG.into()),
-    ])
-}
-
 /// How a stopped process ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Stopped {
