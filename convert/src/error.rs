@@ -1,6 +1,6 @@
 //! The error type of `twin-convert`. Every variant names the file and, for URDF content, the
-//! line and element, and says what to do. `twin_core::Error` has variants of the same names
-//! and text, so a conversion error reads the same from the library and from `twin`.
+//! line and element, and says what to do. `twin_core::Error` wraps it (`Error::Convert`), so a
+//! conversion error reads the same from the library and from `twin`.
 
 use std::path::PathBuf;
 

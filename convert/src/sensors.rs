@@ -41,6 +41,20 @@ impl Converter<'_> {
             }
             let name = esc(&unique);
             let topic = s.topic.clone();
+            // What every sensor's record takes from its Gazebo tag; each kind below adds the
+            // names of what it made in MuJoCo and, where it has them, its range, noise and beams.
+            let meta = |mujoco: Vec<String>| SensorMeta {
+                name: s.name.clone(),
+                kind: s.kind.clone(),
+                reference: s.reference.clone(),
+                update_rate_hz: s.update_rate_hz,
+                topic: s.topic.clone(),
+                frame_id: s.frame_name.clone(),
+                mujoco,
+                range_m: None,
+                noise_std: 0.0,
+                scan: None,
+            };
             match s.kind.as_str() {
                 "imu" => {
                     let (gyro, accel) = (s.gyro_noise_std, s.accel_noise_std);
@@ -92,16 +106,9 @@ impl Converter<'_> {
                         made.push(cname);
                     }
                     self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic: topic.clone(),
-                        frame_id: s.frame_name.clone(),
-                        mujoco: made,
                         range_m: cams.first().and_then(|c| c.clip_m),
                         noise_std: cams.first().map_or(0.0, |c| c.noise_std),
-                        scan: None,
+                        ..meta(made)
                     });
                 }
                 "ray" | "gpu_ray" | "lidar" | "gpu_lidar" => {
@@ -117,16 +124,10 @@ impl Converter<'_> {
                     self.sites[link]
                         .push(format!("<site name=\"{name}\"{} size=\"0.005\" group=\"4\"/>", pose_attrs(&pose)));
                     self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic: topic.clone(),
-                        frame_id: s.frame_name.clone(),
-                        mujoco: vec![unique.clone()],
                         range_m: Some([ray.min_range_m, ray.max_range_m]),
                         noise_std: ray.noise_std,
                         scan: Some(ScanMeta { horizontal: ray.horizontal, vertical: ray.vertical }),
+                        ..meta(vec![unique.clone()])
                     });
                 }
                 "force_torque" => {
@@ -135,18 +136,7 @@ impl Converter<'_> {
                         .push(format!("<site name=\"{site}\"{} size=\"0.005\" group=\"4\"/>", pose_attrs(&pose)));
                     self.sensor_xml.push(format!("<force name=\"{name}_force\" site=\"{site}\"/>"));
                     self.sensor_xml.push(format!("<torque name=\"{name}_torque\" site=\"{site}\"/>"));
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic: topic.clone(),
-                        frame_id: s.frame_name.clone(),
-                        mujoco: vec![format!("{}_force", s.name), format!("{}_torque", s.name)],
-                        range_m: None,
-                        noise_std: 0.0,
-                        scan: None,
-                    });
+                    self.sensor_meta.push(meta(vec![format!("{}_force", s.name), format!("{}_torque", s.name)]));
                 }
                 "contact" => {
                     let l = &robot.links[link];
@@ -178,18 +168,7 @@ impl Converter<'_> {
                         pose_attrs(&g.pose)
                     ));
                     self.sensor_xml.push(format!("<touch name=\"{name}\" site=\"{site}\"/>"));
-                    self.sensor_meta.push(SensorMeta {
-                        name: s.name.clone(),
-                        kind: s.kind.clone(),
-                        reference: s.reference.clone(),
-                        update_rate_hz: s.update_rate_hz,
-                        topic: topic.clone(),
-                        frame_id: s.frame_name.clone(),
-                        mujoco: vec![s.name.clone()],
-                        range_m: None,
-                        noise_std: 0.0,
-                        scan: None,
-                    });
+                    self.sensor_meta.push(meta(vec![s.name.clone()]));
                 }
                 other => {
                     self.notes.push(format!(

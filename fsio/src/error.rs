@@ -1,5 +1,5 @@
 //! The error type of `twin-fsio`: a path that could not be read or written, or that is not what
-//! it must be. `twin_core::Error` has the same two variants with the same text.
+//! it must be. `twin_core::Error` wraps it (`Error::File`), with the same text.
 
 use std::path::PathBuf;
 

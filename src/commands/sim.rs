@@ -669,14 +669,14 @@ mod live {
     use std::io::Write;
     use twin_core::control::Controller;
     use twin_core::engine::Disturbance;
-    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, LiveReset, Pacing};
+    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, Pacing};
     use twin_core::robot::Robot;
     use twin_core::sim::{RecordOptions, Recording};
 
     /// The bridge of a run: its controller and its reset.
     pub struct Live {
         controller: LiveController,
-        reset: LiveReset,
+        reset: twin_core::engine::disturb::ResetOnRequest,
     }
 
     /// `ROS_DOMAIN_ID` (0 when unset), checked.

@@ -7,15 +7,6 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
-    /// Reading or writing a file failed (the OS error is the source, printed by `{:#}`).
-    #[error("{}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the OS said.
-        source: std::io::Error,
-    },
-
     /// A CSV log is malformed; `line` is 1-based.
     #[error("{}:{line}: {message}", path.display())]
     Csv {
@@ -68,7 +59,8 @@ pub enum Error {
     #[error("estimation failed: {0}")]
     Numerical(String),
 
-    /// A MuJoCo or URDF error from `twin-core`.
+    /// A file, MuJoCo or URDF error from `twin-core` (a file that could not be read or written
+    /// is `twin_core::Error::File`).
     #[error(transparent)]
     Core(#[from] twin_core::Error),
 }

@@ -1033,7 +1033,7 @@ pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptio
 /// `(joint, curve)` per joint, e.g. for `twin sim --friction-fit`.
 ///
 /// # Errors
-/// [`Error::Io`]; [`Error::Option`] naming the file when it is not such a report.
+/// [`Error::Core`]; [`Error::Option`] naming the file when it is not such a report.
 pub fn read_fits(path: &std::path::Path) -> Result<Vec<(String, Stribeck)>> {
     #[derive(serde::Deserialize)]
     struct Entry {

@@ -149,7 +149,7 @@ impl JointLog {
     /// Reads a CSV log (format in the [module docs](self)).
     ///
     /// # Errors
-    /// [`Error::Io`] if unreadable, [`Error::Csv`] naming the line for a bad header, a wrong
+    /// [`Error::Core`] if unreadable, [`Error::Csv`] naming the line for a bad header, a wrong
     /// number of cells or a cell that is not a number.
     pub fn read_csv(path: impl AsRef<Path>) -> Result<JointLog> {
         let path = path.as_ref();
@@ -283,7 +283,7 @@ impl JointLog {
     /// Writes the log as CSV (atomically: temp file + rename).
     ///
     /// # Errors
-    /// [`Error::Io`].
+    /// [`Error::Core`].
     pub fn write_csv(&self, path: impl AsRef<Path>) -> Result<()> {
         twin_core::fsio::write_atomic(path.as_ref(), self.to_csv().as_bytes(), twin_core::fsio::Backup::None)?;
         Ok(())

@@ -313,7 +313,7 @@ pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<M
 /// `extra_mujoco` (MJCF elements such as `<option>`) added to the model.
 ///
 /// # Errors
-/// [`Error::Io`]; the converter's errors (naming the file, line and element); MuJoCo's load
+/// [`Error::Core`]; the converter's errors (naming the file, line and element); MuJoCo's load
 /// error.
 pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
     let text = twin_core::fsio::read_to_string(path)?;

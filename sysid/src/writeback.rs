@@ -419,7 +419,7 @@ pub struct UrdfUpdate {
 /// Reads the URDF at `path` and rewrites it in memory (see [`rewrite_urdf`]).
 ///
 /// # Errors
-/// [`Error::Io`], [`Error::Urdf`].
+/// [`Error::Core`], [`Error::Urdf`].
 pub fn plan_urdf_update(path: &Path, links: &[LinkUpdate], joints: &[JointUpdate]) -> Result<UrdfUpdate> {
     let original = twin_core::fsio::read_to_string(path)?;
     let new = rewrite_urdf(path, &original, links, joints)?;
@@ -433,7 +433,7 @@ pub fn plan_urdf_update(path: &Path, links: &[LinkUpdate], joints: &[JointUpdate
 /// `dry_run` nothing is written.
 ///
 /// # Errors
-/// [`Error::Io`], [`Error::Urdf`], twin-core's path errors.
+/// [`Error::Core`], [`Error::Urdf`], twin-core's path errors.
 pub fn update_urdf_file(
     path: &Path,
     links: &[LinkUpdate],
@@ -450,7 +450,7 @@ pub fn update_urdf_file(
 /// the disk.
 ///
 /// # Errors
-/// [`Error::Io`]; twin-core's path errors; whatever `rewrite` returns (the file is then
+/// [`Error::Core`]; twin-core's path errors; whatever `rewrite` returns (the file is then
 /// untouched).
 pub fn update_file_with(
     path: &Path,

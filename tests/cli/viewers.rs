@@ -7,7 +7,7 @@
 use super::common::{repo_root, twin};
 use std::io::{BufRead, BufReader};
 use std::path::{Path, PathBuf};
-use std::process::{Command, Stdio};
+use std::process::{Child, Command, Stdio};
 use std::sync::mpsc;
 use std::time::Duration;
 
@@ -83,31 +83,44 @@ fn client(modules: &Path, args: &[&str]) -> serde_json::Value {
     serde_json::from_str(stdout.lines().last().unwrap_or("")).unwrap_or_else(|e| panic!("{e}: {stdout}"))
 }
 
-#[test]
-fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
-    let modules = node_modules();
-    let dir = tempfile::tempdir().unwrap();
-    let (urdf, mesh_bytes) = package(dir.path());
-    let mut sim = twin()
-        .args(["sim", urdf.to_str().unwrap(), "--duration", "120", "--foxglove", "0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = sim.stdout.take().unwrap();
+/// Starts `twin ARGS` and reads its output until a line that starts with `prefix` says where it
+/// listens (the first word after `marker`), waiting at most `limit` for each line (`what` names
+/// what it waits for); returns the running child and that address.
+fn spawn_listening(args: &[&str], prefix: &str, marker: &str, limit: Duration, what: &str) -> (Child, String) {
+    let mut child = twin().args(args).stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().unwrap();
+    let stdout = child.stdout.take().unwrap();
     let (tx, rx) = mpsc::channel();
     std::thread::spawn(move || {
         for line in BufReader::new(stdout).lines().map_while(Result::ok) {
             let _ = tx.send(line);
         }
     });
-    let mut url = None;
-    while url.is_none() {
-        let line = rx.recv_timeout(Duration::from_secs(120)).expect("twin sim says where the server listens");
-        url =
-            line.strip_prefix("foxglove: ws://").and_then(|l| l.split_whitespace().next()).map(|a| format!("ws://{a}"));
+    loop {
+        let Ok(line) = rx.recv_timeout(limit) else {
+            let _ = child.kill();
+            let _ = child.wait();
+            panic!("{what}");
+        };
+        let after = line.strip_prefix(prefix).and_then(|l| l.split_once(marker)).map(|(_, a)| a);
+        if let Some(word) = after.and_then(|a| a.split_whitespace().next()) {
+            return (child, word.to_string());
+        }
     }
-    let url = url.unwrap();
+}
+
+#[test]
+fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
+    let modules = node_modules();
+    let dir = tempfile::tempdir().unwrap();
+    let (urdf, mesh_bytes) = package(dir.path());
+    let (mut sim, address) = spawn_listening(
+        &["sim", urdf.to_str().unwrap(), "--duration", "120", "--foxglove", "0"],
+        "foxglove: ",
+        "ws://",
+        Duration::from_secs(120),
+        "twin sim says where the server listens",
+    );
+    let url = format!("ws://{address}");
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback by default: {url}");
 
     // The SDK's subprotocol name: subscribe and decode.
@@ -171,29 +184,13 @@ fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
 #[test]
 fn unity_client_handshakes_subscribes_and_moves_a_joint() {
     let python = crate::test_python::python().to_string_lossy().into_owned();
-    let mut sim = twin()
-        .args(["sim", "--duration", "120", "--unity", "0"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = sim.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let mut addr = None;
-    while addr.is_none() {
-        let line = rx.recv_timeout(Duration::from_secs(120)).expect("twin sim says where the endpoint listens");
-        addr = line
-            .split(" on ")
-            .nth(1)
-            .filter(|_| line.starts_with("unity:"))
-            .map(|a| a.split_whitespace().next().unwrap().to_string());
-    }
-    let addr = addr.unwrap();
+    let (mut sim, addr) = spawn_listening(
+        &["sim", "--duration", "120", "--unity", "0"],
+        "unity: ",
+        " on ",
+        Duration::from_secs(120),
+        "twin sim says where the endpoint listens",
+    );
     let (host, port) = addr.rsplit_once(':').unwrap();
     assert_eq!(host, "127.0.0.1", "loopback by default");
     let out = Command::new(&python)
@@ -230,26 +227,14 @@ fn foxglove_client_plays_a_recorded_log() {
     let mcap = dir.path().join("run.mcap");
     let (ok, out, err) = super::common::run(&["sim", "--duration", "1", "--record", mcap.to_str().unwrap()]);
     assert!(ok, "{out}\n{err}");
-    let mut view = twin()
-        .args(["view", mcap.to_str().unwrap(), "--foxglove", "0", "--wait", "60"])
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .unwrap();
-    let stdout = view.stdout.take().unwrap();
-    let (tx, rx) = mpsc::channel();
-    std::thread::spawn(move || {
-        for line in BufReader::new(stdout).lines().map_while(Result::ok) {
-            let _ = tx.send(line);
-        }
-    });
-    let mut url = None;
-    while url.is_none() {
-        let line = rx.recv_timeout(Duration::from_secs(60)).expect("twin view says where the server listens");
-        url =
-            line.strip_prefix("foxglove: ws://").and_then(|l| l.split_whitespace().next()).map(|a| format!("ws://{a}"));
-    }
-    let a = client(&modules, &[&url.unwrap(), "foxglove.websocket.v1", "watch"]);
+    let (mut view, address) = spawn_listening(
+        &["view", mcap.to_str().unwrap(), "--foxglove", "0", "--wait", "60"],
+        "foxglove: ",
+        "ws://",
+        Duration::from_secs(60),
+        "twin view says where the server listens",
+    );
+    let a = client(&modules, &[&format!("ws://{address}"), "foxglove.websocket.v1", "watch"]);
     let status = view.wait().unwrap();
     assert!(status.success(), "{status:?}");
     assert_eq!(a["end"], "done", "{a:#}");

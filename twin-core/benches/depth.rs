@@ -17,23 +17,14 @@
 //! (unit directions, the same geom groups, one thread), whose depths are compared ray by ray
 //! on frame (1) (`mj_multiRay` has no near clip: in (2) it sees the inside of the head).
 
+mod common;
+
+use common::{median, thread_cpu_secs, with_camera};
 use nalgebra::{Matrix3, Rotation3, Vector3};
-use std::sync::Arc;
 use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
 use twin_core::mj::{Data, Model, ObjType};
 use twin_core::sense::{DepthCamera, DepthCameraOptions};
-
-/// CPU time of the calling thread, seconds (Linux).
-fn thread_cpu_secs() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap_or_default();
-    text.split_whitespace().next().and_then(|n| n.parse::<u64>().ok()).map_or(f64::NAN, |n| n as f64 * 1e-9)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 fn default_talos() -> String {
     let cache = std::env::var("TWIN_URDF_CACHE")
@@ -79,15 +70,7 @@ fn main() {
     let [near, far] = head_sensor.range_m.unwrap_or([0.05, 10.0]);
     // The external camera: 2.2 m in front (+x) at 1.0 m height, looking back at the robot.
     let (eye, target) = (Vector3::new(2.2, 0.0, 1.0), Vector3::new(0.0, 0.0, 0.9));
-    let d = (target - eye).normalize();
-    let right = d.cross(&Vector3::z()).normalize();
-    let up = right.cross(&d);
-    let camera = format!(
-        "<camera name=\"bench_front\" pos=\"{} {} {}\" xyaxes=\"{} {} {} {} {} {}\" fovy=\"45\" resolution=\"640 480\"/>",
-        eye.x, eye.y, eye.z, right.x, right.y, right.z, up.x, up.y, up.z
-    );
-    let mjcf = converted.mjcf.replacen("<worldbody>", &format!("<worldbody>\n{camera}"), 1);
-    let model = Arc::new(Model::from_xml_str(&mjcf).unwrap());
+    let model = with_camera(&converted.mjcf, "bench_front", eye, target, "fovy=\"45\" resolution=\"640 480\"");
     let mut data = Data::new(model.clone()).unwrap();
     twin_core::control::reset_to_home(&mut data).unwrap();
     data.forward().unwrap();

@@ -15,6 +15,9 @@
 //!    15 Hz on the simulation's thread, and pipelined ([`twin_core::sense::Pipelined`], as
 //!    `twin sim --record` does), alternated R times.
 
+mod common;
+
+use common::{median, thread_cpu_secs, with_camera};
 use nalgebra::Vector3;
 use std::sync::Arc;
 use std::time::Instant;
@@ -25,18 +28,6 @@ use twin_core::mj::{Data, Model, RayFilter};
 use twin_core::scenario::Scenario;
 use twin_core::sense::{DepthCamera, DepthCameraOptions, Device, Pipelined, Reading};
 use twin_core::sim::{self, SimOptions};
-
-/// CPU time of the calling thread, seconds (Linux): not inflated by waiting for a core on a
-/// busy machine, unlike wall time.
-fn thread_cpu_secs() -> f64 {
-    let text = std::fs::read_to_string("/proc/thread-self/schedstat").unwrap_or_default();
-    text.split_whitespace().next().and_then(|n| n.parse::<u64>().ok()).map_or(f64::NAN, |n| n as f64 * 1e-9)
-}
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
 
 /// The repository: `TWIN_ROOT` when the binary runs elsewhere (another machine).
 fn repo_root() -> String {
@@ -50,15 +41,7 @@ fn grasp_scene() -> Arc<Model> {
     let converted = convert_urdf(std::path::Path::new(&format!("{root}/models/humanoid.urdf")), &opts)
         .unwrap_or_else(|e| panic!("{e}"));
     let (eye, target) = (Vector3::new(0.1, 0.0, 1.45), Vector3::new(0.5, 0.0, 0.75));
-    let d = (target - eye).normalize();
-    let right = d.cross(&Vector3::z()).normalize();
-    let up = right.cross(&d);
-    let camera = format!(
-        "<camera name=\"bench_head\" pos=\"{} {} {}\" xyaxes=\"{} {} {} {} {} {}\" fovy=\"58\"/>",
-        eye.x, eye.y, eye.z, right.x, right.y, right.z, up.x, up.y, up.z
-    );
-    let mjcf = converted.mjcf.replacen("<worldbody>", &format!("<worldbody>\n{camera}"), 1);
-    Arc::new(Model::from_xml_str(&mjcf).unwrap_or_else(|e| panic!("{e}")))
+    with_camera(&converted.mjcf, "bench_head", eye, target, "fovy=\"58\"")
 }
 
 /// Renders the camera at its rate during a rollout: on the simulation's thread, or pipelined

@@ -59,7 +59,7 @@ fn compile(mjcf: &str) -> std::result::Result<Model, Compile<Error>> {
 /// Converts the URDF file at `path` with MuJoCo as compiler ([`twin_convert::convert_urdf`]).
 ///
 /// # Errors
-/// [`Error::Io`] if it can't be read; [`Error::Xml`] for malformed XML; [`Error::Urdf`] naming
+/// [`Error::File`] if it can't be read; [`Error::Convert`] for malformed XML; [`Error::Convert`] naming
 /// the file, line and element for invalid content (missing link, cycle, negative mass, bad
 /// inertia, missing mesh …); [`Error::Load`] if MuJoCo rejects the result.
 pub fn convert_urdf(path: &Path, opts: &ConvertOptions) -> Result<ConvertedModel> {
@@ -176,7 +176,7 @@ pub struct Loaded {
 /// MuJoCo's own parser as it is (`options` and `extra_mjcf` unused).
 ///
 /// # Errors
-/// [`Error::Io`] if the file can't be read, [`Error::Urdf`]/[`Error::Xml`] for an invalid
+/// [`Error::File`] if the file can't be read, [`Error::Convert`] for an invalid
 /// URDF, [`Error::Load`] naming the file with MuJoCo's message if MuJoCo refuses it.
 pub fn load(path: &Path, options: &ConvertOptions, extra_mjcf: &str) -> Result<Loaded> {
     crate::mj::init()?;

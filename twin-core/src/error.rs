@@ -7,24 +7,10 @@ use std::path::PathBuf;
 #[derive(Debug, thiserror::Error)]
 #[non_exhaustive]
 pub enum Error {
-    /// Reading or writing a file failed.
-    #[error("{}", path.display())]
-    Io {
-        /// The file.
-        path: PathBuf,
-        /// What the OS said.
-        source: std::io::Error,
-    },
-
-    /// A path is not what it must be (a FIFO or device as input, a folder or an input as
-    /// output, …); `message` says what it is and what to do.
-    #[error("{}: {message}", path.display())]
-    BadPath {
-        /// The path as given.
-        path: PathBuf,
-        /// What is wrong and what to do.
-        message: String,
-    },
+    /// A file could not be read or written, or a path is not what it must be (twin-fsio's error,
+    /// with its text).
+    #[error(transparent)]
+    File(#[from] twin_fsio::Error),
 
     /// A number in a model or an option is out of its valid range; the message gives the range.
     #[error("{what}: {message}")]
@@ -67,33 +53,10 @@ pub enum Error {
         header: i32,
     },
 
-    /// A URDF element is invalid; `line` is 1-based.
-    #[error("{}:{line}: <{element}{}>: {message}", path.display(), name.as_deref().map_or_else(String::new, |n| format!(" name=\"{n}\"")))]
-    Urdf {
-        /// The URDF file.
-        path: PathBuf,
-        /// Line of the offending element (1-based).
-        line: u32,
-        /// The element's tag, e.g. `inertia`.
-        element: String,
-        /// The `name` of the enclosing link or joint, if any.
-        name: Option<String>,
-        /// What is wrong and what to do about it.
-        message: String,
-    },
-
-    /// The file is not well-formed XML.
-    #[error("{}:{line}:{column}: not well-formed XML: {message}", path.display())]
-    Xml {
-        /// The file.
-        path: PathBuf,
-        /// 1-based line.
-        line: u32,
-        /// 1-based column.
-        column: u32,
-        /// The parser's message.
-        message: String,
-    },
+    /// A URDF is invalid or not well-formed XML (twin-convert's error, with its text: the file,
+    /// the line and element, what to do).
+    #[error(transparent)]
+    Convert(twin_convert::Error),
 
     /// No object of this kind and name in the model.
     #[error("the model has no {kind} named \"{name}\"")]
@@ -265,14 +228,10 @@ pub enum Error {
 /// `Result` with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-impl From<twin_fsio::Error> for Error {
-    /// The same variant, with the same text.
-    fn from(e: twin_fsio::Error) -> Error {
-        match e {
-            twin_fsio::Error::Io { path, source } => Error::Io { path, source },
-            twin_fsio::Error::BadPath { path, message } => Error::BadPath { path, message },
-            other => Error::Options(other.to_string()),
-        }
+impl Error {
+    /// A failed read or write of `path` ([`twin_fsio::Error::File`]).
+    pub fn io(path: impl Into<PathBuf>, source: std::io::Error) -> Error {
+        Error::File(twin_fsio::Error::Io { path: path.into(), source })
     }
 }
 
@@ -280,13 +239,9 @@ impl From<twin_convert::Error> for Error {
     /// The same variant, with the same text.
     fn from(e: twin_convert::Error) -> Error {
         match e {
-            twin_convert::Error::File(e) => e.into(),
-            twin_convert::Error::Urdf { path, line, element, name, message } => {
-                Error::Urdf { path, line, element, name, message }
-            }
-            twin_convert::Error::Xml { path, line, column, message } => Error::Xml { path, line, column, message },
+            twin_convert::Error::File(e) => Error::File(e),
             twin_convert::Error::Load { path, message } => Error::Load { path, message },
-            other => Error::Options(other.to_string()),
+            other => Error::Convert(other),
         }
     }
 }

@@ -163,7 +163,7 @@ impl Robot {
     /// scene.
     ///
     /// # Errors
-    /// [`Error::Io`](crate::Error::Io) if the file can't be read; the converter's errors for a URDF;
+    /// [`Error::File`](crate::Error::File) if the file can't be read; the converter's errors for a URDF;
     /// [`Error::Load`](crate::Error::Load) if MuJoCo refuses the model.
     pub fn load(path: impl AsRef<Path>) -> Result<Robot> {
         Robot::load_with(path, &ConvertOptions::default())

@@ -276,11 +276,11 @@ impl Scenario {
     /// Reads and checks `path`.
     ///
     /// # Errors
-    /// [`Error::Io`] if it can't be read; [`Error::Scenario`] naming the line and key for
+    /// [`Error::File`] if it can't be read; [`Error::Scenario`] naming the line and key for
     /// unknown keys, wrong types and impossible values.
     pub fn load(path: impl AsRef<Path>) -> Result<Scenario> {
         let path = path.as_ref();
-        let text = std::fs::read_to_string(path).map_err(|source| Error::Io { path: path.to_path_buf(), source })?;
+        let text = std::fs::read_to_string(path).map_err(|source| Error::io(path.to_path_buf(), source))?;
         Scenario::parse(path, &text)
     }
 

@@ -236,7 +236,7 @@ impl JointTrajectory {
     /// increasing.
     ///
     /// # Errors
-    /// [`Error::Io`]; [`Error::Trajectory`] naming the line for a bad header, a non-number, a
+    /// [`Error::File`]; [`Error::Trajectory`] naming the line for a bad header, a non-number, a
     /// short row or a time that does not increase.
     pub fn from_csv(path: &std::path::Path) -> Result<JointTrajectory> {
         let text = crate::fsio::read_to_string(path)?;

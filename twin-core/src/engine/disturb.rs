@@ -5,6 +5,8 @@ use crate::error::Result;
 use crate::mj::{Data, Model};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
+use std::sync::Arc;
+use std::sync::atomic::{AtomicBool, Ordering};
 
 /// Horizontal pushes in a random direction at a fixed interval, from the first interval on.
 /// Without a body, each push adds `speed_mps` to the floating base's horizontal velocity at
@@ -225,6 +227,35 @@ impl Disturbance for StribeckFriction {
                 *q += tau - self.last[k];
             }
             self.last[k] = tau;
+        }
+    }
+}
+
+/// Puts back the state the run started from (positions, velocities, activations; not the time)
+/// at the first step after `requested` is set, and clears it: the reset of the live bridge
+/// (`/twin/reset_simulation`) and of the viewers (`/twin/reset`).
+pub struct ResetOnRequest {
+    requested: Arc<AtomicBool>,
+    initial: Vec<f64>,
+}
+
+impl ResetOnRequest {
+    /// A reset taken whenever `requested` is set (by a service thread).
+    pub fn new(requested: Arc<AtomicBool>) -> ResetOnRequest {
+        ResetOnRequest { requested, initial: Vec::new() }
+    }
+}
+
+impl Disturbance for ResetOnRequest {
+    fn start(&mut self, _model: &Model, data: &Data) -> Result<()> {
+        self.initial = data.state(crate::mj::StateSig::PHYSICS)?;
+        Ok(())
+    }
+
+    fn apply(&mut self, data: &mut Data, _rng: &mut ChaCha8Rng) {
+        if self.requested.swap(false, Ordering::Relaxed) {
+            // Same model, same signature: only a length mismatch could fail, and can't here.
+            let _ = data.set_state(&self.initial, crate::mj::StateSig::PHYSICS);
         }
     }
 }

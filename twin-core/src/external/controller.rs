@@ -1,11 +1,12 @@
 //! The external controller as a [`Controller`] of the rollout engine, and the check that
 //! publishes the robot's state to it and gives the verdict on its health.
 
-use super::process::{ControllerProcess, DomainLease, Stopped, dds_environment};
+use super::process::{ControllerProcess, DomainLease, Stopped};
 use super::{Interface, Restart, RosOptions};
 use crate::control::{Controller, Observation, PdHold, PdHoldOptions};
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
+use crate::live::Loopback;
 use crate::live::{self, CommandInterface, LiveController, LiveOptions, LiveSink, Pacing};
 use crate::mj::{Data, Model};
 use crate::robot::Robot;
@@ -99,7 +100,7 @@ pub struct ControllerHealth {
 ///
 /// # Errors
 /// [`Error::Live`] when the bridge can't start or a `subscribes` topic is not one the robot
-/// publishes; [`Error::Io`] for the profile or the log.
+/// publishes; [`Error::File`] for the profile or the log.
 pub fn external(
     robot: &Robot,
     options: &RosOptions,
@@ -111,8 +112,8 @@ pub fn external(
     let profile_dir = tempfile::Builder::new()
         .prefix("twin-ros-")
         .tempdir()
-        .map_err(|source| Error::Io { path: std::env::temp_dir(), source })?;
-    let env = dds_environment(lease.id(), &profile_dir.path().join("fastdds_loopback.xml"))?;
+        .map_err(|source| Error::io(std::env::temp_dir(), source))?;
+    let env = Loopback::write(profile_dir.path(), lease.id())?.environment();
     let live_options = LiveOptions {
         domain_id: lease.id(),
         interface: std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),

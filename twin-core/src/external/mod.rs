@@ -3,9 +3,10 @@
 //!
 //! Data flow, per run (one `twin sim --scenario`, or one `twin randomize` worker):
 //! 1. twin takes a DDS domain id that no other twin run on this machine holds
-//!    ([`process::DomainLease`]), writes a loopback-only Fast DDS profile and puts
-//!    `ROS_DOMAIN_ID`, `FASTDDS_DEFAULT_PROFILES_FILE`, `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`
-//!    and `CYCLONEDDS_URI` into the process's environment ([`process::dds_environment`]);
+//!    ([`process::DomainLease`]), writes the loopback-only Fast DDS and Cyclone DDS profiles and
+//!    puts `ROS_DOMAIN_ID`, `FASTDDS_DEFAULT_PROFILES_FILE`, `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`,
+//!    an empty `ROS_STATIC_PEERS` and `CYCLONEDDS_URI` into the process's environment
+//!    ([`crate::live::Loopback`], the same settings the tests give their nodes);
 //! 2. joins that domain with the live bridge ([`crate::live`], lockstep, loopback) and starts
 //!    `command` with `sh -c` in the scenario file's folder, in a process group of its own, its
 //!    stdout and stderr appended to a log ([`process::ControllerProcess`]);

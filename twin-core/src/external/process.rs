@@ -32,7 +32,7 @@ impl DomainLease {
     /// [`Error::Live`] when the lock folder can't be written or every id is held.
     pub fn acquire() -> Result<DomainLease> {
         let dir = std::env::temp_dir().join("twin-dds-domains");
-        std::fs::create_dir_all(&dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
+        std::fs::create_dir_all(&dir).map_err(|source| Error::io(dir.clone(), source))?;
         let n = u64::from(DOMAINS.end() - DOMAINS.start()) + 1;
         // Start where other processes are unlikely to: spread by pid and by lease count.
         let start = (u64::from(std::process::id()) * 7 + LEASES.fetch_add(1, Ordering::Relaxed) * 3) % n;
@@ -44,7 +44,7 @@ impl DomainLease {
                 .truncate(false)
                 .write(true)
                 .open(&path)
-                .map_err(|source| Error::Io { path: path.clone(), source })?;
+                .map_err(|source| Error::io(path.clone(), source))?;
             if file.try_lock().is_ok() {
                 return Ok(DomainLease { id, _lock: file });
             }
@@ -63,64 +63,6 @@ impl DomainLease {
     pub fn id(&self) -> u16 {
         self.id
     }
-}
-
-/// A Fast DDS XML profile that keeps a participant on loopback: a UDPv4 transport allowed only
-/// 127.0.0.1, no builtin transports (no shared memory, no multicast), discovery by unicast to
-/// the initial peer 127.0.0.1.
-pub const FASTDDS_LOOPBACK_PROFILE: &str = r#"<?xml version="1.0" encoding="UTF-8"?>
-<!-- Written by twin: keeps the controller's DDS traffic on loopback. -->
-<dds xmlns="http://www.eprosima.com">
-  <profiles>
-    <transport_descriptors>
-      <transport_descriptor>
-        <transport_id>twin_loopback</transport_id>
-        <type>UDPv4</type>
-        <interfaceWhiteList><address>127.0.0.1</address></interfaceWhiteList>
-      </transport_descriptor>
-    </transport_descriptors>
-    <participant profile_name="twin_loopback" is_default_profile="true">
-      <rtps>
-        <userTransports><transport_id>twin_loopback</transport_id></userTransports>
-        <useBuiltinTransports>false</useBuiltinTransports>
-        <builtin>
-          <metatrafficUnicastLocatorList>
-            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
-          </metatrafficUnicastLocatorList>
-          <initialPeersList>
-            <locator><udpv4><address>127.0.0.1</address></udpv4></locator>
-          </initialPeersList>
-        </builtin>
-      </rtps>
-    </participant>
-  </profiles>
-</dds>
-"#;
-
-/// Cyclone DDS configuration (for `CYCLONEDDS_URI`) that keeps a participant on loopback:
-/// interface `lo` without multicast, unicast discovery to 127.0.0.1.
-pub const CYCLONE_LOOPBACK_CONFIG: &str = "<CycloneDDS><Domain Id=\"any\"><General><Interfaces>\
-<NetworkInterface name=\"lo\" multicast=\"false\"/></Interfaces><AllowMulticast>false</AllowMulticast></General>\
-<Discovery><Peers><Peer address=\"127.0.0.1\"/></Peers><ParticipantIndex>auto</ParticipantIndex>\
-<MaxAutoParticipantIndex>20</MaxAutoParticipantIndex></Discovery></Domain></CycloneDDS>";
-
-/// The environment of a controller process in `domain`: `ROS_DOMAIN_ID`, loopback-only
-/// discovery for ROS 2 (`ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`), Fast DDS (the profile
-/// written to `profile`, given by `FASTDDS_DEFAULT_PROFILES_FILE`) and Cyclone DDS
-/// (`CYCLONEDDS_URI`).
-///
-/// # Errors
-/// [`Error::Io`] when the profile can't be written.
-pub fn dds_environment(domain: u16, profile: &Path) -> Result<Vec<(String, String)>> {
-    std::fs::write(profile, FASTDDS_LOOPBACK_PROFILE)
-        .map_err(|source| Error::Io { path: profile.to_path_buf(), source })?;
-    Ok(vec![
-        ("ROS_DOMAIN_ID".into(), domain.to_string()),
-        ("ROS_AUTOMATIC_DISCOVERY_RANGE".into(), "LOCALHOST".into()),
-        ("ROS_STATIC_PEERS".into(), String::new()),
-        ("FASTDDS_DEFAULT_PROFILES_FILE".into(), profile.display().to_string()),
-        ("CYCLONEDDS_URI".into(), CYCLONE_LOOPBACK_CONFIG.into()),
-    ])
 }
 
 /// How a stopped process ended.
@@ -149,7 +91,7 @@ impl ControllerProcess {
     /// what starts (`note`).
     ///
     /// # Errors
-    /// [`Error::Io`] when the log can't be opened; [`Error::Live`] when `sh` can't start.
+    /// [`Error::File`] when the log can't be opened; [`Error::Live`] when `sh` can't start.
     pub fn start(
         command: &str,
         folder: &Path,
@@ -158,9 +100,9 @@ impl ControllerProcess {
         note: &str,
     ) -> Result<ControllerProcess> {
         if let Some(dir) = log.parent() {
-            std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
+            std::fs::create_dir_all(dir).map_err(|source| Error::io(dir.to_path_buf(), source))?;
         }
-        let io = |source| Error::Io { path: log.to_path_buf(), source };
+        let io = |source| Error::io(log.to_path_buf(), source);
         let mut out = File::options().create(true).append(true).open(log).map_err(io)?;
         writeln!(out, "--- twin: {note}: sh -c {command:?} in {}", folder.display()).map_err(io)?;
         let err = out.try_clone().map_err(io)?;

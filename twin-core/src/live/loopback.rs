@@ -5,7 +5,7 @@
 //!
 //! [`Loopback::write`] puts the two XML profiles into a folder and [`Loopback::environment`]
 //! gives the variables to start the node with: `ROS_DOMAIN_ID`,
-//! `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, `FASTDDS_DEFAULT_PROFILES_FILE` (a UDPv4
+//! `ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST`, an empty `ROS_STATIC_PEERS`, `FASTDDS_DEFAULT_PROFILES_FILE` (a UDPv4
 //! transport whitelisted to 127.0.0.1, no builtin transports, initial peer 127.0.0.1) and
 //! `CYCLONEDDS_URI` (interface `lo`, multicast off, peer 127.0.0.1). The twin's own side is
 //! [`super::LiveOptions::interface`] = 127.0.0.1.
@@ -94,7 +94,7 @@ impl Loopback {
     /// replacing earlier copies) for `domain_id`.
     ///
     /// # Errors
-    /// [`crate::Error::Io`] when a file can't be written.
+    /// [`crate::Error::File`] when a file can't be written.
     pub fn write(dir: &Path, domain_id: u16) -> Result<Loopback> {
         let fastdds_profile = dir.join("fastdds-loopback.xml");
         let cyclonedds_config = dir.join("cyclonedds-loopback.xml");
@@ -108,6 +108,8 @@ impl Loopback {
         vec![
             ("ROS_DOMAIN_ID".into(), self.domain_id.to_string()),
             ("ROS_AUTOMATIC_DISCOVERY_RANGE".into(), "LOCALHOST".into()),
+            // No inherited static peers off this machine.
+            ("ROS_STATIC_PEERS".into(), String::new()),
             ("FASTDDS_DEFAULT_PROFILES_FILE".into(), self.fastdds_profile.display().to_string()),
             ("CYCLONEDDS_URI".into(), format!("file://{}", self.cyclonedds_config.display())),
         ]

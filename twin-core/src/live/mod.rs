@@ -53,7 +53,7 @@
 //! `/twin/step_simulation` and `/twin/reset_simulation`. Requests are taken at each control
 //! period's start (after its `/clock`), and at every step while paused. While paused the
 //! simulation waits (no steps, no `/clock`); after a resume, real-time pacing starts again
-//! from the current simulated time (no catching up). A reset acts through [`LiveReset`], the
+//! from the current simulated time (no catching up). A reset acts through [`ResetOnRequest`](crate::engine::disturb::ResetOnRequest), the
 //! run's disturbance: the state at the start comes back at the next step. In lockstep, a
 //! `StepSimulation` that crosses a control period's start waits for that period's command, as
 //! any step does.
@@ -72,7 +72,7 @@ pub use command::{CommandInterface, Commander};
 pub use loopback::Loopback;
 
 use crate::control::{Controller, Observation};
-use crate::engine::Disturbance;
+use crate::engine::disturb::ResetOnRequest;
 use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
 use crate::log::{Clock, Float64MultiArray, JointState, JointTrajectory, RosMessage, RosString};
@@ -296,34 +296,13 @@ pub struct LiveController {
     paused: bool,
     /// A `StepSimulation` in progress: its request and the steps still to take.
     stepping: Option<(usize, service::RequestId, u64)>,
-    /// Set by a reset, taken by [`LiveReset`] at the next step.
+    /// Set by a reset, taken by [`ResetOnRequest`](crate::engine::disturb::ResetOnRequest) at the next step.
     reset_requested: Arc<AtomicBool>,
     /// `SetSimulationState(QUITTING)` ends the run after this step.
     quit: bool,
     dt_secs: f64,
     /// Simulated time at the end of the step being taken, s.
     step_end_secs: f64,
-}
-
-/// The run's reset (`/twin/reset_simulation`): a [`Disturbance`] that puts the state the run
-/// started from (positions, velocities, activations; not the time) back when asked.
-pub struct LiveReset {
-    requested: Arc<AtomicBool>,
-    initial: Vec<f64>,
-}
-
-impl Disturbance for LiveReset {
-    fn start(&mut self, _model: &Model, data: &crate::mj::Data) -> Result<()> {
-        self.initial = data.state(crate::mj::StateSig::PHYSICS)?;
-        Ok(())
-    }
-
-    fn apply(&mut self, data: &mut crate::mj::Data, _rng: &mut rand_chacha::ChaCha8Rng) {
-        if self.requested.swap(false, Ordering::Relaxed) {
-            // Same model, same signature: only a length mismatch could fail, and can't here.
-            let _ = data.set_state(&self.initial, crate::mj::StateSig::PHYSICS);
-        }
-    }
 }
 
 /// Topic of the commands (`/<robot>/joint_commands`).
@@ -533,8 +512,8 @@ impl LiveController {
     /// The run's reset disturbance: give it to the simulation loop with the others
     /// ([`crate::sim::simulate_with`]); without it a reset only brings the command back to
     /// holding the home pose.
-    pub fn reset_disturbance(&self) -> LiveReset {
-        LiveReset { requested: self.reset_requested.clone(), initial: Vec::new() }
+    pub fn reset_disturbance(&self) -> ResetOnRequest {
+        ResetOnRequest::new(self.reset_requested.clone())
     }
 
     /// Answers every waiting service call (see [`simulation`]).

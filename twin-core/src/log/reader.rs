@@ -187,7 +187,7 @@ impl<'f> Scanner<'f> {
     }
 
     fn io(&self, source: std::io::Error) -> Error {
-        Error::Io { path: self.path.clone(), source }
+        Error::io(self.path.clone(), source)
     }
 
     fn format_err(&self, offset: Option<u64>, message: String) -> Error {

@@ -173,9 +173,8 @@ impl Sink {
     fn finish(mut self) -> Result<WriteSummary> {
         let summary = self.w.finish().map_err(|e| Error::McapWrite { path: self.path.clone(), source: e })?;
         let path = self.path;
-        let file =
-            self.w.into_inner().into_inner().map_err(|e| Error::Io { path: path.clone(), source: e.into_error() })?;
-        let io = |source| Error::Io { path: path.clone(), source };
+        let file = self.w.into_inner().into_inner().map_err(|e| Error::io(path.clone(), e.into_error()))?;
+        let io = |source| Error::io(path.clone(), source);
         file.sync_all().map_err(io)?;
         let bytes = file.metadata().map_err(io)?.len();
         Ok(WriteSummary { messages: self.messages, chunks: summary.chunk_indexes.len(), bytes, queue_full_waits: 0 })
@@ -241,7 +240,7 @@ impl LogWriter {
     /// [`WriterOptions::backup_existing`]) and starts the writer thread.
     ///
     /// # Errors
-    /// [`Error::Io`] when the file cannot be created; [`Error::LogFormat`] when it exists and
+    /// [`Error::File`] when the file cannot be created; [`Error::LogFormat`] when it exists and
     /// backups are off.
     pub fn create(path: impl AsRef<Path>, options: &WriterOptions) -> Result<Self> {
         let path = path.as_ref().to_path_buf();
@@ -257,7 +256,7 @@ impl LogWriter {
             }
             crate::fsio::backup_numbered(&target.resolved)?;
         }
-        let file = File::create(&target.resolved).map_err(|source| Error::Io { path: path.clone(), source })?;
+        let file = File::create(&target.resolved).map_err(|source| Error::io(path.clone(), source))?;
         let (compression, level) = match options.compression {
             Compression::None => (None, 0),
             Compression::Zstd(level) => (Some(mcap::Compression::Zstd), level.max(1) as u32),
@@ -284,7 +283,7 @@ impl LogWriter {
             let thread = std::thread::Builder::new()
                 .name("twin-mcap-writer".into())
                 .spawn(move || writer_thread(sink, rx, recycle))
-                .map_err(|source| Error::Io { path: path.clone(), source })?;
+                .map_err(|source| Error::io(path.clone(), source))?;
             Backend::Thread { tx: Some(tx), recycled, thread: Some(thread) }
         } else {
             Backend::Inline(Some(Box::new(sink)))
@@ -313,10 +312,10 @@ impl LogWriter {
                 *tx = None;
                 match thread.take().map(std::thread::JoinHandle::join) {
                     Some(Ok(Err(e))) => e,
-                    _ => Error::Io { path: self.path.clone(), source: gone() },
+                    _ => Error::io(self.path.clone(), gone()),
                 }
             }
-            Backend::Inline(_) => Error::Io { path: self.path.clone(), source: gone() },
+            Backend::Inline(_) => Error::io(self.path.clone(), gone()),
         }
     }
 
@@ -335,10 +334,10 @@ impl LogWriter {
             Backend::Thread { tx: None, .. } => {}
             Backend::Inline(sink) => {
                 let Some(s) = sink.as_mut() else {
-                    return Err(Error::Io {
-                        path: self.path.clone(),
-                        source: std::io::Error::other("the MCAP writer stopped after an earlier error"),
-                    });
+                    return Err(Error::io(
+                        self.path.clone(),
+                        std::io::Error::other("the MCAP writer stopped after an earlier error"),
+                    ));
                 };
                 let r = match job {
                     Job::Batch(b) => {
@@ -428,7 +427,7 @@ impl LogWriter {
     /// Writes one message, stamped `log_time_nanos` (also its publish time).
     ///
     /// # Errors
-    /// [`Error::McapWrite`] / [`Error::Io`] when the file cannot be written (reported by the
+    /// [`Error::McapWrite`] / [`Error::File`] when the file cannot be written (reported by the
     /// first call after the writer met the error).
     pub fn write<T: RosMessage>(&mut self, topic: Topic<T>, log_time_nanos: u64, message: &T) -> Result<()> {
         self.write_with(topic, log_time_nanos, |w| message.encode(w))
@@ -504,7 +503,7 @@ impl LogWriter {
     /// Writes the last chunk and the summary (statistics, indexes) and closes the file.
     ///
     /// # Errors
-    /// [`Error::McapWrite`] / [`Error::Io`] when the file cannot be written.
+    /// [`Error::McapWrite`] / [`Error::File`] when the file cannot be written.
     pub fn finish(mut self) -> Result<WriteSummary> {
         self.send_batch()?;
         let waits = self.queue_full_waits;
@@ -513,7 +512,7 @@ impl LogWriter {
 
     fn close(&mut self) -> Result<WriteSummary> {
         let path = self.path.clone();
-        let gone = |what: &str| Error::Io { path: path.clone(), source: std::io::Error::other(what.to_string()) };
+        let gone = |what: &str| Error::io(path.clone(), std::io::Error::other(what.to_string()));
         match &mut self.backend {
             Backend::Thread { tx, thread, .. } => {
                 *tx = None;

@@ -357,33 +357,17 @@ impl<'a> RayScene<'a> {
     #[inline(never)]
     fn hit_mujoco(&self, s: &Seen, origin: &[f64; 3], dir: &[f64; 3]) -> f64 {
         let id = self.geoms[s.k as usize].id as c_int;
-        match s.kind {
-            Kind::Primitive(_) => -1.0,
-            // SAFETY: the geom is a mesh of this live model; mj_rayMesh only reads the model and
-            // the (borrowed, unmodified) data and raises only for non-mesh geoms; origin and
-            // dir hold 3 values each; the normal is optional (null).
-            Kind::Mesh => unsafe {
-                sys::mj_rayMesh(
-                    self.model.as_ptr(),
-                    self.data.raw(),
-                    id,
-                    origin.as_ptr(),
-                    dir.as_ptr(),
-                    std::ptr::null_mut(),
-                )
-            },
-            // SAFETY: as for meshes, with a height field geom.
-            Kind::Hfield => unsafe {
-                sys::mj_rayHfield(
-                    self.model.as_ptr(),
-                    self.data.raw(),
-                    id,
-                    origin.as_ptr(),
-                    dir.as_ptr(),
-                    std::ptr::null_mut(),
-                )
-            },
-        }
+        // mj_rayMesh and mj_rayHfield take the same arguments.
+        let cast = match s.kind {
+            Kind::Primitive(_) => return -1.0,
+            Kind::Mesh => sys::mj_rayMesh,
+            Kind::Hfield => sys::mj_rayHfield,
+        };
+        // SAFETY: the geom is a mesh (or height field, matched to its function) of this live
+        // model; the call only reads the model and the (borrowed, unmodified) data and raises
+        // only for a geom of the other kind; origin and dir hold 3 values each; the normal is
+        // optional (null).
+        unsafe { cast(self.model.as_ptr(), self.data.raw(), id, origin.as_ptr(), dir.as_ptr(), std::ptr::null_mut()) }
     }
 
     /// The nearest hit of the ray from `origin` along the unit vector `dir` within

@@ -184,7 +184,7 @@ impl McapSink {
     /// Creates the file at `path` (see [`LogWriter::create`]).
     ///
     /// # Errors
-    /// [`Error::Io`] / [`Error::McapWrite`] when the file can't be created.
+    /// [`Error::File`] / [`Error::McapWrite`] when the file can't be created.
     pub fn create(path: &std::path::Path, options: &WriterOptions) -> Result<McapSink> {
         let writer = LogWriter::create(path, options)?;
         Ok(McapSink {
@@ -538,7 +538,7 @@ impl Recording {
     /// Opens the outputs `options` names for `robot`.
     ///
     /// # Errors
-    /// [`Error::Io`] / [`Error::McapWrite`] when the MCAP file can't be created;
+    /// [`Error::File`] / [`Error::McapWrite`] when the MCAP file can't be created;
     /// [`Error::Rerun`] when the `.rrd` can't be created, the viewer can't be reached, or the
     /// `rerun` feature is off.
     pub fn new(robot: &Robot, options: &RecordOptions) -> Result<Recording> {

@@ -12,14 +12,15 @@
 //! run's controller wrapper: once a client publishes a `Float64MultiArray` on
 //! `/<robot>/joint_commands` (CDR, or JSON `{"data": [...]}`), its values drive the joints
 //! (positions through the hold gains, as `twin sim --ros` takes them) instead of the
-//! controller's. A reset acts through [`ViewerReset`], a disturbance of the loop. `--unity`
+//! controller's. A reset acts through [`ResetOnRequest`](crate::engine::disturb::ResetOnRequest), a disturbance of the loop. `--unity`
 //! adds a [`unity::UnitySink`] and its published commands take the same path.
 
 pub mod foxglove;
 pub mod unity;
 
 use crate::control::{Controller, Observation};
-use crate::engine::{Disturbance, Flow, Observer, StepView};
+use crate::engine::disturb::ResetOnRequest;
+use crate::engine::{Flow, Observer, StepView};
 use crate::error::Result;
 use crate::live::{CommandInterface, Commander};
 use crate::log::cdr::{CdrReader, CdrWriter};
@@ -63,25 +64,6 @@ pub struct SimHook {
     joint_count: usize,
     stats: ViewerStats,
     log: Box<dyn FnMut(&str) + Send>,
-}
-
-/// The run's reset through the viewer's `/twin/reset` service.
-pub struct ViewerReset {
-    requested: Arc<AtomicBool>,
-    initial: Vec<f64>,
-}
-
-impl Disturbance for ViewerReset {
-    fn start(&mut self, _model: &Model, data: &crate::mj::Data) -> Result<()> {
-        self.initial = data.state(crate::mj::StateSig::PHYSICS)?;
-        Ok(())
-    }
-
-    fn apply(&mut self, data: &mut crate::mj::Data, _rng: &mut rand_chacha::ChaCha8Rng) {
-        if self.requested.swap(false, Ordering::Relaxed) {
-            let _ = data.set_state(&self.initial, crate::mj::StateSig::PHYSICS);
-        }
-    }
 }
 
 /// The run's controller with client commands on top (see the module docs).
@@ -191,8 +173,8 @@ impl SimHook {
     }
 
     /// The reset disturbance to give the loop.
-    pub fn reset_disturbance(&self) -> ViewerReset {
-        ViewerReset { requested: self.reset.clone(), initial: Vec::new() }
+    pub fn reset_disturbance(&self) -> ResetOnRequest {
+        ResetOnRequest::new(self.reset.clone())
     }
 
     /// The statistics so far.

@@ -185,10 +185,10 @@ fn expect_urdf_error(urdf: &str, line: u32, element: &str, needle: &str) {
     let err = convert_urdf_str(Path::new("bad.urdf"), urdf, &ConvertOptions::default()).unwrap_err();
     let text = err.to_string();
     match &err {
-        Error::Urdf { line: l, element: e, .. } => {
+        Error::Convert(twin_convert::Error::Urdf { line: l, element: e, .. }) => {
             assert_eq!((*l, e.as_str()), (line, element), "{text}");
         }
-        Error::Xml { line: l, .. } => assert_eq!(*l, line, "{text}"),
+        Error::Convert(twin_convert::Error::Xml { line: l, .. }) => assert_eq!(*l, line, "{text}"),
         other => panic!("unexpected error {other:?}"),
     }
     assert!(text.contains("bad.urdf"), "{text}");

@@ -112,7 +112,9 @@ fn mjcf_file_errors_name_the_file() {
     let text = err.to_string();
     assert!(text.contains("broken.xml"), "{text}");
     let missing = Model::from_file(dir.path().join("nope.xml")).expect_err("missing file");
-    assert!(matches!(missing, Error::Io { .. }) && missing.to_string().contains("nope.xml"));
+    assert!(
+        matches!(missing, Error::File(twin_core::fsio::Error::Io { .. })) && missing.to_string().contains("nope.xml")
+    );
 }
 
 const URDF_HEAD: &str = "<?xml version=\"1.0\"?>\n<robot name=\"r\">\n  <link name=\"base\">\n    <inertial><mass value=\"1\"/><inertia ixx=\"0.01\" iyy=\"0.01\" izz=\"0.01\" ixy=\"0\" ixz=\"0\" iyz=\"0\"/></inertial>\n  </link>\n";
@@ -130,7 +132,9 @@ fn urdf_with_bad_inertia_names_file_link_and_line() {
     assert_eq!(repaired.nbody(), 3);
     let strict = twin_core::convert::ConvertOptions { strict_inertia: true, ..Default::default() };
     let err = twin_core::convert::convert_urdf(&path, &strict).expect_err("triangle inequality");
-    let Error::Urdf { line, element, name, message, .. } = &err else { panic!("{err:?}") };
+    let Error::Convert(twin_convert::Error::Urdf { line, element, name, message, .. }) = &err else {
+        panic!("{err:?}")
+    };
     assert_eq!((*line, element.as_str(), name.as_deref()), (9, "inertia", Some("arm")));
     assert!(message.contains("triangle"), "{message}");
     let text = err.to_string();
@@ -146,7 +150,9 @@ fn urdf_with_missing_mesh_names_file_link_and_line() {
     );
     let path = write(dir.path(), "missing_mesh.urdf", &urdf);
     let err = Model::from_file(&path).expect_err("missing mesh");
-    let Error::Urdf { line, element, name, message, .. } = &err else { panic!("{err:?}") };
+    let Error::Convert(twin_convert::Error::Urdf { line, element, name, message, .. }) = &err else {
+        panic!("{err:?}")
+    };
     assert_eq!((*line, element.as_str(), name.as_deref()), (9, "mesh", Some("shell")));
     assert!(message.contains("meshes/shell.stl") && message.contains("not found"), "{message}");
 }
@@ -156,12 +162,15 @@ fn urdf_with_negative_mass_and_broken_xml() {
     let dir = tempfile::tempdir().unwrap();
     let neg = URDF_HEAD.replace("<mass value=\"1\"/>", "<mass value=\"-2\"/>") + "</robot>\n";
     let err = Model::from_file(write(dir.path(), "neg.urdf", &neg)).expect_err("negative mass");
-    assert!(matches!(&err, Error::Urdf { line: 4, element, .. } if element == "mass"), "{err:?}");
+    assert!(
+        matches!(&err, Error::Convert(twin_convert::Error::Urdf { line: 4, element, .. }) if element == "mass"),
+        "{err:?}"
+    );
     assert!(err.to_string().contains("negative mass"));
 
     let broken = format!("{URDF_HEAD}  <link name=\"x\">\n</robot>\n");
     let err = Model::from_file(write(dir.path(), "broken.urdf", &broken)).expect_err("broken XML");
-    assert!(matches!(err, Error::Xml { .. }), "{err:?}");
+    assert!(matches!(err, Error::Convert(twin_convert::Error::Xml { .. })), "{err:?}");
     assert!(err.to_string().contains("broken.urdf:"), "{err}");
 }
 
