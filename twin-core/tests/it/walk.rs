@@ -132,6 +132,45 @@ fn turns_ninety_degrees_in_place() {
     assert!(s.distance_m < 0.3, "{}", s.distance_m);
 }
 
+/// Steering by a schedule (`[walk] commands`): after the crouch, 0.3 rad/s in place until
+/// the command asks 90°, then stop. The walker turns by steps (yaw only, the feet around one
+/// centre), stops, brings its feet side by side and stands: it ends within 15° of 90°, near
+/// where it started, and from 2 s after the stop it neither turns nor walks. The metrics
+/// report each segment's commanded and achieved angle.
+#[test]
+fn scheduled_ninety_degree_turn_in_place_stops_within_fifteen_degrees() {
+    let turn_secs = std::f64::consts::FRAC_PI_2 / 0.3;
+    let stop = 1.0 + turn_secs;
+    let (s, _, _) = run_scenario(stand(stop + 4.0), |sc| {
+        sc.walk.commands = vec![[1.0, 0.0, 0.0, 0.3], [stop, 0.0, 0.0, 0.0], [stop + 2.0, 0.0, 0.0, 0.0]];
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let deg = s.yaw_change_rad.to_degrees();
+    assert!((deg - 90.0).abs() < 15.0, "turned {deg}°");
+    assert!(s.distance_m < 0.3, "walked off {} m", s.distance_m);
+    assert_eq!(s.segments.len(), 4, "{:?}", s.segments);
+    let turn = &s.segments[1];
+    assert!((turn.commanded_angle_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-2, "{turn:?}");
+    let still = &s.segments[3];
+    assert!(still.angle_rad.abs() < 0.02 && still.distance_m < 0.02, "kept moving after the stop: {still:?}");
+}
+
+/// A scheduled stop from walking: 0.25 m/s for 4 s (1 m), then zero: the walker slows at
+/// `max_accel_mps2`, finishes its step, stands and stays put. The move and its stop cover the
+/// commanded metre within 20 %; from 2 s after the stop on, it stands still.
+#[test]
+fn scheduled_stop_from_walking_stands_in_place() {
+    let (s, _, _) = run_scenario(stand(10.0), |sc| {
+        sc.walk.commands = vec![[1.0, 0.25, 0.0, 0.0], [5.0, 0.0, 0.0, 0.0], [7.0, 0.0, 0.0, 0.0]];
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let (walk, stop, still) = (&s.segments[1], &s.segments[2], &s.segments[3]);
+    assert!((walk.commanded_distance_m - 1.0).abs() < 1e-2, "{walk:?}");
+    let forward = walk.forward_m + stop.forward_m;
+    assert!((forward - 1.0).abs() < 0.2, "walked {forward} m of 1 m");
+    assert!(still.distance_m < 0.02 && still.angle_rad.abs() < 0.02, "{still:?}");
+}
+
 /// On a floor too slippery to walk on, the feet slide: slip is reported and its check fails.
 #[test]
 fn low_friction_slip_fails_its_check() {
