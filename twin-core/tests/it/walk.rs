@@ -171,6 +171,35 @@ fn scheduled_stop_from_walking_stands_in_place() {
     assert!(still.distance_m < 0.02 && still.angle_rad.abs() < 0.02, "{still:?}");
 }
 
+/// The navigation sequence of the README's `/cmd_vel` node as a schedule: 1 m forward, a 90°
+/// turn in place, 0.5 m to the left, each followed by 2 s of stop. Each move with its stop
+/// covers its commanded distance or angle within 20 % (the lateral leg measured across the
+/// heading it starts at, after the turn).
+#[test]
+fn scheduled_forward_turn_lateral_sequence_within_twenty_percent() {
+    let turn_end = 7.0 + std::f64::consts::FRAC_PI_2 / 0.3;
+    let (s, _, _) = run_scenario(stand(21.5), |sc| {
+        sc.walk.commands = vec![
+            [1.0, 0.25, 0.0, 0.0],
+            [5.0, 0.0, 0.0, 0.0],
+            [7.0, 0.0, 0.0, 0.3],
+            [turn_end, 0.0, 0.0, 0.0],
+            [14.5, 0.0, 0.1, 0.0],
+            [19.5, 0.0, 0.0, 0.0],
+        ];
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let seg = &s.segments;
+    assert_eq!(seg.len(), 7, "{seg:?}");
+    let forward = seg[1].forward_m + seg[2].forward_m;
+    let turned = seg[3].angle_rad + seg[4].angle_rad;
+    let lateral = seg[5].lateral_m + seg[6].lateral_m;
+    println!("forward {forward:.3} m of 1, turned {:.1}° of 90, lateral {lateral:.3} m of 0.5", turned.to_degrees());
+    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
+    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
+    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+}
+
 /// On a floor too slippery to walk on, the feet slide: slip is reported and its check fails.
 #[test]
 fn low_friction_slip_fails_its_check() {
