@@ -87,10 +87,10 @@ use crate::engine::Disturbance;
 use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
 use crate::log::{Clock, Float64MultiArray, JointState, JointTrajectory, RosMessage, RosString, Twist};
-use crate::walk::{Command as WalkCommand, Walker};
 use crate::mj::Model;
 use crate::robot::Robot;
 use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
+use crate::walk::{Command as WalkCommand, Walker};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
 use simulation::{Call, Outcome, SimulationServices, result, scope, state};
 use std::collections::HashMap;
@@ -838,10 +838,16 @@ impl LiveController {
             Ok(m) => {
                 return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, &format!("not finite: {m:?}"));
             }
-            Err(e) => return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, &format!("not a Twist: {}", e.message)),
+            Err(e) => {
+                return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, &format!("not a Twist: {}", e.message));
+            }
         };
         let Some(walker) = self.walker.as_mut() else {
-            return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, "no walker runs (twin sim --ros --controller walk)");
+            return self.reject(
+                crate::topics::CMD_VEL_TOPIC,
+                t_nanos,
+                "no walker runs (twin sim --ros --controller walk)",
+            );
         };
         if walker.steer(target) {
             self.stats.cmd_vel_clamped += 1;

@@ -88,10 +88,12 @@ pub struct WalkOptions {
     /// steps allow (`max_step_length / step_period`, …).
     pub commands: Vec<[f64; 4]>,
     /// Largest change per second of the forward and lateral command when it changes (a
-    /// schedule's entry or a live `/cmd_vel`), m/s² (default: 0.5: 0 to 0.3 m/s in 0.6 s, one
-    /// or two steps).
+    /// schedule's entry or a live `/cmd_vel`), m/s²: the command is taken once per step and
+    /// changes by at most this × `step_period` from one step to the next (default: 0.5: at
+    /// 0.6-s steps, 0.3 m/s per step).
     pub max_accel_mps2: f64,
-    /// Largest change per second of the yaw-rate command, rad/s² (default: 1.0).
+    /// Largest change per second of the yaw-rate command, rad/s², taken per step as above
+    /// (default: 1.0).
     pub max_yaw_accel_radps2: f64,
     /// Step duration (double + single support), s (default: 0.6).
     pub step_period: f64,
@@ -407,7 +409,8 @@ impl WalkOptions {
         if self.yaw_rate.abs() * self.step_period > self.max_step_yaw + 1e-12 {
             return Err(("yaw_rate", format!("needs turns per step beyond max_step_yaw {} rad", self.max_step_yaw)));
         }
-        for (name, v) in [("max_accel_mps2", self.max_accel_mps2), ("max_yaw_accel_radps2", self.max_yaw_accel_radps2)] {
+        for (name, v) in [("max_accel_mps2", self.max_accel_mps2), ("max_yaw_accel_radps2", self.max_yaw_accel_radps2)]
+        {
             if !(v > 0.0 && v.is_finite()) {
                 return Err((name, format!("must be a positive number (got {v})")));
             }
@@ -1253,6 +1256,17 @@ impl Walker {
         Step { swing_to: Foothold { pos, ..step.swing_to }, ..step }
     }
 
+    /// The command of the step about to be planned, moved toward the steering `goal` by at most
+    /// the acceleration limits over one step period ([`steer::ramp`]): the steps' advance is
+    /// what the command sets, and it changes once per step.
+    fn steer_step(&mut self, goal: Command) {
+        let o = &self.options;
+        let next = steer::ramp(self.command, goal, o.step_period, o.max_accel_mps2, o.max_yaw_accel_radps2);
+        if next != self.command {
+            self.set_command(next);
+        }
+    }
+
     /// Starts a step with `swing` swinging from the feet `feet` at `t`.
     fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
@@ -1339,13 +1353,8 @@ impl Controller for Walker {
         let t = observation.time_secs - self.t0;
         let o = Arc::clone(&self.options);
         let gait = o.gait();
-        // 0. Steering: toward the live target or the schedule's, at bounded acceleration.
-        if let Some(target) = self.steer_target.or_else(|| steer::scheduled(&o.commands, t)) {
-            let next = steer::ramp(self.command, target, self.dt, o.max_accel_mps2, o.max_yaw_accel_radps2);
-            if next != self.command {
-                self.set_command(next);
-            }
-        }
+        // 0. Steering: the live target or the schedule's, taken step by step (below).
+        let goal = self.steer_target.or_else(|| steer::scheduled(&o.commands, t));
         // 1. State.
         self.tree.forward(observation.qpos, &mut self.frames);
         let com = self.frames.com();
@@ -1365,6 +1374,9 @@ impl Controller for Walker {
         match self.mode {
             Mode::Standing => {
                 let ready = t >= o.settle_secs;
+                if let (Some(goal), true) = (goal, ready) {
+                    self.steer_step(goal);
+                }
                 let push = ready && !self.inside_support(dcm, &feet, o.recovery_margin);
                 if push {
                     self.recovering = true;
@@ -1393,6 +1405,9 @@ impl Controller for Walker {
             }
             Mode::Walking(step) => {
                 if t >= step.end() {
+                    if let (Some(goal), false) = (goal, self.recovering) {
+                        self.steer_step(goal);
+                    }
                     // Touchdown: the landed foot is planted where it actually is.
                     let mut now = feet;
                     now[step.stance.side.index()] = step.stance;

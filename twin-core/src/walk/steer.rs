@@ -5,9 +5,10 @@
 //! (`geometry_msgs/Twist` on `/cmd_vel`, [`crate::live`]); it is clamped to what the walker's
 //! steps allow ([`clamp`]: `max_step_length`, `max_step_lateral`, `max_step_yaw` over
 //! `step_period`) and the command the walker plans its steps with moves toward it at bounded
-//! acceleration ([`ramp`], `max_accel_mps2`, `max_yaw_accel_radps2`), once per solve. The
-//! walker takes the command at each step it plans ([`super::Walker::set_command`]); with a zero
-//! command it finishes the step it is in, brings the feet side by side and stands.
+//! acceleration ([`ramp`], `max_accel_mps2`, `max_yaw_accel_radps2`), once per step: at each
+//! step it plans (and when it starts from standing) by at most the limit × `step_period`, since
+//! a step's advance is what the command sets. With a zero command it finishes the step it is
+//! in, brings the feet side by side and stands.
 //!
 //! A walker with neither a schedule nor a live target keeps its constant command
 //! (`vx`, `vy`, `yaw_rate`) and never runs this path.
@@ -17,11 +18,7 @@ use super::plan::Command;
 /// The command in force at `t_secs` (controller seconds from the start) of `schedule`: the
 /// last entry whose time is at or before `t_secs`; `None` before the first entry.
 pub fn scheduled(schedule: &[[f64; 4]], t_secs: f64) -> Option<Command> {
-    schedule
-        .iter()
-        .rev()
-        .find(|e| e[0] <= t_secs)
-        .map(|e| Command { vx: e[1], vy: e[2], yaw_rate: e[3] })
+    schedule.iter().rev().find(|e| e[0] <= t_secs).map(|e| Command { vx: e[1], vy: e[2], yaw_rate: e[3] })
 }
 
 /// The largest command the walker's steps allow: per axis, the longest step over the step
