@@ -690,7 +690,7 @@ fn readme_steer(dir: &Path) -> (Vec<String>, Vec<String>, PathBuf) {
     let lines: Vec<&str> = readme.lines().collect();
     let k = lines
         .iter()
-        .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains("--controller walk"))
+        .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains("steer.mcap"))
         .expect("the README's steering command");
     let twin_args = lines[k]
         .split_whitespace()
@@ -699,7 +699,7 @@ fn readme_steer(dir: &Path) -> (Vec<String>, Vec<String>, PathBuf) {
         .collect();
     assert!(lines[k + 1].starts_with("ROS_DOMAIN_ID=7 python3 steer.py"), "{}", lines[k + 1]);
     let node_args = lines[k + 1].split_whitespace().skip(3).map(String::from).collect();
-    let at = readme.find("`steer.py`: 1 m forward").expect("the README's steering node");
+    let at = readme.find("`steer.py`: 1 m\nforward").expect("the README's steering node");
     let start = readme[at..].find("```python\n").expect("its python block") + at + "```python\n".len();
     let end = readme[start..].find("```").expect("the block's end") + start;
     let path = dir.join("steer.py");
