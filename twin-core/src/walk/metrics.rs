@@ -341,8 +341,10 @@ impl GaitMetrics {
         let command = self.command_at(self.time);
         let begun = self.entries_begun(self.time);
         if self.segment.is_some_and(|s| s.4 != begun) {
-            self.segments.extend(self.segment_until(self.time, self.last_base, self.yaw_total));
-            self.segment = Some((self.time, self.last_base, self.yaw_total, command, begun));
+            // At the entry's own time (the pose of the step that reached it).
+            let at = self.commands[begun - 1][0];
+            self.segments.extend(self.segment_until(at, self.last_base, self.yaw_total));
+            self.segment = Some((at, self.last_base, self.yaw_total, command, begun));
         }
         for (sum, c) in self.window_cmd.iter_mut().zip(command) {
             *sum += c * self.dt;
