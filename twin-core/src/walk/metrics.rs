@@ -159,6 +159,10 @@ fn geom_parts(model: &Model, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
         .collect()
 }
 
+/// Where the open command segment started: (time s, base position, unwrapped yaw rad, its
+/// command, the schedule entries begun).
+type OpenSegment = (f64, [f64; 3], f64, [f64; 3], usize);
+
 /// Accumulates [`GaitSummary`] step by step.
 #[derive(Debug, Clone)]
 pub struct GaitMetrics {
@@ -196,7 +200,7 @@ pub struct GaitMetrics {
     /// Closed segments, and the open one's start: (time, base, unwrapped yaw, command, the
     /// schedule entries begun so far).
     segments: Vec<SegmentTracking>,
-    segment: Option<(f64, [f64; 3], f64, [f64; 3], usize)>,
+    segment: Option<OpenSegment>,
     hull: Vec<[f64; 2]>,
     /// Scratch of [`support_margin_into`], kept to spare an allocation per step.
     hull_scratch: Vec<[f64; 2]>,
