@@ -137,6 +137,11 @@ pub struct Args {
     /// their current pose.
     #[arg(long, default_value_t = 0.5, value_name = "SECS")]
     pub silence_timeout: f64,
+    /// With --ros --controller walk: simulated seconds without a Twist on /cmd_vel (which
+    /// steers the walker: linear.x forward, linear.y left, angular.z yaw rate) before it
+    /// stops and stands.
+    #[arg(long, default_value_t = 0.5, value_name = "SECS")]
+    pub cmd_vel_timeout: f64,
     /// Serve the run to Foxglove/Lichtblick over WebSocket at PORT (loopback) or ADDR:PORT:
     /// every topic live (CDR), /robot_description and its package:// meshes, the
     /// /twin/pause, /twin/resume, /twin/step and /twin/reset services, and joint position
@@ -430,7 +435,11 @@ impl Outputs {
             }
         }
         if args.ros {
-            let (live, recording) = live::Live::start(args, robot, options, viewer_sinks)?;
+            // `--controller walk` on the graph: the walker runs, steered by `/cmd_vel`.
+            let walker = (plan.controller == "walk")
+                .then(|| twin_core::walk::Walker::new(&robot.model, plan.controller_options.walk.clone()))
+                .transpose()?;
+            let (live, recording) = live::Live::start(args, robot, options, viewer_sinks, walker)?;
             return Ok(Outputs { recording: Some(recording), recording_wanted, live: Some(live) });
         }
         let recording = if !viewer_sinks.is_empty() {
@@ -712,6 +721,7 @@ mod live {
         positive("--lockstep-timeout", args.lockstep_timeout)?;
         positive("--join-timeout", args.join_timeout)?;
         positive("--silence-timeout", args.silence_timeout)?;
+        positive("--cmd-vel-timeout", args.cmd_vel_timeout)?;
         let interface = if args.ros_interface == "lo" {
             std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST)
         } else {
@@ -733,6 +743,7 @@ mod live {
             },
             pacing,
             silence_timeout_secs: args.silence_timeout,
+            cmd_vel_timeout_secs: args.cmd_vel_timeout,
             lockstep_timeout_secs: args.lockstep_timeout,
             join_timeout_secs: args.join_timeout,
         })
@@ -746,11 +757,15 @@ mod live {
             robot: &Robot,
             record: RecordOptions,
             viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
+            walker: Option<twin_core::walk::Walker>,
         ) -> anyhow::Result<(Live, Recording)> {
             let options = options(args)?;
             let stop = twin_core::fsio::interrupt_flag();
             let log = Box::new(|m: &str| eprintln!("warning: {m}"));
-            let (sink, controller) = bridge::start(robot, &options, stop, log)?;
+            let (sink, mut controller) = bridge::start(robot, &options, stop, log)?;
+            if let Some(w) = walker {
+                controller.drive_walker(w);
+            }
             let record = RecordOptions {
                 command_topic: Some(bridge::actuator_topic(robot)),
                 controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
@@ -788,6 +803,15 @@ mod live {
                 s.resets,
                 s.real_time_factor()
             )?;
+            if self.controller.walker().is_some() {
+                writeln!(
+                    out,
+                    "walker steered by {}: {} Twists clamped to what its steps allow, {} stops for lack of one",
+                    twin_core::topics::CMD_VEL_TOPIC,
+                    s.cmd_vel_clamped,
+                    s.cmd_vel_timeouts,
+                )?;
+            }
             if let Some(j) = s.join_secs {
                 writeln!(out, "lockstep: the controller joined after {j:.2} s")?;
             }

@@ -27,9 +27,10 @@ const ELBOW: &str = "left_elbow_joint";
 const ELBOW_TARGET: f64 = -0.3;
 const PERIOD_NANOS: u64 = 10_000_000;
 
-/// A domain id for test `k` (0..10) unlikely to meet another test binary's.
+/// A domain id for test `k` (0..15) unlikely to meet another test binary's (at most 219 of
+/// DDS's 0..=232).
 fn domain(k: u32) -> u32 {
-    10 + (std::process::id() % 20) * 10 + k
+    10 + (std::process::id() % 14) * 15 + k
 }
 
 fn python() -> PathBuf {
@@ -680,4 +681,92 @@ fn ros_joint_state_commands_by_name_from_rclpy_move_the_named_joint_only() {
             assert!((last.position[i] - first.position[i]).abs() < 0.05, "{name} moved to {}", last.position[i]);
         }
     }
+}
+
+/// The README's "Steer the walker": its `twin sim` arguments (after `sim`, the recording as
+/// `run.mcap`), its node's arguments, and the node written into `dir`.
+fn readme_steer(dir: &Path) -> (Vec<String>, Vec<String>, PathBuf) {
+    let readme = std::fs::read_to_string(README).unwrap();
+    let lines: Vec<&str> = readme.lines().collect();
+    let k = lines
+        .iter()
+        .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains("steer.mcap"))
+        .expect("the README's steering command");
+    let twin_args = lines[k]
+        .split_whitespace()
+        .skip(3)
+        .map(|a| if a == "steer.mcap" { "run.mcap" } else { a }.to_string())
+        .collect();
+    assert!(lines[k + 1].starts_with("ROS_DOMAIN_ID=7 python3 steer.py"), "{}", lines[k + 1]);
+    let node_args = lines[k + 1].split_whitespace().skip(3).map(String::from).collect();
+    let at = readme.find("`steer.py`: 1 m\nforward").expect("the README's steering node");
+    let start = readme[at..].find("```python\n").expect("its python block") + at + "```python\n".len();
+    let end = readme[start..].find("```").expect("the block's end") + start;
+    let path = dir.join("steer.py");
+    std::fs::write(&path, &readme[start..end]).unwrap();
+    (twin_args, node_args, path)
+}
+
+/// The base's (x, y, heading) from `/odom` at the first message at or after `t_secs`.
+fn pose_at(odom: &[(u64, Odometry)], t_secs: f64) -> (f64, f64, f64) {
+    let (_, m) = odom.iter().find(|(t, _)| *t as f64 * 1e-9 >= t_secs - 1e-9).unwrap_or_else(|| odom.last().unwrap());
+    let [x, y, z, w] = m.orientation_xyzw;
+    (m.position[0], m.position[1], (2.0 * (w * z + x * y)).atan2(1.0 - 2.0 * (y * y + z * z)))
+}
+
+/// Heading change from `from` to `to` seconds, unwrapped over every `/odom` message between.
+fn turned(odom: &[(u64, Odometry)], from: f64, to: f64) -> f64 {
+    let yaws: Vec<f64> = odom
+        .iter()
+        .filter(|(t, _)| (from - 1e-9..=to + 1e-9).contains(&(*t as f64 * 1e-9)))
+        .map(|(t, _)| pose_at(odom, *t as f64 * 1e-9).2)
+        .collect();
+    yaws.windows(2)
+        .map(|w| (w[1] - w[0] + std::f64::consts::PI).rem_euclid(std::f64::consts::TAU) - std::f64::consts::PI)
+        .sum()
+}
+
+/// The README's steering node (rclpy, Fast DDS, loopback) drives the humanoid's walker over
+/// `/cmd_vel` in lockstep: 1 m forward, 90° in place, 0.5 m to the left. In `/odom` (the
+/// simulation's ground truth), each leg (its move and the stop after it) covers its
+/// commanded distance or angle within 20 %; the humanoid stays up; every period after the
+/// first took the node's Twist, recorded on `/cmd_vel`; the same node twice gives the same
+/// `/odom` bit for bit.
+#[test]
+fn ros_cmd_vel_from_rclpy_steers_the_walker_forward_turn_and_sideways_within_twenty_percent() {
+    let dir = tempfile::tempdir().unwrap();
+    let (twin_args, node_args, script) = readme_steer(dir.path());
+    let a = run_rclpy(10, &twin_args, Some(&script), &node_args);
+    let b = run_rclpy(11, &twin_args, Some(&script), &node_args);
+    for run in [&a, &b] {
+        assert_eq!(count_before(&run.stdout, "control periods"), 430, "{}", run.stdout);
+        assert_eq!(count_before(&run.stdout, "commands applied"), 429, "{}", run.stdout);
+        assert!(run.stdout.contains("0 Twists clamped"), "{}", run.stdout);
+        let twists = read::<twin_core::log::Twist>(&run.mcap, "/cmd_vel");
+        assert_eq!(twists.len(), 429);
+        // The node's own schedule, as received: 0.25 m/s forward from 1 s.
+        let at = |secs: f64| twists.iter().find(|(t, _)| *t >= (secs * 1e9) as u64).unwrap().1;
+        assert_eq!(at(0.5).linear[0], 0.0);
+        assert_eq!(at(1.0).linear[0], 0.25);
+        assert_eq!(at(8.0).angular[2], 0.3);
+        assert_eq!(at(15.0).linear[1], 0.1);
+        let odom = read::<Odometry>(&run.mcap, "/odom");
+        let ((z0, _), (z, tilt)) = base_at_start_and_end(&run.mcap);
+        assert!(z > 0.8 * z0 && tilt < 0.3, "fell: base at {z} m of {z0}, tilt {tilt} rad");
+        let along = |from: f64, to: f64| {
+            let (p, q) = (pose_at(&odom, from), pose_at(&odom, to));
+            let (s, c) = p.2.sin_cos();
+            let d = (q.0 - p.0, q.1 - p.1);
+            (c * d.0 + s * d.1, -s * d.0 + c * d.1)
+        };
+        let forward = along(1.0, 7.0).0;
+        let angle = turned(&odom, 7.0, 14.5);
+        let lateral = along(14.5, 21.5).1;
+        println!("forward {forward:.3} m of 1, turned {:.1}° of 90, lateral {lateral:.3} m of 0.5", angle.to_degrees());
+        assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
+        assert!((angle - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {angle} rad");
+        assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+    }
+    let (oa, ob) = (read::<Odometry>(&a.mcap, "/odom"), read::<Odometry>(&b.mcap, "/odom"));
+    assert!(oa == ob, "two lockstep runs of the same node differ");
 }

@@ -11,6 +11,8 @@
 //!
 //! [walk]                             # walk::WalkOptions, by field name
 //! vx = 0.3
+//! # or a schedule, piecewise constant from each time (s, m/s, m/s, rad/s; walk::steer):
+//! # commands = [[0.0, 0.25, 0.0, 0.0], [5.0, 0.0, 0.0, 0.4], [9.0, 0.0, 0.0, 0.0]]
 //!
 //! [[push]]                           # a force on a body (default: the floating base)
 //! time = 5.0
@@ -536,7 +538,7 @@ impl Scenario {
     /// # Errors
     /// As [`GaitMetrics::for_model`].
     pub fn metrics(&self, model: &Model) -> Result<GaitMetrics> {
-        GaitMetrics::for_model(model, &self.walk.bodies, self.targets())
+        Ok(GaitMetrics::for_model(model, &self.walk.bodies, self.targets())?.with_commands(self.walk.commands.clone()))
     }
 
     /// The scenario's checks on `model`: an observer that measures the gait and gives one

@@ -15,6 +15,10 @@
 //!   frame is not a body;
 //! - `/contacts/<body>` (`geometry_msgs/msg/WrenchStamped`) per body, from its first contact on;
 //! - `/<robot>/joint_commands` (`std_msgs/msg/Float64MultiArray`): the command sent;
+//! - `/cmd_vel` (`geometry_msgs/msg/Twist`, [`CMD_VEL_TOPIC`]), an input: under `twin sim --ros
+//!   --controller walk` it steers the walker (linear.x forward, linear.y left, angular.z yaw
+//!   rate, the robot's heading frame), the topic `teleop_twist_keyboard` and Nav2 publish by
+//!   default ([`crate::live`], [`crate::walk::steer`]);
 //! - each ray-cast sensor's topics ([`crate::sense::rig`]): depth cameras
 //!   `<prefix>/depth/image_raw`, `<prefix>/depth/camera_info`, `<prefix>/points`; LiDARs a
 //!   `LaserScan` or `PointCloud2`, at the sensor's rate.
@@ -26,6 +30,11 @@ use crate::log::{
 };
 use crate::mj::ObjType;
 use crate::robot::Robot;
+
+/// The velocity command input of a walking robot on a live graph: `geometry_msgs/msg/Twist`
+/// in the heading frame (what navigation stacks and `teleop_twist_keyboard` publish by default;
+/// remap theirs to it, e.g. `--ros-args -r cmd_vel:=/cmd_vel`).
+pub const CMD_VEL_TOPIC: &str = "/cmd_vel";
 
 /// Whether every message must arrive (`Reliable`) or the newest matters (`BestEffort`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]

@@ -127,6 +127,7 @@ pub fn external(
         silence_timeout_secs: options.period_timeout_secs,
         lockstep_timeout_secs: options.period_timeout_secs,
         join_timeout_secs: options.join_timeout_secs,
+        ..LiveOptions::default()
     };
     let stop = crate::fsio::interrupt_flag();
     let warnings = log.to_path_buf();

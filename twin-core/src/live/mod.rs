@@ -58,6 +58,17 @@
 //! `StepSimulation` that crosses a control period's start waits for that period's command, as
 //! any step does.
 //!
+//! Steering a walker ([`LiveController::drive_walker`], `twin sim --ros --controller walk`):
+//! the run's controller is twin's walker, and `geometry_msgs/Twist` on `/cmd_vel`
+//! ([`crate::topics::CMD_VEL_TOPIC`]) sets its velocity target (linear.x forward, linear.y
+//! left, angular.z yaw rate; [`crate::walk::Walker::steer`]: clamped to what its steps allow,
+//! with a warning, and reached at its acceleration limits). In lockstep a Twist is the
+//! period's command (one per `/clock` period, as for joint commands); in the real-time modes
+//! the newest one wins. A Twist with a non-finite component is rejected. No Twist for
+//! [`LiveOptions::cmd_vel_timeout_secs`] of simulated time (a mobile base's `cmd_vel_timeout`)
+//! stops the walker: it finishes its step and stands; the next Twist steers again. Before the
+//! first Twist the walker keeps its own command (the scenario's; standing by default).
+//!
 //! Silent controller (real-time modes): the last command is held; after
 //! [`LiveOptions::silence_timeout_secs`] of wall time without a good command, the joints hold
 //! the pose they are in (PD, the hold gains) until commands come back.
@@ -75,10 +86,11 @@ use crate::control::{Controller, Observation};
 use crate::engine::disturb::ResetOnRequest;
 use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
-use crate::log::{Clock, Float64MultiArray, JointState, JointTrajectory, RosMessage, RosString};
+use crate::log::{Clock, Float64MultiArray, JointState, JointTrajectory, RosMessage, RosString, Twist};
 use crate::mj::Model;
 use crate::robot::Robot;
 use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
+use crate::walk::{Command as WalkCommand, Walker};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
 use simulation::{Call, Outcome, SimulationServices, result, scope, state};
 use std::collections::HashMap;
@@ -122,6 +134,9 @@ pub struct LiveOptions {
     /// Lockstep: longest wait for the controller's command publisher before time starts, wall
     /// s (default: 30: a Python node with rclpy takes a few seconds to start and discover).
     pub join_timeout_secs: f64,
+    /// Steering a walker: simulated time without a Twist on `/cmd_vel` after which it stops
+    /// and stands, s (default: 0.5, as `diff_drive_controller`'s `cmd_vel_timeout`).
+    pub cmd_vel_timeout_secs: f64,
 }
 
 impl Default for LiveOptions {
@@ -135,6 +150,7 @@ impl Default for LiveOptions {
             silence_timeout_secs: 0.5,
             lockstep_timeout_secs: 10.0,
             join_timeout_secs: 30.0,
+            cmd_vel_timeout_secs: 0.5,
         }
     }
 }
@@ -158,6 +174,9 @@ const CLOCK: usize = 0;
 const COMMANDS: usize = 1;
 const TRAJECTORY: usize = 2;
 const BY_NAME: usize = 3;
+const CMD_VEL: usize = 4;
+/// The walker's own topics follow the bridge's.
+const WALKER_TOPICS: usize = 5;
 
 /// Lockstep join: how long the twin waits for a `/joint_states` reader once the command
 /// publisher has matched.
@@ -222,7 +241,7 @@ impl Sink for LiveSink {
 pub struct LiveStats {
     /// Control periods run.
     pub periods: u64,
-    /// Commands applied (`Float64MultiArray` and trajectories).
+    /// Commands applied (`Float64MultiArray`, trajectories, Twists).
     pub commands_applied: u64,
     /// Commands rejected (wrong length, NaN, undecodable, bad trajectory).
     pub commands_rejected: u64,
@@ -242,6 +261,10 @@ pub struct LiveStats {
     pub resets: u64,
     /// Lockstep: wall seconds from the start until the controller's command publisher matched.
     pub join_secs: Option<f64>,
+    /// Twists on `/cmd_vel` cut to what the walker's steps allow.
+    pub cmd_vel_clamped: u64,
+    /// Stops of the walker after [`LiveOptions::cmd_vel_timeout_secs`] without a Twist.
+    pub cmd_vel_timeouts: u64,
 }
 
 impl LiveStats {
@@ -271,6 +294,14 @@ pub struct LiveController {
     trajectories: RawReader,
     /// `JointState` commands by joint name.
     by_name: RawReader,
+    /// `Twist` on `/cmd_vel`: the walker's velocity target.
+    twist: RawReader,
+    /// The walker it runs instead of the joint commander ([`LiveController::drive_walker`]),
+    /// whether it must start over at the next step (a reset), and when the last Twist came
+    /// (simulated s; `None`: none yet, or timed out).
+    walker: Option<Box<Walker>>,
+    walker_reset: bool,
+    last_twist_secs: Option<f64>,
     /// The sink's `/joint_states` writer (lockstep join).
     state_writer: SharedWriter,
     poll: rustdds::mio1::Poll,
@@ -362,7 +393,13 @@ pub fn start(
         node: node.clone(),
         writers: HashMap::new(),
         by_id: Vec::new(),
-        own: vec!["/clock".into(), command_topic.clone(), trajectory_topic.clone(), by_name_topic.clone()],
+        own: vec![
+            "/clock".into(),
+            command_topic.clone(),
+            trajectory_topic.clone(),
+            by_name_topic.clone(),
+            crate::topics::CMD_VEL_TOPIC.into(),
+        ],
         cdr: CdrWriter::new(),
         write_failures: 0,
         state_writer: SharedWriter::default(),
@@ -380,6 +417,7 @@ pub fn start(
     let mut commands = node.reader(&command_topic, Float64MultiArray::TYPE_NAME, 1000)?;
     let mut trajectories = node.reader(&trajectory_topic, JointTrajectory::TYPE_NAME, 10)?;
     let mut by_name = node.reader(&by_name_topic, JointState::TYPE_NAME, 1000)?;
+    let mut twist = node.reader(crate::topics::CMD_VEL_TOPIC, Twist::TYPE_NAME, 1000)?;
     let mut services = SimulationServices::new(&node)?;
     let poll = rustdds::mio1::Poll::new().map_err(|e| Error::Live { message: format!("creating a poller: {e}") })?;
     {
@@ -389,9 +427,10 @@ pub fn start(
             .register(&mut commands, Token(0), Interest::READABLE)
             .and_then(|()| poll.registry().register(&mut trajectories, Token(1), Interest::READABLE))
             .and_then(|()| poll.registry().register(&mut by_name, Token(2), Interest::READABLE))
+            .and_then(|()| poll.registry().register(&mut twist, Token(3), Interest::READABLE))
             .map_err(watch)?;
         for (k, r) in services.readers_mut().enumerate() {
-            poll.registry().register(r, Token(3 + k), Interest::READABLE).map_err(watch)?;
+            poll.registry().register(r, Token(4 + k), Interest::READABLE).map_err(watch)?;
         }
     }
     let model: &Model = &robot.model;
@@ -404,6 +443,10 @@ pub fn start(
         commands,
         trajectories,
         by_name,
+        twist,
+        walker: None,
+        walker_reset: false,
+        last_twist_secs: None,
         state_writer: sink.state_writer.clone(),
         poll,
         events: rustdds::mio1::Events::with_capacity(16),
@@ -494,6 +537,18 @@ impl LiveSink {
 }
 
 impl LiveController {
+    /// Runs `walker` as the run's controller, steered by `geometry_msgs/Twist` on `/cmd_vel`
+    /// (see the module docs), instead of taking joint commands. Call before the recording is
+    /// opened: the walker's topics join the bridge's ([`Controller::topics`]).
+    pub fn drive_walker(&mut self, walker: Walker) {
+        self.walker = Some(Box::new(walker));
+    }
+
+    /// The walker it drives, if any.
+    pub fn walker(&self) -> Option<&Walker> {
+        self.walker.as_deref()
+    }
+
     /// The commanded joints, in `Float64MultiArray` order.
     pub fn joint_names(&self) -> &[String] {
         self.commander.joint_names()
@@ -610,6 +665,7 @@ impl LiveController {
     fn reset(&mut self, model: &Model, t_secs: f64) {
         self.reset_requested.store(true, Ordering::Relaxed);
         self.commander = Commander::new(model, self.options.command_interface);
+        self.walker_reset = self.walker.is_some();
         self.stats.resets += 1;
         self.warn(format!(
             "reset_simulation: the robot's state goes back to its start at the next step (t = {t_secs:.3} s); \
@@ -749,8 +805,70 @@ impl LiveController {
         }
     }
 
+    /// Applies one received `Twist` to the walker (or rejects it).
+    fn take_twist(&mut self, raw: RawCdr, t_nanos: u64) {
+        let decoded = CdrReader::new(&raw.0).and_then(|mut r| Twist::decode(&mut r));
+        self.record(CMD_VEL, t_nanos, raw.0);
+        let t_secs = t_nanos as f64 * 1e-9;
+        let target = match decoded {
+            Ok(m) if m.linear.iter().chain(&m.angular).all(|v| v.is_finite()) => {
+                WalkCommand { vx: m.linear[0], vy: m.linear[1], yaw_rate: m.angular[2] }
+            }
+            Ok(m) => {
+                return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, &format!("not finite: {m:?}"));
+            }
+            Err(e) => {
+                return self.reject(crate::topics::CMD_VEL_TOPIC, t_nanos, &format!("not a Twist: {}", e.message));
+            }
+        };
+        let Some(walker) = self.walker.as_mut() else {
+            return self.reject(
+                crate::topics::CMD_VEL_TOPIC,
+                t_nanos,
+                "no walker runs (twin sim --ros --controller walk)",
+            );
+        };
+        if walker.steer(target) {
+            self.stats.cmd_vel_clamped += 1;
+            let n = self.stats.cmd_vel_clamped;
+            let b = walker.options().command_bounds();
+            if n <= 10 || n.is_multiple_of(1000) {
+                self.warn(format!(
+                    "/cmd_vel #{n} at t = {t_secs:.3} s asks (vx {}, vy {}, yaw rate {}), beyond what the walker's \
+                     steps allow (|vx| ≤ {:.3} m/s, |vy| ≤ {:.3} m/s, |yaw rate| ≤ {:.3} rad/s: max_step_length, \
+                     max_step_lateral, max_step_yaw over step_period): clamped",
+                    target.vx, target.vy, target.yaw_rate, b.vx_mps, b.vy_mps, b.yaw_rate_radps
+                ));
+            }
+        }
+        self.last_twist_secs = Some(t_secs);
+        self.stats.commands_applied += 1;
+        self.last_good = Instant::now();
+    }
+
+    /// Steering a walker: stops it when no Twist came for the timeout (simulated time).
+    fn check_cmd_vel_timeout(&mut self, t_secs: f64) {
+        let Some(last) = self.last_twist_secs else { return };
+        if t_secs - last <= self.options.cmd_vel_timeout_secs {
+            return;
+        }
+        if let Some(walker) = self.walker.as_mut() {
+            walker.steer(WalkCommand::default());
+        }
+        self.last_twist_secs = None;
+        self.stats.cmd_vel_timeouts += 1;
+        self.warn(format!(
+            "no Twist on {} for {} s at t = {t_secs:.3} s: the walker stops and stands",
+            crate::topics::CMD_VEL_TOPIC,
+            self.options.cmd_vel_timeout_secs
+        ));
+    }
+
     /// Takes every queued trajectory and command (real-time modes; the last good one wins).
     fn drain(&mut self, t_nanos: u64) {
+        while let Ok(Some(s)) = self.twist.take_next_sample() {
+            self.take_twist(s.into_value(), t_nanos);
+        }
         while let Ok(Some(s)) = self.trajectories.take_next_sample() {
             self.take_trajectory(s.into_value(), t_nanos);
         }
@@ -770,6 +888,8 @@ impl LiveController {
             self.take_by_name(s.into_value(), t_nanos);
         } else if let Ok(Some(s)) = self.commands.take_next_sample() {
             self.take_command(s.into_value(), t_nanos);
+        } else if let Ok(Some(s)) = self.twist.take_next_sample() {
+            self.take_twist(s.into_value(), t_nanos);
         } else {
             return false;
         }
@@ -792,7 +912,7 @@ impl LiveController {
             }
             *count > 0
         };
-        let (mut a, mut b, mut c) = (0, 0, 0);
+        let (mut a, mut b, mut c, mut d) = (0, 0, 0, 0);
         loop {
             let now = Instant::now();
             if now >= resend {
@@ -800,8 +920,10 @@ impl LiveController {
                 resend = now + CLOCK_RESEND;
             }
             // (Each reader's status is drained every time: no short-circuit.)
-            let any =
-                matched(&self.commands, &mut a) | matched(&self.trajectories, &mut b) | matched(&self.by_name, &mut c);
+            let any = matched(&self.commands, &mut a)
+                | matched(&self.trajectories, &mut b)
+                | matched(&self.by_name, &mut c)
+                | matched(&self.twist, &mut d);
             if any {
                 break;
             }
@@ -811,12 +933,13 @@ impl LiveController {
             if now >= deadline {
                 return Err(Error::Live {
                     message: format!(
-                        "lockstep: no controller joined within {} s: nothing published on {}, {} or {} in domain {} (ROS_DOMAIN_ID); is it running, on the same domain \
+                        "lockstep: no controller joined within {} s: nothing published on {}, {}, {} or {} in domain {} (ROS_DOMAIN_ID); is it running, on the same domain \
                          and interface (loopback: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)?",
                         self.options.join_timeout_secs,
                         self.command_topic,
                         self.trajectory_topic,
                         self.by_name_topic,
+                        crate::topics::CMD_VEL_TOPIC,
                         self.options.domain_id
                     ),
                 });
@@ -864,12 +987,13 @@ impl LiveController {
             if now >= deadline {
                 return Err(Error::Live {
                     message: format!(
-                        "lockstep: no command on {} (nor {}, {}) within {} s after /clock = {:.3} s (command {} \
+                        "lockstep: no command on {} (nor {}, {}, {}) within {} s after /clock = {:.3} s (command {} \
                          of the run); is the controller still running in domain {} (ROS_DOMAIN_ID), sending one \
                          command per /clock period? (--lockstep-timeout sets the wait)",
                         self.command_topic,
                         self.trajectory_topic,
                         self.by_name_topic,
+                        crate::topics::CMD_VEL_TOPIC,
                         self.options.lockstep_timeout_secs,
                         t_nanos as f64 * 1e-9,
                         self.stats.periods,
@@ -940,6 +1064,9 @@ impl LiveController {
                 }
             }
         }
+        if self.walker.is_some() {
+            self.check_cmd_vel_timeout(t_secs);
+        }
         self.stats.periods += 1;
         self.stats.wall_secs = Instant::now().duration_since(wall0).as_secs_f64();
         self.stats.sim_secs = t_secs - sim0;
@@ -952,9 +1079,12 @@ impl Controller for LiveController {
         "ros"
     }
 
-    fn reset(&mut self, model: &Model, _observation: &Observation<'_>) -> Result<()> {
+    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         self.commander = Commander::new(model, self.options.command_interface);
         self.step = 0;
+        if let Some(w) = self.walker.as_mut() {
+            w.reset(model, observation)?;
+        }
         Ok(())
     }
 
@@ -972,6 +1102,15 @@ impl Controller for LiveController {
         }
         self.step_end_secs = observation.time_secs + self.dt_secs;
         self.step += 1;
+        if let Some(walker) = self.walker.as_mut() {
+            if std::mem::take(&mut self.walker_reset)
+                && let Err(e) = walker.reset(model, observation)
+            {
+                self.failure.get_or_insert(e);
+            }
+            walker.compute(model, observation, command);
+            return;
+        }
         self.commander.compute(observation.time_secs, observation.qpos, observation.qvel, command);
     }
 
@@ -999,7 +1138,17 @@ impl Controller for LiveController {
             topic(&self.command_topic, Float64MultiArray::TYPE_NAME, None, COMMANDS),
             topic(&self.trajectory_topic, JointTrajectory::TYPE_NAME, None, TRAJECTORY),
             topic(&self.by_name_topic, JointState::TYPE_NAME, None, BY_NAME),
+            topic(crate::topics::CMD_VEL_TOPIC, Twist::TYPE_NAME, None, CMD_VEL),
         ]
+        .into_iter()
+        .chain(self.walker.iter().flat_map(|w| w.topics()).map(|t| TopicInfo {
+            kind: match t.kind {
+                TopicKind::Controller(k) => TopicKind::Controller(WALKER_TOPICS + k),
+                other => other,
+            },
+            ..t
+        }))
+        .collect()
     }
 
     fn diagnostics(&self, emit: &mut dyn FnMut(usize, u64, TypedMessage<'_>)) {
@@ -1007,6 +1156,9 @@ impl Controller for LiveController {
             for m in q.drain(..) {
                 emit(m.topic, m.log_time_nanos, TypedMessage::Cdr(&m.cdr));
             }
+        }
+        if let Some(w) = &self.walker {
+            w.diagnostics(&mut |k, t, m| emit(WALKER_TOPICS + k, t, m));
         }
     }
 }

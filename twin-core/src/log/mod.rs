@@ -37,7 +37,7 @@ pub use series::{JointSeries, JointStateReport, JointStateSeries};
 pub use typed::{
     CameraInfo, Clock, Float64MultiArray, Header, Image, Imu, JointState, JointTrajectory, JointTrajectoryPoint,
     LaserScan, MultiArrayDimension, Odometry, PointCloud2, PointField, PointStamped, Pose, PoseArray, RegionOfInterest,
-    RosMessage, RosString, TfMessage, TransformStamped, WrenchStamped,
+    RosMessage, RosString, TfMessage, TransformStamped, Twist, WrenchStamped,
 };
 pub use writer::{Compression, LogWriter, Topic, WriteSummary, WriterOptions};
 

@@ -176,6 +176,16 @@ pub struct TfMessage {
     pub transforms: Vec<TransformStamped>,
 }
 
+/// `geometry_msgs/msg/Twist`: a velocity in free space, linear (m/s) and angular (rad/s); on
+/// `/cmd_vel`, in the robot's heading frame (x forward, y left, z up: REP 103).
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Twist {
+    /// Linear velocity, m/s.
+    pub linear: [f64; 3],
+    /// Angular velocity, rad/s.
+    pub angular: [f64; 3],
+}
+
 /// `rosgraph_msgs/msg/Clock`: simulation time.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct Clock {
@@ -493,6 +503,17 @@ impl RosMessage for TfMessage {
             });
         }
         Ok(Self { transforms })
+    }
+}
+
+impl RosMessage for Twist {
+    const TYPE_NAME: &'static str = "geometry_msgs/msg/Twist";
+    fn encode(&self, w: &mut CdrWriter) {
+        w.f64_fixed(&self.linear);
+        w.f64_fixed(&self.angular);
+    }
+    fn decode(r: &mut CdrReader) -> CdrResult<Self> {
+        Ok(Self { linear: vec3(r)?, angular: vec3(r)? })
     }
 }
 

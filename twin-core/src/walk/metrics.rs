@@ -6,6 +6,7 @@
 
 use super::kin::{Body, BodyNames, Tree};
 use super::plan::wrap;
+use super::steer;
 use crate::control::nominal_pose;
 use crate::engine::{Flow, Measurement, Metric, Observer, StepView};
 use crate::error::Result;
@@ -67,6 +68,42 @@ pub struct GaitSummary {
     pub support_margin_mean_m: f64,
     /// Cost of transport: Σ|τ·q̇|·dt / (m·g·distance).
     pub cost_of_transport: f64,
+    /// RMS over 1-s windows of the forward velocity's error (heading frame at the window's
+    /// start) against the command's mean over the window, m/s.
+    pub vx_rms_error_mps: f64,
+    /// The same for the leftward velocity, m/s.
+    pub vy_rms_error_mps: f64,
+    /// The same for the yaw rate, rad/s.
+    pub yaw_rate_rms_error_radps: f64,
+    /// Per command segment (the whole run for a constant command; each schedule entry, and
+    /// the constant command before the first), what was asked and what was done. The body
+    /// lags the command by a step or two, so a segment followed by a stop shows the rest of
+    /// its motion in the stop's segment: compare a move and the stop after it together.
+    pub segments: Vec<SegmentTracking>,
+}
+
+/// What one command segment asked and what the robot did over it (the last one until the
+/// end or the fall).
+#[derive(Debug, Clone, PartialEq, Default, serde::Serialize)]
+pub struct SegmentTracking {
+    /// When the segment starts, s from the start.
+    pub start_secs: f64,
+    /// When it ends (the next command, the fall or the end), s from the start.
+    pub end_secs: f64,
+    /// Its command: vx, vy (m/s), yaw rate (rad/s).
+    pub command: [f64; 3],
+    /// `|(vx, vy)|` times the segment's duration, m.
+    pub commanded_distance_m: f64,
+    /// Net horizontal displacement of the pelvis over the segment, m.
+    pub distance_m: f64,
+    /// That displacement along the heading at the segment's start, m.
+    pub forward_m: f64,
+    /// That displacement across the heading at the segment's start (left positive), m.
+    pub lateral_m: f64,
+    /// `yaw_rate` times the segment's duration, rad.
+    pub commanded_angle_rad: f64,
+    /// Heading change over the segment (unwrapped), rad.
+    pub angle_rad: f64,
 }
 
 #[derive(Debug, Clone, Default)]
@@ -122,6 +159,10 @@ fn geom_parts(model: &Model, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
         .collect()
 }
 
+/// Where the open command segment started: (time s, base position, unwrapped yaw rad, its
+/// command, the schedule entries begun).
+type OpenSegment = (f64, [f64; 3], f64, [f64; 3], usize);
+
 /// Accumulates [`GaitSummary`] step by step.
 #[derive(Debug, Clone)]
 pub struct GaitMetrics {
@@ -150,6 +191,16 @@ pub struct GaitMetrics {
     window: Option<(f64, [f64; 2], f64)>,
     vel_err_sq: f64,
     vel_windows: u64,
+    /// The command schedule ([`steer`]); empty: the constant `targets`.
+    commands: Vec<[f64; 4]>,
+    /// Σ of the command × dt over the current window (vx, vy, yaw rate).
+    window_cmd: [f64; 3],
+    /// Σ of the squared per-axis window errors (vx, vy, yaw rate).
+    axis_err_sq: [f64; 3],
+    /// Closed segments, and the open one's start: (time, base, unwrapped yaw, command, the
+    /// schedule entries begun so far).
+    segments: Vec<SegmentTracking>,
+    segment: Option<OpenSegment>,
     hull: Vec<[f64; 2]>,
     /// Scratch of [`support_margin_into`], kept to spare an allocation per step.
     hull_scratch: Vec<[f64; 2]>,
@@ -197,10 +248,56 @@ impl GaitMetrics {
             window: None,
             vel_err_sq: 0.0,
             vel_windows: 0,
+            commands: Vec::new(),
+            window_cmd: [0.0; 3],
+            axis_err_sq: [0.0; 3],
+            segments: Vec::new(),
+            segment: None,
             hull: Vec::new(),
             hull_scratch: Vec::new(),
             geoms: Vec::new(),
         }
+    }
+
+    /// The same metrics measuring tracking against the command schedule `commands`
+    /// (`[t_secs, vx, vy, yaw_rate]`, [`steer`]; before its first time, the targets' command).
+    pub fn with_commands(mut self, commands: Vec<[f64; 4]>) -> GaitMetrics {
+        self.commands = commands;
+        self
+    }
+
+    /// The command in force `t_secs` from the start.
+    fn command_at(&self, t_secs: f64) -> [f64; 3] {
+        match steer::scheduled(&self.commands, t_secs) {
+            Some(c) => [c.vx, c.vy, c.yaw_rate],
+            None => [self.targets.vx, self.targets.vy, self.targets.yaw_rate],
+        }
+    }
+
+    /// How many schedule entries have begun by `t_secs`.
+    fn entries_begun(&self, t_secs: f64) -> usize {
+        self.commands.iter().take_while(|e| e[0] <= t_secs).count()
+    }
+
+    /// The open segment's tracking until `t_secs`, the base at `base` and the heading at
+    /// `yaw_total`.
+    fn segment_until(&self, t_secs: f64, base: [f64; 3], yaw_total: f64) -> Option<SegmentTracking> {
+        let (t0, p0, y0, command, _) = self.segment?;
+        let start_yaw = self.start.map_or(0.0, |s| s.1) + y0;
+        let (s, c) = start_yaw.sin_cos();
+        let d = [base[0] - p0[0], base[1] - p0[1]];
+        let span = t_secs - t0;
+        Some(SegmentTracking {
+            start_secs: t0,
+            end_secs: t_secs,
+            command,
+            commanded_distance_m: command[0].hypot(command[1]) * span,
+            distance_m: d[0].hypot(d[1]),
+            forward_m: c * d[0] + s * d[1],
+            lateral_m: -s * d[0] + c * d[1],
+            commanded_angle_rad: command[2] * span,
+            angle_rad: yaw_total - y0,
+        })
     }
 
     /// Whether a fall was detected.
@@ -240,9 +337,22 @@ impl GaitMetrics {
             self.last_base = base;
             self.window = Some((t, [base[0], base[1]], yaw));
             self.geoms = geom_parts(data.model(), self.base, self.feet);
+            self.segment = Some((0.0, base, 0.0, self.command_at(0.0), self.entries_begun(0.0)));
             return;
         };
         self.time = t - t0;
+        // Command segments: one closes where the next schedule entry begins.
+        let command = self.command_at(self.time);
+        let begun = self.entries_begun(self.time);
+        if self.segment.is_some_and(|s| s.4 != begun) {
+            // At the entry's own time (the pose of the step that reached it).
+            let at = self.commands[begun - 1][0];
+            self.segments.extend(self.segment_until(at, self.last_base, self.yaw_total));
+            self.segment = Some((at, self.last_base, self.yaw_total, command, begun));
+        }
+        for (sum, c) in self.window_cmd.iter_mut().zip(command) {
+            *sum += c * self.dt;
+        }
         self.yaw_total += wrap(yaw - self.last_yaw);
         self.last_yaw = yaw;
         self.last_base = base;
@@ -354,7 +464,18 @@ impl GaitMetrics {
             let (s, c) = yw.sin_cos();
             let d = [base[0] - pw[0], base[1] - pw[1]];
             let v = [(c * d[0] + s * d[1]) / span, (-s * d[0] + c * d[1]) / span];
-            self.vel_err_sq += (v[0] - self.targets.vx).powi(2) + (v[1] - self.targets.vy).powi(2);
+            // The command's mean over the window (the constant one exactly, without a schedule).
+            let mean = if self.commands.is_empty() {
+                [self.targets.vx, self.targets.vy, self.targets.yaw_rate]
+            } else {
+                self.window_cmd.map(|sum| sum / span)
+            };
+            let yaw_rate = wrap(yaw - yw) / span;
+            self.vel_err_sq += (v[0] - mean[0]).powi(2) + (v[1] - mean[1]).powi(2);
+            for (sq, e) in self.axis_err_sq.iter_mut().zip([v[0] - mean[0], v[1] - mean[1], yaw_rate - mean[2]]) {
+                *sq += e * e;
+            }
+            self.window_cmd = [0.0; 3];
             self.vel_windows += 1;
             self.window = Some((t, [base[0], base[1]], yaw));
         }
@@ -395,6 +516,15 @@ impl GaitMetrics {
             } else {
                 f64::INFINITY
             },
+            vx_rms_error_mps: rms(self.axis_err_sq[0], self.vel_windows),
+            vy_rms_error_mps: rms(self.axis_err_sq[1], self.vel_windows),
+            yaw_rate_rms_error_radps: rms(self.axis_err_sq[2], self.vel_windows),
+            segments: self
+                .segments
+                .iter()
+                .cloned()
+                .chain(self.segment_until(self.time, self.last_base, self.yaw_total))
+                .collect(),
         }
     }
 }
@@ -402,7 +532,8 @@ impl GaitMetrics {
 impl Observer for GaitMetrics {
     /// Starts over on this rollout's model (its mass and timestep may be randomized).
     fn start(&mut self, model: &Model, _data: &Data) -> Result<()> {
-        *self = GaitMetrics::new(model, self.feet, self.base, self.targets);
+        let commands = std::mem::take(&mut self.commands);
+        *self = GaitMetrics::new(model, self.feet, self.base, self.targets).with_commands(commands);
         Ok(())
     }
 
@@ -436,6 +567,9 @@ impl GaitSummary {
             Measurement::new("step_width_rms_error", self.step_width_rms_error_m, "m"),
             Measurement::new("support_margin_min", self.support_margin_min_m, "m"),
             Measurement::new("cost_of_transport", self.cost_of_transport, ""),
+            Measurement::new("vx_rms_error", self.vx_rms_error_mps, "m/s"),
+            Measurement::new("vy_rms_error", self.vy_rms_error_mps, "m/s"),
+            Measurement::new("yaw_rate_rms_error", self.yaw_rate_rms_error_radps, "rad/s"),
         ]
     }
 }
@@ -467,7 +601,30 @@ impl std::fmt::Display for GaitSummary {
             "  CoM support margin      min {:.3} m, mean {:.3} m",
             self.support_margin_min_m, self.support_margin_mean_m
         )?;
-        write!(f, "  cost of transport       {:.3}", self.cost_of_transport)
+        write!(f, "  cost of transport       {:.3}", self.cost_of_transport)?;
+        write!(
+            f,
+            "\n  command tracking (RMS)  vx {:.3} m/s, vy {:.3} m/s, yaw rate {:.3} rad/s",
+            self.vx_rms_error_mps, self.vy_rms_error_mps, self.yaw_rate_rms_error_radps
+        )?;
+        if self.segments.len() > 1 {
+            for s in &self.segments {
+                write!(
+                    f,
+                    "\n  {:6.2}–{:6.2} s  cmd ({:.2}, {:.2}, {:.2}): {:.3} of {:.3} m, {:.1}° of {:.1}°",
+                    s.start_secs,
+                    s.end_secs,
+                    s.command[0],
+                    s.command[1],
+                    s.command[2],
+                    s.distance_m,
+                    s.commanded_distance_m,
+                    s.angle_rad.to_degrees(),
+                    s.commanded_angle_rad.to_degrees()
+                )?;
+            }
+        }
+        Ok(())
     }
 }
 

@@ -40,9 +40,10 @@ pub mod kin;
 pub mod metrics;
 pub mod plan;
 pub mod preview;
+pub mod steer;
 
 pub use kin::{BodyNames, Side};
-pub use metrics::{GaitMetrics, GaitSummary, GaitTargets};
+pub use metrics::{GaitMetrics, GaitSummary, GaitTargets, SegmentTracking};
 pub use plan::Command;
 
 use crate::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, nominal_pose};
@@ -80,6 +81,20 @@ pub struct WalkOptions {
     pub vy: f64,
     /// Yaw-rate command, rad/s (default: 0.0).
     pub yaw_rate: f64,
+    /// A schedule of velocity commands, `[t_secs, vx, vy, yaw_rate]` each (s, m/s, m/s,
+    /// rad/s): from each time on, the walker steers toward that command ([`steer`]) at the
+    /// acceleration limits below; before the first time it keeps `vx`, `vy`, `yaw_rate`
+    /// (default: empty: the constant command). Times increase; each command within what the
+    /// steps allow (`max_step_length / step_period`, …).
+    pub commands: Vec<[f64; 4]>,
+    /// Largest change per second of the forward and lateral command when it changes (a
+    /// schedule's entry or a live `/cmd_vel`), m/s²: the command is taken once per step and
+    /// changes by at most this × `step_period` from one step to the next (default: 0.5: at
+    /// 0.6-s steps, 0.3 m/s per step).
+    pub max_accel_mps2: f64,
+    /// Largest change per second of the yaw-rate command, rad/s², taken per step as above
+    /// (default: 1.0).
+    pub max_yaw_accel_radps2: f64,
     /// Step duration (double + single support), s (default: 0.6).
     pub step_period: f64,
     /// Fraction of a step in double support (default: 0.2).
@@ -232,6 +247,9 @@ impl Default for WalkOptions {
             vx: 0.0,
             vy: 0.0,
             yaw_rate: 0.0,
+            commands: Vec::new(),
+            max_accel_mps2: 0.5,
+            max_yaw_accel_radps2: 1.0,
             step_period: 0.6,
             double_support: 0.2,
             step_width: 0.18,
@@ -285,6 +303,15 @@ impl WalkOptions {
     /// The velocity command.
     pub fn command(&self) -> Command {
         Command { vx: self.vx, vy: self.vy, yaw_rate: self.yaw_rate }
+    }
+
+    /// The largest command the steps allow (each step's longest advance over `step_period`).
+    pub fn command_bounds(&self) -> steer::CommandBounds {
+        steer::CommandBounds {
+            vx_mps: self.max_step_length / self.step_period,
+            vy_mps: self.max_step_lateral / self.step_period,
+            yaw_rate_radps: self.max_step_yaw / self.step_period,
+        }
     }
 
     fn gait(&self) -> Gait {
@@ -382,6 +409,13 @@ impl WalkOptions {
         if self.yaw_rate.abs() * self.step_period > self.max_step_yaw + 1e-12 {
             return Err(("yaw_rate", format!("needs turns per step beyond max_step_yaw {} rad", self.max_step_yaw)));
         }
+        for (name, v) in [("max_accel_mps2", self.max_accel_mps2), ("max_yaw_accel_radps2", self.max_yaw_accel_radps2)]
+        {
+            if !(v > 0.0 && v.is_finite()) {
+                return Err((name, format!("must be a positive number (got {v})")));
+            }
+        }
+        steer::validate_schedule(&self.commands, &self.command_bounds()).map_err(|m| ("commands", m))?;
         if !(self.recovery_reach_fraction > 0.0 && self.recovery_reach_fraction <= 1.0) {
             return Err((
                 "recovery_reach_fraction",
@@ -466,6 +500,11 @@ pub struct WalkerState {
     pub walking: bool,
     /// Worst leg-IK position error this tick, m.
     pub ik_error_m: f64,
+    /// The velocity command the steps are planned with (vx m/s, vy m/s, yaw rate rad/s):
+    /// the constant one, or the steered one on its way to its target ([`steer`]).
+    pub command: [f64; 3],
+    /// Live targets ([`Walker::steer`]) cut to what the steps allow, count.
+    pub commands_clamped: u64,
 }
 
 /// The walking controller (`walk`): see the [module docs](self).
@@ -499,6 +538,11 @@ pub struct Walker {
     schedule: Schedule,
     mode: Mode,
     command: Command,
+    /// The live steering target ([`Walker::steer`]), clamped; it overrides the schedule.
+    steer_target: Option<Command>,
+    /// Whether the current step was planned with a zero command (feet brought side by side:
+    /// at its touchdown a walker told to stop stands).
+    step_zero: bool,
     t0: f64,
     tick: u64,
     com_prev: Option<Vector3<f64>>,
@@ -682,6 +726,8 @@ impl Walker {
             schedule: Schedule::default(),
             mode: Mode::Standing,
             command: options.command(),
+            steer_target: None,
+            step_zero: false,
             t0: 0.0,
             tick: 0,
             com_prev: None,
@@ -725,6 +771,23 @@ impl Walker {
     /// The foot bodies found (left, right) and the pelvis.
     pub fn feet(&self) -> ([usize; 2], usize) {
         ([self.body.legs[0].foot, self.body.legs[1].foot], self.body.pelvis)
+    }
+
+    /// Steers toward `target` from now on (a navigation stack's `/cmd_vel`, [`steer`]): the
+    /// target is clamped to what the steps allow and reached at the acceleration limits; it
+    /// overrides a schedule. A zero target stops the walker: it finishes its step, brings the
+    /// feet side by side and stands. Returns whether the target was cut (counted in
+    /// [`WalkerState::commands_clamped`]).
+    pub fn steer(&mut self, target: Command) -> bool {
+        let (target, cut) = steer::clamp(target, &self.options.command_bounds());
+        self.state.commands_clamped += u64::from(cut);
+        self.steer_target = Some(target);
+        cut
+    }
+
+    /// The command the steps are planned with now.
+    pub fn command(&self) -> Command {
+        self.command
     }
 
     /// Sets a new velocity command (takes effect at the next step).
@@ -1193,6 +1256,17 @@ impl Walker {
         Step { swing_to: Foothold { pos, ..step.swing_to }, ..step }
     }
 
+    /// The command of the step about to be planned, moved toward the steering `goal` by at most
+    /// the acceleration limits over one step period ([`steer::ramp`]): the steps' advance is
+    /// what the command sets, and it changes once per step.
+    fn steer_step(&mut self, goal: Command) {
+        let o = &self.options;
+        let next = steer::ramp(self.command, goal, o.step_period, o.max_accel_mps2, o.max_yaw_accel_radps2);
+        if next != self.command {
+            self.set_command(next);
+        }
+    }
+
     /// Starts a step with `swing` swinging from the feet `feet` at `t`.
     fn start_step(&mut self, t: f64, feet: &[Foothold; 2], swing: Side, ds: f64, zmp_from: Vector2<f64>) {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
@@ -1207,6 +1281,7 @@ impl Walker {
             step.zmp_inward = 0.0;
         }
         self.mode = Mode::Walking(step);
+        self.step_zero = self.command.is_zero();
         self.swing_s = 0.0;
         self.swing_t = t;
         self.state.steps += 1;
@@ -1226,9 +1301,12 @@ impl Controller for Walker {
 
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         // Masses, inertias and gains may differ per episode (randomization): rebuild for `model`.
-        let command = self.command;
+        // A schedule starts over; a live target and a set command carry on.
+        let command = if self.options.commands.is_empty() { self.command } else { self.options.command() };
+        let (steer_target, clamped) = (self.steer_target, self.state.commands_clamped);
         *self = Walker::new(model, WalkOptions::clone(&self.options))?;
         self.command = command;
+        self.steer_target = steer_target;
         self.t0 = observation.time_secs;
         self.tree.forward(observation.qpos, &mut self.frames);
         let com = self.frames.com();
@@ -1257,7 +1335,7 @@ impl Controller for Walker {
         self.replan(0.0, &feet);
         self.schedule.rest_from = self.schedule.rest;
         self.tick = 0;
-        self.state = WalkerState::default();
+        self.state = WalkerState { commands_clamped: clamped, ..WalkerState::default() };
         Ok(())
     }
 
@@ -1275,6 +1353,8 @@ impl Controller for Walker {
         let t = observation.time_secs - self.t0;
         let o = Arc::clone(&self.options);
         let gait = o.gait();
+        // 0. Steering: the live target or the schedule's, taken step by step (below).
+        let goal = self.steer_target.or_else(|| steer::scheduled(&o.commands, t));
         // 1. State.
         self.tree.forward(observation.qpos, &mut self.frames);
         let com = self.frames.com();
@@ -1294,6 +1374,9 @@ impl Controller for Walker {
         match self.mode {
             Mode::Standing => {
                 let ready = t >= o.settle_secs;
+                if let (Some(goal), true) = (goal, ready) {
+                    self.steer_step(goal);
+                }
                 let push = ready && !self.inside_support(dcm, &feet, o.recovery_margin);
                 if push {
                     self.recovering = true;
@@ -1322,6 +1405,9 @@ impl Controller for Walker {
             }
             Mode::Walking(step) => {
                 if t >= step.end() {
+                    if let (Some(goal), false) = (goal, self.recovering) {
+                        self.steer_step(goal);
+                    }
                     // Touchdown: the landed foot is planted where it actually is.
                     let mut now = feet;
                     now[step.stance.side.index()] = step.stance;
@@ -1344,6 +1430,17 @@ impl Controller for Walker {
                         self.schedule.rest_start = t;
                         self.restart_preview(com);
                         self.recovering = false;
+                    } else if !self.recovering
+                        && self.step_zero
+                        && self.command.is_zero()
+                        && self.inside_support(dcm, &now, o.recovery_margin)
+                    {
+                        // Told to stop, and the feet are side by side: stand where they are.
+                        self.mode = Mode::Standing;
+                        self.schedule.steps.clear();
+                        self.schedule.rest_from = self.clamp_to_support(dcm, &now);
+                        self.schedule.rest_start = t;
+                        self.restart_preview(com);
                     } else {
                         let swing = if self.recovering { self.first_swing(Some(dcm), &now) } else { step.stance.side };
                         self.start_step(t, &now, swing, gait.ds_secs(), step.zmp_point());
@@ -1609,6 +1706,7 @@ impl Controller for Walker {
         self.state.dcm_ref = [dcm_ref.x, dcm_ref.y];
         self.state.dcm = [dcm.x, dcm.y];
         self.state.walking = matches!(self.mode, Mode::Walking(_));
+        self.state.command = [self.command.vx, self.command.vy, self.command.yaw_rate];
         self.state.ik_error_m = ik_error;
         self.state.footholds.clear();
         for s in self.schedule.steps.iter().take(6) {

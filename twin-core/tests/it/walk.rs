@@ -132,6 +132,65 @@ fn turns_ninety_degrees_in_place() {
     assert!(s.distance_m < 0.3, "{}", s.distance_m);
 }
 
+/// Steering by a schedule (`[walk] commands`): after the crouch, 0.3 rad/s in place until
+/// the command asks 90°, then stop. The walker turns by steps (yaw only, the feet around one
+/// centre), stops, brings its feet side by side and stands: it ends within 15° of 90°, near
+/// where it started, and from 2 s after the stop it neither turns nor walks. The metrics
+/// report each segment's commanded and achieved angle.
+#[test]
+fn scheduled_ninety_degree_turn_in_place_stops_within_fifteen_degrees() {
+    let turn_secs = std::f64::consts::FRAC_PI_2 / 0.3;
+    let stop = 1.0 + turn_secs;
+    let (s, _, _) = run_scenario(stand(stop + 4.0), |sc| {
+        sc.walk.commands = vec![[1.0, 0.0, 0.0, 0.3], [stop, 0.0, 0.0, 0.0], [stop + 2.0, 0.0, 0.0, 0.0]];
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let deg = s.yaw_change_rad.to_degrees();
+    assert!((deg - 90.0).abs() < 15.0, "turned {deg}°");
+    assert!(s.distance_m < 0.3, "walked off {} m", s.distance_m);
+    assert_eq!(s.segments.len(), 4, "{:?}", s.segments);
+    let turn = &s.segments[1];
+    assert!((turn.commanded_angle_rad - std::f64::consts::FRAC_PI_2).abs() < 1e-2, "{turn:?}");
+    let still = &s.segments[3];
+    assert!(still.angle_rad.abs() < 0.02 && still.distance_m < 0.02, "kept moving after the stop: {still:?}");
+}
+
+/// A scheduled stop from walking: 0.25 m/s for 4 s, then zero: the walker finishes the step
+/// it is in (planned at 0.25 m/s), brings its feet side by side and stands: it goes on at
+/// most two steps' advance (0.3 m) after the stop and, from 2 s after it, stands still.
+#[test]
+fn scheduled_stop_from_walking_stands_in_place() {
+    let (s, _, _) = run_scenario(stand(10.0), |sc| {
+        sc.walk.commands = vec![[1.0, 0.25, 0.0, 0.0], [5.0, 0.0, 0.0, 0.0], [7.0, 0.0, 0.0, 0.0]];
+    });
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    let (walk, stop, still) = (&s.segments[1], &s.segments[2], &s.segments[3]);
+    assert!((walk.commanded_distance_m - 1.0).abs() < 1e-9 && walk.forward_m > 0.8, "{walk:?}");
+    assert!(stop.forward_m < 2.0 * 0.25 * 0.6, "{stop:?}");
+    assert!(still.distance_m < 0.02 && still.angle_rad.abs() < 0.02, "{still:?}");
+}
+
+/// `scenarios/steer.toml`, the navigation sequence of the README's `/cmd_vel` node as a
+/// schedule: 1 m forward, a 90° turn in place, 0.5 m to the left, each followed by a stop.
+/// Each move with its stop covers its commanded distance or angle within 20 % (the lateral
+/// leg measured across the heading it starts at, after the turn).
+#[test]
+fn steer_scenario_forward_turn_lateral_within_twenty_percent() {
+    let (s, verdicts, _) = run_scenario(Scenario::load(scenarios().join("steer.toml")).unwrap(), |_| {});
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+    let seg = &s.segments;
+    assert_eq!(seg.len(), 7, "{seg:?}");
+    let forward = seg[1].forward_m + seg[2].forward_m;
+    let turned = seg[3].angle_rad + seg[4].angle_rad;
+    let lateral = seg[5].lateral_m + seg[6].lateral_m;
+    println!("forward {forward:.3} m of 1, turned {:.1}° of 90, lateral {lateral:.3} m of 0.5", turned.to_degrees());
+    assert!((seg[1].commanded_distance_m - 1.0).abs() < 1e-9 && (seg[5].commanded_distance_m - 0.5).abs() < 1e-9);
+    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
+    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
+    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+}
+
 /// On a floor too slippery to walk on, the feet slide: slip is reported and its check fails.
 #[test]
 fn low_friction_slip_fails_its_check() {
