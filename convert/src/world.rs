@@ -411,7 +411,7 @@ fn heightmap(
         }
     };
     let size = vec3("size", [1.0, 1.0, 1.0])?;
-    if size.iter().any(|v| !(*v > 0.0)) {
+    if size.iter().any(|v| v.is_nan() || *v <= 0.0) {
         return Err(ctx.err(
             child(hm, "size").unwrap_or(hm),
             "<size> must be 3 positive numbers: x y extent and height range, m",

@@ -213,7 +213,7 @@ fn the_robot_stands_on_a_gazebo_heightmap_at_its_elevation() {
         "{:?}",
         converted.notes
     );
-    let robot = twin_core::robot::Robot::load_with(&humanoid(), &options).unwrap();
+    let robot = twin_core::robot::Robot::load_with(humanoid(), &options).unwrap();
     let model = robot.model.clone();
     let terrain = model.require_id(ObjType::Geom, "terrain_collision").unwrap();
     assert_eq!(model.geom_type()[terrain] as u32, 1, "an hfield geom"); // mjGEOM_HFIELD
