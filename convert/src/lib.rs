@@ -2,6 +2,7 @@
 #![deny(unsafe_code)]
 
 mod error;
+pub mod hfield;
 pub(crate) mod inertia;
 mod ir;
 pub mod mesh;
@@ -66,9 +67,27 @@ pub struct Probe {
     /// Lowest world z of any collision geom (contype or conaffinity set, planes ignored),
     /// metres; `None` when the robot has none.
     pub lowest_collision_z_m: Option<f64>,
+    /// Each collision geom (planes ignored): the world x-y box around it (centre x, y, half
+    /// sizes x, y) and its lowest world z, m (what seats the robot on a world's heightmaps).
+    pub collision_geoms_m: Vec<[f64; 5]>,
     /// Per body asked for: MuJoCo's `body_invweight0[0]` (inverse of the effective mass at the
     /// body, 1/kg), `None` when the model has no such body.
     pub body_invweight: Vec<Option<f64>>,
+}
+
+/// How far a robot whose collision geoms are `geoms` ([`Probe::collision_geoms_m`], measured with
+/// its base at z 0) placed at `base_z` must rise for none of them to be below the highest
+/// ground of `heightfields` under its x-y box, m (0 when none is).
+fn seat_lift_m(geoms: &[[f64; 5]], base_z: f64, heightfields: &[hfield::Heightfield]) -> f64 {
+    let mut lift: f64 = 0.0;
+    for &[x, y, hx, hy, lowest] in geoms {
+        for h in heightfields {
+            if let Some(ground) = h.highest_under(x, y, [hx, hy]) {
+                lift = lift.max(ground - (lowest + base_z));
+            }
+        }
+    }
+    lift
 }
 
 /// An IMU of the robot, with what logging and noise models need.
@@ -264,19 +283,26 @@ pub fn convert_urdf_str<C: Compiler>(
     };
 
     // Pass 1: robot alone, to find the lowest collision point at the zero pose.
-    let base_height_m = if conv.placed {
+    let (mut base_height_m, placed_geoms) = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
         let bodies = conv.contact_bodies();
         let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies))?;
         conv.contact_solrefs(&measured);
-        match measured.lowest_collision_z_m {
+        let base = match measured.lowest_collision_z_m {
             Some(z) if conv.world_root => (-z).max(0.0),
             Some(z) => -z,
             None => 0.0,
-        }
+        };
+        (base, measured.collision_geoms_m)
     } else {
-        0.0
+        (0.0, Vec::new())
     };
+    // A world's heightmaps: the robot rises until no collision geom is below the ground under it
+    // (the highest ground under each geom's x-y box), seated on the terrain, never inside it.
+    if conv.placed && !conv.world_root && world.as_ref().is_some_and(|w| !w.heightfields.is_empty()) {
+        let w = world.as_ref().map_or(&[][..], |w| &w.heightfields[..]);
+        base_height_m += seat_lift_m(&placed_geoms, base_height_m, w);
+    }
     // Pass 2: the real model; its qpos0 is the home pose.
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), None)?;
     let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf))?;

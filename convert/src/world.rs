@@ -4,6 +4,7 @@
 use super::ir::{self, Ctx, Pose, child, child_text, children, parse_vec};
 use super::{esc, f, fv, pose_attrs};
 use crate::error::Result;
+use crate::hfield::Heightfield;
 use nalgebra::Matrix3;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -20,6 +21,8 @@ pub(crate) struct World {
     pub timestep_secs: Option<f64>,
     pub gravity: Option<[f64; 3]>,
     pub notes: Vec<String>,
+    /// The `<heightmap>`s, in world coordinates (the robot is seated on them).
+    pub heightfields: Vec<Heightfield>,
 }
 
 pub(crate) fn prio_tag(mu: f64) -> String {
@@ -254,6 +257,18 @@ fn sdf(ctx: &Ctx<'_, '_>, root: roxmltree::Node<'_, '_>) -> Result<World> {
             for (k, c) in children(*l, "collision").enumerate() {
                 let cname = c.attribute("name").map_or_else(|| format!("collision{k}"), str::to_string);
                 let gname = format!("{full}_{cname}");
+                if let Some(hm) = heightmap_of(c) {
+                    if !is_static {
+                        return Err(ctx.err(
+                            hm,
+                            format!(
+                                "a <heightmap> in the dynamic model \"{mname}\": make the model <static>true</static>"
+                            ),
+                        ));
+                    }
+                    heightmap(ctx, hm, &world_from_link.then(&sdf_pose(ctx, c)?), c, &gname, &mut w, &mut inner)?;
+                    continue;
+                }
                 let Some(shape) = sdf_geometry(ctx, c, &mut w, &gname)? else {
                     continue;
                 };
@@ -280,6 +295,18 @@ fn sdf(ctx: &Ctx<'_, '_>, root: roxmltree::Node<'_, '_>) -> Result<World> {
             for (k, v) in children(*l, "visual").enumerate() {
                 let vname =
                     format!("{full}_{}", v.attribute("name").map_or_else(|| format!("visual{k}"), str::to_string));
+                if let Some(hm) = heightmap_of(v) {
+                    heightmap_notes(ctx, hm, &mut w);
+                    // The collision's heightfield is drawn; a visual-only one has no ground to draw.
+                    if !children(*l, "collision").any(|c| heightmap_of(c).is_some()) {
+                        w.notes.push(format!(
+                            "{}:{}: <heightmap> only in a <visual> not converted (give it a <collision> to walk on it)",
+                            ctx.path.display(),
+                            ctx.line(hm)
+                        ));
+                    }
+                    continue;
+                }
                 let Some(shape) = sdf_geometry(ctx, v, &mut w, &vname)? else {
                     continue;
                 };
@@ -341,4 +368,97 @@ fn sdf(ctx: &Ctx<'_, '_>, root: roxmltree::Node<'_, '_>) -> Result<World> {
     }
     w.worldbody = body;
     Ok(w)
+}
+
+/// The `<heightmap>` of a `<collision>` or `<visual>`'s `<geometry>`, if that is its shape.
+fn heightmap_of<'a, 'input>(node: roxmltree::Node<'a, 'input>) -> Option<roxmltree::Node<'a, 'input>> {
+    child(node, "geometry").and_then(|g| child(g, "heightmap"))
+}
+
+/// A `<heightmap>` (`<uri>` a grayscale PNG relative to the world file, `<size>` its extent and
+/// height range, `<pos>` its centre in the collision's frame) as an `<hfield>` asset and an
+/// `hfield` geom in world coordinates (Gazebo's surface: the image's top row at +y, black at
+/// `pos` z, white `size` z above). Its `<texture>`, `<blend>` and other elements (how Gazebo
+/// draws it) are notes.
+fn heightmap(
+    ctx: &Ctx<'_, '_>,
+    hm: roxmltree::Node<'_, '_>,
+    world_from_collision: &Pose,
+    collision: roxmltree::Node<'_, '_>,
+    gname: &str,
+    w: &mut World,
+    body: &mut String,
+) -> Result<()> {
+    let uri_node = child(hm, "uri").ok_or_else(|| ctx.err(hm, "<heightmap> without <uri>: name a grayscale PNG"))?;
+    let uri = uri_node.text().unwrap_or("").trim();
+    let file = uri.strip_prefix("file://").unwrap_or(uri);
+    let p = ctx.path.parent().unwrap_or(Path::new(".")).join(file);
+    if uri.starts_with("model://") || !p.is_file() {
+        return Err(ctx.err(
+            uri_node,
+            format!(
+                "heightmap \"{uri}\" not found (looked at {}): give a PNG path relative to the world file",
+                p.display()
+            ),
+        ));
+    }
+    let vec3 = |tag: &str, default: [f64; 3]| -> Result<[f64; 3]> {
+        match child(hm, tag) {
+            Some(n) => {
+                parse_vec::<3>(n.text().unwrap_or("")).ok_or_else(|| ctx.err(n, format!("<{tag}> must be 3 numbers")))
+            }
+            None => Ok(default),
+        }
+    };
+    let size = vec3("size", [1.0, 1.0, 1.0])?;
+    if size.iter().any(|v| v.is_nan() || *v <= 0.0) {
+        return Err(ctx.err(
+            child(hm, "size").unwrap_or(hm),
+            "<size> must be 3 positive numbers: x y extent and height range, m",
+        ));
+    }
+    let pos = vec3("pos", [0.0; 3])?;
+    let (roll, pitch, yaw) = world_from_collision.rot.euler_angles();
+    if roll.abs() > 1e-9 || pitch.abs() > 1e-9 {
+        return Err(ctx.err(
+            hm,
+            "a tilted <heightmap> (roll or pitch in its poses): only a turn about z maps onto a MuJoCo heightfield",
+        ));
+    }
+    let centre = world_from_collision.xyz + world_from_collision.rot * nalgebra::Vector3::from(pos);
+    let h = Heightfield::from_png(&p, size, [centre.x, centre.y, centre.z], yaw).map_err(|m| ctx.err(uri_node, m))?;
+    heightmap_notes(ctx, hm, w);
+    let mu = child(collision, "surface")
+        .and_then(|s| child(s, "friction"))
+        .and_then(|fr| child(fr, "ode"))
+        .and_then(|o| child_text(o, "mu"))
+        .and_then(ir::parse_num)
+        .unwrap_or(1.0);
+    w.mus.push(mu);
+    let asset = format!("world_{gname}");
+    let _ = writeln!(w.assets, "    {}", h.hfield_element(&esc(&asset)));
+    let _ = writeln!(
+        body,
+        "    <geom name=\"{}\" type=\"hfield\" hfield=\"{}\" {} friction=\"{} 0.005 0.0001\" priority=\"{}\" rgba=\"0.45 0.42 0.36 1\"/>",
+        esc(gname),
+        esc(&asset),
+        h.placement(),
+        f(mu),
+        prio_tag(mu)
+    );
+    w.heightfields.push(h);
+    Ok(())
+}
+
+/// Notes for a `<heightmap>`'s elements other than `<uri>`, `<size>` and `<pos>` (`<texture>`,
+/// `<blend>`, `<sampling>`…: how Gazebo draws and samples it).
+fn heightmap_notes(ctx: &Ctx<'_, '_>, hm: roxmltree::Node<'_, '_>, w: &mut World) {
+    for other in hm.children().filter(|n| n.is_element() && !["uri", "size", "pos"].contains(&n.tag_name().name())) {
+        w.notes.push(format!(
+            "{}:{}: <heightmap><{}> not converted (how Gazebo draws the terrain; the surface is the PNG's pixels)",
+            ctx.path.display(),
+            ctx.line(other),
+            other.tag_name().name()
+        ));
+    }
 }

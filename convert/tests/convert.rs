@@ -69,7 +69,11 @@ impl Compiler for BoxEngine {
         if let Some(m) = &self.refuse {
             return Err(Compile::Rejected(m.clone()));
         }
-        Ok(Probe { lowest_collision_z_m: lowest_box_z(mjcf), body_invweight: vec![Some(self.invweight); bodies.len()] })
+        Ok(Probe {
+            lowest_collision_z_m: lowest_box_z(mjcf),
+            body_invweight: vec![Some(self.invweight); bodies.len()],
+            ..Probe::default()
+        })
     }
 
     fn home_qpos(&mut self, mjcf: &str) -> Result<Vec<f64>, Compile<Error>> {

@@ -54,6 +54,32 @@ fn convert_with_table_cup_world() {
     assert!(xml.contains("name=\"table_top_collision\""));
 }
 
+/// The README's Gazebo heightmap world: the PNG becomes a MuJoCo hfield with the elevations of
+/// its pixels (black at −0.15 m, white 0.3 m above), the box a static geom, the texture a note
+/// with its line.
+#[test]
+fn convert_with_heightmap_world() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("hills.xml");
+    let o = twin(
+        &["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap(), "--world", "models/hills.world"],
+        &repo(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    assert!(text(&o).contains("models/hills.world:30: <heightmap><texture> not converted"), "{}", text(&o));
+    let xml = std::fs::read_to_string(&out).unwrap();
+    let doc = roxmltree::Document::parse(&xml).unwrap();
+    let hfield = doc.descendants().find(|n| n.has_tag_name("hfield")).unwrap();
+    assert_eq!((hfield.attribute("nrow"), hfield.attribute("ncol")), (Some("65"), Some("65")));
+    let geom = doc.descendants().find(|n| n.attribute("type") == Some("hfield")).unwrap();
+    // Placed at the lowest pixel's elevation, its range the highest's minus the lowest's.
+    let size: Vec<f64> = hfield.attribute("size").unwrap().split(' ').map(|v| v.parse().unwrap()).collect();
+    let z: f64 = geom.attribute("pos").unwrap().split(' ').nth(2).unwrap().parse().unwrap();
+    assert_eq!(&size[..2], &[4.0, 4.0]);
+    assert!(z > -0.15 && z + size[2] < 0.15 && size[2] > 0.1, "{z} {size:?}");
+    assert!(xml.contains("name=\"rock_collision\" type=\"box\""));
+}
+
 #[test]
 fn convert_reports_bad_input_with_file_line_and_fix() {
     let dir = tempfile::tempdir().unwrap();

@@ -34,8 +34,10 @@ impl Compiler for MuJoCo {
 
     fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> std::result::Result<Probe, Compile<Error>> {
         let model = compile(mjcf)?;
+        let geoms = collision_geoms(&model).map_err(Compile::Other)?;
         Ok(Probe {
-            lowest_collision_z_m: lowest_collision_z(&model).map_err(Compile::Other)?,
+            lowest_collision_z_m: geoms.iter().map(|g| g[4]).reduce(f64::min),
+            collision_geoms_m: geoms,
             body_invweight: bodies
                 .iter()
                 .map(|b| model.id(ObjType::Body, b).map(|b| model.body_invweight0()[b][0]))
@@ -95,14 +97,16 @@ fn home_pose(model: &Model) -> Vec<f64> {
     q
 }
 
-/// Lowest world z of any collision geom of the robot at the model's home pose (planes ignored).
-fn lowest_collision_z(model: &Model) -> Result<Option<f64>> {
+/// Each collision geom of the robot at the model's home pose (planes ignored): the world x-y box
+/// around it (centre x, y, half sizes x, y, from MuJoCo's local bounding box) and its lowest
+/// world z ([`Probe::collision_geoms_m`]).
+fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
     let model = Arc::new(model.try_clone()?);
     let mut data = Data::new(model.clone())?;
     let home = home_pose(&model);
     data.qpos_mut().copy_from_slice(&home);
     data.forward()?;
-    let mut lowest: Option<f64> = None;
+    let mut geoms = Vec::new();
     let m = &model;
     for g in 0..m.ngeom() {
         if m.geom_contype()[g] == 0 && m.geom_conaffinity()[g] == 0 {
@@ -136,9 +140,12 @@ fn lowest_collision_z(model: &Model) -> Result<Option<f64>> {
             }
             _ => continue,
         };
-        lowest = Some(lowest.map_or(z, |l: f64| l.min(z)));
+        let [cx, cy, cz, hx, hy, hz] = m.geom_aabb()[g];
+        let centre = p + r * Vector3::new(cx, cy, cz);
+        let half = |row: usize| r[(row, 0)].abs() * hx + r[(row, 1)].abs() * hy + r[(row, 2)].abs() * hz;
+        geoms.push([centre.x, centre.y, half(0), half(1), z]);
     }
-    Ok(lowest)
+    Ok(geoms)
 }
 
 /// Metadata of a compiled model for callers that only have a [`Model`]: the joints with an

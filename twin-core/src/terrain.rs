@@ -154,23 +154,9 @@ pub struct TerrainBox {
     pub yaw_rad: f64,
 }
 
-/// A heightfield of the terrain: a grid of heights in the path frame.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Heightfield {
-    /// Centre of the grid, world x y, m.
-    pub center_m: [f64; 2],
-    /// Half extent along the path (the grid's x) and across it (y), m.
-    pub half_m: [f64; 2],
-    /// Rotation about z (the path's heading), radians.
-    pub yaw_rad: f64,
-    /// Rows (along y).
-    pub nrow: usize,
-    /// Columns (along x).
-    pub ncol: usize,
-    /// Heights above the floor, m, row-major: row `i` at y = −half_y + i·2·half_y/(nrow−1),
-    /// column `j` at x = −half_x + j·2·half_x/(ncol−1) (MuJoCo's layout).
-    pub heights_m: Vec<f64>,
-}
+/// A heightfield of the terrain: a grid of heights in the path frame (the one heightfield type,
+/// shared with Gazebo worlds' `<heightmap>`s).
+pub use twin_convert::hfield::Heightfield;
 
 /// The terrain as geometry (see the [module docs](self)).
 #[derive(Debug, Clone, PartialEq, Default)]
@@ -512,37 +498,6 @@ impl Lattice {
     }
 }
 
-impl Heightfield {
-    /// Lowest and highest height, m.
-    pub fn range_m(&self) -> (f64, f64) {
-        self.heights_m.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), &h| (lo.min(h), hi.max(h)))
-    }
-
-    /// Height of the grid's surface at world (x, y) as MuJoCo triangulates it (each cell split
-    /// along its diagonal from (i, j) to (i+1, j+1)); `None` outside the grid.
-    pub fn height_at(&self, x: f64, y: f64) -> Option<f64> {
-        let (c, s) = (self.yaw_rad.cos(), self.yaw_rad.sin());
-        let (dx, dy) = (x - self.center_m[0], y - self.center_m[1]);
-        let (u, v) = (c * dx + s * dy, -s * dx + c * dy);
-        let [hx, hy] = self.half_m;
-        if u.abs() > hx || v.abs() > hy {
-            return None;
-        }
-        let fx = (u + hx) / (2.0 * hx) * (self.ncol - 1) as f64;
-        let fy = (v + hy) / (2.0 * hy) * (self.nrow - 1) as f64;
-        let j = (fx.floor() as usize).min(self.ncol - 2);
-        let i = (fy.floor() as usize).min(self.nrow - 2);
-        let (tx, ty) = (fx - j as f64, fy - i as f64);
-        let h = |i: usize, j: usize| self.heights_m[i * self.ncol + j];
-        let (h00, h01, h10, h11) = (h(i, j), h(i, j + 1), h(i + 1, j), h(i + 1, j + 1));
-        Some(if tx >= ty {
-            h00 + tx * (h01 - h00) + ty * (h11 - h01)
-        } else {
-            h00 + ty * (h10 - h00) + tx * (h11 - h10)
-        })
-    }
-}
-
 impl TerrainBox {
     /// Height of the box's top at world (x, y) if (x, y) is over it.
     pub fn top_at(&self, x: f64, y: f64) -> Option<f64> {
@@ -600,40 +555,15 @@ impl TerrainGeometry {
         let friction = friction.map(num).join(" ");
         let quat = |yaw: f64| format!("{} 0 0 {}", num((yaw / 2.0).cos()), num((yaw / 2.0).sin()));
         if let Some(h) = &self.hfield {
-            let (lo, hi) = h.range_m();
-            let range = hi - lo;
-            let _ = write!(
-                x,
-                "<asset>\n  <hfield name=\"{GEOM_PREFIX}\" nrow=\"{}\" ncol=\"{}\" size=\"{} {} {} 0.05\" elevation=\"",
-                h.nrow,
-                h.ncol,
-                num(h.half_m[0]),
-                num(h.half_m[1]),
-                num(if range > 0.0 { range } else { 1e-6 })
-            );
-            // MJCF's `elevation` lists rows from +y down, as an image does (MuJoCo flips them
-            // into its row 0 at −y); `heights_m` is in MuJoCo's order.
-            for (k, row) in h.heights_m.chunks(h.ncol).rev().enumerate() {
-                for (j, v) in row.iter().enumerate() {
-                    if k > 0 || j > 0 {
-                        x.push(' ');
-                    }
-                    x.push_str(&num(if range > 0.0 { (v - lo) / range } else { 0.0 }));
-                }
-            }
-            x.push_str("\"/>\n</asset>\n");
+            let _ = write!(x, "<asset>\n  {}\n</asset>\n", h.hfield_element(GEOM_PREFIX));
         }
         x.push_str("<worldbody>\n");
         let rgba = "0.45 0.42 0.36 1";
         if let Some(h) = &self.hfield {
-            let (lo, _) = h.range_m();
             let _ = writeln!(
                 x,
-                "  <geom name=\"{GEOM_PREFIX}_hfield\" type=\"hfield\" hfield=\"{GEOM_PREFIX}\" pos=\"{} {} {}\" quat=\"{}\" contype=\"1\" conaffinity=\"1\" friction=\"{friction}\" rgba=\"{rgba}\"/>",
-                num(h.center_m[0]),
-                num(h.center_m[1]),
-                num(lo),
-                quat(h.yaw_rad)
+                "  <geom name=\"{GEOM_PREFIX}_hfield\" type=\"hfield\" hfield=\"{GEOM_PREFIX}\" {} contype=\"1\" conaffinity=\"1\" friction=\"{friction}\" rgba=\"{rgba}\"/>",
+                h.placement()
             );
         }
         for (i, b) in self.boxes.iter().enumerate() {

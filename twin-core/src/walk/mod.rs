@@ -112,8 +112,10 @@ pub struct WalkOptions {
     pub line_hold_gain: f64,
     /// Largest sideways correction of one step toward the line, m (default: 0.03).
     pub line_hold_step: f64,
-    /// Centre-of-mass height while walking, m (default: 0.62: knees bent, away from the
-    /// stretched-leg singularity of the shipped humanoid, whose standing CoM is at 0.68 m).
+    /// Centre-of-mass height while walking, m, above the floor (z = 0), or with
+    /// [`WalkOptions::follow_ground`] above the soles at the start (default: 0.62: knees bent,
+    /// away from the stretched-leg singularity of the shipped humanoid, whose standing CoM is at
+    /// 0.68 m).
     pub com_height: f64,
     /// Swing-foot clearance at mid-swing, m (default: 0.05).
     pub foot_clearance: f64,
@@ -221,8 +223,9 @@ pub struct WalkOptions {
     pub plan_every_ticks: u64,
     /// Blind walking on uneven ground: each landed sole's height is the ground under that foot
     /// (unless within [`GROUND_DEADBAND_M`] of the start, flat ground), a swinging foot goes
-    /// from its own ground to the stance foot's, and the pelvis reference rises and sinks with
-    /// the mean ground under the feet (default: false: a foot that lands tilted after a kick
+    /// from its own ground to the stance foot's, the pelvis reference rises and sinks with
+    /// the mean ground under the feet, and `com_height` counts from the soles' height at the
+    /// start (a start on raised ground) instead of from z = 0 (default: false: a foot that lands tilted after a kick
     /// reads as uneven ground; on flat ground with the default spec's kicks, 1 of 6 randomized
     /// `walk.toml` episodes passed with it against 6 of 6 without).
     pub follow_ground: bool,
@@ -1318,8 +1321,11 @@ impl Controller for Walker {
         let d = rotation(-yaw) * Vector2::new(pelvis.x - com.x, pelvis.y - com.y);
         self.pelvis_from_com = Vector3::new(d.x, d.y, pelvis.z - com.z);
         self.pelvis_z0 = pelvis.z;
-        self.pelvis_z = self.options.com_height + (pelvis.z - com.z);
         self.sole_z = (self.sole_world(&self.frames, 0).z + self.sole_world(&self.frames, 1).z) / 2.0;
+        // `com_height` is above the ground under the feet at the start when following the
+        // ground (a start on a step or a hill), above the floor (z = 0) otherwise.
+        let start_ground = if self.options.follow_ground { self.sole_z } else { 0.0 };
+        self.pelvis_z = start_ground + self.options.com_height + (pelvis.z - com.z);
         self.ground_z = [self.sole_z; 2];
         self.ground_ref = 0.0;
         for ik in &self.ik {

@@ -708,3 +708,28 @@ fn held_steps_track_every_step_solving_of_the_walk_scenario() {
     println!("between solves: worst command difference, mean {mean:.4}, 95th percentile {p95:.4} of the range");
     assert!(mean < 0.065 && p95 < 0.18, "mean {mean}, 95th percentile {p95}");
 }
+
+/// A start on raised ground: `walk_steps.toml` with the robot seated on the 3-cm platform
+/// (`start_m = 0`, 3 m of it). With `follow_ground`, `com_height` counts from the soles at the
+/// start, so the walker keeps its CoM 0.62 m above the platform (not 0.59 m: 3 cm more crouch
+/// than on the floor) and walks along it without a fall.
+#[test]
+fn walks_from_a_raised_start() {
+    let scenario = Scenario::load(scenarios().join("walk_steps.toml")).unwrap();
+    let (summary, verdicts, last) = run_scenario(scenario, |sc| {
+        sc.duration_secs = 8.0;
+        let t = sc.terrain.as_mut().unwrap();
+        t.start_m = Some(0.0);
+        t.depth_m = Some(3.0);
+        sc.checks.min_forward = Some(1.5);
+    });
+    assert!(!summary.fell, "{summary}");
+    assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
+    // Still on the platform at the end, the base as high above it as when walking on the floor:
+    // the 0.06 m crouch from the standing CoM (0.68 m) to com_height (0.62 m), and about 1.5 cm
+    // of stepping. Measured: 0.074 m below rest + 3 cm; with com_height from z = 0 (before), 0.101.
+    assert!(last[0] < 3.0 && summary.forward_m > 1.5, "{summary}");
+    let flat = run_scenario(stand(0.1), |_| {}).2;
+    let below = flat[2] + 0.03 - last[2];
+    assert!((0.05..0.085).contains(&below), "base {below} m below its rest height over the platform");
+}
