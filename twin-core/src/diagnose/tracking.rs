@@ -155,6 +155,10 @@ fn lag(c: &[f64], a: &[f64], dt: f64) -> Option<f64> {
 /// its header stamp, or when it was received where the stamp is zero) and the message.
 pub(crate) type TrajectoryCommand<'a> = (f64, &'a crate::log::JointTrajectory);
 
+/// One joint's part of a trajectory: its start (s) and its knots (time from the start, s;
+/// position).
+type Segment = (f64, Vec<(f64, f64)>);
+
 /// The joint position a stream of trajectories commands, as a trajectory controller follows
 /// it: each joint follows the latest trajectory naming it that has started (a new one replaces
 /// the old, as `joint_trajectory_controller` does), linearly between its points by
@@ -177,8 +181,8 @@ pub(crate) fn sample_trajectories(
             }
         }
     }
-    // Per joint: its segments (start, knots (time from the start, position)), in start order.
-    let mut per_joint: Vec<Vec<(f64, Vec<(f64, f64)>)>> = vec![Vec::new(); names.len()];
+    // Per joint: its segments, in start order.
+    let mut per_joint: Vec<Vec<Segment>> = vec![Vec::new(); names.len()];
     for (j, name) in names.iter().enumerate() {
         for &k in &order {
             let (start, msg) = trajectories[k];
@@ -195,7 +199,7 @@ pub(crate) fn sample_trajectories(
         }
     }
     // The commanded position of joint `j` under segment `s` at `t` (at or after its start).
-    fn along(segments: &[(f64, Vec<(f64, f64)>)], s: usize, t: f64, from: f64) -> f64 {
+    fn along(segments: &[Segment], s: usize, t: f64, from: f64) -> f64 {
         let (start, knots) = &segments[s];
         let tau = t - start;
         let (mut t0, mut q0) = (0.0, from);

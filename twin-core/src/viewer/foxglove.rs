@@ -41,7 +41,8 @@ const QUEUE: usize = 4096;
 /// client subscribed to everything costs the simulation little (benches/foxglove_stream.sh).
 const POLL: Duration = Duration::from_millis(10);
 
-/// How long the last messages may take to reach a client when the server stops.
+/// How long the last messages may take to reach a client when the server stops (a client
+/// that reads no more is given up after about this).
 const DRAIN: Duration = Duration::from_secs(1);
 
 /// Options of the server.
@@ -498,8 +499,9 @@ fn serve(stream: TcpStream, shared: &Arc<Shared>) {
     // The run ended: what it queued still reaches the client (bounded by DRAIN).
     if shared.stop.load(Ordering::Relaxed) {
         let _ = ws.get_ref().set_write_timeout(Some(DRAIN));
+        let deadline = std::time::Instant::now() + DRAIN;
         while let Ok(frame) = rx.try_recv() {
-            if ws.write(ws_message(frame)).is_err() {
+            if std::time::Instant::now() > deadline || ws.write(ws_message(frame)).is_err() {
                 break;
             }
         }
