@@ -55,8 +55,9 @@ pub struct AnalyzeArgs {
     /// The nav_msgs/Odometry topic (base pose) [default: the first Odometry topic].
     #[arg(long)]
     pub odom: Option<String>,
-    /// The std_msgs/Float64MultiArray joint command topic [default: the one ending in
-    /// joint_commands].
+    /// The joint command topic: std_msgs/Float64MultiArray, or trajectory_msgs/JointTrajectory
+    /// (positions by joint name, interpolated in time) [default: the Float64MultiArray topic
+    /// ending in joint_commands, else the JointTrajectory topic ending in joint_trajectory].
     #[arg(long)]
     pub commands: Option<String>,
     /// What the commands are [default: the model's actuators', else the JointState field they

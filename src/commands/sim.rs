@@ -154,6 +154,7 @@ pub struct Args {
     #[arg(long, value_name = "[ADDR:]PORT", num_args = 0..=1, default_missing_value = "10000")]
     pub unity: Option<String>,
     /// With --ros: wait up to this long for a subscriber on /clock before starting, seconds.
+    /// With --foxglove (no --ros): wait up to this long for a Foxglove client to subscribe.
     #[arg(long, default_value_t = 0.0, value_name = "SECS")]
     pub wait_for_subscriber: f64,
 }
@@ -200,6 +201,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let viewer_sinks = viewer.as_ref().map(|v| v.sinks()).unwrap_or_default();
     let mut outputs = Outputs::open(&args, &plan, &robot, controller.as_ref(), viewer_sinks)?;
     let mut viewer_reset = viewer.as_ref().map(|v| v.reset_disturbance());
+    if let Some(v) = &viewer
+        && !args.ros
+        && args.wait_for_subscriber > 0.0
+    {
+        v.wait_for_subscriber(args.wait_for_subscriber)?;
+    }
 
     let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();

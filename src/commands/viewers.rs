@@ -136,6 +136,23 @@ mod enabled {
             Box::new(self.hook.reset_disturbance())
         }
 
+        /// `--wait-for-subscriber` with `--foxglove`: waits up to `secs` for a client to
+        /// subscribe to a channel (the channels exist once the recording is open).
+        pub fn wait_for_subscriber(&self, secs: f64) -> anyhow::Result<()> {
+            let Some(server) = &self.foxglove else { return Ok(()) };
+            let stop = twin_core::fsio::interrupt_flag();
+            // Ctrl-C while waiting: the run stops at once and says so.
+            if !server.wait_for_subscriber(std::time::Duration::from_secs_f64(secs), stop)
+                && !stop.load(std::sync::atomic::Ordering::Relaxed)
+            {
+                anyhow::bail!(
+                    "no Foxglove client subscribed to a channel on ws://{} within {secs} s (--wait-for-subscriber)",
+                    server.local_addr()
+                );
+            }
+            Ok(())
+        }
+
         /// The run's observer (pacing, services, pause).
         pub fn observer(&mut self) -> &mut dyn twin_core::engine::Observer {
             &mut self.hook
@@ -273,6 +290,9 @@ impl Viewers {
         match *self {}
     }
     pub fn observer(&mut self) -> &mut dyn twin_core::engine::Observer {
+        match *self {}
+    }
+    pub fn wait_for_subscriber(&self, _secs: f64) -> anyhow::Result<()> {
         match *self {}
     }
     pub fn report(&self, _out: &mut impl Write) -> anyhow::Result<()> {

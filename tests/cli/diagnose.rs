@@ -152,3 +152,46 @@ fn analyze_reports_on_a_joint_state_only_log() {
     assert!(!ok);
     assert!(err.contains("/nope") && err.contains("IMU"), "{err}");
 }
+
+/// Trajectory commands (`trajectory_msgs/JointTrajectory`, as a trajectory controller takes
+/// them), written by an independent writer (mcap-ros2-support, `tests/python/trajectory_bag.py`)
+/// with known errors: the trajectories' points interpolated in time and matched by joint name
+/// give the elbow's constant 0.1-rad error and the shoulder's 0.02-rad sine (RMS 0.02/√2); the
+/// neck, never commanded, is not compared.
+#[test]
+fn analyze_compares_joint_trajectory_commands_by_name_and_time() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("trajectory.mcap");
+    let exe = crate::test_python::python();
+    let out = std::process::Command::new(&exe)
+        .arg(repo_root().join("tests/python/trajectory_bag.py"))
+        .arg(&mcap)
+        .output()
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let report = dir.path().join("trajectory.json");
+    let (ok, text, err) = run(&["log", "analyze", mcap.to_str().unwrap(), "--json", report.to_str().unwrap()]);
+    assert!(ok, "{text}\n{err}");
+    let a = json(&report);
+    assert_eq!(a.pointer("/tracking/topic").unwrap(), "/arm/joint_trajectory", "{text}");
+    assert_eq!(a.pointer("/tracking/kind").unwrap(), "position", "{text}");
+    let joints = a.pointer("/tracking/joints").and_then(|j| j.as_array()).unwrap();
+    let names: Vec<&str> = joints.iter().filter_map(|j| j["joint"].as_str()).collect();
+    assert_eq!(names, ["elbow", "shoulder"], "the elbow is worst; the neck is not commanded\n{text}");
+    // 300 joint states from the first trajectory's start.
+    assert_eq!(num(&a, "/tracking/joints/0/samples"), 300.0, "{text}");
+    assert!((num(&a, "/tracking/joints/0/rms_error") - 0.1).abs() < 1e-9, "{text}");
+    assert!((num(&a, "/tracking/joints/0/max_error") - 0.1).abs() < 1e-9, "{text}");
+    let rms = num(&a, "/tracking/joints/1/rms_error");
+    assert!((rms - 0.02 / 2f64.sqrt()).abs() < 1e-9, "{rms}\n{text}");
+    assert!((num(&a, "/tracking/joints/1/max_error") - 0.02).abs() < 1e-6, "{text}");
+    assert!(text.contains("/arm/joint_trajectory"), "{text}");
+    // Named explicitly, the same.
+    let (ok, text2, err) = run(&["log", "analyze", mcap.to_str().unwrap(), "--commands", "/arm/joint_trajectory"]);
+    assert!(ok, "{text2}\n{err}");
+    assert!(text2.contains("elbow"), "{text2}");
+    // A topic of another type: an error naming it and the command topics.
+    let (ok, _, err) = run(&["log", "analyze", mcap.to_str().unwrap(), "--commands", "/joint_states"]);
+    assert!(!ok);
+    assert!(err.contains("/joint_states") && err.contains("/arm/joint_trajectory"), "{err}");
+}

@@ -32,7 +32,7 @@ pub use signal::Signal;
 
 use crate::engine::observers::FallOptions;
 use crate::error::{Error, Result};
-use crate::log::{Float64MultiArray, Imu, JointState, Log, Odometry, RosMessage, WrenchStamped};
+use crate::log::{Float64MultiArray, Imu, JointState, JointTrajectory, Log, Odometry, RosMessage, WrenchStamped};
 use crate::robot::Robot;
 use serde::Serialize;
 use std::fmt::Write as _;
@@ -78,8 +78,11 @@ pub struct AnalyzeOptions {
     pub imu_topic: Option<String>,
     /// The base pose topic. (default: none given = the first `nav_msgs/msg/Odometry` topic)
     pub odom_topic: Option<String>,
-    /// The joint command topic (`std_msgs/msg/Float64MultiArray`). (default: none given = the
-    /// one whose name ends in `joint_commands`, else the only Float64MultiArray topic)
+    /// The joint command topic: `std_msgs/msg/Float64MultiArray` (an array per actuator) or
+    /// `trajectory_msgs/msg/JointTrajectory` (positions by joint name, interpolated in time).
+    /// (default: none given = the Float64MultiArray topic whose name ends in `joint_commands`,
+    /// else the only one; without one, the JointTrajectory topic whose name ends in
+    /// `joint_trajectory`, else the only one)
     pub command_topic: Option<String>,
     /// What the commands are. (default: none given = the model's actuators' interface, else the
     /// JointState field the commands match best)
@@ -268,16 +271,35 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     };
     let imu_topic = pick(&options.imu_topic, Imu::TYPE_NAME, "IMU")?;
     let odom_topic = pick(&options.odom_topic, Odometry::TYPE_NAME, "odometry")?;
+    let trajectory_topics = topics_of(&info, JointTrajectory::TYPE_NAME);
     let command_topic = match &options.command_topic {
+        Some(t) if trajectory_topics.contains(t) => Some(t.clone()),
+        Some(t) if has(t) && !topics_of(&info, Float64MultiArray::TYPE_NAME).contains(t) => {
+            return Err(Error::LogTopic {
+                path: log.path().to_path_buf(),
+                topic: t.clone(),
+                message: format!(
+                    "{t} is neither std_msgs/msg/Float64MultiArray nor trajectory_msgs/msg/JointTrajectory; command \
+                     topics: {}",
+                    none_if_empty(
+                        &[topics_of(&info, Float64MultiArray::TYPE_NAME), trajectory_topics.clone()].concat()
+                    )
+                ),
+            });
+        }
         Some(_) => pick(&options.command_topic, Float64MultiArray::TYPE_NAME, "command")?,
         None => {
-            let all = topics_of(&info, Float64MultiArray::TYPE_NAME);
-            all.iter()
-                .find(|t| t.ends_with("joint_commands"))
-                .cloned()
-                .or_else(|| if all.len() == 1 { all.first().cloned() } else { None })
+            let by_name = |all: Vec<String>, suffix: &str| {
+                all.iter()
+                    .find(|t| t.ends_with(suffix))
+                    .cloned()
+                    .or_else(|| if all.len() == 1 { all.first().cloned() } else { None })
+            };
+            by_name(topics_of(&info, Float64MultiArray::TYPE_NAME), "joint_commands")
+                .or_else(|| by_name(trajectory_topics.clone(), "joint_trajectory"))
         }
     };
+    let command_is_trajectory = command_topic.as_ref().is_some_and(|t| trajectory_topics.contains(t));
 
     // Joint states, and their stamps against log times (commands are mapped through it).
     let joint_states = if has(&options.joint_states_topic) {
@@ -332,7 +354,18 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     if !contacts_raw.is_empty() {
         sources.push(format!("{} WrenchStamped (contact) topics", contacts_raw.len()));
     }
+    let mut trajectories_raw: Vec<(u64, JointTrajectory)> = Vec::new();
     let commands_raw = match &command_topic {
+        Some(t) if command_is_trajectory => {
+            let (msgs, report) = log.read_typed::<JointTrajectory>(t)?;
+            warnings.extend(report.warnings().into_iter().map(|w| format!("{t}: {w}")));
+            sources.push(format!("{t}: {} trajectories", msgs.len()));
+            if options.command_kind.is_some_and(|k| k != CommandKind::Position) {
+                notes.push(format!("{t}: trajectory points are compared as positions, whatever --command-kind says"));
+            }
+            trajectories_raw = msgs;
+            Vec::new()
+        }
         Some(t) => {
             let (msgs, report) = log.read_typed::<Float64MultiArray>(t)?;
             warnings.extend(report.warnings().into_iter().map(|w| format!("{t}: {w}")));
@@ -341,9 +374,9 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
         }
         None => {
             notes.push(format!(
-                "no joint command topic (Float64MultiArray topics: {}): give --commands TOPIC to compare commanded \
-                 with actual",
-                none_if_empty(&topics_of(&info, Float64MultiArray::TYPE_NAME))
+                "no joint command topic (Float64MultiArray or JointTrajectory topics: {}): give --commands TOPIC to \
+                 compare commanded with actual",
+                none_if_empty(&[topics_of(&info, Float64MultiArray::TYPE_NAME), trajectory_topics].concat())
             ));
             Vec::new()
         }
@@ -438,18 +471,36 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     }
 
     // Commands against actual.
-    let tracking = match (&joint_states, commands_raw.is_empty()) {
+    let tracking = match (&joint_states, commands_raw.is_empty() && trajectories_raw.is_empty()) {
         (Some(js), false) => {
             let t_map = |log_nanos: u64| match stamp_map {
                 Some((a, b)) => secs((a + b * log_nanos as f64).round() as i64, origin),
                 None => secs(log_nanos as i64, origin),
             };
-            let commands: Vec<(f64, &[f64])> =
-                commands_raw.iter().map(|(lt, m)| (t_map(*lt), m.data.as_slice())).collect();
+            // Trajectories: the positions they command, sampled at the joint states' times.
+            let trajectories: Vec<tracking::TrajectoryCommand<'_>> = trajectories_raw
+                .iter()
+                .map(|(lt, m)| {
+                    let start = if m.header.stamp_nanos == 0 { t_map(*lt) } else { secs(m.header.stamp_nanos, origin) };
+                    (start, m)
+                })
+                .collect();
+            let sampled = (!trajectories.is_empty()).then(|| {
+                let actual = |name: &str, t: f64| {
+                    js.joints.iter().position(|j| j.name == name).map_or(f64::NAN, |j| data.positions[j].at(t))
+                };
+                let times = data.positions.iter().max_by_key(|s| s.len()).map(|s| s.t_secs.clone()).unwrap_or_default();
+                tracking::sample_trajectories(&trajectories, &times, &actual)
+            });
+            let commands: Vec<(f64, &[f64])> = match &sampled {
+                Some((_, rows)) => rows.iter().map(|(t, q)| (*t, q.as_slice())).collect(),
+                None => commands_raw.iter().map(|(lt, m)| (t_map(*lt), m.data.as_slice())).collect(),
+            };
             let end = fall.as_ref().map(|f| f.fall_time_secs);
             match tracking::compare(
                 command_topic.as_deref().unwrap_or(""),
                 &commands,
+                sampled.as_ref().map(|(names, _)| names.as_slice()),
                 js,
                 &data,
                 robot,

@@ -151,12 +151,101 @@ fn lag(c: &[f64], a: &[f64], dt: f64) -> Option<f64> {
     (best.1 > 0.5).then_some(best.0 as f64 * dt)
 }
 
+/// One `trajectory_msgs/msg/JointTrajectory` command: when it starts (s on the analysis axis:
+/// its header stamp, or when it was received where the stamp is zero) and the message.
+pub(crate) type TrajectoryCommand<'a> = (f64, &'a crate::log::JointTrajectory);
+
+/// One joint's part of a trajectory: its start (s) and its knots (time from the start, s;
+/// position).
+type Segment = (f64, Vec<(f64, f64)>);
+
+/// The joint position a stream of trajectories commands, as a trajectory controller follows
+/// it: each joint follows the latest trajectory naming it that has started (a new one replaces
+/// the old, as `joint_trajectory_controller` does), linearly between its points by
+/// `time_from_start`, from the position commanded when it starts (the previous trajectory's,
+/// else the actual position `actual`) to its first point, and holds its last point after the
+/// end. Sampled at `times` (s); returns the joints in order of first appearance and per time
+/// one position per joint (NaN before the first trajectory naming it).
+pub(crate) fn sample_trajectories(
+    trajectories: &[TrajectoryCommand<'_>],
+    times: &[f64],
+    actual: &dyn Fn(&str, f64) -> f64,
+) -> (Vec<String>, Vec<(f64, Vec<f64>)>) {
+    let mut order: Vec<usize> = (0..trajectories.len()).collect();
+    order.sort_by(|&a, &b| trajectories[a].0.total_cmp(&trajectories[b].0).then(a.cmp(&b)));
+    let mut names: Vec<String> = Vec::new();
+    for &k in &order {
+        for n in &trajectories[k].1.joint_names {
+            if !names.contains(n) {
+                names.push(n.clone());
+            }
+        }
+    }
+    // Per joint: its segments, in start order.
+    let mut per_joint: Vec<Vec<Segment>> = vec![Vec::new(); names.len()];
+    for (j, name) in names.iter().enumerate() {
+        for &k in &order {
+            let (start, msg) = trajectories[k];
+            let Some(col) = msg.joint_names.iter().position(|n| n == name) else { continue };
+            let knots: Vec<(f64, f64)> = msg
+                .points
+                .iter()
+                .filter_map(|p| p.positions.get(col).map(|q| (p.time_from_start_nanos as f64 * 1e-9, *q)))
+                .filter(|(t, q)| t.is_finite() && q.is_finite())
+                .collect();
+            if !knots.is_empty() {
+                per_joint[j].push((start, knots));
+            }
+        }
+    }
+    // The commanded position of joint `j` under segment `s` at `t` (at or after its start).
+    fn along(segments: &[Segment], s: usize, t: f64, from: f64) -> f64 {
+        let (start, knots) = &segments[s];
+        let tau = t - start;
+        let (mut t0, mut q0) = (0.0, from);
+        for &(tk, qk) in knots {
+            if tau <= tk {
+                return if tk - t0 <= 0.0 { qk } else { q0 + (qk - q0) * (tau - t0) / (tk - t0) };
+            }
+            (t0, q0) = (tk, qk);
+        }
+        q0
+    }
+    // Where each segment starts from: the command in force then, else the actual position.
+    let mut from: Vec<Vec<f64>> = Vec::with_capacity(names.len());
+    for (j, segments) in per_joint.iter().enumerate() {
+        let mut f: Vec<f64> = Vec::with_capacity(segments.len());
+        for s in 0..segments.len() {
+            let start = segments[s].0;
+            let q = if s == 0 { actual(&names[j], start) } else { along(segments, s - 1, start, f[s - 1]) };
+            f.push(q);
+        }
+        from.push(f);
+    }
+    let mut out = Vec::with_capacity(times.len());
+    for &t in times {
+        let q: Vec<f64> = per_joint
+            .iter()
+            .zip(&from)
+            .map(|(segments, f)| {
+                let s = segments.partition_point(|(start, _)| *start <= t);
+                if s == 0 { f64::NAN } else { along(segments, s - 1, t, f[s - 1]) }
+            })
+            .collect();
+        if q.iter().any(|x| x.is_finite()) {
+            out.push((t, q));
+        }
+    }
+    (names, out)
+}
+
 /// Compares the commands with the joints; also returns each compared joint's command and
 /// actual signals (for the plots).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn compare(
     topic: &str,
     commands: &[(f64, &[f64])],
+    trajectory_joints: Option<&[String]>,
     js: &JointStateSeries,
     data: &Data,
     robot: Option<&Robot>,
@@ -168,11 +257,27 @@ pub(crate) fn compare(
     if n == 0 {
         return Err(format!("{topic}: the commands are empty"));
     }
-    let (map, model_kind, map_reason) = mapping(n, js, robot)?;
+    let (map, model_kind, map_reason) = match trajectory_joints {
+        Some(names) => {
+            let map: Vec<Option<usize>> = names.iter().map(|n| js.joints.iter().position(|j| j.name == *n)).collect();
+            if map.iter().all(Option::is_none) {
+                return Err(format!(
+                    "{topic}: none of the trajectory's joints ({}) is in the JointState topic",
+                    names.join(", ")
+                ));
+            }
+            (map, Some(CommandKind::Position), "trajectory points (positions, interpolated in time)".to_string())
+        }
+        None => mapping(n, js, robot)?,
+    };
     let end = end.unwrap_or(f64::INFINITY);
     let cmds: Vec<(f64, &[f64])> = commands.iter().filter(|(t, d)| *t <= end && d.len() == n).copied().collect();
-    let command_signal =
-        |i: usize, name: &str| Signal::new(format!("{name} command"), cmds.iter().map(|(t, d)| (*t, d[i])).collect());
+    let command_signal = |i: usize, name: &str| {
+        Signal::new(
+            format!("{name} command"),
+            cmds.iter().filter(|(_, d)| d[i].is_finite()).map(|(t, d)| (*t, d[i])).collect(),
+        )
+    };
     let available = |k: CommandKind| {
         map.iter().flatten().any(|&j| match k {
             CommandKind::Position => true,
@@ -183,6 +288,7 @@ pub(crate) fn compare(
     // The kind: given, the model's, or the JointState field the commands match best.
     let (kind, kind_reason) = match (kind, model_kind) {
         (Some(k), _) => (k, "as given".to_string()),
+        (None, Some(k)) if trajectory_joints.is_some() => (k, map_reason.clone()),
         (None, Some(k)) => (k, format!("as {map_reason} take")),
         (None, None) => {
             let mut best: Option<(CommandKind, f64)> = None;
@@ -243,7 +349,12 @@ pub(crate) fn compare(
         if a.v.iter().all(|x| !x.is_finite()) {
             continue;
         }
-        let c: Vec<f64> = cmds.iter().map(|(_, d)| d[i]).collect();
+        // A joint a trajectory names only from some time on: compared from then.
+        let (times, c): (Vec<f64>, Vec<f64>) =
+            cmds.iter().filter(|(_, d)| d[i].is_finite()).map(|(t, d)| (*t, d[i])).unzip();
+        if c.is_empty() {
+            continue;
+        }
         let a_at: Vec<f64> = times.iter().map(|&t| a.at(t)).collect();
         let e: Vec<f64> = c.iter().zip(&a_at).map(|(c, a)| c - a).collect();
         let (mut max_error, mut max_error_secs) = (0.0f64, f64::NAN);

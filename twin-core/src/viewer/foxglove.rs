@@ -36,8 +36,14 @@ pub const SUBPROTOCOLS: [&str; 2] = ["foxglove.websocket.v1", "foxglove.sdk.v1"]
 /// Messages queued per client before new ones are dropped.
 const QUEUE: usize = 4096;
 
-/// How long a client thread waits for a request before it writes what was queued.
-const POLL: Duration = Duration::from_millis(2);
+/// How long a client thread waits for a request before it writes what was queued: the
+/// messages of that span go out in one batch (one flush, one wake-up of the client), so a
+/// client subscribed to everything costs the simulation little (benches/foxglove_stream.sh).
+const POLL: Duration = Duration::from_millis(10);
+
+/// How long the last messages may take to reach a client when the server stops (a client
+/// that reads no more is given up after about this).
+const DRAIN: Duration = Duration::from_secs(1);
 
 /// Options of the server.
 #[derive(Debug, Clone, PartialEq)]
@@ -462,13 +468,7 @@ fn serve(stream: TcpStream, shared: &Arc<Shared>) {
         // Write what was queued.
         let mut wrote = false;
         while let Ok(frame) = rx.try_recv() {
-            let msg = match frame.last() {
-                Some(0) if frame.first() == Some(&b'{') => {
-                    tungstenite::Message::text(String::from_utf8_lossy(&frame[..frame.len() - 1]).into_owned())
-                }
-                _ => tungstenite::Message::binary(frame),
-            };
-            if ws.write(msg).is_err() {
+            if ws.write(ws_message(frame)).is_err() {
                 break 'session;
             }
             wrote = true;
@@ -496,8 +496,29 @@ fn serve(stream: TcpStream, shared: &Arc<Shared>) {
         lock(&subscriptions).len() as u64
     };
     shared.subscribed.fetch_sub(removed, Ordering::Relaxed);
+    // The run ended: what it queued still reaches the client (bounded by DRAIN).
+    if shared.stop.load(Ordering::Relaxed) {
+        let _ = ws.get_ref().set_write_timeout(Some(DRAIN));
+        let deadline = std::time::Instant::now() + DRAIN;
+        while let Ok(frame) = rx.try_recv() {
+            if std::time::Instant::now() > deadline || ws.write(ws_message(frame)).is_err() {
+                break;
+            }
+        }
+        let _ = ws.flush();
+    }
     let _ = ws.close(None);
     let _ = ws.flush();
+}
+
+/// A queued frame as a WebSocket message (text frames end with the NUL marker).
+fn ws_message(frame: Vec<u8>) -> tungstenite::Message {
+    match frame.last() {
+        Some(0) if frame.first() == Some(&b'{') => {
+            tungstenite::Message::text(String::from_utf8_lossy(&frame[..frame.len() - 1]).into_owned())
+        }
+        _ => tungstenite::Message::binary(frame),
+    }
 }
 
 fn status_frame(level: u8, message: &str) -> Vec<u8> {
