@@ -35,12 +35,14 @@
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
 
+pub mod derive;
 pub mod hip;
 pub mod kin;
 pub mod metrics;
 pub mod plan;
 pub mod preview;
 
+pub use derive::Proportions;
 pub use kin::{BodyNames, Side};
 pub use metrics::{GaitMetrics, GaitSummary, GaitTargets};
 pub use plan::Command;
