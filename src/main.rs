@@ -12,7 +12,7 @@ fn main() -> ExitCode {
     let cli = cli::Cli::parse();
     // Ctrl-C / SIGTERM / SIGHUP: temp files are removed; commands that can stop cleanly do.
     twin_core::fsio::install_signal_handler();
-    match commands::run(cli) {
+    match cli.run() {
         Ok(()) => ExitCode::SUCCESS,
         // `twin info … | head` must not report an error when the reader goes away.
         Err(e) if is_broken_pipe(&e) => ExitCode::SUCCESS,

@@ -8,12 +8,17 @@ mod common;
 mod convert;
 #[path = "cli/deploy.rs"]
 mod deploy;
+#[path = "cli/diagnose.rs"]
+mod diagnose;
 #[path = "cli/engine.rs"]
 mod engine;
 #[path = "../twin-core/tests/it/example_robot_data.rs"]
 mod example_robot_data;
 #[path = "cli/excite.rs"]
 mod excite;
+#[cfg(feature = "ros")]
+#[path = "cli/extctl.rs"]
+mod extctl;
 #[path = "cli/gap.rs"]
 mod gap;
 #[path = "cli/grasp.rs"]
@@ -35,7 +40,14 @@ mod sense;
 mod shards;
 #[path = "cli/sim.rs"]
 mod sim;
+#[path = "cli/sweep.rs"]
+mod sweep;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[path = "../twin-core/tests/it/test_python.rs"]
+mod test_python;
+#[cfg(feature = "ros")]
+#[path = "cli/viewers.rs"]
+mod viewers;
 #[path = "cli/walk.rs"]
 mod walk;

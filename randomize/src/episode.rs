@@ -25,6 +25,12 @@ pub type DisturbanceFactory = dyn Fn(&Model) -> Vec<Box<dyn Disturbance>> + Send
 /// verdict is part of every episode's result, and a failed check fails the episode.
 pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>> + Send + Sync;
 
+/// Makes a batch's controller together with the checks that watch it, for a worker thread: an
+/// external controller ([`twin_core::external`]) comes with the check that publishes the
+/// robot's state to its process and judges its health, so a controller that crashes or hangs
+/// fails its episode, not the batch.
+pub type DriverFactory = dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
+
 /// How an episode runs and when it ends early.
 #[derive(Debug, Clone, PartialEq)]
 pub struct EpisodeOptions {
@@ -36,7 +42,7 @@ pub struct EpisodeOptions {
     /// The robot has fallen when its base tilts more than this from upright, radians.
     /// (default: 1.0, about 57°)
     pub fall_tilt_rad: f64,
-    /// Controller name, one of `twin_core::control::CONTROLLERS`, used unless the batch is
+    /// Controller name, one of `twin_core::registry::CONTROLLERS`, used unless the batch is
     /// given a controller factory ([`Batch::with_controller`]). (default: `pd-hold`)
     pub controller: String,
 }
@@ -68,6 +74,10 @@ pub struct Batch {
     controller_name: String,
     checks: Option<Arc<CheckFactory>>,
     disturbances: Option<Arc<DisturbanceFactory>>,
+    /// A controller with its own checks, instead of `controller` (see [`DriverFactory`]), and
+    /// the verdicts of those checks before any episode (their CSV columns).
+    driver: Option<(Arc<DriverFactory>, Vec<Verdict>)>,
+    terrain: Option<twin_core::terrain::TerrainOptions>,
 }
 
 impl Batch {
@@ -95,7 +105,7 @@ impl Batch {
             )));
         }
         let name = options.controller.clone();
-        let factory: Arc<ControllerFactory> = Arc::new(move |r: &Robot| twin_core::control::by_name(&name, &r.model));
+        let factory: Arc<ControllerFactory> = Arc::new(move |r: &Robot| twin_core::registry::by_name(&name, &r.model));
         let batch = Batch {
             nominal: robot.model.clone(),
             robot,
@@ -106,6 +116,8 @@ impl Batch {
             controller: factory,
             checks: None,
             disturbances: None,
+            driver: None,
+            terrain: None,
         };
         let factory = batch.controller.clone();
         batch.with_controller_factory(factory)
@@ -128,6 +140,25 @@ impl Batch {
         self.controller_name = factory(&self.robot)?.name().to_string();
         self.options.controller = self.controller_name.clone();
         self.controller = factory;
+        Ok(self)
+    }
+
+    /// The batch driven by controllers that come with checks of their own, from `factory` (one
+    /// pair per worker thread), instead of the named controller.
+    ///
+    /// # Errors
+    /// The factory's error for the nominal robot.
+    pub fn with_driver(
+        mut self,
+        factory: impl Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync + 'static,
+    ) -> Result<Batch> {
+        // Made once here so a bad controller fails the batch before any episode runs.
+        let (controller, checks) = factory(&self.robot)?;
+        self.controller_name = controller.name().to_string();
+        self.options.controller = self.controller_name.clone();
+        let verdicts = checks.iter().map(|c| c.verdict()).collect();
+        drop((controller, checks));
+        self.driver = Some((Arc::new(factory), verdicts));
         Ok(self)
     }
 
@@ -154,17 +185,49 @@ impl Batch {
         self
     }
 
+    /// The batch on a new terrain per episode: `terrain` (the nominal model's, as
+    /// `twin_core::scenario::Scenario::robot` built it) with its seed drawn from (its seed, the
+    /// master seed, the episode index), written into the episode's model, the robot seated on
+    /// it. Only the kinds with random parts (rough ground, obstacles) change.
+    pub fn with_terrain(mut self, terrain: twin_core::terrain::TerrainOptions) -> Batch {
+        self.terrain = matches!(terrain.kind.as_str(), "rough" | "obstacles").then_some(terrain);
+        self
+    }
+
     /// The batch run as `scenario` says (`twin randomize --scenario`): the scenario's
     /// controller, with its options, on each worker; its checks deciding each episode's success;
-    /// its scripted pushes besides the spec's random ones. The nominal robot should be
-    /// `scenario.robot(..)` (its armature and friction).
+    /// its scripted pushes besides the spec's random ones; a new terrain per episode
+    /// ([`Batch::with_terrain`]). The nominal robot should be `scenario.robot(..)` (its armature,
+    /// friction and terrain).
     ///
     /// # Errors
     /// The scenario's controller or check error for the nominal robot.
     pub fn with_scenario(self, scenario: Arc<twin_core::scenario::Scenario>) -> Result<Batch> {
+        let logs = std::env::temp_dir().join("twin-controller-logs");
+        self.with_scenario_logs(scenario, &logs)
+    }
+
+    /// [`Batch::with_scenario`], an external controller's process output going to
+    /// `logs/worker-<k>.log` (one log per worker, each process start marked in it).
+    ///
+    /// # Errors
+    /// As [`Batch::with_scenario`].
+    pub fn with_scenario_logs(
+        self,
+        scenario: Arc<twin_core::scenario::Scenario>,
+        logs: &std::path::Path,
+    ) -> Result<Batch> {
         let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
-        Ok(self
-            .with_controller(move |r| scenario.controller(&r.model))?
+        let batch = match scenario.terrain.clone() {
+            Some(t) => self.with_terrain(t),
+            None => self,
+        };
+        let batch = if scenario.is_external() {
+            batch.with_external(&scenario, logs)?
+        } else {
+            batch.with_controller(move |r| scenario.controller(&r.model))?
+        };
+        Ok(batch
             .with_checks(move |r| {
                 let check: Box<dyn Check> = Box::new(for_checks.check(&r.model)?);
                 Ok(vec![check])
@@ -172,6 +235,36 @@ impl Batch {
             .with_disturbances(move |m| {
                 for_pushes.disturbances(m).into_iter().map(|d| Box::new(d) as Box<dyn Disturbance>).collect()
             }))
+    }
+
+    /// The scenario's external controller ([`twin_core::external`]) on each worker: a domain,
+    /// a bridge and a process of its own.
+    #[cfg(feature = "ros")]
+    fn with_external(self, scenario: &twin_core::scenario::Scenario, logs: &std::path::Path) -> Result<Batch> {
+        let Some(options) = scenario.ros.clone() else {
+            return Err(Error::Options(format!(
+                "{}: controller = \"ros\" needs a [ros] table",
+                scenario.path.display()
+            )));
+        };
+        let folder = scenario.folder();
+        let logs = logs.to_path_buf();
+        let workers = std::sync::atomic::AtomicU64::new(0);
+        self.with_driver(move |r| {
+            let k = workers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
+            let log = logs.join(format!("worker-{k}.log"));
+            let (controller, health) = twin_core::external::external(r, &options, &folder, &log)?;
+            Ok((Box::new(controller) as Box<dyn Controller>, vec![Box::new(health) as Box<dyn Check>]))
+        })
+    }
+
+    #[cfg(not(feature = "ros"))]
+    fn with_external(self, _scenario: &twin_core::scenario::Scenario, _logs: &std::path::Path) -> Result<Batch> {
+        Err(twin_core::Error::FeatureMissing {
+            feature: "ros",
+            what: "controller = \"ros\" (your ROS 2 node through the live bridge)".into(),
+        }
+        .into())
     }
 
     /// Name of the controller.
@@ -185,10 +278,11 @@ impl Batch {
     /// # Errors
     /// The check factory's error.
     pub fn check_verdicts(&self) -> Result<Vec<Verdict>> {
-        Ok(match &self.checks {
-            Some(f) => f(&self.robot)?.iter().map(|c| c.verdict()).collect(),
-            None => Vec::new(),
-        })
+        let mut verdicts = self.driver.as_ref().map(|(_, v)| v.clone()).unwrap_or_default();
+        if let Some(f) = &self.checks {
+            verdicts.extend(f(&self.robot)?.iter().map(|c| c.verdict()));
+        }
+        Ok(verdicts)
     }
 
     /// Names of the bodies counted as feet.
@@ -288,6 +382,30 @@ impl Observer for TrajectoryRows<'_> {
     }
 }
 
+/// Episode `index`'s terrain: `terrain` with a seed from (its seed, the master seed, the
+/// index), written into the draw's model, the robot's start raised or lowered by as much as the
+/// ground under its feet differs from the nominal terrain's.
+fn episode_terrain(
+    batch: &Batch,
+    terrain: &twin_core::terrain::TerrainOptions,
+    index: u64,
+    draw: &mut Draw,
+) -> Result<()> {
+    use rand::{Rng, SeedableRng};
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(terrain.seed ^ batch.seed.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+    rng.set_stream(index);
+    let options = twin_core::terrain::TerrainOptions { seed: rng.random(), ..terrain.clone() };
+    let geometry = options.build();
+    draw.model = geometry.write_into(&draw.model)?;
+    let lift = twin_core::terrain::seat_lift(&draw.model, &batch.layout.home_qpos, &geometry, &batch.robot.feet)?;
+    if let Some(free) = draw.model.free_joint()
+        && lift.abs() > 1e-9
+    {
+        draw.init_qpos[free.qpos_adr + 2] += lift;
+    }
+    Ok(())
+}
+
 /// Per-thread state: the rollout engine (one `Data` reused across episodes), the controller,
 /// the checks and the touch-down counter.
 pub struct Worker {
@@ -303,13 +421,17 @@ impl Worker {
     /// # Errors
     /// [`Error::Core`] from the controller or check factory.
     pub fn new(batch: &Batch) -> Result<Worker> {
+        let (controller, mut checks) = match &batch.driver {
+            Some((f, _)) => f(&batch.robot)?,
+            None => ((batch.controller)(&batch.robot)?, Vec::new()),
+        };
+        if let Some(f) = &batch.checks {
+            checks.extend(f(&batch.robot)?);
+        }
         Ok(Worker {
             engine: Engine::new(),
-            controller: (batch.controller)(&batch.robot)?,
-            checks: match &batch.checks {
-                Some(f) => f(&batch.robot)?,
-                None => Vec::new(),
-            },
+            controller,
+            checks,
             touchdowns: Touchdowns::new(&batch.nominal, &batch.robot.feet),
         })
     }
@@ -346,7 +468,10 @@ impl Worker {
         recording: Option<&mut dyn Observer>,
     ) -> Result<EpisodeResult> {
         let mut param_rng = episode_rng(batch.seed, index, 0);
-        let draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
+        let mut draw = batch.layout.draw(&batch.nominal, index, &mut param_rng)?;
+        if let Some(t) = &batch.terrain {
+            episode_terrain(batch, t, index, &mut draw)?;
+        }
         self.rollout(batch, index, draw, trajectory, recording)
     }
 
@@ -374,7 +499,15 @@ impl Worker {
         let episode = Episode {
             initial_qpos: Some(init_qpos),
             steps: batch.steps_per_episode(),
-            sensors: SensorModel { qpos_noise_std, sensor_noise_std, sensor_bias, latency_steps },
+            // The robot's IMU bias processes (twin's one sensor model, `twin_core::sim::sensor_model`)
+            // with the drawn white noise, bias and latency.
+            sensors: SensorModel {
+                qpos_noise_std,
+                sensor_noise_std,
+                sensor_bias,
+                bias_processes: twin_core::sim::sensor_model(&batch.robot).bias_processes,
+                latency_steps,
+            },
             command_scale,
         };
         let mut push = push_interval_secs.map(|every| Push::new(every, push_speed_mps, batch.layout.push_body));

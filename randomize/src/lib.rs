@@ -16,6 +16,8 @@
 //!   progress, and merging shards into the single-machine outputs.
 //! - [`summary`]: success rate with a Wilson interval, metric quantiles, and the parameters
 //!   that separate failures from successes.
+//! - [`sweep`]: success against one parameter (`--sweep NAME=FROM:TO:STEP`): a batch per level,
+//!   a table, CSV and SVG, shards merged level by level.
 //!
 //! ```no_run
 //! use std::sync::Arc;
@@ -48,6 +50,7 @@ pub mod merge;
 pub mod run;
 pub mod spec;
 pub mod summary;
+pub mod sweep;
 
 pub use draw::Layout;
 pub use episode::{Batch, CheckFactory, ControllerFactory, DisturbanceFactory, EpisodeOptions, EpisodeResult, Worker};

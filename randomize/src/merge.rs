@@ -10,7 +10,7 @@
 
 use crate::episode::EpisodeResult;
 use crate::error::{Error, Result};
-use crate::run::{RunInfo, Shard, SummaryFile, write_atomic, write_summary};
+use crate::run::{PARTIAL_CSV, RunInfo, Shard, SummaryFile, write_atomic, write_summary};
 use crate::summary::{Summary, SummaryBuilder, read_csv, write_csv};
 use serde::{Deserialize, Serialize};
 use sha2::{Digest, Sha256};
@@ -19,9 +19,6 @@ use std::path::{Path, PathBuf};
 
 /// A shard's record of itself, written before its first episode.
 pub const MANIFEST: &str = "shard.json";
-
-/// Rows finished so far by a running shard (renamed to `episodes.csv` when it completes).
-pub const PARTIAL_CSV: &str = ".episodes.csv.tmp";
 
 /// `shard.json`: what a shard ran, with which binary, and how to run it again.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]

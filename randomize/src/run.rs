@@ -145,6 +145,10 @@ fn worse(a: &EpisodeResult, b: &EpisodeResult) -> std::cmp::Ordering {
     y.0.cmp(&x.0).then(y.1.total_cmp(&x.1)).then(y.2.total_cmp(&x.2)).then(y.3.cmp(&x.3))
 }
 
+/// Rows finished so far by a running batch or shard (renamed to `episodes.csv` when it
+/// completes; `twin randomize merge --status` counts them).
+pub const PARTIAL_CSV: &str = ".episodes.csv.tmp";
+
 /// Writes what `f` produces to `path` with twin's one atomic writer ([`twin_core::fsio`]),
 /// keeping an existing file as a numbered backup (`<name>.bak`, `.bak.1`, …).
 pub(crate) fn write_atomic(path: &Path, f: impl FnOnce(&mut Vec<u8>) -> Result<()>) -> Result<()> {
@@ -184,7 +188,7 @@ pub fn run_batch(
     let tmp_csv;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
-        tmp_csv = dir.join(crate::merge::PARTIAL_CSV);
+        tmp_csv = dir.join(PARTIAL_CSV);
         let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
         let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
         let checks = batch.check_verdicts()?;
@@ -320,8 +324,7 @@ pub fn record_worst(batch: &Batch, worst: &[EpisodeResult], dir: &Path) -> Resul
         let options = twin_core::sim::RecordOptions {
             mcap: Some(mcap.clone()),
             rrd: cfg!(feature = "rerun").then(|| rrd.clone()),
-            // The episode's own sensor-noise stream is separate; this seeds the IMU messages.
-            seed: batch.seed ^ original.index,
+            // The IMU and /joint_states recorded are the episode's observations (its own noise).
             ..Default::default()
         };
         let mut recording = twin_core::sim::Recording::new(robot, &options)?;

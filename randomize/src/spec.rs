@@ -429,6 +429,38 @@ impl Spec {
         out
     }
 
+    /// The term with key `key` (as [`Spec::terms`] names them), if the spec has it.
+    pub fn term_mut(&mut self, key: &str) -> Option<&mut Term> {
+        let single = match key {
+            "friction" => &mut self.friction,
+            "mass" => &mut self.mass,
+            "com_offset" => &mut self.com_offset,
+            "damping" => &mut self.damping,
+            "frictionloss" => &mut self.frictionloss,
+            "armature" => &mut self.armature,
+            "actuator_strength" => &mut self.actuator_strength,
+            "gravity" => &mut self.gravity,
+            "imu_noise_std" => &mut self.imu_noise_std,
+            "imu_bias" => &mut self.imu_bias,
+            "encoder_noise_std" => &mut self.encoder_noise_std,
+            "latency_steps" => &mut self.latency_steps,
+            "init_qpos" => &mut self.init_qpos,
+            "camera_noise_std" => &mut self.camera_noise_std,
+            "push.interval_secs" => return self.push.as_mut().map(|p| &mut p.interval_secs),
+            "push.speed_mps" => return self.push.as_mut().map(|p| &mut p.speed_mps),
+            _ => {
+                let (list, i) = key.split_once('.')?;
+                let i: usize = i.parse().ok()?;
+                return match list {
+                    "object_mass" => self.object_mass.get_mut(i),
+                    "object_position" => self.object_position.get_mut(i),
+                    _ => None,
+                };
+            }
+        };
+        single.as_mut()
+    }
+
     /// Checks every term.
     ///
     /// # Errors

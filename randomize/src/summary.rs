@@ -32,6 +32,20 @@ pub const METRIC_COLUMNS: [&str; 13] = [
 /// batches with checks only.
 pub const CHECKS_COLUMN: &str = "checks";
 
+/// The column of the failed checks' causes (`controller: exited: exit status: 3 at t = …`,
+/// several joined by ` | `), right after the [`CHECKS_COLUMN`] (files written before it
+/// existed lack it and still read).
+pub const FAILURE_COLUMN: &str = "failure";
+
+/// Separator of several causes in the [`FAILURE_COLUMN`].
+const CAUSE_SEPARATOR: &str = " | ";
+
+/// What a failed check's cause counts as in [`Summary::failures`]: the check's name and the
+/// cause up to its first `:` (`controller: never joined`).
+pub fn failure_kind(check: &str, cause: &str) -> String {
+    format!("{check}: {}", cause.split(':').next().unwrap_or(cause).trim())
+}
+
 /// Prefix of the columns holding the checks' numbers (`metric:scenario.slip_mean_m`), between
 /// the [`CHECKS_COLUMN`] and the drawn parameters (no parameter kind is called `metric`).
 pub const CHECK_METRIC_PREFIX: &str = "metric:";
@@ -61,6 +75,7 @@ pub fn csv_header(params: &[String], with_checks: bool, check_metrics: &[String]
         .iter()
         .map(|s| s.to_string())
         .chain(with_checks.then(|| CHECKS_COLUMN.to_string()))
+        .chain(with_checks.then(|| FAILURE_COLUMN.to_string()))
         .chain(check_metrics.iter().map(|m| format!("{CHECK_METRIC_PREFIX}{m}")))
         .chain(params.iter().cloned())
         .collect()
@@ -88,6 +103,13 @@ pub fn csv_record(r: &EpisodeResult) -> Vec<String> {
         let verdicts: Vec<String> =
             r.checks.iter().map(|c| format!("{}={}", c.name, if c.passed { "PASS" } else { "FAIL" })).collect();
         out.push(verdicts.join(";"));
+        let causes: Vec<String> = r
+            .checks
+            .iter()
+            .filter(|c| !c.passed)
+            .map(|c| format!("{}: {}", c.name, c.cause.as_deref().unwrap_or("failed").replace(CAUSE_SEPARATOR, " / ")))
+            .collect();
+        out.push(causes.join(CAUSE_SEPARATOR));
         out.extend(r.checks.iter().flat_map(|c| c.metrics.iter().map(|m| m.value.to_string())));
     }
     out.extend(r.params.iter().map(f64::to_string));
@@ -115,7 +137,8 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
         ));
     }
     let with_checks = names.get(METRIC_COLUMNS.len()) == Some(&CHECKS_COLUMN);
-    let first_metric = METRIC_COLUMNS.len() + usize::from(with_checks);
+    let with_failure = with_checks && names.get(METRIC_COLUMNS.len() + 1) == Some(&FAILURE_COLUMN);
+    let first_metric = METRIC_COLUMNS.len() + usize::from(with_checks) + usize::from(with_failure);
     // The checks' metric columns: (check, measurement name), as written by `csv_header`.
     let check_metrics: Vec<(&str, &str)> = names[first_metric..]
         .iter()
@@ -167,6 +190,14 @@ fn read_csv_from(path: &Path, reader: impl Read) -> Result<(Vec<String>, Vec<Epi
             params: (first_param..names.len()).map(f).collect::<Result<_>>()?,
             checks: if with_checks {
                 let mut verdicts = read_verdicts(&rec[METRIC_COLUMNS.len()]).map_err(|m| err(Some(line), m))?;
+                if with_failure {
+                    for cause in rec[METRIC_COLUMNS.len() + 1].split(CAUSE_SEPARATOR).filter(|c| !c.is_empty()) {
+                        let (name, why) = cause.split_once(": ").unwrap_or((cause, "failed"));
+                        if let Some(v) = verdicts.iter_mut().find(|v| v.name == name && !v.passed) {
+                            v.cause = Some(why.to_string());
+                        }
+                    }
+                }
                 for (k, (check, name)) in check_metrics.iter().enumerate() {
                     let value = f(first_metric + k)?;
                     let Some(v) = verdicts.iter_mut().find(|v| v.name == *check) else {
@@ -286,6 +317,20 @@ pub struct Summary {
     pub quantiles: Vec<Quantiles>,
     /// Parameters ranked by |SMD|, largest first (empty unless both groups have ≥ 2 episodes).
     pub separation: Vec<Separation>,
+    /// Failed episodes per failure kind ([`failure_kind`]: a failed check and its cause's
+    /// kind, e.g. `controller: exited`), most frequent first; an episode counts once per
+    /// failed check.
+    #[serde(default)]
+    pub failures: Vec<FailureCount>,
+}
+
+/// How many episodes failed one way.
+#[derive(Debug, Clone, PartialEq, Eq, Serialize, Deserialize)]
+pub struct FailureCount {
+    /// The failure kind ([`failure_kind`]).
+    pub kind: String,
+    /// Episodes.
+    pub episodes: u64,
 }
 
 /// Running per-group moments (Welford) of one parameter.
@@ -318,6 +363,7 @@ pub struct SummaryBuilder {
     /// order first seen.
     check_metrics: Vec<(String, Vec<f64>)>,
     groups: Vec<[Moments; 2]>,
+    failures: Vec<FailureCount>,
 }
 
 const QUANTILE_METRICS: [&str; 7] =
@@ -335,6 +381,7 @@ impl SummaryBuilder {
             metrics: Default::default(),
             check_metrics: Vec::new(),
             groups: vec![Default::default(); params.len()],
+            failures: Vec::new(),
         }
     }
 
@@ -344,6 +391,13 @@ impl SummaryBuilder {
         self.succeeded += u64::from(r.success());
         self.fell += u64::from(r.fell);
         self.unstable += u64::from(r.unstable);
+        for c in r.checks.iter().filter(|c| !c.passed) {
+            let kind = failure_kind(&c.name, c.cause.as_deref().unwrap_or("failed"));
+            match self.failures.iter_mut().find(|f| f.kind == kind) {
+                Some(f) => f.episodes += 1,
+                None => self.failures.push(FailureCount { kind, episodes: 1 }),
+            }
+        }
         // Diverged episodes carry no meaningful motion metrics.
         if !r.unstable {
             let values =
@@ -416,6 +470,11 @@ impl SummaryBuilder {
             success_rate_ci95: wilson(self.succeeded, n),
             quantiles,
             separation,
+            failures: {
+                let mut f = self.failures.clone();
+                f.sort_by(|a, b| b.episodes.cmp(&a.episodes).then(a.kind.cmp(&b.kind)));
+                f
+            },
         }
     }
 }
@@ -462,6 +521,10 @@ impl Summary {
             self.fell,
             self.unstable
         );
+        if !self.failures.is_empty() {
+            let kinds: Vec<String> = self.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();
+            let _ = writeln!(s, "failed checks: {}", kinds.join(", "));
+        }
         if !self.quantiles.is_empty() {
             let w = self.quantiles.iter().map(|q| q.metric.chars().count()).max().unwrap_or(0).max(18);
             let _ = writeln!(

@@ -5,7 +5,6 @@ use std::io::Write;
 use std::path::PathBuf;
 use twin_core::check::{CheckOptions, check};
 use twin_core::convert::ConvertOptions;
-use twin_core::mj::Model;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -28,22 +27,22 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     super::check_range("--hold-secs", args.hold_secs, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     let path = args.model.clone().unwrap_or_else(super::default_model);
-    let text = twin_core::fsio::read_to_string(&path)?;
     let mut out = std::io::stdout().lock();
-    let (floating, fixed) = if twin_core::urdf::is_urdf(&text) {
-        // Joints that no transmission names get a motor (--actuators auto) so the PD hold can
-        // act on them.
-        let opts = ConvertOptions {
-            fixed_base: args.fixed_base,
-            package_paths: args.package_paths.clone(),
-            strict_inertia: args.strict_inertia,
-            ..ConvertOptions::default()
-        };
-        let floating = Model::from_urdf(&path, &opts)?;
-        let fixed = Model::from_urdf(&path, &ConvertOptions { fixed_base: true, floor: false, ..opts })?;
-        (floating, Some(fixed))
-    } else {
-        (Model::from_file(&path)?, None)
+    // Joints that no transmission names get a motor (--actuators auto) so the PD hold can act
+    // on them. The one path from a file (what `Robot::load` runs); a URDF is checked welded too.
+    let opts = ConvertOptions {
+        fixed_base: args.fixed_base,
+        package_paths: args.package_paths.clone(),
+        strict_inertia: args.strict_inertia,
+        ..ConvertOptions::default()
+    };
+    let loaded = twin_core::convert::load(&path, &opts, "")?;
+    let floating = loaded.model;
+    let fixed = match loaded.converted {
+        Some(_) => {
+            Some(twin_core::convert::load(&path, &ConvertOptions { fixed_base: true, floor: false, ..opts }, "")?.model)
+        }
+        None => None,
     };
     writeln!(
         out,

@@ -4,6 +4,7 @@ use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
 use twin_core::mj::{Model, ObjType};
+use twin_core::robot::Robot;
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -13,9 +14,10 @@ pub struct Args {
 
 pub fn run(args: Args) -> anyhow::Result<()> {
     let path = args.model.unwrap_or_else(super::default_model);
-    let model = Model::from_file(&path).with_context(|| format!("loading {}", path.display()))?;
+    let robot = Robot::load(&path).with_context(|| format!("loading {}", path.display()))?;
+    let model = &robot.model;
     let mut out = std::io::stdout().lock();
-    write_info(&mut out, &path, &model)?;
+    write_info(&mut out, &path, model)?;
     Ok(())
 }
 

@@ -1,4 +1,5 @@
-//! One module per subcommand, each with `run(args) -> anyhow::Result<()>`.
+//! One module per subcommand, each with `run(args) -> anyhow::Result<()>`; [`crate::cli`]
+//! lists them and dispatches to them.
 
 pub mod calibrate;
 pub mod check;
@@ -10,30 +11,17 @@ pub mod log;
 pub mod randomize;
 pub mod sim;
 pub mod sysid;
+pub mod test;
 pub mod view;
+pub mod viewers;
 
-use crate::cli::{Cli, Command};
 use std::path::PathBuf;
+use std::sync::LazyLock;
 
-/// `twin --version`: twin's version and the MuJoCo version it was built for.
-pub const VERSION_LINE: &str = concat!(env!("CARGO_PKG_VERSION"), " (MuJoCo 4.0.1)");
-
-/// Dispatches to the subcommand.
-pub fn run(cli: Cli) -> anyhow::Result<()> {
-    match cli.command {
-        Command::Info(args) => info::run(args),
-        Command::Convert(args) => convert::run(args),
-        Command::Check(args) => check::run(args),
-        Command::Log(args) => log::run(args),
-        Command::Randomize(args) => randomize::run(*args),
-        Command::Sysid(args) => sysid::run(args),
-        Command::Sim(args) => sim::run(*args),
-        Command::View(args) => view::run(args),
-        Command::Calibrate(args) => calibrate::run(args),
-        Command::Excite(args) => excite::run(args),
-        Command::Gap(args) => gap::run(args),
-    }
-}
+/// `twin --version`: twin's version and the version of the MuJoCo headers its bindings were
+/// generated from (the library loaded at run time is checked against it).
+pub static VERSION_LINE: LazyLock<String> =
+    LazyLock::new(|| format!("{} (MuJoCo {})", env!("CARGO_PKG_VERSION"), twin_core::mj::header_version()));
 
 /// A command that Ctrl-C (SIGINT, or SIGTERM/SIGHUP) stopped early and that then finished
 /// cleanly: its outputs are closed and readable up to where it stopped and its summary is

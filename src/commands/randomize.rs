@@ -1,12 +1,15 @@
 //! `twin randomize`: domain-randomized batch rollouts, and `twin randomize merge` for shards.
 //! `--scenario FILE` takes the model, duration, controller and checks from a scenario file
-//! (`twin_core::scenario`): its checks decide each episode's success.
+//! (`twin_core::scenario`): its checks decide each episode's success. `--sweep NAME=FROM:TO:STEP`
+//! runs one batch per level of a spec or scenario parameter (`randomize::sweep`) and reports
+//! success against it.
 
 use anyhow::Context as _;
 use clap::{Args as ClapArgs, Subcommand};
+use randomize::sweep::{LevelRow, Sweep, SweepManifest, Target};
 use randomize::{Batch, EpisodeOptions, Layout, RunOptions, Shard, Spec};
 use std::io::IsTerminal;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::time::Instant;
 use twin_core::robot::Robot;
 use twin_core::scenario::Scenario;
@@ -77,6 +80,17 @@ pub struct Args {
     /// A fall: base tilted more than this from upright, radians.
     #[arg(long, default_value_t = 1.0)]
     pub fall_tilt: f64,
+
+    /// Success against a parameter: one batch of --episodes per level FROM, FROM+STEP, … TO of
+    /// a randomization term (fixed to the level, e.g. push.speed_mps=0:0.6:0.1) or a scenario
+    /// key (e.g. terrain.difficulty=0:1:0.2). Prints success with its 95 % interval per level;
+    /// with --out, OUT/level-NN/ per level and OUT/sweep.csv, OUT/sweep.svg.
+    #[arg(long, value_name = "NAME=FROM:TO:STEP")]
+    pub sweep: Option<String>,
+
+    /// The sweep reports the first level whose success rate is below this.
+    #[arg(long, default_value_t = randomize::sweep::DEFAULT_THRESHOLD)]
+    pub sweep_threshold: f64,
 }
 
 /// `twin randomize merge`.
@@ -109,6 +123,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let shards: Vec<&std::path::Path> = dirs.iter().map(PathBuf::as_path).collect();
             twin_core::fsio::check_output_dir(out, &shards)?;
         }
+        if SweepManifest::read(&dirs[0])?.is_some() {
+            let (manifest, rows) = randomize::sweep::merge(&dirs, out.as_deref())?;
+            print!("{}", randomize::sweep::to_text(&manifest.sweep.name, &rows, manifest.threshold));
+            if let Some(out) = out {
+                eprintln!("wrote {}", out.display());
+            }
+            return Ok(());
+        }
         let merged = randomize::merge(&dirs, out.as_deref())?;
         print!("{}", merged.summary.to_text(merged.run.episodes));
         if let Some(out) = out {
@@ -133,6 +155,74 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         anyhow::bail!("--episodes must be a whole number from 1 to {}, got 0", u64::MAX);
     }
     let scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
+    if let Some(out) = &args.out {
+        let mut inputs: Vec<&Path> = args.model.iter().map(PathBuf::as_path).collect();
+        inputs.extend(args.config.as_deref());
+        inputs.extend(args.scenario.as_deref());
+        twin_core::fsio::check_output_dir(out, &inputs)?;
+    }
+    // Ctrl-C (or SIGTERM) ends the run after the episodes in flight; a second one aborts.
+    twin_core::fsio::cooperate();
+    let Some(sweep) = &args.sweep else {
+        return run_one(&args, scenario, None, args.out.as_deref(), shard).map(|_| ());
+    };
+    let sweep: Sweep = sweep.parse()?;
+    if !(0.0..=1.0).contains(&args.sweep_threshold) {
+        anyhow::bail!("--sweep-threshold must be within [0, 1], got {}", args.sweep_threshold);
+    }
+    let manifest = SweepManifest { sweep: sweep.clone(), threshold: args.sweep_threshold };
+    if let Some(out) = &args.out {
+        std::fs::create_dir_all(out).with_context(|| format!("creating {}", out.display()))?;
+        manifest.write(out)?;
+    }
+    let mut rows = Vec::new();
+    for (i, &level) in sweep.levels.iter().enumerate() {
+        println!("== {} = {level} ({} of {})", sweep.name, i + 1, sweep.levels.len());
+        let out = args.out.as_deref().map(|o| Sweep::level_dir(o, i));
+        let Some(summary) = run_one(&args, scenario.clone(), Some((&sweep, level)), out.as_deref(), shard)? else {
+            return Err(super::Interrupted(format!("the sweep stopped at {} = {level}", sweep.name)).into());
+        };
+        rows.push(LevelRow::new(level, &summary));
+        println!();
+    }
+    print!("{}", randomize::sweep::to_text(&sweep.name, &rows, args.sweep_threshold));
+    if let Some(out) = &args.out {
+        if shard.is_some() {
+            eprintln!(
+                "wrote shard {} of each level in {}: `twin randomize merge --out DIR` with the other shards' folders writes sweep.csv and sweep.svg",
+                shard.map_or_else(String::new, |s| s.to_string()),
+                out.display()
+            );
+        } else {
+            randomize::sweep::write_outputs(out, &manifest, &rows)?;
+            eprintln!("wrote {} (sweep.csv, sweep.svg, level-NN/)", out.display());
+        }
+    }
+    Ok(())
+}
+
+/// One batch (one sweep level with `level`): prints its summary; returns it, or `None` when a
+/// stop request ended it early.
+fn run_one(
+    args: &Args,
+    scenario: Option<Scenario>,
+    level: Option<(&Sweep, f64)>,
+    out: Option<&Path>,
+    shard: Option<Shard>,
+) -> anyhow::Result<Option<randomize::Summary>> {
+    // A scenario key swept: the scenario file with that key at the level.
+    let target = level.map(|(sweep, _)| sweep.target(&Spec::default_spec()));
+    let scenario = match (&target, level, scenario) {
+        (Some(Target::Scenario(key)), Some((_, value)), Some(s)) => {
+            let text = twin_core::fsio::read_to_string(&s.path)?;
+            let text = randomize::sweep::scenario_text_at(&text, key, value)?;
+            Some(Scenario::parse(&s.path, &text).with_context(|| format!("--sweep {key} = {value}"))?)
+        }
+        (Some(Target::Scenario(key)), _, None) => {
+            anyhow::bail!("--sweep {key}: not a randomization term, and there is no --scenario whose key it could be")
+        }
+        (_, _, s) => s,
+    };
     let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
     super::check_range("--duration", duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     super::check_range("--fall-tilt", args.fall_tilt, 0.0, std::f64::consts::PI, "rad")?;
@@ -142,11 +232,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .clone()
         .or_else(|| scenario.as_ref().and_then(|s| s.model.clone()))
         .unwrap_or_else(super::default_model);
-    if let Some(out) = &args.out {
-        let mut inputs = vec![model_path.as_path()];
-        inputs.extend(args.config.as_deref());
-        inputs.extend(args.scenario.as_deref());
-        twin_core::fsio::check_output_dir(out, &inputs)?;
+    if let Some(out) = out {
+        twin_core::fsio::check_output_dir(out, &[model_path.as_path()])?;
     }
     // A scenario's physics options (armature, friction) are part of the nominal model: every
     // episode's draw starts from it.
@@ -157,7 +244,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let model = robot.model.clone();
     // Without --config, a scenario's own spec (e.g. the grasp scenario's cup and camera draws).
     let config = args.config.clone().or_else(|| scenario.as_ref().and_then(|s| s.randomize.clone()));
-    let spec = match &config {
+    let mut spec = match &config {
         Some(path) => Spec::from_file(path)?,
         None => {
             let mut spec = Spec::default_spec();
@@ -172,6 +259,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             spec
         }
     };
+    if let (Some(Target::Spec(key)), Some((_, value))) = (&target, level) {
+        spec = randomize::sweep::spec_at(&spec, key, value)?;
+    }
     let bound = if config.is_some() {
         Layout::new(&spec, &model).map(|l| (l, Vec::new()))
     } else {
@@ -195,34 +285,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let controller =
         args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    let external = controller == twin_core::scenario::EXTERNAL_CONTROLLER;
     let options = EpisodeOptions {
         duration_secs: duration,
         fall_height_fraction: args.fall_height_fraction,
         fall_tilt_rad: args.fall_tilt,
-        controller: controller.clone(),
+        // An external controller comes with the scenario (below).
+        controller: if external { "pd-hold".into() } else { controller.clone() },
     };
+    if external && scenario.is_none() {
+        anyhow::bail!("--controller ros needs --scenario FILE with a [ros] table (the command that starts your node)");
+    }
+    // The nominal robot, for `twin log analyze` of the worst episodes' recordings.
+    let nominal = (args.record_worst > 0).then(|| robot.clone());
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(mut s) = scenario {
         // The scenario's walker (its options, the --controller override) on each worker, its
         // checks, and its scripted pushes besides the spec's random ones.
         s.controller = controller;
-        batch = batch.with_scenario(std::sync::Arc::new(s))?;
+        // An external controller's output: OUT/controller_logs/worker-<k>.log.
+        let logs = match &args.out {
+            Some(out) => out.join("controller_logs"),
+            None => std::env::temp_dir().join(format!("twin-controller-logs-{}", std::process::id())),
+        };
+        if s.is_external() {
+            eprintln!(
+                "external controller `{}`: its output goes to {}",
+                s.ros.as_ref().map_or("", |r| &r.command),
+                logs.display()
+            );
+        }
+        batch = batch.with_scenario_logs(std::sync::Arc::new(s), &logs)?;
     }
-    let run_info = randomize::run_info(&batch, &model_path.display().to_string(), &spec, args.episodes, shard);
+    // A sweep level names its parameter with the model, so its outputs say which level they are.
+    let label = match level {
+        Some((sweep, value)) => format!("{} [{} = {value}]", model_path.display(), sweep.name),
+        None => model_path.display().to_string(),
+    };
+    let run_info = randomize::run_info(&batch, &label, &spec, args.episodes, shard);
     let run_options = RunOptions {
         episodes: args.episodes,
         threads: args.threads,
         shard,
-        out_dir: args.out.clone(),
+        out_dir: out.map(Path::to_path_buf),
         record_worst: args.record_worst,
     };
     let requested = (0..args.episodes).filter(|&i| shard.is_none_or(|s| s.contains(i))).count() as u64;
     // A shard records what it runs before its first episode (for merge and --status); a shard
     // already finished in its folder by this binary is not run again.
-    if let Some(out) = &args.out {
+    if let Some(out) = out {
         let cwd = std::env::current_dir().context("current folder")?;
         if let Some(manifest) =
-            randomize::ShardManifest::new(&run_info, super::VERSION_LINE, std::env::args().collect(), cwd)
+            randomize::ShardManifest::new(&run_info, &super::VERSION_LINE, std::env::args().collect(), cwd)
             && let randomize::ShardStart::AlreadyDone(done) = randomize::merge::start_shard(out, &manifest)?
         {
             print!("{}", done.summary.to_text(requested));
@@ -231,12 +345,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 manifest.shard,
                 out.display()
             );
-            return Ok(());
+            return Ok(Some(done.summary));
         }
     }
 
-    // Ctrl-C (or SIGTERM) ends the run after the episodes in flight; a second one aborts.
-    twin_core::fsio::cooperate();
     let stop = twin_core::fsio::interrupt_flag();
     let bar = if std::io::stderr().is_terminal() {
         let bar = indicatif::ProgressBar::new(requested);
@@ -267,7 +379,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         report.simulated_steps as f64 / secs.max(1e-9),
         shard.map_or_else(String::new, |s| format!(", shard {s}"))
     );
-    if let Some(out) = &args.out {
+    if let Some(out) = out {
         eprintln!("wrote {}", out.display());
         if !report.worst.is_empty() {
             eprintln!(
@@ -276,12 +388,60 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 if cfg!(feature = "rerun") { ".csv, .mcap, .rrd" } else { ".csv, .mcap" },
                 out.join("worst").display()
             );
+            if let Some(robot) = &nominal {
+                let fall = twin_core::engine::observers::FallOptions {
+                    height_fraction: args.fall_height_fraction,
+                    tilt_rad: args.fall_tilt,
+                };
+                analyze_worst(&out.join("worst"), &report.worst, robot, fall)?;
+            }
         }
     }
     if report.interrupted {
+        if level.is_some() {
+            return Ok(None);
+        }
         return Err(
             super::Interrupted(format!("{} of {} episodes finished", report.summary.episodes, requested)).into()
         );
     }
+    Ok(Some(report.summary))
+}
+
+/// `twin log analyze` of each worst episode's recording (`worst_<i>.mcap`): the report as
+/// `worst_<i>.analysis.txt` and `.json`, the plots in `worst_<i>_plots/`, and its first finding
+/// on stderr.
+fn analyze_worst(
+    dir: &std::path::Path,
+    worst: &[u64],
+    robot: &Robot,
+    fall: twin_core::engine::observers::FallOptions,
+) -> anyhow::Result<()> {
+    let options = twin_core::diagnose::AnalyzeOptions { fall, ..Default::default() };
+    for &i in worst {
+        let mcap = dir.join(format!("worst_{i:06}.mcap"));
+        let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions::default())?;
+        let analysis = twin_core::diagnose::analyze(&log, Some(robot), &options)
+            .with_context(|| format!("analysing {}", mcap.display()))?;
+        twin_core::fsio::write_atomic(
+            &dir.join(format!("worst_{i:06}.analysis.txt")),
+            analysis.to_text().as_bytes(),
+            twin_core::fsio::Backup::None,
+        )?;
+        twin_core::fsio::write_atomic(
+            &dir.join(format!("worst_{i:06}.analysis.json")),
+            analysis.to_json().as_bytes(),
+            twin_core::fsio::Backup::None,
+        )?;
+        let plots = dir.join(format!("worst_{i:06}_plots"));
+        std::fs::create_dir_all(&plots).with_context(|| format!("creating {}", plots.display()))?;
+        for (name, svg) in analysis.plots() {
+            twin_core::fsio::write_atomic(&plots.join(name), svg.as_bytes(), twin_core::fsio::Backup::None)?;
+        }
+        if let Some(d) = analysis.diagnosis.first() {
+            eprintln!("episode {i}: {} ({})", d.cause, d.evidence);
+        }
+    }
+    eprintln!("analyses (twin log analyze): worst_<i>.analysis.txt/.json and worst_<i>_plots/ in {}", dir.display());
     Ok(())
 }

@@ -1,15 +1,24 @@
 //! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay|walk …`: runs the twin
-//! under a controller of twin's registry (`twin_core::control::by_name_with`) and records ROS 2
+//! under a controller of twin's registry (`twin_core::registry::by_name_with`) and records ROS 2
 //! topics (MCAP) and a rerun recording, stamped in simulation time. `--scenario FILE` runs a
 //! scenario (`twin_core::scenario`): its model, controller, pushes and checks, printing the gait
 //! metrics and each check as PASS/FAIL; `--controller walk` alone runs the default scenario.
+//! `--ros` puts the run on the ROS 2 graph (`twin_core::live`): the bridge publishes what the
+//! recorder writes and its commands drive the robot.
+//!
+//! [`run`] reads in steps: the [`Plan`] (scenario and command line merged, checked, outputs
+//! checked before any work), the robot, the controller, the [`Outputs`] (recording; with
+//! `--ros` the live bridge, a sink of the recording whose controller replaces the registry's),
+//! the simulation (`twin_core::sim::simulate_with`, seeded by `--seed`), the printed report and
+//! the scenario's verdicts.
 
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
-use twin_core::control::{Controller, ControllerOptions, JointTrajectory};
+use twin_core::control::{Controller, JointTrajectory};
 use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
+use twin_core::registry::ControllerOptions;
 use twin_core::robot::Robot;
 use twin_core::scenario::Scenario;
 use twin_core::sim::{self, RecordOptions, Recording, SimOptions};
@@ -71,13 +80,15 @@ pub struct Args {
     /// Stream the rerun recording to a running viewer (e.g. rerun+http://127.0.0.1:9876/proxy).
     #[arg(long, value_name = "URL")]
     pub connect: Option<String>,
-    /// Seed of the sensor noise.
-    #[arg(long, default_value_t = 0)]
-    pub seed: u64,
+    /// Seed of the run's random stream: the sensor noise and biases the controller observes
+    /// (and the recording and the live bridge publish), random disturbances [default: the
+    /// scenario's, or 0].
+    #[arg(long)]
+    pub seed: Option<u64>,
     /// Rate of /joint_states, /odom, contacts and commands, Hz (every step if the timestep is
-    /// longer).
-    #[arg(long, default_value_t = 500.0)]
-    pub rate: f64,
+    /// longer) [default: 500; with --ros --lockstep, the control rate].
+    #[arg(long)]
+    pub rate: Option<f64>,
     /// Rate of /tf, Hz.
     #[arg(long, default_value_t = 100.0)]
     pub tf_rate: f64,
@@ -93,19 +104,25 @@ pub struct Args {
     pub topics: Option<Vec<String>>,
     /// Join the ROS 2 graph (domain `ROS_DOMAIN_ID`): publish /clock, /joint_states, the IMUs,
     /// /odom, /tf, /tf_static, contacts and /robot_description, and take commands on
-    /// /<robot>/joint_commands (Float64MultiArray) and /<robot>/joint_trajectory.
+    /// /<robot>/joint_commands (Float64MultiArray), /<robot>/joint_trajectory and
+    /// /<robot>/joint_command (JointState by joint name).
     #[arg(long)]
     pub ros: bool,
     /// With --ros: simulated seconds per wall second (1.0 = real time), or `max`.
     #[arg(long, default_value = "1.0", value_name = "FACTOR|max")]
     pub rtf: String,
-    /// With --ros: wait for exactly one command per control period (deterministic, however
-    /// slow the controller).
+    /// With --ros: wait for the controller to join, run the first control period under hold,
+    /// then wait for exactly one command per period (deterministic, however slow the
+    /// controller; see the README).
     #[arg(long)]
     pub lockstep: bool,
     /// With --lockstep: longest wait for a command, seconds.
     #[arg(long, default_value_t = 10.0, value_name = "SECS")]
     pub lockstep_timeout: f64,
+    /// With --lockstep: longest wait, before time starts, for the controller's command
+    /// publisher to join, seconds.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub join_timeout: f64,
     /// With --ros: control rate (/clock and command periods), Hz.
     #[arg(long, default_value_t = 100.0, value_name = "HZ")]
     pub control_rate: f64,
@@ -120,6 +137,17 @@ pub struct Args {
     /// their current pose.
     #[arg(long, default_value_t = 0.5, value_name = "SECS")]
     pub silence_timeout: f64,
+    /// Serve the run to Foxglove/Lichtblick over WebSocket at PORT (loopback) or ADDR:PORT:
+    /// every topic live (CDR), /robot_description and its package:// meshes, the
+    /// /twin/pause, /twin/resume, /twin/step and /twin/reset services, and joint position
+    /// commands published by a client. Paced at --rtf unless --ros paces the run.
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    pub foxglove: Option<String>,
+    /// Serve the run to Unity's ROS-TCP-Connector (the ROS-TCP-Endpoint protocol, ROS 2 CDR)
+    /// at PORT (loopback; 10000 when no port is given) or ADDR:PORT: Unity subscribes to
+    /// /joint_states and the other topics and publishes joint position commands.
+    #[arg(long, value_name = "[ADDR:]PORT", num_args = 0..=1, default_missing_value = "10000")]
+    pub unity: Option<String>,
     /// With --ros: wait up to this long for a subscriber on /clock before starting, seconds.
     #[arg(long, default_value_t = 0.0, value_name = "SECS")]
     pub wait_for_subscriber: f64,
@@ -135,276 +163,521 @@ pub enum InterfaceKind {
     Effort,
 }
 
+/// `twin sim`, step by step: what to run ([`Plan`]), the robot, the controller, the outputs
+/// (recording and the live bridge), the run, the report, the verdicts.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let mut scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
-    let controller_name =
-        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
-    let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
-    super::check_range("--duration", duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
-    super::check_range("--rate", args.rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
-    super::check_range("--tf-rate", args.tf_rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
-    let walking = controller_name == "walk";
-    if !walking && (args.vx.is_some() || args.vy.is_some() || args.yaw_rate.is_some()) {
-        bail!("--vx, --vy and --yaw-rate are for --controller walk");
-    }
-    // Walking runs a scenario: the given file, or the defaults with the command-line model and
-    // velocity.
-    if scenario.is_none() && walking {
-        let defaults = format!("duration = {duration:?}\ncontroller = \"walk\"\n");
-        scenario = Some(Scenario::parse(std::path::Path::new("<command line>"), &defaults)?);
-    }
-    if let Some(s) = scenario.as_mut() {
-        s.walk.vx = args.vx.unwrap_or(s.walk.vx);
-        s.walk.vy = args.vy.unwrap_or(s.walk.vy);
-        s.walk.yaw_rate = args.yaw_rate.unwrap_or(s.walk.yaw_rate);
-        s.walk.validate().map_err(|(key, m)| anyhow::anyhow!("walking option `{key}` {m}"))?;
-        if args.model.is_some() {
-            s.model = args.model.clone();
+    let plan = Plan::of(&args)?;
+    let (robot, mut stribeck) = load_robot(&args, &plan)?;
+    // A scenario's own ROS 2 node (`controller = "ros"`): started, driven in lockstep, stopped.
+    let external = plan.scenario.as_ref().filter(|s| s.is_external() && plan.controller == "ros");
+    let (mut controller, mut health) = match external {
+        Some(s) => {
+            if args.ros {
+                bail!("--ros is for driving the twin from a node you start; {} starts its own", s.path.display());
+            }
+            let (c, h) = external::start(s, &robot, args.record.as_deref())?;
+            (c, Some(h))
         }
-    }
-    // Outputs are checked before any work: not a folder or device, not an input.
-    let model_path = scenario
-        .as_ref()
-        .and_then(|s| s.model.clone())
-        .or_else(|| args.model.clone())
-        .unwrap_or_else(super::default_model);
-    let mut inputs = vec![model_path.as_path()];
-    inputs.extend(args.trajectory.as_deref());
-    inputs.extend(args.scenario.as_deref());
-    twin_core::fsio::check_outputs(
-        &[("--record", args.record.as_deref()), ("--rerun", args.rerun.as_deref())],
-        &inputs,
-    )?;
-    if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
-        return Err(twin_core::sim::record::rerun_unavailable().into());
-    }
-    let path = model_path.clone();
-    let robot = match &scenario {
-        Some(s) => s.robot(&path)?,
-        None => Robot::load(&path)?,
+        None => (twin_core::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?, None),
     };
-    let mut stribeck = args.friction_fit.as_deref().map(|file| stribeck_curves(file, &robot)).transpose()?;
-    let robot = match &stribeck {
-        Some(f) => robot.with_model(std::sync::Arc::new(f.model_without_joint_friction(&robot.model)?))?,
-        None => robot,
-    };
-    let trajectory = match (&args.trajectory, controller_name.as_str()) {
-        (Some(file), "replay") => Some(JointTrajectory::load(file, &args.trajectory_topic)?),
-        (Some(_), _) => bail!("--trajectory is for --controller replay"),
-        (None, "replay") => {
-            bail!("--controller replay needs --trajectory LOG_OR_CSV (a ROS 2 log or a CSV time_sec,<joint>,…)")
-        }
-        (None, _) => None,
-    };
-    let walk = scenario.as_ref().map(|s| s.walk.clone()).unwrap_or_default();
-    let grasp = scenario.as_ref().map(|s| s.grasp.clone()).unwrap_or_default();
-    let controller_options = ControllerOptions { trajectory, walk, grasp, ..ControllerOptions::default() };
-    let mut controller = twin_core::control::by_name_with(&controller_name, &robot.model, &controller_options)?;
     // A scenario's pushes and its gait metrics and checks.
-    let mut pushes = scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
-    let mut check = scenario.as_ref().map(|s| s.check(&robot.model)).transpose()?;
-    let options = RecordOptions {
-        mcap: args.record.clone(),
-        rrd: args.rerun.clone(),
-        connect: args.connect.clone(),
-        state_rate_hz: args.rate,
-        tf_rate_hz: args.tf_rate,
-        seed: scenario.as_ref().map_or(args.seed, |s| if args.seed != 0 { args.seed } else { s.seed }),
-        writer: WriterOptions {
-            compression: match args.compression {
-                CompressionKind::Zstd => Compression::Zstd(1),
-                CompressionKind::Lz4 => Compression::Lz4,
-                CompressionKind::None => Compression::None,
-            },
-            background: !args.inline_writer,
-            ..WriterOptions::default()
-        },
-        topics: args.topics.clone(),
-        controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
-        ..RecordOptions::default()
-    };
+    let mut pushes = plan.scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
+    let mut check = plan.scenario.as_ref().map(|s| s.check(&robot.model)).transpose()?;
     // From here on, Ctrl-C (or SIGTERM) ends the run after the current step: recordings are
     // closed, the summary printed, and twin exits with status 130; a second one aborts.
     twin_core::fsio::cooperate();
-    let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
-    let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
-    #[cfg(feature = "ros")]
-    let live = if args.ros { Some(live::start(&args, &robot)?) } else { None };
-    #[cfg(not(feature = "ros"))]
-    if args.ros {
-        return Err(
-            twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }.into()
-        );
+    let mut viewer = viewer_start(&args, &robot)?;
+    if let Some(v) = &viewer
+        && !args.ros
+    {
+        controller = v.wrap(controller, &robot.model);
     }
-    #[cfg(feature = "ros")]
-    let (mut recording, mut live_controller) = match live {
-        Some((sink, controller)) => {
-            let options = RecordOptions {
-                command_topic: Some(twin_core::live::actuator_topic(&robot)),
-                controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
-                ..options
-            };
-            (Some(Recording::with_sinks(&robot, &options, vec![Box::new(sink)])?), Some(controller))
-        }
-        None => (if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None }, None),
-    };
-    #[cfg(not(feature = "ros"))]
-    let mut recording = if recording_wanted { Some(Recording::new(&robot, &options)?) } else { None };
-    #[cfg(feature = "ros")]
-    if let Some(c) = &live_controller {
-        live::announce(&args, &robot, c)?;
-        if args.wait_for_subscriber > 0.0
-            && !c.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber))
-        {
-            bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
-        }
-    }
-    #[cfg(feature = "ros")]
-    let mut live_reset = live_controller.as_ref().map(|c| c.reset_disturbance());
-    #[cfg(feature = "ros")]
-    let controller: &mut dyn Controller = match live_controller.as_mut() {
-        Some(c) => c,
-        None => controller.as_mut(),
-    };
-    #[cfg(not(feature = "ros"))]
-    let controller: &mut dyn Controller = controller.as_mut();
+    let viewer_sinks = viewer.as_ref().map(|v| v.sinks()).unwrap_or_default();
+    let mut outputs = Outputs::open(&args, &plan, &robot, controller.as_ref(), viewer_sinks)?;
+    let mut viewer_reset = viewer.as_ref().map(|v| v.reset_disturbance());
 
-    let bar = if std::io::stderr().is_terminal() {
-        let bar = indicatif::ProgressBar::new(1000);
-        bar.set_style(
-            indicatif::ProgressStyle::with_template("{bar:40} {percent}% of the simulated time  ETA {eta}")
-                .context("progress bar template")?,
-        );
-        Some(bar)
-    } else {
-        None
-    };
-    let mut progress = |f: f64| {
-        if let Some(b) = &bar {
-            b.set_position((f * 1000.0) as u64);
-        }
-    };
+    let mut stop = twin_core::engine::observers::StopFlag::new(twin_core::fsio::interrupt_flag());
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
-    #[cfg(feature = "ros")]
-    disturbances.extend(live_reset.iter_mut().map(|r| r as &mut dyn Disturbance));
     if let Some(f) = stribeck.as_mut() {
         disturbances.push(f);
     }
-    let mut observers: Vec<&mut dyn Observer> = check.iter_mut().map(|c| c as &mut dyn Observer).collect();
+    disturbances.extend(viewer_reset.iter_mut().map(|r| r.as_mut() as &mut dyn Disturbance));
+    let mut observers: Vec<&mut dyn Observer> = health.iter_mut().map(|h| h.as_mut() as &mut dyn Observer).collect();
+    observers.extend(check.iter_mut().map(|c| c as &mut dyn Observer));
+    // Commanded vs actual joint positions, for every controller that says its targets.
+    let mut tracking = twin_core::tracking::Tracking::new();
+    observers.push(&mut tracking);
     observers.push(&mut stop);
-    let report = sim::simulate_with(
-        &robot,
-        controller,
-        &SimOptions { duration_secs: duration },
-        recording.as_mut(),
-        &mut progress,
-        &mut disturbances,
-        &mut observers,
-    )?;
+    observers.extend(viewer.as_mut().map(|v| v.observer()));
+    let (report, ran) = outputs.simulate(&robot, controller.as_mut(), &plan, &mut disturbances, &mut observers)?;
     drop(observers);
-    let controller_name = controller.name();
-    let controller_report = controller.report();
-    if let Some(b) = bar {
-        b.finish_and_clear();
-    }
-    #[cfg(feature = "ros")]
-    let live_stats = live_controller.as_ref().map(|c| c.stats().clone());
-    let finishing = std::time::Instant::now();
-    let summary = match recording {
-        Some(r) => Some(r.finish()?),
-        None => None,
-    };
-    let finish_secs = finishing.elapsed().as_secs_f64();
     let mut out = std::io::stdout().lock();
+    outputs.print(&mut out, &plan, &robot, &report, &ran)?;
+    writeln!(out, "{}", tracking.summary())?;
 
-    writeln!(
-        out,
-        "simulated {:.3} s of {} ({} steps of {} ms) with controller {} in {:.3} s wall: real-time factor {:.1}",
-        report.sim_secs,
-        path.display(),
-        report.steps,
-        robot.model.timestep_secs() * 1e3,
-        controller_name,
-        report.wall_secs,
-        report.real_time_factor()
-    )?;
-    if let Some(cpu) = report.loop_cpu_secs {
-        writeln!(out, "simulation thread CPU: {cpu:.3} s ({:.2} µs per step)", cpu * 1e6 / report.steps as f64)?;
-    }
-    if let Some(s) = summary {
-        if recording_wanted {
-            writeln!(
-                out,
-                "recording: {:.3} s inside the loop ({:.1} % of the loop, {:.2} µs per step), {:.3} s to close",
-                report.record_secs,
-                100.0 * report.record_secs / report.wall_secs.max(1e-12),
-                report.record_secs * 1e6 / report.steps as f64,
-                finish_secs
-            )?;
-        }
-        if let Some((file, w)) = &s.mcap {
-            writeln!(out, "{}: {} messages, {} chunks, {} bytes", file.display(), w.messages, w.chunks, w.bytes)?;
-            if w.queue_full_waits > 0 {
-                writeln!(
-                    out,
-                    "  the simulation waited {} times for the MCAP writer thread (no free core, or slow disk)",
-                    w.queue_full_waits
-                )?;
-            }
-            let width = s.topics.iter().map(|(t, _)| t.len()).max().unwrap_or(0);
-            for (topic, n) in &s.topics {
-                writeln!(out, "  {topic:<width$}  {n}")?;
-            }
-        }
-        if let Some((file, bytes)) = &s.rrd {
-            writeln!(out, "{}: {bytes} bytes", file.display())?;
-        }
-    }
-    #[cfg(feature = "ros")]
-    if let Some(stats) = live_stats {
-        live::report(&mut out, &stats)?;
-    }
-    for line in &controller_report {
-        writeln!(out, "{line}")?;
+    if let Some(v) = &viewer {
+        v.report(&mut out)?;
     }
     // A live run also ends on the flag, through its controller.
     let interrupted = twin_core::fsio::interrupted();
     if interrupted {
-        writeln!(out, "stopped by Ctrl-C at {:.3} s of {duration} s simulated", report.sim_secs)?;
+        writeln!(out, "stopped by Ctrl-C at {:.3} s of {} s simulated", report.sim_secs, plan.duration_secs)?;
     }
-    if let (Some(c), Some(s)) = (&check, &scenario) {
-        writeln!(out, "{}", c.metrics.summary())?;
-        let verdicts = c.verdicts();
-        if !verdicts.is_empty() {
-            writeln!(out, "checks of {}:", s.path.display())?;
-            for v in &verdicts {
-                writeln!(out, "  {v}")?;
-            }
+    if let Some(h) = &health
+        && let Some(cause) = h.verdict().cause
+    {
+        writeln!(out, "FAIL controller: {cause}")?;
+        out.flush()?;
+        if !interrupted {
+            bail!("the external controller failed: {cause}");
         }
-        let failed = verdicts.iter().filter(|v| !v.passed).count();
-        if failed > 0 && !interrupted {
-            bail!("{failed} of {} checks of {} failed", verdicts.len(), s.path.display());
-        }
+    }
+    if let (Some(c), Some(s)) = (&check, &plan.scenario) {
+        print_verdicts(&mut out, c, s, interrupted)?;
     }
     if interrupted {
         out.flush()?;
         return Err(super::Interrupted(format!(
-            "simulated {:.3} of {duration} s; the recordings are closed and readable",
-            report.sim_secs
+            "simulated {:.3} of {} s; the recordings are closed and readable",
+            report.sim_secs, plan.duration_secs
         ))
         .into());
     }
     Ok(())
 }
 
-/// The `--ros` side of `twin sim`.
+/// `--foxglove`, `--unity`: the servers, their hook and sinks (see `super::viewers`); paced at
+/// `--rtf` unless `--ros` paces the run.
+#[cfg(feature = "ros")]
+fn viewer_start(args: &Args, robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_none() && args.unity.is_none() {
+        return Ok(None);
+    }
+    let foxglove = args.foxglove.as_deref().map(|a| super::viewers::parse_addr("--foxglove", a)).transpose()?;
+    let unity = args.unity.as_deref().map(|a| super::viewers::parse_addr("--unity", a)).transpose()?;
+    let rtf = if args.ros || args.rtf.eq_ignore_ascii_case("max") {
+        None
+    } else {
+        match args.rtf.parse::<f64>() {
+            Ok(f) if f > 0.0 && f.is_finite() => Some(f),
+            _ => bail!("--rtf must be a positive real-time factor (1.0 = real time) or `max` (got {:?})", args.rtf),
+        }
+    };
+    Ok(Some(super::viewers::start(foxglove, unity, robot, rtf)?))
+}
+
+#[cfg(not(feature = "ros"))]
+fn viewer_start(args: &Args, _robot: &Robot) -> anyhow::Result<Option<super::viewers::Viewers>> {
+    if args.foxglove.is_some() || args.unity.is_some() {
+        return Err(super::viewers::unavailable());
+    }
+    Ok(None)
+}
+
+/// What to run: the scenario (a file, or the defaults of `--controller walk`), the controller
+/// and its options, the duration, the seed, the model file.
+struct Plan {
+    scenario: Option<Scenario>,
+    controller: String,
+    controller_options: ControllerOptions,
+    duration_secs: f64,
+    seed: u64,
+    model_path: PathBuf,
+    /// Rate of `/joint_states` and the other state topics, Hz.
+    state_rate_hz: f64,
+}
+
+impl Plan {
+    /// Reads the scenario, merges the command line over it, checks the numbers and the outputs
+    /// (before any work: not a folder or device, not an input) and loads the trajectory.
+    fn of(args: &Args) -> anyhow::Result<Plan> {
+        let mut scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
+        let controller = args
+            .controller
+            .clone()
+            .or_else(|| scenario.as_ref().map(|s| s.controller.clone()))
+            .unwrap_or("pd-hold".into());
+        let duration_secs = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
+        super::check_range("--duration", duration_secs, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
+        // In lockstep the state comes once per control period (see twin_core::live).
+        let state_rate_hz = args.rate.unwrap_or(if args.ros && args.lockstep { args.control_rate } else { 500.0 });
+        super::check_range("--rate", state_rate_hz, 1e-3, super::MAX_RATE_HZ, "Hz")?;
+        super::check_range("--tf-rate", args.tf_rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
+        let walking = controller == "walk";
+        if !walking && (args.vx.is_some() || args.vy.is_some() || args.yaw_rate.is_some()) {
+            bail!("--vx, --vy and --yaw-rate are for --controller walk");
+        }
+        // Walking runs a scenario: the given file, or the defaults with the command-line model
+        // and velocity.
+        if scenario.is_none() && walking {
+            scenario = Some(Scenario::defaults("walk", duration_secs));
+        }
+        if let Some(s) = scenario.as_mut() {
+            s.walk.vx = args.vx.unwrap_or(s.walk.vx);
+            s.walk.vy = args.vy.unwrap_or(s.walk.vy);
+            s.walk.yaw_rate = args.yaw_rate.unwrap_or(s.walk.yaw_rate);
+            s.walk.validate().map_err(|(key, m)| anyhow::anyhow!("walking option `{key}` {m}"))?;
+            if args.model.is_some() {
+                s.model = args.model.clone();
+            }
+        }
+        let model_path = scenario
+            .as_ref()
+            .and_then(|s| s.model.clone())
+            .or_else(|| args.model.clone())
+            .unwrap_or_else(super::default_model);
+        let mut inputs = vec![model_path.as_path()];
+        inputs.extend(args.trajectory.as_deref());
+        inputs.extend(args.scenario.as_deref());
+        twin_core::fsio::check_outputs(
+            &[("--record", args.record.as_deref()), ("--rerun", args.rerun.as_deref())],
+            &inputs,
+        )?;
+        if (args.rerun.is_some() || args.connect.is_some()) && !cfg!(feature = "rerun") {
+            return Err(twin_core::sim::record::rerun_unavailable().into());
+        }
+        let trajectory = match (&args.trajectory, controller.as_str()) {
+            (Some(file), "replay") => {
+                let trajectory = JointTrajectory::load(file, &args.trajectory_topic)?;
+                for w in &trajectory.warnings {
+                    eprintln!("warning: {}: {w}", file.display());
+                }
+                Some(trajectory)
+            }
+            (Some(_), _) => bail!("--trajectory is for --controller replay"),
+            (None, "replay") => {
+                bail!("--controller replay needs --trajectory LOG_OR_CSV (a ROS 2 log or a CSV time_sec,<joint>,…)")
+            }
+            (None, _) => None,
+        };
+        let controller_options = ControllerOptions {
+            trajectory,
+            walk: scenario.as_ref().map(|s| s.walk.clone()).unwrap_or_default(),
+            grasp: scenario.as_ref().map(|s| s.grasp.clone()).unwrap_or_default(),
+            ..ControllerOptions::default()
+        };
+        // --seed wins over the scenario's.
+        let seed = args.seed.or(scenario.as_ref().map(|s| s.seed)).unwrap_or(0);
+        Ok(Plan { scenario, controller, controller_options, duration_secs, seed, model_path, state_rate_hz })
+    }
+}
+
+/// The robot to simulate, with the friction curves of `--friction-fit` (a disturbance of the
+/// run) when given.
+fn load_robot(
+    args: &Args,
+    plan: &Plan,
+) -> anyhow::Result<(Robot, Option<twin_core::engine::disturb::StribeckFriction>)> {
+    let path = &plan.model_path;
+    let robot = match &plan.scenario {
+        Some(s) => s.robot(path)?,
+        None => Robot::load(path)?,
+    };
+    let stribeck = args.friction_fit.as_deref().map(|file| stribeck_curves(file, &robot)).transpose()?;
+    let robot = match &stribeck {
+        Some(f) => robot.with_model(std::sync::Arc::new(f.model_without_joint_friction(&robot.model)?))?,
+        None => robot,
+    };
+    Ok((robot, stribeck))
+}
+
+/// Where the run goes: the recording (MCAP, rerun) and, with `--ros`, the live bridge (a sink
+/// of the recording and the run's controller).
+struct Outputs {
+    recording: Option<Recording>,
+    /// Whether the user asked for a file or viewer (the live bridge records too).
+    recording_wanted: bool,
+    live: Option<live::Live>,
+}
+
+/// What the run's controller said when it ended.
+struct Ran {
+    controller: &'static str,
+    lines: Vec<String>,
+}
+
+impl Outputs {
+    fn open(
+        args: &Args,
+        plan: &Plan,
+        robot: &Robot,
+        controller: &dyn Controller,
+        viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
+    ) -> anyhow::Result<Outputs> {
+        let options = RecordOptions {
+            mcap: args.record.clone(),
+            rrd: args.rerun.clone(),
+            connect: args.connect.clone(),
+            state_rate_hz: plan.state_rate_hz,
+            tf_rate_hz: args.tf_rate,
+            writer: WriterOptions {
+                compression: match args.compression {
+                    CompressionKind::Zstd => Compression::Zstd(1),
+                    CompressionKind::Lz4 => Compression::Lz4,
+                    CompressionKind::None => Compression::None,
+                },
+                background: !args.inline_writer,
+                ..WriterOptions::default()
+            },
+            topics: args.topics.clone(),
+            controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
+            ..RecordOptions::default()
+        };
+        let recording_wanted = options.mcap.is_some() || options.rrd.is_some() || options.connect.is_some();
+        if recording_wanted || args.ros {
+            for note in twin_core::sense::unrendered_cameras(robot) {
+                eprintln!("note: {note}");
+            }
+        }
+        if args.ros {
+            let (live, recording) = live::Live::start(args, robot, options, viewer_sinks)?;
+            return Ok(Outputs { recording: Some(recording), recording_wanted, live: Some(live) });
+        }
+        let recording = if !viewer_sinks.is_empty() {
+            Some(Recording::with_sinks(robot, &options, viewer_sinks)?)
+        } else if recording_wanted {
+            Some(Recording::new(robot, &options)?)
+        } else {
+            None
+        };
+        Ok(Outputs { recording, recording_wanted, live: None })
+    }
+
+    /// Runs the simulation with `controller` (or the live bridge's), a progress bar on a
+    /// terminal, and closes the recording.
+    fn simulate(
+        &mut self,
+        robot: &Robot,
+        controller: &mut dyn Controller,
+        plan: &Plan,
+        disturbances: &mut [&mut dyn Disturbance],
+        observers: &mut [&mut dyn Observer],
+    ) -> anyhow::Result<(sim::SimReport, Ran)> {
+        let bar = progress_bar()?;
+        let mut progress = |f: f64| {
+            if let Some(b) = &bar {
+                b.set_position((f * 1000.0) as u64);
+            }
+        };
+        let (controller, reset): (&mut dyn Controller, _) = match self.live.as_mut() {
+            Some(l) => l.parts(),
+            None => (controller, None),
+        };
+        let mut all: Vec<&mut dyn Disturbance> =
+            disturbances.iter_mut().map(|d| &mut **d as &mut dyn Disturbance).collect();
+        all.extend(reset);
+        let options = SimOptions { duration_secs: plan.duration_secs, seed: plan.seed };
+        let report = sim::simulate_with(
+            robot,
+            controller,
+            &options,
+            self.recording.as_mut(),
+            &mut progress,
+            &mut all,
+            observers,
+        )?;
+        let ran = Ran { controller: controller.name(), lines: controller.report() };
+        if let Some(b) = bar {
+            b.finish_and_clear();
+        }
+        Ok((report, ran))
+    }
+
+    /// Closes the recording and prints what the run did.
+    fn print(
+        &mut self,
+        out: &mut impl Write,
+        plan: &Plan,
+        robot: &Robot,
+        report: &sim::SimReport,
+        ran: &Ran,
+    ) -> anyhow::Result<()> {
+        let finishing = std::time::Instant::now();
+        let summary = self.recording.take().map(Recording::finish).transpose()?;
+        let finish_secs = finishing.elapsed().as_secs_f64();
+        writeln!(
+            out,
+            "simulated {:.3} s of {} ({} steps of {} ms) with controller {} in {:.3} s wall: real-time factor {:.1}",
+            report.sim_secs,
+            plan.model_path.display(),
+            report.steps,
+            robot.model.timestep_secs() * 1e3,
+            ran.controller,
+            report.wall_secs,
+            report.real_time_factor()
+        )?;
+        if let Some(cpu) = report.loop_cpu_secs {
+            writeln!(out, "simulation thread CPU: {cpu:.3} s ({:.2} µs per step)", cpu * 1e6 / report.steps as f64)?;
+        }
+        if let Some(s) = summary {
+            print_recording(out, &s, report, finish_secs, self.recording_wanted)?;
+        }
+        if let Some(l) = &self.live {
+            l.report(out)?;
+        }
+        for line in &ran.lines {
+            writeln!(out, "{line}")?;
+        }
+        Ok(())
+    }
+}
+
+fn progress_bar() -> anyhow::Result<Option<indicatif::ProgressBar>> {
+    if !std::io::stderr().is_terminal() {
+        return Ok(None);
+    }
+    let bar = indicatif::ProgressBar::new(1000);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{bar:40} {percent}% of the simulated time  ETA {eta}")
+            .context("progress bar template")?,
+    );
+    Ok(Some(bar))
+}
+
+fn print_recording(
+    out: &mut impl Write,
+    s: &twin_core::sim::RecordSummary,
+    report: &sim::SimReport,
+    finish_secs: f64,
+    recording_wanted: bool,
+) -> anyhow::Result<()> {
+    if recording_wanted {
+        writeln!(
+            out,
+            "recording: {:.3} s inside the loop ({:.1} % of the loop, {:.2} µs per step), {:.3} s to close",
+            report.record_secs,
+            100.0 * report.record_secs / report.wall_secs.max(1e-12),
+            report.record_secs * 1e6 / report.steps as f64,
+            finish_secs
+        )?;
+    }
+    if let Some((file, w)) = &s.mcap {
+        writeln!(out, "{}: {} messages, {} chunks, {} bytes", file.display(), w.messages, w.chunks, w.bytes)?;
+        if w.queue_full_waits > 0 {
+            writeln!(
+                out,
+                "  the simulation waited {} times for the MCAP writer thread (no free core, or slow disk)",
+                w.queue_full_waits
+            )?;
+        }
+        let width = s.topics.iter().map(|(t, _)| t.len()).max().unwrap_or(0);
+        for (topic, n) in &s.topics {
+            writeln!(out, "  {topic:<width$}  {n}")?;
+        }
+    }
+    if let Some((file, bytes)) = &s.rrd {
+        writeln!(out, "{}: {bytes} bytes", file.display())?;
+    }
+    for c in &s.sensors {
+        writeln!(
+            out,
+            "sensor {}: {} readings of {} rays at {} Hz, {:.2} ms each: {:.0} ms per simulated second",
+            c.name,
+            c.readings,
+            c.rays,
+            c.rate_hz,
+            c.secs_per_reading * 1e3,
+            c.secs_per_sim_sec() * 1e3
+        )?;
+        // The budget: real time on the core that casts the sensor's rays.
+        if c.secs_per_sim_sec() > 1.0 {
+            eprintln!(
+                "warning: sensor {} alone keeps the run below real time: {:.1} ms a reading × {} Hz = {:.2} s per \
+                 simulated second; lower its resolution or rate, or leave its topics out (--topics)",
+                c.name,
+                c.secs_per_reading * 1e3,
+                c.rate_hz,
+                c.secs_per_sim_sec()
+            );
+        }
+    }
+    Ok(())
+}
+
+/// Prints the scenario's gait metrics and verdicts; fails when a check failed (unless the run
+/// was interrupted: its numbers are partial).
+fn print_verdicts(
+    out: &mut impl Write,
+    check: &twin_core::scenario::ScenarioCheck,
+    scenario: &Scenario,
+    interrupted: bool,
+) -> anyhow::Result<()> {
+    writeln!(out, "{}", check.metrics.summary())?;
+    let verdicts = check.verdicts();
+    if !verdicts.is_empty() {
+        writeln!(out, "checks of {}:", scenario.path.display())?;
+        for v in &verdicts {
+            writeln!(out, "  {v}")?;
+        }
+    }
+    let failed = verdicts.iter().filter(|v| !v.passed).count();
+    if failed > 0 && !interrupted {
+        bail!("{failed} of {} checks of {} failed", verdicts.len(), scenario.path.display());
+    }
+    Ok(())
+}
+
+/// `controller = "ros"` in a scenario: the user's node as the controller
+/// (`twin_core::external`).
+mod external {
+    use std::path::Path;
+    use twin_core::control::Controller;
+    use twin_core::engine::Check;
+    use twin_core::robot::Robot;
+    use twin_core::scenario::Scenario;
+
+    /// The scenario's external controller and its health check; the process's output goes
+    /// beside `record` (`<record>.controller.log`), or to `<scenario>.controller.log` in the
+    /// current folder.
+    #[cfg(feature = "ros")]
+    pub fn start(
+        s: &Scenario,
+        robot: &Robot,
+        record: Option<&Path>,
+    ) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
+        let Some(options) = &s.ros else {
+            anyhow::bail!("{}: controller = \"ros\" needs a [ros] table", s.path.display())
+        };
+        let stem = |p: &Path| p.file_stem().map_or_else(|| "run".into(), |n| n.to_string_lossy().into_owned());
+        let log = match record {
+            Some(r) => r.with_file_name(format!("{}.controller.log", stem(r))),
+            None => Path::new(".").join(format!("{}.controller.log", stem(&s.path))),
+        };
+        let (c, h) = twin_core::external::external(robot, options, &s.folder(), &log)?;
+        eprintln!(
+            "external controller `{}` on ROS domain {}: its output goes to {}",
+            options.command,
+            c.domain_id(),
+            log.display()
+        );
+        Ok((Box::new(c), Box::new(h)))
+    }
+
+    #[cfg(not(feature = "ros"))]
+    pub fn start(_: &Scenario, _: &Robot, _: Option<&Path>) -> anyhow::Result<(Box<dyn Controller>, Box<dyn Check>)> {
+        Err(twin_core::Error::FeatureMissing { feature: "ros", what: "controller = \"ros\" (your ROS 2 node)".into() }
+            .into())
+    }
+}
+
+/// The `--ros` side of `twin sim`: the live bridge's two halves, started, announced and
+/// reported.
 #[cfg(feature = "ros")]
 mod live {
     use super::{Args, InterfaceKind};
     use anyhow::{Context, bail};
     use std::io::Write;
-    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, LiveSink, LiveStats, Pacing};
+    use twin_core::control::Controller;
+    use twin_core::engine::Disturbance;
+    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, LiveReset, Pacing};
     use twin_core::robot::Robot;
+    use twin_core::sim::{RecordOptions, Recording};
+
+    /// The bridge of a run: its controller and its reset.
+    pub struct Live {
+        controller: LiveController,
+        reset: LiveReset,
+    }
 
     /// `ROS_DOMAIN_ID` (0 when unset), checked.
     fn domain_id() -> anyhow::Result<u16> {
@@ -418,7 +691,14 @@ mod live {
         }
     }
 
-    pub fn start(args: &Args, robot: &Robot) -> anyhow::Result<(LiveSink, LiveController)> {
+    fn positive(option: &str, value: f64) -> anyhow::Result<()> {
+        if !(value > 0.0 && value.is_finite()) {
+            bail!("{option} must be a positive number of seconds (got {value})");
+        }
+        Ok(())
+    }
+
+    fn options(args: &Args) -> anyhow::Result<LiveOptions> {
         let pacing = if args.lockstep {
             Pacing::Lockstep
         } else if args.rtf.eq_ignore_ascii_case("max") {
@@ -429,12 +709,9 @@ mod live {
                 _ => bail!("--rtf must be a positive real-time factor (1.0 = real time) or `max` (got {:?})", args.rtf),
             }
         };
-        if !(args.lockstep_timeout > 0.0 && args.lockstep_timeout.is_finite()) {
-            bail!("--lockstep-timeout must be a positive number of seconds (got {})", args.lockstep_timeout);
-        }
-        if !(args.silence_timeout > 0.0 && args.silence_timeout.is_finite()) {
-            bail!("--silence-timeout must be a positive number of seconds (got {})", args.silence_timeout);
-        }
+        positive("--lockstep-timeout", args.lockstep_timeout)?;
+        positive("--join-timeout", args.join_timeout)?;
+        positive("--silence-timeout", args.silence_timeout)?;
         let interface = if args.ros_interface == "lo" {
             std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST)
         } else {
@@ -445,7 +722,7 @@ mod live {
                 )
             })?
         };
-        let options = LiveOptions {
+        Ok(LiveOptions {
             domain_id: domain_id()?,
             interface,
             control_rate_hz: args.control_rate,
@@ -457,21 +734,82 @@ mod live {
             pacing,
             silence_timeout_secs: args.silence_timeout,
             lockstep_timeout_secs: args.lockstep_timeout,
-        };
-        // Ctrl-C ends the run cleanly (recordings closed); a second one aborts (twin's one
-        // signal handler, installed by main).
-        twin_core::fsio::cooperate();
-        let stop = twin_core::fsio::interrupt_flag();
-        let log = Box::new(|m: &str| eprintln!("warning: {m}"));
-        Ok(bridge::start(robot, &options, stop, log)?)
+            join_timeout_secs: args.join_timeout,
+        })
     }
 
-    pub fn announce(args: &Args, robot: &Robot, c: &LiveController) -> anyhow::Result<()> {
+    impl Live {
+        /// Joins the graph, opens the recording with the bridge as a sink, announces the
+        /// bridge, and waits for a subscriber when asked.
+        pub fn start(
+            args: &Args,
+            robot: &Robot,
+            record: RecordOptions,
+            viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
+        ) -> anyhow::Result<(Live, Recording)> {
+            let options = options(args)?;
+            let stop = twin_core::fsio::interrupt_flag();
+            let log = Box::new(|m: &str| eprintln!("warning: {m}"));
+            let (sink, controller) = bridge::start(robot, &options, stop, log)?;
+            let record = RecordOptions {
+                command_topic: Some(bridge::actuator_topic(robot)),
+                controller_topics: controller.topics().into_iter().map(|t| t.name).collect(),
+                ..record
+            };
+            let mut sinks: Vec<Box<dyn twin_core::topics::Sink>> = vec![Box::new(sink)];
+            sinks.extend(viewer_sinks);
+            let recording = Recording::with_sinks(robot, &record, sinks)?;
+            announce(args, robot, &controller, options.domain_id)?;
+            if args.wait_for_subscriber > 0.0
+                && !controller.wait_for_subscriber(std::time::Duration::from_secs_f64(args.wait_for_subscriber))
+            {
+                bail!("no subscriber on /clock within {} s (--wait-for-subscriber)", args.wait_for_subscriber);
+            }
+            let reset = controller.reset_disturbance();
+            Ok((Live { controller, reset }, recording))
+        }
+
+        /// The run's controller and its reset disturbance.
+        pub fn parts(&mut self) -> (&mut dyn Controller, Option<&mut dyn Disturbance>) {
+            (&mut self.controller, Some(&mut self.reset))
+        }
+
+        pub fn report(&self, out: &mut impl Write) -> anyhow::Result<()> {
+            let s = self.controller.stats();
+            writeln!(
+                out,
+                "live: {} control periods, {} commands applied, {} rejected, {} safe holds, {} service calls, {} \
+                 resets; measured real-time factor {:.4}",
+                s.periods,
+                s.commands_applied,
+                s.commands_rejected,
+                s.safe_holds,
+                s.service_calls,
+                s.resets,
+                s.real_time_factor()
+            )?;
+            if let Some(j) = s.join_secs {
+                writeln!(out, "lockstep: the controller joined after {j:.2} s")?;
+            }
+            if let (Some(p50), Some(p99)) =
+                (bridge::percentile(&s.jitter_micros, 50.0), bridge::percentile(&s.jitter_micros, 99.0))
+            {
+                writeln!(out, "period start lateness (jitter): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+            }
+            if let (Some(p50), Some(p99)) =
+                (bridge::percentile(&s.round_trip_micros, 50.0), bridge::percentile(&s.round_trip_micros, 99.0))
+            {
+                writeln!(out, "lockstep round trip (/clock out to command in): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+            }
+            Ok(())
+        }
+    }
+
+    fn announce(args: &Args, robot: &Robot, c: &LiveController, domain: u16) -> anyhow::Result<()> {
         let mut out = std::io::stdout().lock();
         writeln!(
             out,
-            "ROS 2 live: domain {}, interface {}, {} at {} Hz ({} steps per period), {}",
-            domain_id()?,
+            "ROS 2 live: domain {domain}, interface {}, {} at {} Hz ({} steps per period), {}",
             args.ros_interface,
             if args.lockstep { "lockstep".to_string() } else { format!("rtf {}", args.rtf) },
             args.control_rate,
@@ -480,14 +818,16 @@ mod live {
         )?;
         writeln!(
             out,
-            "commands: std_msgs/Float64MultiArray on {} ({}), trajectory_msgs/JointTrajectory on /{}/joint_trajectory",
+            "commands: std_msgs/Float64MultiArray on {} ({}), trajectory_msgs/JointTrajectory on {}, \
+             sensor_msgs/JointState by joint name on {}",
             bridge::command_topic(robot),
             match args.command_interface {
                 InterfaceKind::Position => "positions, rad",
                 InterfaceKind::Velocity => "velocities, rad/s",
                 InterfaceKind::Effort => "efforts, N·m",
             },
-            robot.name
+            bridge::trajectory_topic(robot),
+            bridge::by_name_topic(robot)
         )?;
         writeln!(out, "command order ({} joints): {}", c.joint_names().len(), c.joint_names().join(", "))?;
         let services: Vec<String> =
@@ -496,31 +836,38 @@ mod live {
         out.flush()?;
         Ok(())
     }
+}
 
-    pub fn report(out: &mut impl Write, s: &LiveStats) -> anyhow::Result<()> {
-        writeln!(
-            out,
-            "live: {} control periods, {} commands applied, {} rejected, {} safe holds, {} service calls, {} resets; \
-             measured real-time factor {:.4}",
-            s.periods,
-            s.commands_applied,
-            s.commands_rejected,
-            s.safe_holds,
-            s.service_calls,
-            s.resets,
-            s.real_time_factor()
-        )?;
-        if let (Some(p50), Some(p99)) =
-            (bridge::percentile(&s.jitter_micros, 50.0), bridge::percentile(&s.jitter_micros, 99.0))
-        {
-            writeln!(out, "period start lateness (jitter): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+/// Without the `ros` feature: `--ros` says the build lacks it.
+#[cfg(not(feature = "ros"))]
+mod live {
+    use super::Args;
+    use twin_core::control::Controller;
+    use twin_core::engine::Disturbance;
+    use twin_core::robot::Robot;
+    use twin_core::sim::{RecordOptions, Recording};
+
+    /// No bridge in this build: never made.
+    pub enum Live {}
+
+    impl Live {
+        pub fn start(
+            _: &Args,
+            _: &Robot,
+            _: RecordOptions,
+            _: Vec<Box<dyn twin_core::topics::Sink>>,
+        ) -> anyhow::Result<(Live, Recording)> {
+            Err(twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }
+                .into())
         }
-        if let (Some(p50), Some(p99)) =
-            (bridge::percentile(&s.round_trip_micros, 50.0), bridge::percentile(&s.round_trip_micros, 99.0))
-        {
-            writeln!(out, "lockstep round trip (/clock out to command in): p50 {p50:.0} µs, p99 {p99:.0} µs")?;
+
+        pub fn parts(&mut self) -> (&mut dyn Controller, Option<&mut dyn Disturbance>) {
+            match *self {}
         }
-        Ok(())
+
+        pub fn report(&self, _: &mut impl std::io::Write) -> anyhow::Result<()> {
+            match *self {}
+        }
     }
 }
 

@@ -124,7 +124,7 @@ fn friction(args: FrictionArgs) -> anyhow::Result<()> {
         Some(u) => format!("friction identification failed; {} was not changed", u.display()),
         None => "friction identification failed".into(),
     })?;
-    print!("{}", report.table());
+    print!("{}\n{}", report.segments_text(), report.table());
     if let Some(path) = &args.report {
         super::write_output(path, &report.to_json(), "report")?;
     }

@@ -1,6 +1,8 @@
 //! `twin view LOG.mcap [--model robot.urdf] -o log.rrd [--connect URL]`: a robot's ROS 2 bag as
 //! a rerun recording, the robot animated from `/joint_states` (and `/odom` when present), joint
 //! and IMU time series as scalars: RViz and PlotJuggler in one file.
+//! `twin view LOG --foxglove [ADDR:]PORT`: plays the log to Foxglove/Lichtblick over WebSocket
+//! instead (its CDR topics with their schemas, at the log's pace).
 
 use anyhow::bail;
 use std::path::PathBuf;
@@ -30,11 +32,33 @@ pub struct Args {
     /// Fail on a damaged log instead of showing what is intact.
     #[arg(long)]
     pub strict: bool,
+    /// Play the log to Foxglove/Lichtblick over WebSocket at PORT (loopback) or ADDR:PORT,
+    /// once a client subscribes (see --wait), at --rate × its pace.
+    #[arg(long, value_name = "[ADDR:]PORT")]
+    pub foxglove: Option<String>,
+    /// With --foxglove: playback speed (1.0 = the log's pace).
+    #[arg(long, default_value_t = 1.0)]
+    pub rate: f64,
+    /// With --foxglove: longest wait for a client's subscription before playing, seconds.
+    #[arg(long, default_value_t = 30.0, value_name = "SECS")]
+    pub wait: f64,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
+    if let Some(addr) = &args.foxglove {
+        super::check_range("--rate", args.rate, 1e-3, 1e3, "")?;
+        super::check_range("--wait", args.wait, 0.0, 3600.0, "s")?;
+        let addr = super::viewers::parse_addr("--foxglove", addr)?;
+        #[cfg(feature = "ros")]
+        return super::viewers::play(&args.log, args.model.as_deref(), addr, args.rate, args.wait, args.strict);
+        #[cfg(not(feature = "ros"))]
+        return Err(super::viewers::unavailable());
+    }
     if args.output.is_none() && args.connect.is_none() {
-        bail!("give -o LOG.rrd to write a recording, or --connect URL to stream to a rerun viewer");
+        bail!(
+            "give -o LOG.rrd to write a recording, --connect URL to stream to a rerun viewer, or --foxglove PORT to \
+             play it to Foxglove"
+        );
     }
     super::check_range("--fps", args.fps, 1e-3, super::MAX_FPS, "frames per second")?;
     if let Some(out) = &args.output {

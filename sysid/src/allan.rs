@@ -386,7 +386,7 @@ fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::synth::Rng;
+    use crate::rng::Rng;
 
     #[test]
     fn white_noise_adev_is_sigma_over_sqrt_m_and_quantiles_are_right() {

@@ -75,3 +75,10 @@ pub enum Error {
 
 /// `Result` with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl From<twin_core::fsio::Error> for Error {
+    /// A file error, as `twin_core::Error` reports it.
+    fn from(e: twin_core::fsio::Error) -> Error {
+        Error::Core(e.into())
+    }
+}

@@ -56,7 +56,7 @@ use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
 use crate::model::RobotModel;
 use crate::regressor::{FrictionModel, Regressor};
-use crate::synth::Rng;
+use crate::rng::Rng;
 use faer::Mat;
 use std::f64::consts::PI;
 use std::path::Path;

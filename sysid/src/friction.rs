@@ -2,20 +2,34 @@
 //!
 //! Recipe (calibration notes; IHMC, Rhoban/bam): each joint is moved at a series of constant
 //! velocities, forth and back. For each joint:
-//! 1. **Segments**: runs where the joint's velocity (logged, else the central difference of
-//!    the positions, smoothed over [`FrictionOptions::smooth_secs`]) stays within
-//!    `max(rel_tol·|v|, abs_tol)` of the run's mean for at least `min_segment_secs`, above the
-//!    dead zone.
+//! 1. **Segments** ([`find_segments`]): the joint's velocity (logged, else the central
+//!    difference of the positions) is smoothed by a moving average over
+//!    [`FrictionOptions::smooth_secs`], logged or not (a drive's velocity is as noisy as a
+//!    difference). Its noise is measured from the log itself: σ = 1.4826 · the median absolute
+//!    deviation of the raw velocity from the smoothed one, divided by √(samples per window) for
+//!    the smoothed series. A segment is a run whose smoothed samples all stay within the
+//!    tolerance `max(rel_tol·|v̄|, abs_tol, 4σ)` of the run's running mean `v̄`, with
+//!    `|v̄| > dead_zone`; of it only the core is kept, where samples are within half that
+//!    tolerance of the run's median (the ramps, where inertia torques would not cancel, are
+//!    cut), minus 10 % at each end; the core must last `min_segment_secs`. Every segment used
+//!    is listed with its times ([`JointFriction::segment_spans`]; `twin sysid friction` prints
+//!    them per joint).
 //! 2. **±v pairing**: a `+v` segment and a `−v` segment of about the same speed (within
 //!    `pair_tol`), over the positions both cover: their efforts are fitted together as a cubic
 //!    in position (gravity and offsets, the same both ways) plus `±f`, so `f` is `(τ⁺ − τ⁻)/2`
 //!    with gravity cancelled even where the two directions sample the positions unevenly (the
 //!    difference of plain means was biased by up to 3 % at 1.3 rad/s on gravity-loaded joints);
 //!    inertia is absent at constant velocity.
-//! 3. **Fit**: `τ_f(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ) + Fv·v` for `v > 0` (odd in `v`) by
-//!    bounded Levenberg–Marquardt (`Fc, Fs, Fv ≥ 0`, `vs` in log space, `δ ∈ [0.5, 3]`), from a
-//!    line through the fast half (`Fc`, `Fv`) and several `vs` starts; covariance
-//!    `σ²(JᵀJ)⁻¹` gives 95 % confidence intervals.
+//! 3. **Fit** the richest model the paired speeds identify ([`FrictionModel`]), and say which:
+//!    - with ≥ 6 speeds, **Stribeck** `τ_f(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ) + Fv·v` for
+//!      `v > 0` (odd in `v`) by bounded Levenberg–Marquardt (`Fc, Fs, Fv ≥ 0`, `vs` in log
+//!      space, `δ ∈ [0.5, 3]`), from a line through the fast half (`Fc`, `Fv`) and several `vs`
+//!      starts; covariance `σ²(JᵀJ)⁻¹` gives 95 % confidence intervals. It is kept when the
+//!      Stribeck hump is identified: `Fs − Fc` above its own 95 % half-width and every interval
+//!      finite; else the data say no more than Coulomb + viscous, which is fitted instead;
+//!    - with 2 to 5 speeds (or an unidentified hump), **Coulomb + viscous** `Fc + Fv·v`, by
+//!      least squares weighted by each point's standard error;
+//!    - with 1 speed, **Coulomb** alone.
 //!
 //! The Coulomb (`Fc` → `<dynamics friction>`) and viscous (`Fv` → `damping`) parts go into the
 //! URDF with [`crate::writeback::update_urdf_file`]; the Stribeck terms are reported.
@@ -36,9 +50,12 @@ pub struct FrictionOptions {
     pub abs_tol: f64,
     /// Speeds below are the dead zone (stiction), rad/s (default: 0.001).
     pub dead_zone: f64,
+    /// Velocity tolerance floor in multiples of the smoothed velocity's measured noise σ
+    /// (default: 4).
+    pub noise_sigmas: f64,
     /// Largest relative speed difference of a ±v pair (default: 0.1).
     pub pair_tol: f64,
-    /// Moving-average window of differentiated velocities, s (default: 0.05).
+    /// Moving-average window of the velocity (logged or differentiated), s (default: 0.05).
     pub smooth_secs: f64,
     /// Joints to fit (default: every joint with segments; empty = all).
     pub joints: Vec<String>,
@@ -51,6 +68,7 @@ impl Default for FrictionOptions {
             rel_tol: 0.05,
             abs_tol: 0.002,
             dead_zone: 0.001,
+            noise_sigmas: 4.0,
             pair_tol: 0.1,
             smooth_secs: 0.05,
             joints: Vec::new(),
@@ -80,6 +98,46 @@ pub struct CurvePoint {
     pub std_err: f64,
     /// Samples averaged (both directions).
     pub samples: usize,
+    /// The `+v` segment, seconds from the log's start (first, last sample).
+    pub positive_secs: [f64; 2],
+    /// The `−v` segment, seconds from the log's start.
+    pub negative_secs: [f64; 2],
+}
+
+/// A constant-velocity segment as the report lists it.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct SegmentSpan {
+    /// First sample, seconds from the log's start.
+    pub start_secs: f64,
+    /// Last sample, seconds from the log's start.
+    pub end_secs: f64,
+    /// Mean velocity, rad/s.
+    pub velocity: f64,
+    /// Whether it made a ±v pair (a point of the curve).
+    pub paired: bool,
+}
+
+/// The friction model a joint's data identify (see the module docs).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FrictionModel {
+    /// Coulomb, breakaway, Stribeck velocity and exponent, viscous (≥ 6 speeds, hump identified).
+    Stribeck,
+    /// Coulomb + viscous (2 speeds or more).
+    CoulombViscous,
+    /// Coulomb alone (one speed).
+    Coulomb,
+}
+
+impl FrictionModel {
+    /// Its name in reports.
+    pub fn label(self) -> &'static str {
+        match self {
+            FrictionModel::Stribeck => "Stribeck",
+            FrictionModel::CoulombViscous => "Coulomb + viscous",
+            FrictionModel::Coulomb => "Coulomb",
+        }
+    }
 }
 
 /// Stribeck parameters.
@@ -119,10 +177,15 @@ impl Stribeck {
 pub struct JointFriction {
     /// Joint.
     pub joint: String,
-    /// Fitted curve.
+    /// The model fitted: the richest the data identify.
+    pub model: FrictionModel,
+    /// Why not a richer model (empty for Stribeck).
+    pub model_note: String,
+    /// Fitted curve. Without the Stribeck terms `breakaway` equals `coulomb` (the hump is zero)
+    /// and `stribeck_velocity`, `exponent` are 1 and unused; without viscous, `viscous` is 0.
     pub fit: Stribeck,
     /// 95 % half-widths of `[Fc, Fs, vs, δ, Fv]` (vs: from the log-space interval, the larger
-    /// side).
+    /// side); NaN (`null` in JSON) for the terms the model does not have.
     pub ci95: [f64; 5],
     /// RMS residual, N·m.
     pub rms_residual: f64,
@@ -130,6 +193,8 @@ pub struct JointFriction {
     pub points: Vec<CurvePoint>,
     /// Segments found (both directions).
     pub segments: usize,
+    /// Every segment found, paired or not, in time order.
+    pub segment_spans: Vec<SegmentSpan>,
 }
 
 /// Friction fits of a sweep log.
@@ -141,38 +206,54 @@ pub struct FrictionReport {
     pub joints: Vec<JointFriction>,
 }
 
-/// Velocity of joint `j`: the logged one where finite, else the smoothed central difference.
-fn joint_velocity(log: &JointLog, j: usize, smooth_secs: f64) -> Vec<f64> {
+/// Velocity of joint `j` (the logged one where every sample has one, else the central
+/// difference of the positions), smoothed by a moving average over `smooth_secs`, and the
+/// measured noise σ of the smoothed series (see the module docs), rad/s.
+fn joint_velocity(log: &JointLog, j: usize, smooth_secs: f64) -> (Vec<f64>, f64) {
     let n = log.len();
-    if log.velocity[j].iter().all(|v| v.is_finite()) && n > 0 {
-        return log.velocity[j].clone();
-    }
-    let q = &log.position[j];
     let t = |k: usize| log.t_nanos[k] as f64 * 1e-9;
-    let raw: Vec<f64> = (0..n)
-        .map(|k| {
-            let (a, b) = (k.saturating_sub(1), (k + 1).min(n - 1));
-            if b > a { (q[b] - q[a]) / (t(b) - t(a)) } else { 0.0 }
-        })
-        .collect();
-    let dt = if n > 1 { (t(n - 1) - t(0)) / (n - 1) as f64 } else { 1.0 };
+    let raw: Vec<f64> = if log.velocity[j].iter().all(|v| v.is_finite()) {
+        log.velocity[j].clone()
+    } else {
+        let q = &log.position[j];
+        (0..n)
+            .map(|k| {
+                let (a, b) = (k.saturating_sub(1), (k + 1).min(n.saturating_sub(1)));
+                if b > a { (q[b] - q[a]) / (t(b) - t(a)) } else { 0.0 }
+            })
+            .collect()
+    };
+    if n < 2 {
+        return (raw, 0.0);
+    }
+    let dt = (t(n - 1) - t(0)) / (n - 1) as f64;
     let half = ((smooth_secs / dt / 2.0).round() as usize).max(1);
     let mut prefix = vec![0.0; n + 1];
     for k in 0..n {
         prefix[k + 1] = prefix[k] + raw[k];
     }
-    (0..n)
+    let smooth: Vec<f64> = (0..n)
         .map(|k| {
             let (a, b) = (k.saturating_sub(half), (k + half + 1).min(n));
             (prefix[b] - prefix[a]) / (b - a) as f64
         })
-        .collect()
+        .collect();
+    let mut dev: Vec<f64> = raw.iter().zip(&smooth).map(|(r, s)| (r - s).abs()).filter(|d| d.is_finite()).collect();
+    let sigma_raw = if dev.is_empty() {
+        0.0
+    } else {
+        let mid = dev.len() / 2;
+        1.4826 * *dev.select_nth_unstable_by(mid, f64::total_cmp).1
+    };
+    (smooth, sigma_raw / ((2 * half + 1) as f64).sqrt())
 }
 
-/// Constant-velocity segments of velocity series `v` at times `t_nanos`.
-pub fn find_segments(t_nanos: &[i64], v: &[f64], opts: &FrictionOptions) -> Vec<Segment> {
+/// Constant-velocity segments of the smoothed velocity series `v` at times `t_nanos`, whose
+/// measured noise is `noise_sigma` rad/s (see the module docs for the criteria).
+pub fn find_segments(t_nanos: &[i64], v: &[f64], noise_sigma: f64, opts: &FrictionOptions) -> Vec<Segment> {
     let mut out = Vec::new();
     let n = v.len();
+    let floor = opts.abs_tol.max(opts.noise_sigmas * noise_sigma);
     let mut start = 0;
     while start < n {
         // Grow a run while every sample stays within tolerance of the run's running mean.
@@ -180,7 +261,7 @@ pub fn find_segments(t_nanos: &[i64], v: &[f64], opts: &FrictionOptions) -> Vec<
         let mut end = start + 1;
         while end < n {
             let mean = sum / (end - start) as f64;
-            let tol = (opts.rel_tol * mean.abs()).max(opts.abs_tol);
+            let tol = (opts.rel_tol * mean.abs()).max(floor);
             if !v[end].is_finite() || (v[end] - mean).abs() > tol {
                 break;
             }
@@ -197,7 +278,7 @@ pub fn find_segments(t_nanos: &[i64], v: &[f64], opts: &FrictionOptions) -> Vec<
             let mut sorted: Vec<f64> = v[start..end].to_vec();
             sorted.sort_by(f64::total_cmp);
             let median = sorted[sorted.len() / 2];
-            let core_tol = 0.5 * (opts.rel_tol * median.abs()).max(opts.abs_tol);
+            let core_tol = 0.5 * (opts.rel_tol * median.abs()).max(floor);
             let (mut a, mut b) = (start, end);
             while a < b && (v[a] - median).abs() > core_tol {
                 a += 1;
@@ -268,6 +349,12 @@ fn paired_friction(
     Some((coef[4], var.max(0.0).sqrt(), rows.len()))
 }
 
+/// First and last sample of `s`, seconds from the log's start.
+fn segment_secs(log: &JointLog, s: &Segment) -> [f64; 2] {
+    let at = |k: usize| (log.t_nanos[k] - log.t_nanos[0]) as f64 * 1e-9;
+    [at(s.start), at(s.end.saturating_sub(1).max(s.start))]
+}
+
 /// Paired friction points of joint `j` from its segments.
 pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &FrictionOptions) -> Vec<CurvePoint> {
     let range = |s: &Segment| {
@@ -298,19 +385,27 @@ pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &Fric
         let Some((friction, std_err, samples)) = paired_friction(log, j, pos, neg, lo, hi) else { continue };
         used[b] = true;
         let _ = a;
-        out.push(CurvePoint { speed: 0.5 * (pos.velocity - neg.velocity), friction, std_err, samples });
+        out.push(CurvePoint {
+            speed: 0.5 * (pos.velocity - neg.velocity),
+            friction,
+            std_err,
+            samples,
+            positive_secs: segment_secs(log, pos),
+            negative_secs: segment_secs(log, neg),
+        });
     }
     out.sort_by(|x, y| x.speed.total_cmp(&y.speed));
     out
 }
 
-/// Fits the Stribeck curve to paired points by bounded Levenberg–Marquardt, with 95 %
-/// confidence half-widths.
+/// Fits the Stribeck curve to paired points by bounded Levenberg–Marquardt: the curve, 95 %
+/// confidence half-widths of `[Fc, Fs, vs, δ, Fv]`, the RMS residual (N·m) and the 95 %
+/// half-width of the hump `Fs − Fc`.
 ///
 /// # Errors
 /// [`Error::Numerical`] with fewer than 6 points (5 parameters).
 #[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
-pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> {
+pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64, f64)> {
     if points.len() < 6 {
         return Err(Error::Numerical(format!(
             "{} paired speeds; the Stribeck curve (5 parameters) needs at least 6",
@@ -423,8 +518,7 @@ pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> 
         }
     }
     let mut ci = [f64::NAN; 5];
-    // Student t 97.5 % quantile, approximated for small dof.
-    let t = 1.96 + 2.4 / dof + 3.0 / (dof * dof);
+    let t = t975(dof);
     for p in 0..5 {
         let mut e = [0.0; 5];
         e[p] = 1.0;
@@ -432,10 +526,103 @@ pub fn fit_stribeck(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> 
             ci[p] = t * (sigma2 * col[p]).max(0.0).sqrt();
         }
     }
+    let hump_ci =
+        solve5(a, [-1.0, 1.0, 0.0, 0.0, 0.0]).map_or(f64::NAN, |col| t * (sigma2 * (col[1] - col[0])).max(0.0).sqrt());
     let fit = Stribeck::from_vec(x);
     // vs: the log-space half-width converted to the larger side.
     ci[2] = fit.stribeck_velocity * (ci[2].exp() - 1.0);
-    Ok((fit, ci, (c / points.len() as f64).sqrt()))
+    Ok((fit, ci, (c / points.len() as f64).sqrt(), hump_ci))
+}
+
+/// Student t 97.5 % quantile for `dof` degrees of freedom (1.96 for many), approximated.
+fn t975(dof: f64) -> f64 {
+    1.96 + 2.4 / dof + 3.0 / (dof * dof)
+}
+
+/// Fits Coulomb + viscous `Fc + Fv·v` to ≥ 2 paired points by least squares weighted by each
+/// point's standard error: the curve (no hump), 95 % half-widths (`[Fc, NaN, NaN, NaN, Fv]`)
+/// and the RMS residual, N·m. The intervals use the points' errors, scaled up by the residual
+/// when it exceeds them.
+///
+/// # Errors
+/// [`Error::Numerical`] with fewer than 2 distinct speeds.
+pub fn fit_coulomb_viscous(points: &[CurvePoint]) -> Result<(Stribeck, [f64; 5], f64)> {
+    let w = |p: &CurvePoint| 1.0 / p.std_err.max(1e-9).powi(2);
+    let (mut s00, mut s01, mut s11, mut b0, mut b1) = (0.0, 0.0, 0.0, 0.0, 0.0);
+    for p in points {
+        let wi = w(p);
+        s00 += wi;
+        s01 += wi * p.speed;
+        s11 += wi * p.speed * p.speed;
+        b0 += wi * p.friction;
+        b1 += wi * p.speed * p.friction;
+    }
+    let det = s00 * s11 - s01 * s01;
+    if points.len() < 2 || det.abs() <= 1e-12 * s00 * s11 {
+        return Err(Error::Numerical(format!(
+            "{} paired speed(s); Coulomb + viscous needs 2 distinct speeds",
+            points.len()
+        )));
+    }
+    let fc = (s11 * b0 - s01 * b1) / det;
+    let fv = (s00 * b1 - s01 * b0) / det;
+    let residual = |p: &CurvePoint| p.friction - fc - fv * p.speed;
+    let chi2: f64 = points.iter().map(|p| w(p) * residual(p).powi(2)).sum();
+    let dof = points.len() as f64 - 2.0;
+    let scale = if dof > 0.0 { (chi2 / dof).max(1.0) } else { 1.0 };
+    let t = if dof > 0.0 { t975(dof) } else { 1.96 };
+    let ci = [t * (scale * s11 / det).sqrt(), f64::NAN, f64::NAN, f64::NAN, t * (scale * s00 / det).sqrt()];
+    let rms = (points.iter().map(|p| residual(p).powi(2)).sum::<f64>() / points.len() as f64).sqrt();
+    let fit = Stribeck { coulomb: fc, breakaway: fc, stribeck_velocity: 1.0, exponent: 1.0, viscous: fv };
+    Ok((fit, ci, rms))
+}
+
+/// Coulomb friction from one paired speed: the point's value, its 95 % half-width.
+fn fit_coulomb(point: &CurvePoint) -> (Stribeck, [f64; 5], f64) {
+    let fc = point.friction;
+    let fit = Stribeck { coulomb: fc, breakaway: fc, stribeck_velocity: 1.0, exponent: 1.0, viscous: 0.0 };
+    (fit, [1.96 * point.std_err, f64::NAN, f64::NAN, f64::NAN, f64::NAN], 0.0)
+}
+
+/// The richest model `points` identify (see the module docs), fitted: model, why not a richer
+/// one, curve, 95 % half-widths, RMS residual.
+///
+/// # Errors
+/// [`Error::Numerical`] without any point.
+#[allow(clippy::type_complexity)]
+pub fn fit_richest(points: &[CurvePoint]) -> Result<(FrictionModel, String, Stribeck, [f64; 5], f64)> {
+    let n = points.len();
+    let coulomb_viscous = |note: String| -> Result<_> {
+        let (fit, ci, rms) = fit_coulomb_viscous(points)?;
+        Ok((FrictionModel::CoulombViscous, note, fit, ci, rms))
+    };
+    match n {
+        0 => Err(Error::Numerical("no paired speed".into())),
+        1 => {
+            let (fit, ci, rms) = fit_coulomb(&points[0]);
+            Ok((
+                FrictionModel::Coulomb,
+                "1 paired speed: Coulomb only (viscous needs 2 speeds, Stribeck 6)".into(),
+                fit,
+                ci,
+                rms,
+            ))
+        }
+        2..=5 => coulomb_viscous(format!("{n} paired speeds: Coulomb + viscous (Stribeck needs 6)")),
+        _ => {
+            let (fit, ci, rms, hump_ci) = fit_stribeck(points)?;
+            let hump = fit.breakaway - fit.coulomb;
+            if ci.iter().all(|c| c.is_finite()) && hump_ci.is_finite() && hump > hump_ci {
+                Ok((FrictionModel::Stribeck, String::new(), fit, ci, rms))
+            } else {
+                coulomb_viscous(format!(
+                    "{n} paired speeds, but the Stribeck hump is not identified (Fs − Fc = {:.4} ± {:.4} N·m): \
+                     Coulomb + viscous",
+                    hump, hump_ci
+                ))
+            }
+        }
+    }
 }
 
 #[allow(clippy::needless_range_loop)] // Gaussian elimination on a 5 × 5 system, indexed as written
@@ -494,8 +681,8 @@ pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<Frict
             if log.effort[j].iter().all(|e| !e.is_finite()) {
                 return Err(log.bad(format!("joint \"{name}\" has no effort: friction needs the joint torque")));
             }
-            let v = joint_velocity(log, j, opts.smooth_secs);
-            let segments = find_segments(&log.t_nanos, &v, opts);
+            let (v, noise_sigma) = joint_velocity(log, j, opts.smooth_secs);
+            let segments = find_segments(&log.t_nanos, &v, noise_sigma, opts);
             if segments.is_empty() {
                 return Ok(Err(format!(
                     "joint \"{name}\": no constant-velocity segment (≥ {} s within ±{} %)",
@@ -510,16 +697,27 @@ pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<Frict
                     segments.len()
                 )));
             }
-            let (fit, ci95, rms) = fit_stribeck(&points).map_err(|e| {
+            let (model, model_note, fit, ci95, rms) = fit_richest(&points).map_err(|e| {
                 log.bad(format!("joint \"{name}\": {e}; sweep more speeds (log-spaced across the Stribeck region)"))
             })?;
+            let segment_spans = segments
+                .iter()
+                .map(|s| {
+                    let [start_secs, end_secs] = segment_secs(log, s);
+                    let paired = points.iter().any(|p| p.positive_secs[0] == start_secs || p.negative_secs[0] == start_secs);
+                    SegmentSpan { start_secs, end_secs, velocity: s.velocity, paired }
+                })
+                .collect();
             Ok(Ok(JointFriction {
                 joint: name.clone(),
+                model,
+                model_note,
                 fit,
                 ci95,
                 rms_residual: rms,
                 points,
                 segments: segments.len(),
+                segment_spans,
             }))
         })
         .collect();
@@ -545,22 +743,64 @@ pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<Frict
 }
 
 impl FrictionReport {
+    /// Per joint, the model fitted and the constant-velocity segments used: each ±v pair with
+    /// its times, then the segments left unpaired.
+    pub fn segments_text(&self) -> String {
+        let mut out = String::new();
+        for j in &self.joints {
+            let _ = writeln!(
+                out,
+                "{}: {} segment(s), {} paired speed(s) → {}{}",
+                j.joint,
+                j.segments,
+                j.points.len(),
+                j.model.label(),
+                if j.model_note.is_empty() { String::new() } else { format!(" ({})", j.model_note) }
+            );
+            for p in &j.points {
+                let _ = writeln!(
+                    out,
+                    "  ±{:.4} rad/s: +v {:.2}–{:.2} s, −v {:.2}–{:.2} s, {} samples, (τ⁺ − τ⁻)/2 = {:.4} ± {:.4} N·m",
+                    p.speed,
+                    p.positive_secs[0],
+                    p.positive_secs[1],
+                    p.negative_secs[0],
+                    p.negative_secs[1],
+                    p.samples,
+                    p.friction,
+                    1.96 * p.std_err
+                );
+            }
+            let unpaired: Vec<String> = j
+                .segment_spans
+                .iter()
+                .filter(|s| !s.paired)
+                .map(|s| format!("{:+.4} rad/s at {:.2}–{:.2} s", s.velocity, s.start_secs, s.end_secs))
+                .collect();
+            if !unpaired.is_empty() {
+                let _ = writeln!(out, "  unpaired: {}", unpaired.join("; "));
+            }
+        }
+        out
+    }
+
     /// The terminal table.
     pub fn table(&self) -> String {
-        let g = crate::writeback::format_number;
-        let mut out = String::from("Friction from constant-velocity sweeps (95 % intervals):\n");
+        let g = crate::number::format_number;
+        let mut out = String::from("Friction from constant-velocity sweeps (95 % intervals; — : not in the model):\n");
         let _ = writeln!(
             out,
-            "  {:<20} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
-            "joint", "Fc (N·m)", "Fs (N·m)", "vs (rad/s)", "δ", "Fv (N·m·s/rad)", "speeds", "rms (N·m)"
+            "  {:<20} {:>18} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
+            "joint", "model", "Fc (N·m)", "Fs (N·m)", "vs (rad/s)", "δ", "Fv (N·m·s/rad)", "speeds", "rms (N·m)"
         );
         for j in &self.joints {
             let f = &j.fit;
-            let pm = |v: f64, c: f64| format!("{} ±{}", g(v), g(c));
+            let pm = |v: f64, c: f64| if c.is_nan() { "—".to_string() } else { format!("{} ±{}", g(v), g(c)) };
             let _ = writeln!(
                 out,
-                "  {:<20} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
+                "  {:<20} {:>18} {:>18} {:>18} {:>18} {:>14} {:>18} {:>7} {:>10}",
                 j.joint,
+                j.model.label(),
                 pm(f.coulomb, j.ci95[0]),
                 pm(f.breakaway, j.ci95[1]),
                 pm(f.stribeck_velocity, j.ci95[2]),
@@ -618,7 +858,7 @@ impl FrictionReport {
                     j.points.iter().map(|c| (c.speed, c.friction)).collect(),
                     crate::plot::COLORS[0],
                 );
-                p.line("Stribeck fit", curve, crate::plot::COLORS[1]);
+                p.line(&format!("{} fit", j.model.label()), curve, crate::plot::COLORS[1]);
                 p
             })
             .collect();
@@ -671,7 +911,7 @@ impl Default for SweepOptions {
 /// # Errors
 /// Loading errors of the URDF; [`Error::Core`] if MuJoCo fails.
 pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptions) -> Result<JointLog> {
-    use crate::synth::Rng;
+    use crate::rng::Rng;
     use std::f64::consts::PI;
     let model = std::sync::Arc::new(crate::model::load_urdf_in_mujoco(urdf, "")?);
     let robot = crate::model::RobotModel::from_model(urdf, model.clone())?;

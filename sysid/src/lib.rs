@@ -138,9 +138,12 @@ pub mod log;
 pub mod mjcf;
 pub mod model;
 pub mod noise;
-pub mod plot;
+pub mod number;
+/// The SVG plots of the reports: twin-core's one plotting helper.
+pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
+pub mod rng;
 pub mod signal;
 pub mod synth;
 pub mod writeback;

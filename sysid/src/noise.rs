@@ -25,7 +25,7 @@
 use crate::allan::{self, AllanPoint, NoiseFit};
 use crate::error::{Error, Result};
 use crate::log::JointLog;
-use crate::synth::Rng;
+use crate::rng::Rng;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -655,7 +655,7 @@ impl NoiseReport {
     /// The terminal table.
     pub fn table(&self) -> String {
         let mut out = String::new();
-        let g = crate::writeback::format_number;
+        let g = crate::number::format_number;
         for imu in &self.imus {
             let _ = writeln!(
                 out,
@@ -724,8 +724,8 @@ impl NoiseReport {
             let _ = writeln!(
                 out,
                 "[imu_noise_std]\nmode = \"scale\"\ndist = \"uniform\"\nlow = {}\nhigh = {}\n",
-                crate::writeback::format_number(1.0 - rel),
-                crate::writeback::format_number(1.0 + rel)
+                crate::number::format_number(1.0 - rel),
+                crate::number::format_number(1.0 + rel)
             );
         }
         let enc = self
@@ -738,7 +738,7 @@ impl NoiseReport {
             let _ = writeln!(
                 out,
                 "[encoder_noise_std]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0\nhigh = {}",
-                crate::writeback::format_number(enc)
+                crate::number::format_number(enc)
             );
         }
         out

@@ -8,6 +8,7 @@
 //! is kept), the centre of mass in the link frame.
 
 use crate::error::{Error, Result};
+use crate::number::format_number;
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use roxmltree::{Document, Node};
 use std::ops::Range;
@@ -35,17 +36,6 @@ pub struct JointUpdate {
     pub damping: f64,
     /// `<dynamics friction>`, N·m or N.
     pub friction: f64,
-}
-
-/// Formats a number with 7 significant digits, shortest form.
-pub fn format_number(x: f64) -> String {
-    if x == 0.0 {
-        return "0".into();
-    }
-    let rounded: f64 = format!("{x:.6e}").parse().unwrap_or(x);
-    let plain = format!("{rounded}");
-    let sci = format!("{rounded:e}");
-    if plain.len() <= sci.len() { plain } else { sci }
 }
 
 /// Whether `old` (file text) already holds `new` to the precision written.

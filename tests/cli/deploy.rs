@@ -21,16 +21,17 @@ fn path_with_twin() -> String {
 
 /// Every YAML document of `file` as JSON, parsed by PyYAML.
 fn yaml_documents(file: &Path) -> Vec<Value> {
-    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let python = crate::test_python::python();
     let out = Command::new(&python)
         .args(["-c", "import json, sys, yaml; print(json.dumps(list(yaml.safe_load_all(open(sys.argv[1])))))"])
         .arg(file)
         .output()
-        .unwrap_or_else(|e| panic!("{python} (TWIN_PYTHON) with PyYAML is needed to check the manifests: {e}"));
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", python.display()));
     assert!(
         out.status.success(),
-        "{} is not valid YAML (or PyYAML is missing from {python}: pip install PyYAML): {}",
+        "{} is not valid YAML (parsed by PyYAML in {}): {}",
         file.display(),
+        python.display(),
         String::from_utf8_lossy(&out.stderr)
     );
     serde_json::from_slice(&out.stdout).unwrap()

@@ -6,8 +6,8 @@
 //! domain id of their own per test, and every wait is bounded (the peer's `--timeout`, twin's
 //! `--lockstep-timeout` / `--wait-for-subscriber`, [`wait`] here).
 //!
-//! Python comes from `TWIN_PYTHON` (default `python3`) and must have `cyclonedds` (see
-//! `.ci/requirements.txt`): without it these tests FAIL.
+//! Python is the tests' venv (`test_python.rs`: `cyclonedds` from `.ci/requirements.txt`);
+//! without it these tests FAIL.
 
 use super::common::{output_of, repo_root, twin};
 use serde_json::{Value as Json, json};
@@ -27,22 +27,13 @@ const ELBOW: &str = "left_elbow_joint";
 const ELBOW_TARGET: f64 = -0.3;
 const PERIOD_NANOS: u64 = 10_000_000;
 
-/// A domain id for test `k` (0..5) unlikely to meet another test binary's.
+/// A domain id for test `k` (0..10) unlikely to meet another test binary's.
 fn domain(k: u32) -> u32 {
-    10 + (std::process::id() % 40) * 5 + k
+    10 + (std::process::id() % 20) * 10 + k
 }
 
-fn python() -> String {
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let ok = Command::new(&exe).args(["-c", "import cyclonedds.domain"]).output();
-    match ok {
-        Ok(o) if o.status.success() => exe,
-        Ok(o) => panic!(
-            "{exe} has no cyclonedds ({}): pip install -r .ci/requirements.txt and set TWIN_PYTHON",
-            String::from_utf8_lossy(&o.stderr).trim()
-        ),
-        Err(e) => panic!("cannot run {exe} ({e}): set TWIN_PYTHON to a Python with cyclonedds"),
-    }
+fn python() -> PathBuf {
+    crate::test_python::python()
 }
 
 /// Waits for `child` at most `limit`, killing it after that.
@@ -126,11 +117,13 @@ fn run_with_peer(k: u32, peer_args: &[&str], twin_args: &[&str]) -> Run {
 }
 
 /// 1 s of lockstep at 100 Hz, the peer in `mode` answering each `/clock` with the elbow
-/// command.
+/// command (the state at 500 Hz). Its answer to `/clock` = 0 (said before time starts) is the
+/// command of the second period, and so on: twin takes the k-th command in period k.
 fn lockstep_run(k: u32, mode: &str) -> Run {
     let command = serde_json::to_string(&elbow_command()).unwrap();
     let peer = ["--mode", mode, "--command", &command, "--until-clock", "0.99", "--timeout", "90"];
-    let twin = ["--lockstep", "--duration", "1.0", "--control-rate", "100", "--lockstep-timeout", "20"];
+    let twin =
+        ["--lockstep", "--duration", "1.0", "--control-rate", "100", "--lockstep-timeout", "20", "--rate", "500"];
     run_with_peer(k, &peer, &twin)
 }
 
@@ -237,7 +230,8 @@ fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_rec
     assert_eq!(clocks, expected, "the peer's /clock");
     let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
     let times: Vec<u64> = commands.iter().map(|(t, _)| *t).collect();
-    assert_eq!(times, expected, "commands recorded at each period");
+    // The first period runs under hold; a command in each later one.
+    assert_eq!(times, expected[1..], "commands recorded at each period but the first");
     assert_eq!(peer["sent"].as_u64(), Some(100));
     assert!(commands.iter().all(|(_, c)| c.data == elbow_command()));
     let recorded_clock: Vec<u64> = read::<twin_core::log::Clock>(mcap, "/clock").iter().map(|(t, _)| *t).collect();
@@ -277,10 +271,10 @@ fn ros_rejects_bad_commands_and_holds_the_last_good_one() {
     }
     assert!(stderr.contains("is NaN") && stderr.contains("values, expected"), "{stderr}");
     assert!(stdout.contains("3 rejected"), "{stdout}");
-    // All 100 taken commands are recorded, bad ones included; the good ones still bring the
-    // elbow to its target within the second.
+    // All 99 taken commands are recorded (one per period after the first), bad ones included;
+    // the good ones still bring the elbow to its target within the second.
     let commands = read::<Float64MultiArray>(mcap, "/humanoid/joint_commands");
-    assert_eq!(commands.len(), 100);
+    assert_eq!(commands.len(), 99);
     assert!(commands[1].1.data[0].is_nan());
     let (_, q) = elbow_at_end(mcap);
     assert!((q - ELBOW_TARGET).abs() < 0.02, "elbow at {q}");
@@ -387,13 +381,16 @@ fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() 
     let (t_end, _) = js.last().unwrap();
     assert!(*t_end < 30_000_000_000, "{t_end}");
     // The reset brought the robot back to its initial state, exactly, in the step after the
-    // call (between the clock before it and the clock after it).
-    let first = &js[0].1;
-    let back: Vec<u64> = js[1..]
-        .iter()
-        .filter(|(_, m)| m.position == first.position && m.velocity == first.velocity)
-        .map(|(t, _)| *t)
-        .collect();
+    // call (between the clock before it and the clock after it): the ground truth (/odom) says
+    // so. (/joint_states is what the controller observed, at the start of that step: the state
+    // before the reset.)
+    let odom = read::<Odometry>(mcap, "/odom");
+    let first = &odom[0].1;
+    let same = |m: &Odometry| {
+        (m.position, m.orientation_xyzw, m.linear_velocity, m.angular_velocity)
+            == (first.position, first.orientation_xyzw, first.linear_velocity, first.angular_velocity)
+    };
+    let back: Vec<u64> = odom[1..].iter().filter(|(_, m)| same(m)).map(|(t, _)| *t).collect();
     assert_eq!(back.len(), 1, "states equal to the initial one at {back:?}\n{stderr}");
     let (before, after) = (clock_nanos(&calls[9], "clock_before"), clock_nanos(&calls[9], "clock_after"));
     assert!(
@@ -422,5 +419,265 @@ fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() 
     }
     for r in ["rt/humanoid/joint_commands", "rt/humanoid/joint_trajectory", "rq/twin/set_simulation_stateRequest"] {
         assert!(readers.iter().any(|x| x == r), "{r} not among the node's readers {readers:?}");
+    }
+}
+
+// ---------------------------------------------------------------------------------------------
+// Real ROS 2: rclpy (the PyPI ROS 2 Kilted wheels, pinned in .ci/requirements.txt) on Fast DDS,
+// loopback only (twin_core::live::Loopback: a UDPv4 transport whitelisted to 127.0.0.1, no
+// builtin transports, initial peer 127.0.0.1; ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), a
+// domain of its own per run.
+
+const RCLPY_NODE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/rclpy_node.py");
+const README: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
+
+/// The Python of `TWIN_PYTHON` with rclpy and the message packages, or a failure saying what
+/// to install.
+fn rclpy_python() -> String {
+    let exe = crate::test_python::python().to_string_lossy().into_owned();
+    let probe = "import rclpy, sensor_msgs.msg, std_msgs.msg, rosgraph_msgs.msg, rmw_fastrtps_cpp";
+    match Command::new(&exe).args(["-c", probe]).output() {
+        Ok(o) if o.status.success() => exe,
+        Ok(o) => panic!(
+            "{exe} has no rclpy on Fast DDS ({}): pip install -r .ci/requirements.txt (the ros-kilted-* wheels) \
+             and set TWIN_PYTHON",
+            String::from_utf8_lossy(&o.stderr).trim()
+        ),
+        Err(e) => panic!("cannot run {exe} ({e}): set TWIN_PYTHON to a Python with rclpy"),
+    }
+}
+
+/// The README's example node, verbatim: the python block after its `gait_controller.py`
+/// heading line, written into `dir`.
+fn readme_node(dir: &Path) -> PathBuf {
+    let readme = std::fs::read_to_string(README).unwrap();
+    let at = readme.find("A complete 100 Hz controller (`gait_controller.py`)").expect("the README's node");
+    let start = readme[at..].find("```python\n").expect("its python block") + at + "```python\n".len();
+    let end = readme[start..].find("```").expect("the block's end") + start;
+    let path = dir.join("gait_controller.py");
+    std::fs::write(&path, &readme[start..end]).unwrap();
+    path
+}
+
+/// The README's `twin sim` command with `flag` (e.g. `--lockstep`), as its arguments after
+/// `twin`, and the node's command's arguments after the script; both with `ROS_DOMAIN_ID=7`.
+fn readme_commands(flag: &str) -> (Vec<String>, Vec<String>) {
+    let readme = std::fs::read_to_string(README).unwrap();
+    let lines: Vec<&str> = readme.lines().collect();
+    let k = lines
+        .iter()
+        .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains(flag))
+        .unwrap_or_else(|| panic!("no README command with {flag}"));
+    let twin_args = lines[k].split_whitespace().skip(3).map(String::from).collect();
+    let node = lines[k + 1];
+    assert!(node.starts_with("ROS_DOMAIN_ID=7 python3 gait_controller.py"), "{node}");
+    let node_args = node.split_whitespace().skip(3).map(String::from).collect();
+    (twin_args, node_args)
+}
+
+/// An rclpy process: `script` with `args` on `loopback`'s domain, Fast DDS.
+fn spawn_rclpy(loopback: &twin_core::live::Loopback, script: &Path, args: &[String], cwd: &Path) -> Child {
+    let mut cmd = Command::new(rclpy_python());
+    cmd.arg(script).args(args).current_dir(cwd).env("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp");
+    for (k, v) in loopback.environment() {
+        cmd.env(k, v);
+    }
+    cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("the rclpy node starts")
+}
+
+/// Stops a node that spins forever: SIGINT, then (after 10 s) SIGKILL.
+fn interrupt(child: Child) -> Output {
+    let _ = Command::new("kill").args(["-INT", &child.id().to_string()]).status();
+    let deadline = Instant::now() + Duration::from_secs(10);
+    let mut child = child;
+    while Instant::now() < deadline {
+        if child.try_wait().expect("try_wait").is_some() {
+            break;
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    }
+    let _ = child.kill();
+    child.wait_with_output().expect("output")
+}
+
+/// One `twin sim` with an rclpy node.
+struct RosRun {
+    _dir: tempfile::TempDir,
+    mcap: PathBuf,
+    stdout: String,
+    node_out: PathBuf,
+}
+
+/// Runs `twin sim MODEL <twin_args>` (its `run.mcap` replaced by a file of its own, in domain
+/// `domain(k)`) and the node `script <node_args>` (started after twin, as the README says);
+/// twin must finish, the node is then stopped.
+fn run_rclpy(k: u32, twin_args: &[String], script: Option<&Path>, node_args: &[String]) -> RosRun {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("run.mcap");
+    let node_out = dir.path().join("node.json");
+    let d = domain(k);
+    let loopback = twin_core::live::Loopback::write(dir.path(), d as u16).unwrap();
+    let args: Vec<String> =
+        twin_args.iter().map(|a| if a == "run.mcap" { mcap.display().to_string() } else { a.clone() }).collect();
+    let mut cmd = twin();
+    cmd.args(["sim", MODEL, "--ros-interface", "lo"]).args(&args);
+    for (key, v) in loopback.environment() {
+        cmd.env(key, v);
+    }
+    let twin = cmd.stdout(Stdio::piped()).stderr(Stdio::piped()).spawn().expect("twin starts");
+    let extracted;
+    let script = match script {
+        Some(s) => s,
+        None => {
+            extracted = readme_node(dir.path());
+            &extracted
+        }
+    };
+    let node_args: Vec<String> =
+        node_args.iter().map(|a| a.replace("NODE_OUT", &node_out.display().to_string())).collect();
+    let node = spawn_rclpy(&loopback, script, &node_args, dir.path());
+    let (ok, stdout, stderr) = output_of(wait(twin, Duration::from_secs(240), "twin sim --ros"));
+    let node_output = interrupt(node);
+    assert!(
+        ok,
+        "twin failed:\n{stdout}\n{stderr}\nnode:\n{}\n{}",
+        String::from_utf8_lossy(&node_output.stdout),
+        String::from_utf8_lossy(&node_output.stderr)
+    );
+    RosRun { _dir: dir, mcap, stdout, node_out }
+}
+
+/// (height of the base above the ground, m; tilt from upright, rad) from `/odom` (the
+/// simulation's ground truth) at the start and at the end of a recording.
+fn base_at_start_and_end(mcap: &Path) -> ((f64, f64), (f64, f64)) {
+    let odom = read::<Odometry>(mcap, "/odom");
+    let pose = |m: &Odometry| {
+        let [x, y, _, _] = m.orientation_xyzw;
+        // The body z axis' angle from the world z: cos = 1 − 2(x² + y²).
+        (m.position[2], (1.0 - 2.0 * (x * x + y * y)).clamp(-1.0, 1.0).acos())
+    };
+    (pose(&odom[0].1), pose(&odom.last().unwrap().1))
+}
+
+/// The humanoid stands at the end of `mcap` as it does under `--controller pd-hold` for as long:
+/// its base within 3 cm of pd-hold's height and above 90 % of its start, tilted less than 0.2 rad.
+fn assert_standing_like_pd_hold(mcap: &Path, duration: &str) {
+    let dir = tempfile::tempdir().unwrap();
+    let reference = dir.path().join("pd.mcap");
+    let (ok, out, err) = super::common::run(&[
+        "sim",
+        MODEL,
+        "--controller",
+        "pd-hold",
+        "--duration",
+        duration,
+        "--topics",
+        "/odom",
+        "--record",
+        reference.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}\n{err}");
+    let ((z0, _), (z_pd, tilt_pd)) = base_at_start_and_end(&reference);
+    let ((_, _), (z, tilt)) = base_at_start_and_end(mcap);
+    assert!(z_pd > 0.9 * z0 && tilt_pd < 0.2, "pd-hold itself: base at {z_pd} m of {z0}, tilt {tilt_pd}");
+    assert!(z > 0.9 * z0 && tilt < 0.2 && (z - z_pd).abs() < 0.03, "base at {z} m (pd-hold {z_pd}), tilt {tilt} rad");
+}
+
+/// The number after `label` in `text` (e.g. "1000 control periods").
+fn count_before(text: &str, label: &str) -> u64 {
+    let at = text.find(label).unwrap_or_else(|| panic!("no `{label}` in\n{text}"));
+    text[..at].split_whitespace().last().unwrap().parse().unwrap()
+}
+
+#[test]
+fn ros_readme_node_with_rclpy_runs_lockstep_to_the_end_twice_alike_and_keeps_the_humanoid_up() {
+    let (twin_args, node_args) = readme_commands("--lockstep");
+    let a = run_rclpy(5, &twin_args, None, &node_args);
+    let b = run_rclpy(6, &twin_args, None, &node_args);
+    for run in [&a, &b] {
+        // To the end: every period, a command in each but the first (held).
+        assert_eq!(count_before(&run.stdout, "control periods"), 1000, "{}", run.stdout);
+        assert_eq!(count_before(&run.stdout, "commands applied"), 999, "{}", run.stdout);
+        let commands = read::<Float64MultiArray>(&run.mcap, "/humanoid/joint_commands");
+        let times: Vec<u64> = commands.iter().map(|(t, _)| *t).collect();
+        assert_eq!(times, (1..1000).map(|k| k * PERIOD_NANOS).collect::<Vec<_>>());
+        // The node's timer ticked at each /clock: the elbow target of its own formula at that time.
+        let js = read::<JointState>(&run.mcap, "/joint_states");
+        let elbow = js[0].1.name.iter().position(|n| n == ELBOW).unwrap();
+        for (t, c) in &commands {
+            let want = -0.5 + 0.2 * (2.0 * std::f64::consts::PI * 0.5 * (*t as f64 * 1e-9)).sin();
+            assert!((c.data[elbow] - want).abs() < 1e-12, "command at {t} ns: elbow {} vs {want}", c.data[elbow]);
+        }
+        // State once per period in lockstep.
+        assert_eq!(js.len(), 1000);
+        assert_standing_like_pd_hold(&run.mcap, "10");
+    }
+    // Deterministic: byte for byte the same /joint_states.
+    let (ja, jb) = (read::<JointState>(&a.mcap, "/joint_states"), read::<JointState>(&b.mcap, "/joint_states"));
+    assert!(ja == jb, "two lockstep runs of the same node differ");
+}
+
+#[test]
+fn ros_readme_node_with_rclpy_in_real_time_keeps_the_humanoid_up() {
+    let (twin_args, node_args) = readme_commands("--rtf 1");
+    let run = run_rclpy(7, &twin_args, None, &node_args);
+    let stdout = &run.stdout;
+    // Real time: the measured factor, over the whole run.
+    let rtf: f64 =
+        stdout.split("measured real-time factor ").nth(1).unwrap().split_whitespace().next().unwrap().parse().unwrap();
+    assert!((0.9..1.05).contains(&rtf), "measured real-time factor {rtf}\n{stdout}");
+    // The node commanded nearly every period (it joined before time started).
+    let applied = count_before(stdout, "commands applied");
+    assert!(applied >= 900, "{applied} commands\n{stdout}");
+    assert_standing_like_pd_hold(&run.mcap, "10");
+}
+
+#[test]
+fn ros_subscription_driven_rclpy_node_in_lockstep_answers_each_state_one_period_later() {
+    let twin_args: Vec<String> =
+        ["--ros", "--lockstep", "--duration", "2", "--record", "run.mcap"].map(String::from).to_vec();
+    let node_args: Vec<String> = ["--mode", "subscription", "--out", "NODE_OUT"].map(String::from).to_vec();
+    let run = run_rclpy(8, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    assert_eq!(count_before(&run.stdout, "control periods"), 200, "{}", run.stdout);
+    assert_eq!(count_before(&run.stdout, "commands applied"), 199, "{}", run.stdout);
+    // The command applied from t_k answers the state stamped t_(k−1): its elbow value is the
+    // node's function of that stamp.
+    let commands = read::<Float64MultiArray>(&run.mcap, "/humanoid/joint_commands");
+    let js = read::<JointState>(&run.mcap, "/joint_states");
+    assert_eq!(js.iter().map(|(t, _)| *t).collect::<Vec<_>>(), (0..200).map(|k| k * PERIOD_NANOS).collect::<Vec<_>>());
+    let elbow = js[0].1.name.iter().position(|n| n == ELBOW).unwrap();
+    assert_eq!(commands.len(), 199);
+    for (t, c) in &commands {
+        let answered = (*t - PERIOD_NANOS) as f64 * 1e-9;
+        let want = -0.5 + 0.2 * (std::f64::consts::PI * answered).sin();
+        assert!((c.data[elbow] - want).abs() < 1e-12, "command at {t} ns answers {}, not {answered} s", c.data[elbow]);
+        // The other joints: the first state.
+        assert_eq!(c.data[elbow + 1], js[0].1.position[elbow + 1]);
+    }
+    let node: Json = serde_json::from_str(&std::fs::read_to_string(&run.node_out).unwrap()).unwrap();
+    // One answer per state (the last one, to the state of the last period, is never applied).
+    assert!(node["sent"].as_u64().is_some_and(|n| n == 199 || n == 200), "{node}");
+}
+
+#[test]
+fn ros_joint_state_commands_by_name_from_rclpy_move_the_named_joint_only() {
+    let twin_args: Vec<String> =
+        ["--ros", "--lockstep", "--duration", "2", "--record", "run.mcap"].map(String::from).to_vec();
+    let node_args: Vec<String> =
+        ["--mode", "by-name", "--out", "NODE_OUT", "--ros-args", "-p", "use_sim_time:=true"].map(String::from).to_vec();
+    let run = run_rclpy(9, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    assert_eq!(count_before(&run.stdout, "commands applied"), 199, "{}", run.stdout);
+    let commands = read::<JointState>(&run.mcap, "/humanoid/joint_command");
+    assert_eq!(commands.len(), 199);
+    assert!(commands.iter().all(|(_, c)| c.name == [ELBOW] && c.position == [-0.6]));
+    // Physics: the elbow at its target, every other joint where the home hold keeps it.
+    let js = read::<JointState>(&run.mcap, "/joint_states");
+    let (first, last) = (&js[0].1, &js.last().unwrap().1);
+    for (i, name) in last.name.iter().enumerate() {
+        if name == ELBOW {
+            assert!((last.position[i] + 0.6).abs() < 0.02, "elbow at {}", last.position[i]);
+        } else {
+            assert!((last.position[i] - first.position[i]).abs() < 0.05, "{name} moved to {}", last.position[i]);
+        }
     }
 }

@@ -3,12 +3,11 @@
 //! `mcap-ros2-support` readers as `32FC1` of the right size and values, the LiDAR's ranges
 //! match the analytic ones, and the `.rrd` passes `rerun rrd verify`.
 //!
-//! Python comes from `TWIN_PYTHON` (CI: `$HOME/.cache/twin/ci-venv/bin/python`), `rerun` from
-//! the same `bin/` folder. These cross-checks FAIL when either is missing.
+//! Python and `rerun` come from the tests' venv (`test_python.rs`, made from
+//! `.ci/requirements.txt` on first use). These cross-checks FAIL when it cannot be made.
 
 use super::common::{repo_root, run};
 use serde_json::Value as Json;
-use std::path::Path;
 use std::process::Command;
 use twin_core::log::{LaserScan, Log, ReadOptions, TfMessage};
 
@@ -116,19 +115,15 @@ fn depth_camera_and_lidar_are_recorded_and_decode_elsewhere() {
     assert!(["base_link", "lidar_link"].contains(&lidar.header.frame_id.as_str()), "{}", lidar.header.frame_id);
 
     // The depth image, decoded by mcap-ros2-support.
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let exe = crate::test_python::python();
     let prefix = "/arm6/depth_cam";
     let out = Command::new(&exe)
         .arg(SCRIPT)
         .arg(&mcap)
         .args([format!("{prefix}/depth/image_raw"), format!("{prefix}/depth/camera_info"), format!("{prefix}/points")])
         .output()
-        .unwrap_or_else(|e| panic!("cannot run {exe} (set TWIN_PYTHON to the CI venv's python): {e}"));
-    assert!(
-        out.status.success(),
-        "{exe} {SCRIPT} failed (pip install -r .ci/requirements.txt):\n{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
+        .unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    assert!(out.status.success(), "{} {SCRIPT} failed:\n{}", exe.display(), String::from_utf8_lossy(&out.stderr));
     let json: Json = serde_json::from_slice(&out.stdout).unwrap();
     let images = json["images"].as_array().unwrap();
     assert_eq!(images.len(), 10, "10 Hz for 1 s");
@@ -168,9 +163,138 @@ fn depth_camera_and_lidar_are_recorded_and_decode_elsewhere() {
     assert!(std::fs::read(&mcap).unwrap() == std::fs::read(&again).unwrap(), "two runs wrote different files");
 
     // The rerun recording (with the depth image and point clouds) verifies.
-    let rerun = Path::new(&exe).parent().map(|d| d.join("rerun")).filter(|p| p.is_file());
-    let rerun = rerun.unwrap_or_else(|| panic!("no `rerun` next to {exe} (pip install rerun-sdk==0.36.3)"));
+    let rerun = crate::test_python::python_tool("rerun", "rerun-sdk");
     let out = Command::new(&rerun).args(["rrd", "verify"]).arg(&rrd).output().expect("rerun runs");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success() && text.contains("verified without error"), "rerun rrd verify failed:\n{text}");
+}
+
+/// Where the ray from the origin `o` along `d` (unscaled: a point is `o + t·d`) first meets
+/// the shipped cup of `worlds/table_cup.world` (a cylinder of radius 0.04 m from z = 0.62 to
+/// 0.72 m about (0.33, −0.12)): its `t`.
+fn cup_hit(o: [f64; 3], d: [f64; 3]) -> Option<f64> {
+    let (cx, cy, r, z0, z1) = (0.33, -0.12, 0.04, 0.62, 0.72);
+    let (px, py) = (o[0] - cx, o[1] - cy);
+    let a = d[0] * d[0] + d[1] * d[1];
+    let b = px * d[0] + py * d[1];
+    let c = px * px + py * py - r * r;
+    let mut best: Option<f64> = None;
+    let disc = b * b - a * c;
+    if a > 0.0 && disc >= 0.0 {
+        let t = (-b - disc.sqrt()) / a;
+        let z = o[2] + t * d[2];
+        if t > 0.0 && (z0..=z1).contains(&z) {
+            best = Some(t);
+        }
+    }
+    // The top disc.
+    if d[2] != 0.0 {
+        let t = (z1 - o[2]) / d[2];
+        let (x, y) = (px + t * d[0], py + t * d[1]);
+        if t > 0.0 && x * x + y * y <= r * r && best.is_none_or(|b| t < b) {
+            best = Some(t);
+        }
+    }
+    best
+}
+
+/// Where the ray meets the table top (z = 0.62 m over x 0.15…0.95, y −0.3…0.3).
+fn table_hit(o: [f64; 3], d: [f64; 3]) -> Option<(f64, [f64; 3])> {
+    if d[2] >= 0.0 {
+        return None;
+    }
+    let t = (0.62 - o[2]) / d[2];
+    let p = [o[0] + t * d[0], o[1] + t * d[1], 0.62];
+    ((0.15..=0.95).contains(&p[0]) && (-0.3..=0.3).contains(&p[1])).then_some((t, p))
+}
+
+/// The shipped grasp scenario, recorded as a user would, and its head camera's first depth
+/// image decoded by the independent `mcap-ros2-support` reader with the camera's pose from
+/// /tf and /tf_static: the cup's pixels read the cup's analytic distance (ray against the
+/// cylinder of the world file) within 1 cm, and the table around and behind it its own.
+#[test]
+fn the_grasp_recording_shows_the_cup_and_the_table_behind_it() {
+    let dir = tempfile::tempdir().unwrap();
+    let mcap = dir.path().join("g.mcap");
+    let (ok, stdout, stderr) = run(&["sim", "--scenario", "scenarios/grasp.toml", "--record", mcap.to_str().unwrap()]);
+    assert!(ok, "{stdout}\n{stderr}");
+    let prefix = "/humanoid/head_depth_plugin/out";
+    let script = repo_root().join("tests/python/depth_frame.py");
+    let exe = crate::test_python::python();
+    let out = Command::new(&exe)
+        .arg(&script)
+        .arg(&mcap)
+        .arg(format!("{prefix}/depth/image_raw"))
+        .arg(format!("{prefix}/depth/camera_info"))
+        .output()
+        .unwrap();
+    assert!(out.status.success(), "{} failed:\n{}", script.display(), String::from_utf8_lossy(&out.stderr));
+    let frame: Json = serde_json::from_slice(&out.stdout).unwrap();
+    let (w, h) = (frame["width"].as_u64().unwrap() as usize, frame["height"].as_u64().unwrap() as usize);
+    let k: Vec<f64> = frame["k"].as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect();
+    let m: Vec<Vec<f64>> = frame["world_from_optical"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|r| r.as_array().unwrap().iter().map(|v| v.as_f64().unwrap()).collect())
+        .collect();
+    let depth: Vec<Option<f64>> = frame["depth"].as_array().unwrap().iter().map(Json::as_f64).collect();
+    assert_eq!(depth.len(), w * h);
+    let finite = depth.iter().flatten().count();
+    assert!(finite > w * h / 2, "{finite} finite pixels of {}", w * h);
+    let origin = [m[0][3], m[1][3], m[2][3]];
+    // Pixel (u, v)'s ray in the world, scaled so that its optical z is 1: t is the depth.
+    let ray = |u: f64, v: f64| {
+        let o = [(u - k[2]) / k[0], (v - k[5]) / k[4], 1.0];
+        std::array::from_fn::<f64, 3, _>(|i| m[i][0] * o[0] + m[i][1] * o[1] + m[i][2] * o[2])
+    };
+    let (mut cup, mut cup_worst, mut table, mut table_off, mut cup_depth, mut behind) = (0, 0.0f64, 0, 0, 0.0, 0.0);
+    let mut behind_n = 0;
+    for v in 1..h - 1 {
+        for u in 1..w - 1 {
+            let (uf, vf) = (u as f64, v as f64);
+            let got = depth[v * w + u];
+            let around = [(uf - 1.0, vf), (uf + 1.0, vf), (uf, vf - 1.0), (uf, vf + 1.0), (uf, vf)];
+            // Pixels well inside the cup's silhouette.
+            if around.iter().all(|&(a, b)| cup_hit(origin, ray(a, b)).is_some()) {
+                let want = cup_hit(origin, ray(uf, vf)).unwrap();
+                let got = got.unwrap_or_else(|| panic!("cup pixel ({u}, {v}) has no depth (expected {want:.3} m)"));
+                cup_worst = cup_worst.max((got - want).abs());
+                cup += 1;
+                cup_depth += got;
+                continue;
+            }
+            // Table pixels clear of the cup (and its edge) within 0.25 m of the cup's axis.
+            if around.iter().any(|&(a, b)| cup_hit(origin, ray(a, b)).is_some()) {
+                continue;
+            }
+            let near_cup = |p: [f64; 3]| ((p[0] - 0.33).powi(2) + (p[1] + 0.12).powi(2)).sqrt() < 0.25;
+            if around.iter().all(|&(a, b)| table_hit(origin, ray(a, b)).is_some_and(|(_, p)| near_cup(p))) {
+                let (want, _) = table_hit(origin, ray(uf, vf)).unwrap();
+                table += 1;
+                if !got.is_some_and(|g| (g - want).abs() <= 0.01) {
+                    table_off += 1;
+                }
+                // Behind the cup: the table just beyond it (farther from the camera in x).
+                let (_, p) = table_hit(origin, ray(uf, vf)).unwrap();
+                if p[0] > 0.37 && (p[1] + 0.12).abs() < 0.04 {
+                    behind += got.unwrap_or(f64::NAN);
+                    behind_n += 1;
+                }
+            }
+        }
+    }
+    let tf_chain = &frame["tf_chain"];
+    assert!(cup >= 30, "only {cup} pixels inside the cup's silhouette (camera chain {tf_chain})");
+    assert!(cup_worst <= 0.01, "cup pixels off their analytic depth by up to {cup_worst:.4} m");
+    assert!(table >= 500, "only {table} table pixels near the cup");
+    assert!(table_off * 100 <= table, "{table_off} of {table} table pixels off by more than 1 cm");
+    assert!(behind_n >= 20, "{behind_n} table pixels behind the cup");
+    let (cup_mean, behind_mean) = (cup_depth / cup as f64, behind / behind_n as f64);
+    assert!(behind_mean > cup_mean + 0.03, "table behind the cup at {behind_mean:.3} m, cup at {cup_mean:.3} m");
+    eprintln!(
+        "grasp head camera: {cup} cup pixels (worst {:.2} mm off), {table} table pixels ({table_off} off by > 1 cm), \
+         cup at {cup_mean:.3} m, table behind it at {behind_mean:.3} m",
+        cup_worst * 1e3
+    );
 }

@@ -3,9 +3,8 @@
 //! a standing humanoid, and a replay reproduces a recorded trajectory; the `.rrd` files pass the
 //! rerun SDK's own `rerun rrd verify`.
 //!
-//! Python comes from `TWIN_PYTHON` (default `python3`), the `rerun` executable from the same
-//! `bin/` folder; the cross-checks skip with a note when they are missing
-//! (`pip install mcap mcap-ros2-support rosbags rerun-sdk==0.36.3`).
+//! Python and the `rerun` executable come from the tests' venv (`test_python.rs`, made from
+//! `.ci/requirements.txt` on first use); the cross-checks fail when it cannot be made.
 
 use super::common::{repo_root, run};
 use serde_json::Value as Json;
@@ -22,40 +21,27 @@ const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/twin-core/tests/pytho
 const ACCEL_STD: f64 = 0.017;
 const GYRO_STD: f64 = 0.002;
 
-pub(crate) fn python_exe() -> String {
-    std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into())
+/// Every message of `file` decoded by the Python readers (the tests' venv, `test_python.rs`).
+fn python_decode(file: &Path) -> Json {
+    let exe = crate::test_python::python();
+    let out = Command::new(&exe).arg(SCRIPT).arg("decode").arg(file).output();
+    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    assert!(
+        out.status.success(),
+        "{} {SCRIPT} decode failed:\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("script prints JSON")
 }
 
-/// Every message of `file` decoded by the Python readers; `None` (after a note) when missing.
-fn python_decode(file: &Path) -> Option<Json> {
-    let exe = python_exe();
-    let out = match Command::new(&exe).arg(SCRIPT).arg("decode").arg(file).output() {
-        Ok(o) => o,
-        Err(e) => return missing_python(&format!("cannot run {exe}: {e}")),
-    };
-    if out.status.code() == Some(3) {
-        return missing_python(&format!(
-            "{} (pip install -r .ci/requirements.txt)",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    assert!(out.status.success(), "{exe} {SCRIPT} decode failed:\n{}", String::from_utf8_lossy(&out.stderr));
-    Some(serde_json::from_slice(&out.stdout).expect("script prints JSON"))
-}
-
-/// `rerun rrd verify FILE` with the `rerun` next to TWIN_PYTHON; false (after a note) when
-/// there is none.
-pub fn rerun_verify(file: &Path) -> bool {
-    let exe = python_exe();
-    let rerun = Path::new(&exe).parent().map(|d| d.join("rerun")).filter(|p| p.is_file());
-    let Some(rerun) = rerun else {
-        return missing_python::<()>(&format!("no `rerun` next to {exe} (pip install rerun-sdk==0.36.3)")).is_some();
-    };
+/// `rerun rrd verify FILE` with the `rerun` of the tests' venv (rerun-sdk).
+pub fn rerun_verify(file: &Path) {
+    let rerun = crate::test_python::python_tool("rerun", "rerun-sdk");
     let out = Command::new(&rerun).args(["rrd", "verify"]).arg(file).output().expect("rerun runs");
     let text = format!("{}{}", String::from_utf8_lossy(&out.stdout), String::from_utf8_lossy(&out.stderr));
     assert!(out.status.success(), "rerun rrd verify {} failed:\n{text}", file.display());
     assert!(text.contains("verified without error"), "{text}");
-    true
 }
 
 fn sim(args: &[&str]) -> String {
@@ -205,7 +191,7 @@ fn sim_record_decodes_identically_in_mcap_ros2_support_and_rosbags() {
     let dir = tempfile::tempdir().unwrap();
     let mcap = tmp(&dir, "run.mcap");
     sim(&["sim", "--duration", "0.2", "--record", s(&mcap), "--seed", "1"]);
-    let Some(out) = python_decode(&mcap) else { return };
+    let out = python_decode(&mcap);
     assert_eq!(out["profile"], "ros2");
 
     let js = read::<JointState>(&mcap, "/joint_states");
@@ -387,18 +373,87 @@ fn rerun_recordings_of_sim_and_view_verify() {
     let (ok, _, stderr) = run(&["view", s(&tmp(&dir, "missing.mcap")), "-o", s(&view)]);
     assert!(!ok && stderr.contains("missing.mcap"), "{stderr}");
 
-    if rerun_verify(&rrd) {
-        rerun_verify(&view);
-    }
+    rerun_verify(&rrd);
+    rerun_verify(&view);
 }
 
-/// A Python cross-check whose tool is missing fails the test (CI installs them from
-/// `.ci/requirements.txt` and sets TWIN_PYTHON). Only an explicit
-/// `TWIN_ALLOW_MISSING_PYTHON=1` turns the failure into a note, for machines without the tools.
-pub(crate) fn missing_python<T>(why: &str) -> Option<T> {
-    if std::env::var("TWIN_ALLOW_MISSING_PYTHON").is_ok_and(|v| v == "1") {
-        eprintln!("note: Python cross-check not run (TWIN_ALLOW_MISSING_PYTHON=1): {why}");
-        return None;
+/// A JointState log of the humanoid's left knee: one message per stamp of `stamps_nanos`.
+fn knee_log(path: &Path, stamps_nanos: &[i64]) {
+    let mut w = twin_core::log::LogWriter::create(path, &twin_core::log::WriterOptions::default()).unwrap();
+    let topic = w.add_topic::<JointState>("/joint_states").unwrap();
+    for (k, &t) in stamps_nanos.iter().enumerate() {
+        let msg = JointState {
+            header: twin_core::log::Header { stamp_nanos: t, frame_id: String::new() },
+            name: vec!["left_knee_joint".into()],
+            position: vec![0.2 + 1e-4 * k as f64],
+            velocity: Vec::new(),
+            effort: Vec::new(),
+        };
+        w.write(topic, 1_000_000_000 + k as u64 * 10_000_000, &msg).unwrap();
     }
-    panic!("Python cross-check cannot run: {why}; set TWIN_PYTHON to a venv with .ci/requirements.txt");
+    w.finish().unwrap();
+}
+
+#[test]
+fn replay_and_view_warn_when_time_goes_backwards_or_stands_still() {
+    let dir = tempfile::tempdir().unwrap();
+    // 30 s at 100 Hz whose clock jumps 15 s back after 20 s.
+    let back = tmp(&dir, "back.mcap");
+    let stamps: Vec<i64> =
+        (0..3000).map(|k| 100_000_000_000 + k * 10_000_000 - if k >= 2000 { 15_000_000_000 } else { 0 }).collect();
+    knee_log(&back, &stamps);
+    let (ok, _, stderr) = run(&["sim", "--duration", "0.1", "--controller", "replay", "--trajectory", s(&back)]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("back.mcap") && stderr.contains("time goes backwards"), "{stderr}");
+    assert!(stderr.contains("1000 samples") && stderr.contains("14.99"), "{stderr}");
+    let (ok, _, stderr) = run(&["view", s(&back), "-o", s(&tmp(&dir, "back.rrd"))]);
+    assert!(ok && stderr.contains("time goes backwards"), "{stderr}");
+
+    // 10 000 samples sharing one stamp.
+    let still = tmp(&dir, "still.mcap");
+    knee_log(&still, &vec![5_000_000_000; 10_000]);
+    let (ok, _, stderr) = run(&["sim", "--duration", "0.1", "--controller", "replay", "--trajectory", s(&still)]);
+    assert!(ok, "{stderr}");
+    assert!(stderr.contains("still.mcap") && stderr.contains("time stands still"), "{stderr}");
+    assert!(stderr.contains("9999 samples") && stderr.contains("10000 samples at one instant"), "{stderr}");
+    let (ok, stdout, stderr) = run(&["view", s(&still), "-o", s(&tmp(&dir, "still.rrd"))]);
+    assert!(ok && stderr.contains("time stands still"), "{stdout}{stderr}");
+}
+
+/// `--seed` seeds the run's one sensor model: another seed, another IMU noise in what is
+/// recorded, and (the walker balances on its IMU) other joint motion; the same seed, the same
+/// bytes.
+#[test]
+fn sim_seed_sets_the_observed_imu_noise_and_through_the_walker_the_joint_states() {
+    let dir = tempfile::tempdir().unwrap();
+    let record = |seed: &str| {
+        let file = dir.path().join(format!("seed{seed}-{}.mcap", std::process::id()));
+        let (ok, out, err) = run(&[
+            "sim",
+            "--controller",
+            "walk",
+            "--duration",
+            "0.5",
+            "--seed",
+            seed,
+            "--topics",
+            "/joint_states,/humanoid/imu/data",
+            "--record",
+            file.to_str().unwrap(),
+        ]);
+        assert!(ok, "{out}\n{err}");
+        let log = Log::open(&file, ReadOptions { strict: true }).unwrap();
+        let imu: Vec<Imu> = log.read_typed::<Imu>("/humanoid/imu/data").unwrap().0.into_iter().map(|m| m.1).collect();
+        let js: Vec<JointState> =
+            log.read_typed::<JointState>("/joint_states").unwrap().0.into_iter().map(|m| m.1).collect();
+        std::fs::remove_file(&file).unwrap();
+        (imu, js)
+    };
+    let (imu1, js1) = record("1");
+    let (imu2, js2) = record("2");
+    assert_eq!((imu1.len(), js1.len()), (100, 250));
+    let gyro = |m: &Imu| m.angular_velocity;
+    assert!(imu1.iter().zip(&imu2).all(|(a, b)| gyro(a) != gyro(b)), "every IMU sample differs between seeds");
+    assert!(js1.last().unwrap().position != js2.last().unwrap().position, "the walker's joints differ");
+    assert!(record("1") == (imu1, js1), "the same seed, the same recording");
 }

@@ -272,3 +272,63 @@ fn sysid_loads_a_urdf_with_package_meshes_through_the_converter() {
     let log = simulate(&truth, &SynthOptions { duration_secs: 1.0, ..Default::default() }).unwrap();
     assert_eq!(log.joint_names.len(), 6);
 }
+
+/// `twin sysid --update URDF --report JSON` with the URDF and the report in one folder, spelled
+/// `urdf` and `report` (relative, absolute, through `..`, through a symlink to the folder): the
+/// command ends within 5 s (the folder's write lock is taken once, whatever the spelling) with
+/// the URDF updated and the report written.
+fn sysid_ends_with_spellings(urdf: impl Fn(&Path) -> String, report: impl Fn(&Path) -> String) {
+    let (dir, _) = setup(6.0);
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    std::os::unix::fs::symlink(dir.path(), dir.path().join("here")).unwrap();
+    let (urdf, report) = (urdf(dir.path()), report(dir.path()));
+    let mut child = Command::new(env!("CARGO_BIN_EXE_twin"))
+        .current_dir(dir.path())
+        .args(["sysid", "--log", "train.mcap", "--update", &urdf, "--report", &report])
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let started = std::time::Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if started.elapsed() > std::time::Duration::from_secs(5) {
+            let _ = child.kill();
+            let out = child.wait_with_output().unwrap();
+            panic!("twin sysid --update {urdf} --report {report} still running after 5 s:\n{}", stderr(&out));
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    };
+    let out = child.wait_with_output().unwrap();
+    assert!(status.success(), "{}", stderr(&out));
+    let report: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(dir.path().join("rep.json")).unwrap()).unwrap();
+    assert_eq!(report["base"], "fixed");
+    assert!(dir.path().join("arm6.urdf.bak").is_file());
+}
+
+fn absolute(dir: &Path, name: &str) -> String {
+    dir.join(name).to_str().unwrap().to_string()
+}
+
+#[test]
+fn sysid_update_absolute_report_relative_ends() {
+    sysid_ends_with_spellings(|d| absolute(d, "arm6.urdf"), |_| "rep.json".into());
+}
+
+#[test]
+fn sysid_update_relative_report_absolute_ends() {
+    sysid_ends_with_spellings(|_| "arm6.urdf".into(), |d| absolute(d, "rep.json"));
+}
+
+#[test]
+fn sysid_update_through_dotdot_ends() {
+    sysid_ends_with_spellings(|_| "sub/../arm6.urdf".into(), |d| absolute(d, "rep.json"));
+}
+
+#[test]
+fn sysid_update_through_a_symlinked_folder_ends() {
+    sysid_ends_with_spellings(|d| absolute(d, "here/arm6.urdf"), |_| "rep.json".into());
+}

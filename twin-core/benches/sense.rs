@@ -205,7 +205,7 @@ fn main() {
             frames: 0,
             valid: 0,
         };
-        let options = SimOptions { duration_secs: duration };
+        let options = SimOptions { duration_secs: duration, ..SimOptions::default() };
         let report = if mode > 0 {
             let r = sim::simulate_with(
                 &robot,

@@ -264,3 +264,29 @@ pub enum Error {
 
 /// `Result` with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
+
+impl From<twin_fsio::Error> for Error {
+    /// The same variant, with the same text.
+    fn from(e: twin_fsio::Error) -> Error {
+        match e {
+            twin_fsio::Error::Io { path, source } => Error::Io { path, source },
+            twin_fsio::Error::BadPath { path, message } => Error::BadPath { path, message },
+            other => Error::Options(other.to_string()),
+        }
+    }
+}
+
+impl From<twin_convert::Error> for Error {
+    /// The same variant, with the same text.
+    fn from(e: twin_convert::Error) -> Error {
+        match e {
+            twin_convert::Error::File(e) => e.into(),
+            twin_convert::Error::Urdf { path, line, element, name, message } => {
+                Error::Urdf { path, line, element, name, message }
+            }
+            twin_convert::Error::Xml { path, line, column, message } => Error::Xml { path, line, column, message },
+            twin_convert::Error::Load { path, message } => Error::Load { path, message },
+            other => Error::Options(other.to_string()),
+        }
+    }
+}

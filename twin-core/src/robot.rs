@@ -18,9 +18,8 @@
 //!   [`RobotMetadata::from_mjcf`] is the one place where metadata stored in an MJCF is read.
 //! - Feet and end-effectors come from the kinematic tree and the geometry, never from names.
 
-use crate::control::Actuation;
 use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, SensorMeta};
-use crate::error::{Error, Result};
+use crate::error::Result;
 use crate::mj::{Data, FreeJoint, JointType, Model, ObjType};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -120,7 +119,7 @@ impl RobotMetadata {
     /// MJCFs carry none beyond the model itself (sensor noise, `actuatorfrcrange`), which
     /// [`Robot::from_parts`] reads.
     pub fn from_mjcf(model: &Model) -> Option<RobotMetadata> {
-        crate::convert::RobotMeta::from_model(model).map(|m| RobotMetadata {
+        crate::convert::robot_meta(model).map(|m| RobotMetadata {
             name: Some(m.name),
             imus: m.imus,
             joints: m.joints,
@@ -164,8 +163,8 @@ impl Robot {
     /// scene.
     ///
     /// # Errors
-    /// [`Error::Io`] if the file can't be read; the converter's errors for a URDF;
-    /// [`Error::Load`] if MuJoCo refuses the model.
+    /// [`Error::Io`](crate::Error::Io) if the file can't be read; the converter's errors for a URDF;
+    /// [`Error::Load`](crate::Error::Load) if MuJoCo refuses the model.
     pub fn load(path: impl AsRef<Path>) -> Result<Robot> {
         Robot::load_with(path, &ConvertOptions::default())
     }
@@ -180,43 +179,30 @@ impl Robot {
 
     /// [`Robot::load_with`], with `extra_mjcf` (MJCF elements such as `<option>`) added inside
     /// the converted URDF's `<mujoco>` element (e.g. `twin sysid`'s timestep and flags).
-    /// Ignored for MJCF files.
+    /// Ignored for MJCF files. The one path from a file is [`crate::convert::load`].
     ///
     /// # Errors
     /// As [`Robot::load`].
     pub fn load_with_extra(path: impl AsRef<Path>, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
         let path = path.as_ref();
-        let text = crate::fsio::read_to_string(path)?;
-        if crate::urdf::is_urdf(&text) {
-            let converted = crate::convert::convert_urdf_str(path, &text, options)?;
-            let mjcf = match converted.mjcf.rfind("</mujoco>") {
-                Some(end) if !extra_mjcf.is_empty() => {
-                    format!("{}{extra_mjcf}\n{}", &converted.mjcf[..end], &converted.mjcf[end..])
-                }
-                _ => converted.mjcf,
-            };
-            let model = Model::from_xml_str(&mjcf).map_err(|e| match e {
-                Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-                other => other,
-            })?;
-            let meta = RobotMetadata {
+        let loaded = crate::convert::load(path, options, extra_mjcf)?;
+        let meta = match loaded.converted {
+            Some(converted) => Some(RobotMetadata {
                 name: Some(converted.robot_name),
                 imus: converted.imus,
                 joints: converted.joints,
                 sensors: converted.sensors,
-            };
-            return Robot::from_parts(Arc::new(model), path, Some(meta));
-        }
-        let model = Model::from_mujoco_file(path)?;
-        let meta = RobotMetadata::from_mjcf(&model);
-        Robot::from_parts(Arc::new(model), path, meta)
+            }),
+            None => RobotMetadata::from_mjcf(&loaded.model),
+        };
+        Robot::from_parts(Arc::new(loaded.model), path, meta)
     }
 
     /// A robot from a compiled model alone, named `name` (IMUs, limits and interfaces as the
     /// model holds them). [`Robot::from_parts`] with no metadata takes the model's own name.
     ///
     /// # Errors
-    /// [`Error::MuJoCo`] if MuJoCo fails while posing the model to find its feet.
+    /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
     pub fn from_model(model: Arc<Model>, name: &str, path: &Path) -> Result<Robot> {
         let meta = RobotMetadata { name: Some(name.to_string()), ..RobotMetadata::default() };
         Robot::from_parts(model, path, Some(meta))
@@ -225,7 +211,7 @@ impl Robot {
     /// A robot from a compiled model of `path` and the metadata its file gives.
     ///
     /// # Errors
-    /// [`Error::MuJoCo`] if MuJoCo fails while posing the model to find its feet.
+    /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
     pub fn from_parts(model: Arc<Model>, path: &Path, meta: Option<RobotMetadata>) -> Result<Robot> {
         let meta = meta.unwrap_or_default();
         let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
@@ -304,7 +290,7 @@ impl Robot {
     /// every id and address stays valid.
     ///
     /// # Errors
-    /// [`Error::Size`] when `model` does not have this robot's layout.
+    /// [`Error::Size`](crate::Error::Size) when `model` does not have this robot's layout.
     pub fn with_model(&self, model: Arc<Model>) -> Result<Robot> {
         crate::mj::ModelLayout::of(&self.model).require_same(&crate::mj::ModelLayout::of(&model))?;
         Ok(Robot { model, ..self.clone() })
@@ -407,20 +393,20 @@ fn find_imus(model: &Model, robot_name: &str, meta: &[ImuMeta]) -> Vec<Imu> {
 const FOOT_TOLERANCE_M: f64 = 0.01;
 
 /// The feet of a floating-base robot, from the kinematic tree and the geometry: in the home
-/// pose ([`crate::control::reset_to_home`]), the bodies with a collision geom within 1 cm of
+/// pose ([`reset_to_home`]), the bodies with a collision geom within 1 cm of
 /// the robot's lowest collision geom, keeping of each touching chain only its body nearest the
 /// base (a toe body under a touching foot belongs to that foot). Sorted by body id.
 ///
 /// # Errors
-/// [`Error::MuJoCo`] if MuJoCo fails while posing the model.
+/// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model.
 pub fn find_feet(model: &Model) -> Result<Vec<usize>> {
     let mut data = Data::new(Arc::new(model.try_clone()?))?;
-    crate::control::reset_to_home(&mut data)?;
+    reset_to_home(&mut data)?;
     // The lowest collision geom: a visual mesh below the collision geometry (the G1's feet
     // touch the ground with four small spheres above the sole's mesh) touches nothing.
     let collision_lowest: Vec<(usize, f64)> = (0..model.ngeom())
         .filter(|&g| model.geom_bodyid()[g] != 0 && (model.geom_contype()[g] != 0 || model.geom_conaffinity()[g] != 0))
-        .filter_map(|g| crate::control::geom_lowest_z(model, &data, g).map(|z| (model.geom_bodyid()[g] as usize, z)))
+        .filter_map(|g| geom_lowest_z(model, &data, g).map(|z| (model.geom_bodyid()[g] as usize, z)))
         .collect();
     let lowest = collision_lowest.iter().map(|&(_, z)| z).fold(f64::INFINITY, f64::min);
     if !lowest.is_finite() {
@@ -471,6 +457,135 @@ pub fn in_subtree(model: &Model, root: usize, mut b: usize) -> bool {
         }
         b = parent[b] as usize;
     }
+}
+
+/// Where a command goes: `ctrl` when the model has actuators, else `qfrc_applied`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Actuation {
+    /// Command = `ctrl` (len `nu`), clamped to each actuator's `ctrlrange` when limited.
+    Ctrl,
+    /// Command = `qfrc_applied` (len `nv`), clamped to each joint's effort (`actuatorfrcrange`)
+    /// when limited; free and ball joints get none.
+    Qfrc,
+}
+
+impl Actuation {
+    /// [`Actuation::Ctrl`] for models with actuators, else [`Actuation::Qfrc`].
+    pub fn of(model: &Model) -> Actuation {
+        if model.nu() > 0 { Actuation::Ctrl } else { Actuation::Qfrc }
+    }
+
+    /// Length of a command: `nu` or `nv`.
+    pub fn len(self, model: &Model) -> usize {
+        match self {
+            Actuation::Ctrl => model.nu(),
+            Actuation::Qfrc => model.nv(),
+        }
+    }
+
+    /// Whether a command is empty (a model without actuators and DOFs).
+    pub fn is_empty(self, model: &Model) -> bool {
+        self.len(model) == 0
+    }
+
+    /// Limits of each command entry, `[low, high]` (infinite where unlimited; zero for the
+    /// DOFs of free and ball joints under [`Actuation::Qfrc`], which no motor drives).
+    pub fn limits(self, model: &Model) -> Vec<[f64; 2]> {
+        match self {
+            Actuation::Ctrl => (0..model.nu())
+                .map(|u| {
+                    if model.actuator_ctrllimited()[u] {
+                        model.actuator_ctrlrange()[u]
+                    } else {
+                        [f64::NEG_INFINITY, f64::INFINITY]
+                    }
+                })
+                .collect(),
+            Actuation::Qfrc => (0..model.nv())
+                .map(|dof| {
+                    let joint = model.dof_jntid()[dof] as usize;
+                    match model.joint_type(joint) {
+                        JointType::Free | JointType::Ball => [0.0, 0.0],
+                        _ if model.jnt_actfrclimited()[joint] => model.jnt_actfrcrange()[joint],
+                        _ => [f64::NEG_INFINITY, f64::INFINITY],
+                    }
+                })
+                .collect(),
+        }
+    }
+
+    /// Writes `command` into `data` (`ctrl` or `qfrc_applied`). MuJoCo clamps `ctrl` to limited
+    /// control ranges itself; controllers clamp `qfrc_applied` commands (see [`Actuation::limits`]).
+    ///
+    /// # Panics
+    /// If `command` does not have [`Actuation::len`] entries.
+    pub fn apply(self, data: &mut Data, command: &[f64]) {
+        match self {
+            Actuation::Ctrl => data.ctrl_mut().copy_from_slice(command),
+            Actuation::Qfrc => data.qfrc_applied_mut().copy_from_slice(command),
+        }
+    }
+}
+
+/// The pose a robot is meant to hold: keyframe `home` if the model has one, else `qpos0`
+/// (len `nq`).
+pub fn nominal_pose(model: &Model) -> Vec<f64> {
+    model.id(ObjType::Key, "home").and_then(|k| model.key_qpos(k)).unwrap_or_else(|| model.qpos0()).to_vec()
+}
+
+/// Puts `data` in the model's standing pose: keyframe `home` if the model has one; otherwise
+/// `qpos0` with the floating base raised or lowered so that the lowest robot geom touches
+/// z = 0. Runs `forward` so positions and sensors are current.
+///
+/// # Errors
+/// As [`Data::forward`].
+pub fn reset_to_home(data: &mut Data) -> Result<()> {
+    let model = data.model().clone();
+    if let Some(key) = model.id(ObjType::Key, "home") {
+        data.reset_to_keyframe(key)?;
+        return data.forward();
+    }
+    data.reset()?;
+    data.forward()?;
+    let Some(base) = model.free_joint() else {
+        return Ok(());
+    };
+    let lowest = lowest_robot_point_z(&model, data);
+    if lowest.is_finite() {
+        data.qpos_mut()[base.qpos_adr + 2] -= lowest;
+        data.forward()?;
+    }
+    Ok(())
+}
+
+/// Lowest z (world frame, metres) of any geom not attached to the world body, from the geoms'
+/// current poses; +inf when there is none.
+pub fn lowest_robot_point_z(model: &Model, data: &Data) -> f64 {
+    (0..model.ngeom())
+        .filter(|&g| model.geom_bodyid()[g] != 0)
+        .filter_map(|g| geom_lowest_z(model, data, g))
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Lowest z (world frame, metres) of geom `g` in its current pose: exact for spheres,
+/// capsules, cylinders, boxes and ellipsoids; the bounding sphere for meshes and others
+/// (conservative: may leave a small gap); `None` for planes.
+pub fn geom_lowest_z(model: &Model, data: &Data, g: usize) -> Option<f64> {
+    let z = data.geom_xpos()[g][2];
+    let size = model.geom_size()[g];
+    let m = data.geom_xmat()[g];
+    // Row z of the geom's world rotation: the world z component of each of its local axes.
+    let r = [m[6], m[7], m[8]];
+    let extent = match model.geom_type()[g] as u32 {
+        mujoco_sys::mjtGeom_mjGEOM_SPHERE => size[0],
+        mujoco_sys::mjtGeom_mjGEOM_CAPSULE => size[0] + size[1] * r[2].abs(),
+        mujoco_sys::mjtGeom_mjGEOM_CYLINDER => size[0] * (1.0 - r[2] * r[2]).max(0.0).sqrt() + size[1] * r[2].abs(),
+        mujoco_sys::mjtGeom_mjGEOM_BOX => (0..3).map(|k| size[k] * r[k].abs()).sum(),
+        mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => (0..3).map(|k| (size[k] * r[k]).powi(2)).sum::<f64>().sqrt(),
+        mujoco_sys::mjtGeom_mjGEOM_PLANE => return None,
+        _ => model.geom_rbound()[g],
+    };
+    Some(z - extent)
 }
 
 #[cfg(test)]

@@ -42,6 +42,30 @@
 //! min_hold_secs = 2.0
 //! ```
 //!
+//! Your own ROS 2 node as the controller (`controller = "ros"`, see [`crate::external`] and
+//! `scenarios/hold_pose.toml`), and what `twin test` asks of the scenario:
+//!
+//! ```toml
+//! controller = "ros"
+//! [ros]                               # external::RosOptions, by field name
+//! command = "python3 controllers/hold_pose.py --ros-args -p use_sim_time:=true"
+//! period_timeout_secs = 5.0
+//!
+//! [test]                              # TestOptions: `twin test`
+//! episodes = 20
+//! min_success_lower_95 = 0.8
+//! ```
+//!
+//! Walking scenarios may put the robot on terrain (see [`crate::terrain`] for every kind and
+//! key); the robot starts seated on it:
+//!
+//! ```toml
+//! [terrain]                           # terrain::TerrainOptions, by field name
+//! kind = "slope"                      # flat | rough | slope | steps | stairs | obstacles | gaps
+//! slope_deg = 5.0
+//! difficulty = 1.0                    # 0: flat … 1: the parameters as written
+//! ```
+//!
 //! Unknown keys, wrong types and impossible values are errors naming the file, the line and the
 //! key.
 //!
@@ -50,15 +74,20 @@
 //! observer that measures the gait and checks it ([`Scenario::check`], a
 //! [`crate::engine::Check`]); `twin sim` and `twin randomize` run the same pieces.
 
-use crate::control::{Controller, ControllerOptions};
+pub use crate::checks::{Checks, Threshold};
+use crate::control::Controller;
 use crate::engine::disturb::TimedForce;
 use crate::engine::{Check, Flow, Measurement, Observer, StepView};
 use crate::error::{Error, Result};
 use crate::mj::{Data, JointType, Model, ObjType};
+use crate::registry::ControllerOptions;
 use crate::robot::Robot;
 use crate::walk::{GaitMetrics, GaitSummary, GaitTargets, WALK_ARMATURE, WalkOptions};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
+
+/// The `controller` of a scenario driven by the user's own ROS 2 node (see [`crate::external`]).
+pub const EXTERNAL_CONTROLLER: &str = "ros";
 
 /// A push: a constant force on a body for a while.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
@@ -80,71 +109,6 @@ fn default_push_secs() -> f64 {
     0.1
 }
 
-/// Thresholds on [`GaitSummary`]; each one present is checked.
-#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
-pub struct Checks {
-    /// Most falls allowed (0 or 1 in a single run).
-    pub falls: Option<u32>,
-    /// Least displacement along the initial heading, m.
-    pub min_forward: Option<f64>,
-    /// Largest lateral drift (absolute), m.
-    pub max_lateral_drift: Option<f64>,
-    /// Largest net displacement, m (standing).
-    pub max_distance: Option<f64>,
-    /// Least average speed, m/s.
-    pub min_average_speed: Option<f64>,
-    /// Largest foot slide in one stance, m.
-    pub max_slip: Option<f64>,
-    /// Largest mean foot slide per stance, m.
-    pub max_mean_slip: Option<f64>,
-    /// Largest RMS velocity-tracking error, m/s.
-    pub max_velocity_error: Option<f64>,
-    /// Least heading change, degrees (signed as the command: a negative threshold asks for at
-    /// least that much turning right).
-    pub min_turn_deg: Option<f64>,
-    /// Least number of steps.
-    pub min_steps: Option<u64>,
-    /// Largest RMS step-length error, m.
-    pub max_step_length_error: Option<f64>,
-    /// Largest cost of transport.
-    pub max_cost_of_transport: Option<f64>,
-    /// Grasp: least clearance between the arms and the rest of the robot, and no robot contact
-    /// with the world other than feet and gripper–cup, m (0: touching fails).
-    pub min_clearance_m: Option<f64>,
-    /// Grasp: largest finger–cup normal force of one finger, N.
-    pub max_grip_force_n: Option<f64>,
-    /// Grasp: least mean finger–cup normal force of each finger while the cup is held up, N.
-    pub min_grip_force_n: Option<f64>,
-    /// Grasp: largest cup displacement in the grasp frame after the lift started (the grasp
-    /// frame, once at the cup, rose 1 cm), m.
-    pub max_slip_m: Option<f64>,
-    /// Grasp: largest cup tilt in the grasp frame after the lift started, degrees.
-    pub max_tilt_deg: Option<f64>,
-    /// Grasp: least margin of the CoM's ground projection inside the support polygon, m.
-    pub min_com_margin_m: Option<f64>,
-    /// Grasp: least cup height above its start, held for `min_hold_secs` at the end of the
-    /// run, m.
-    pub min_lift_m: Option<f64>,
-    /// Grasp: how long the cup must stay lifted at the end of the run, s (default with
-    /// `min_lift_m`: 2).
-    pub min_hold_secs: Option<f64>,
-}
-
-impl Checks {
-    /// Whether any grasp threshold is set (a [`crate::grasp::GraspCheck`] then runs).
-    pub fn has_grasp(&self) -> bool {
-        self.min_clearance_m.is_some()
-            || self.max_grip_force_n.is_some()
-            || self.min_grip_force_n.is_some()
-            || self.max_slip_m.is_some()
-            || self.max_tilt_deg.is_some()
-            || self.min_com_margin_m.is_some()
-            || self.min_lift_m.is_some()
-            || self.min_hold_secs.is_some()
-    }
-}
-
 /// Where a scene object (the cup) starts.
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -158,35 +122,6 @@ pub struct Placement {
 
 fn default_cup() -> String {
     "cup".into()
-}
-
-/// One check's verdict.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Verdict {
-    /// Check name (its key).
-    pub name: &'static str,
-    /// Measured value.
-    pub value: f64,
-    /// `<=` or `>=`.
-    pub op: &'static str,
-    /// Threshold.
-    pub threshold: f64,
-    /// Whether it passed.
-    pub passed: bool,
-}
-
-impl std::fmt::Display for Verdict {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        write!(
-            f,
-            "{} {:<22} {:.4} {} {}",
-            if self.passed { "PASS" } else { "FAIL" },
-            self.name,
-            self.value,
-            self.op,
-            self.threshold
-        )
-    }
 }
 
 #[derive(Debug, Clone, serde::Deserialize)]
@@ -212,6 +147,10 @@ struct File {
     #[serde(default)]
     grasp: crate::grasp::GraspOptions,
     randomize: Option<PathBuf>,
+    ros: Option<crate::external::RosOptions>,
+    #[serde(default)]
+    test: TestOptions,
+    terrain: Option<crate::terrain::TerrainOptions>,
 }
 
 fn default_controller() -> String {
@@ -227,7 +166,7 @@ pub struct Scenario {
     pub model: Option<PathBuf>,
     /// Simulated seconds.
     pub duration_secs: f64,
-    /// Seed (sensor noise of recordings).
+    /// Seed of the run's random stream (sensor noise and biases, random disturbances).
     pub seed: u64,
     /// Controller name.
     pub controller: String,
@@ -252,6 +191,35 @@ pub struct Scenario {
     /// The randomization spec `twin randomize --scenario` uses without `--config`, resolved
     /// against the scenario's folder.
     pub randomize: Option<PathBuf>,
+    /// The external controller (`controller = "ros"`, [`crate::external`]).
+    pub ros: Option<crate::external::RosOptions>,
+    /// What `twin test` asks of this scenario.
+    pub test: TestOptions,
+    /// The ground, if not the flat floor.
+    pub terrain: Option<crate::terrain::TerrainOptions>,
+}
+
+/// A scenario's `[test]` table: what `twin test` runs and asks.
+///
+/// ```toml
+/// [test]
+/// episodes = 20                 # randomized episodes (0: the nominal run only)
+/// min_success_lower_95 = 0.8    # least lower bound of the success rate's 95 % Wilson interval
+/// seed = 1                      # master seed of the randomized episodes
+/// ```
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TestOptions {
+    /// Randomized episodes (spec: the scenario's `randomize` file, or twin's default spec)
+    /// (default: 0, the nominal run only).
+    #[serde(default)]
+    pub episodes: u64,
+    /// Least lower bound of the success rate's 95 % Wilson interval over the randomized
+    /// episodes, 0–1 (default: 0.5 when `episodes` > 0).
+    pub min_success_lower_95: Option<f64>,
+    /// Master seed of the randomized episodes (default: 0).
+    #[serde(default)]
+    pub seed: u64,
 }
 
 /// 1-based line of byte `offset` in `text`.
@@ -279,6 +247,32 @@ fn line_of_key(text: &str, section: Option<&str>, key: &str) -> Option<usize> {
 }
 
 impl Scenario {
+    /// The scenario of a command line without a file: `controller` for `duration_secs`, every
+    /// other key at its default (what a file with only these two keys gives), named
+    /// `<command line>`.
+    pub fn defaults(controller: &str, duration_secs: f64) -> Scenario {
+        Scenario {
+            path: PathBuf::from("<command line>"),
+            model: None,
+            duration_secs,
+            seed: 0,
+            controller: controller.to_string(),
+            armature: WALK_ARMATURE,
+            friction: None,
+            walk: WalkOptions::default(),
+            pushes: Vec::new(),
+            checks: Checks::default(),
+            world: None,
+            impratio: None,
+            cup: None,
+            grasp: crate::grasp::GraspOptions::default(),
+            randomize: None,
+            ros: None,
+            test: TestOptions::default(),
+            terrain: None,
+        }
+    }
+
     /// Reads and checks `path`.
     ///
     /// # Errors
@@ -315,14 +309,15 @@ impl Scenario {
         if !(file.duration > 0.0 && file.duration.is_finite()) {
             return Err(bad(None, "duration", format!("must be a positive number of seconds (got {})", file.duration)));
         }
-        if !crate::control::CONTROLLERS.contains(&file.controller.as_str()) {
+        let external = file.controller == EXTERNAL_CONTROLLER;
+        if !external && !crate::registry::CONTROLLERS.contains(&file.controller.as_str()) {
             return Err(bad(
                 None,
                 "controller",
                 format!(
-                    "unknown controller \"{}\" (available: {})",
+                    "unknown controller \"{}\" (available: {}, or {EXTERNAL_CONTROLLER} for your own ROS 2 node with a [ros] table)",
                     file.controller,
-                    crate::control::CONTROLLERS.join(", ")
+                    crate::registry::CONTROLLERS.join(", ")
                 ),
             ));
         }
@@ -337,7 +332,34 @@ impl Scenario {
             return Err(bad(None, "friction", format!("must be a non-negative coefficient (got {f})")));
         }
         file.walk.validate().map_err(|(key, m)| bad(Some("walk"), key, m))?;
+        match (&file.ros, external) {
+            (Some(r), true) => r.validate().map_err(|(key, m)| bad(Some("ros"), key, m))?,
+            (None, true) => {
+                return Err(bad(
+                    None,
+                    "controller",
+                    "controller = \"ros\" needs a [ros] table with the command that starts your node \
+                     (e.g. command = \"python3 my_controller.py --ros-args -p use_sim_time:=true\")"
+                        .into(),
+                ));
+            }
+            (Some(_), false) => {
+                return Err(bad(None, "controller", "a [ros] table is for controller = \"ros\"".into()));
+            }
+            (None, false) => {}
+        }
+        if let Some(p) = file.test.min_success_lower_95
+            && !(0.0..=1.0).contains(&p)
+        {
+            return Err(bad(Some("test"), "min_success_lower_95", format!("must be within 0..=1 (got {p})")));
+        }
         file.grasp.validate().map_err(|(key, m)| bad(Some("grasp"), key, m))?;
+        if let Some(t) = &file.terrain {
+            t.validate().map_err(|(key, m)| bad(Some("terrain"), key, m))?;
+            if file.world.is_some() && t.kind != "flat" {
+                return Err(bad(None, "world", "a scenario has either a world or a [terrain], not both".into()));
+            }
+        }
         if let Some(r) = file.impratio
             && !(r > 0.0 && r.is_finite())
         {
@@ -378,7 +400,23 @@ impl Scenario {
             cup: file.cup,
             grasp: file.grasp,
             randomize,
+            ros: file.ros,
+            test: file.test,
+            terrain: file.terrain,
         })
+    }
+
+    /// Whether the scenario's controller is an external ROS 2 node (`controller = "ros"`).
+    pub fn is_external(&self) -> bool {
+        self.controller == EXTERNAL_CONTROLLER
+    }
+
+    /// The folder of the scenario file (where relative paths and a `[ros]` command start).
+    pub fn folder(&self) -> PathBuf {
+        match self.path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p.to_path_buf(),
+            _ => PathBuf::from("."),
+        }
     }
 
     /// Loads the scenario's robot (`default_model` when it names none) with its physics
@@ -392,8 +430,22 @@ impl Scenario {
         // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where
         // `twin randomize` draws it per episode.
         let grasping = self.controller == "grasp";
-        let extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" };
-        let robot = Robot::load_with_extra(&path, &convert, extra)?;
+        let mut extra = if grasping { "<size nuser_cam=\"1\"/>" } else { "" }.to_string();
+        // Terrain: its geometry composed over the floor, the robot seated on it.
+        let terrain = self.terrain.as_ref().filter(|t| t.kind != "flat").map(|t| t.build());
+        if let Some(g) = &terrain {
+            extra.push_str(&g.to_mjcf(crate::terrain::FLOOR_FRICTION));
+        }
+        let mut robot = Robot::load_with_extra(&path, &convert, &extra)?;
+        if let Some(g) = &terrain {
+            let (model, _lift) = crate::terrain::settle(&robot.model, g, &robot.feet).map_err(|e| Error::Scenario {
+                path: self.path.clone(),
+                line: None,
+                key: Some("terrain".into()),
+                message: format!("{e} ({})", path.display()),
+            })?;
+            robot = robot.with_model(Arc::new(model))?;
+        }
         let mut model = prepare_model(&robot.model, self.armature, self.friction)?;
         if self.impratio.is_some() || self.cup.is_some() || grasping {
             let mut edit = model.edit()?;
@@ -439,15 +491,21 @@ impl Scenario {
     }
 
     /// The scenario's controller for `model`, from twin's registry
-    /// ([`crate::control::by_name_with`]) with the scenario's walking options.
+    /// ([`crate::registry::by_name_with`]) with the scenario's walking options.
     ///
     /// # Errors
     /// [`Error::Walk`] when the walker can't drive the model (e.g. unreachable steps); as
-    /// [`crate::control::by_name_with`].
+    /// [`crate::registry::by_name_with`].
     pub fn controller(&self, model: &Model) -> Result<Box<dyn Controller>> {
+        if self.is_external() {
+            return Err(Error::Options(format!(
+                "{}: controller = \"ros\" is a process twin starts (twin_core::external), not one of twin's own",
+                self.path.display()
+            )));
+        }
         let options =
             ControllerOptions { walk: self.walk.clone(), grasp: self.grasp.clone(), ..ControllerOptions::default() };
-        crate::control::by_name_with(&self.controller, model, &options)
+        crate::registry::by_name_with(&self.controller, model, &options)
     }
 
     /// What the gait should be.
@@ -494,57 +552,13 @@ impl Scenario {
                 self.grasp.grasp_bodies.clone(),
             )
         });
-        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp })
+        let collisions = self.terrain.as_ref().map(|_| crate::terrain::Collisions::new(model));
+        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp, collisions })
     }
 
     /// Each check against `summary`.
-    pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Verdict> {
+    pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Threshold> {
         self.checks.evaluate(summary)
-    }
-}
-
-impl Checks {
-    /// Each threshold present against `summary`; a fall fails every non-empty set of checks.
-    pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Verdict> {
-        let c = self;
-        let mut out = Vec::new();
-        let mut at_most = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Verdict { name, value, op: "<=", threshold: t, passed: value <= t });
-            }
-        };
-        at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
-        at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
-        at_most("max_distance", summary.distance_m, c.max_distance);
-        at_most("max_slip", summary.slip_max_m, c.max_slip);
-        at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
-        at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
-        at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
-        at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
-        let mut at_least = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Verdict { name, value, op: ">=", threshold: t, passed: value >= t });
-            }
-        };
-        at_least("min_forward", summary.forward_m, c.min_forward);
-        at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
-        at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
-        if let Some(t) = c.min_turn_deg {
-            let sign = if t < 0.0 { -1.0 } else { 1.0 };
-            let turned = summary.yaw_change_rad.to_degrees();
-            out.push(Verdict {
-                name: "min_turn_deg",
-                value: turned,
-                op: ">=",
-                threshold: t,
-                passed: sign * turned >= sign * t,
-            });
-        }
-        // A fall fails every run that has checks, whether or not `falls` is among them.
-        if summary.fell && c.falls.is_none() && !out.is_empty() {
-            out.push(Verdict { name: "falls", value: 1.0, op: "<=", threshold: 0.0, passed: false });
-        }
-        out
     }
 }
 
@@ -557,11 +571,13 @@ pub struct ScenarioCheck {
     checks: Checks,
     /// The grasp checks, when the scenario has grasp thresholds.
     pub grasp: Option<crate::grasp::GraspCheck>,
+    /// The robot's first run-in with the terrain's boxes, when the scenario has terrain.
+    pub collisions: Option<crate::terrain::Collisions>,
 }
 
 impl ScenarioCheck {
     /// Each threshold's verdict on the gait so far.
-    pub fn verdicts(&self) -> Vec<Verdict> {
+    pub fn verdicts(&self) -> Vec<Threshold> {
         let mut v = self.checks.evaluate(&self.metrics.summary());
         if let Some(g) = &self.grasp {
             v.extend(g.verdicts());
@@ -575,6 +591,9 @@ impl Observer for ScenarioCheck {
         if let Some(g) = self.grasp.as_mut() {
             g.start(model, data)?;
         }
+        if let Some(c) = self.collisions.as_mut() {
+            c.start(model, data)?;
+        }
         self.metrics.start(model, data)
     }
 
@@ -582,7 +601,17 @@ impl Observer for ScenarioCheck {
         if let Some(g) = self.grasp.as_mut() {
             g.observe(step)?;
         }
+        if let Some(c) = self.collisions.as_mut() {
+            c.observe(step)?;
+        }
         self.metrics.observe(step)
+    }
+}
+
+impl ScenarioCheck {
+    /// The robot's first collision with the terrain, if any.
+    pub fn collision(&self) -> Option<&crate::terrain::Collision> {
+        self.collisions.as_ref().and_then(|c| c.first.as_ref())
     }
 }
 
@@ -608,8 +637,16 @@ impl Check for ScenarioCheck {
                 .filter(|m| m.name != "fell")
                 .chain(self.grasp.iter().flat_map(|g| g.verdicts()).map(|v| Measurement::new(v.name, v.value, "")))
                 .collect(),
-            details: verdicts.iter().map(ToString::to_string).collect(),
-            cause: (!failed.is_empty()).then(|| format!("failed: {}", failed.join(", "))),
+            details: verdicts
+                .iter()
+                .map(ToString::to_string)
+                .chain(self.collision().map(|c| format!("collision: {c}")))
+                .collect(),
+            cause: (!failed.is_empty()).then(|| match self.collision() {
+                // Running into the terrain, not a mystery fall.
+                Some(c) => format!("failed: {} (first collision: {c})", failed.join(", ")),
+                None => format!("failed: {}", failed.join(", ")),
+            }),
         }
     }
 }

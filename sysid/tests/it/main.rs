@@ -9,3 +9,5 @@ mod gap;
 mod noise;
 mod regressor;
 mod synthetic;
+#[path = "../../../twin-core/tests/it/test_python.rs"]
+mod test_python;

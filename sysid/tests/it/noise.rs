@@ -3,7 +3,7 @@
 //! refusals of moving and short logs, and the URDF write-back.
 
 use sysid::noise::{AxisTruth, ImuLog, NoiseOptions, analyze_encoders, analyze_imu, imu_noise_updates, synth_imu};
-use sysid::synth::Rng;
+use sysid::rng::Rng;
 
 fn truth(offset: f64, n: f64, b: f64, k: f64) -> AxisTruth {
     AxisTruth { offset, white_density: n, bias_instability: b, bias_random_walk: k }

@@ -1,5 +1,5 @@
-//! Controllers: what drives a twin during a rollout ([`pd_hold`], [`passive`], [`replay`]; one
-//! file each), the registry of their names ([`by_name`]), and the home pose.
+//! Controllers: what drives a twin during a rollout ([`PdHold`], [`Passive`], [`Replay`]; one
+//! file each; their registry by name is [`crate::registry`], above every controller).
 //!
 //! A [`Controller`] reads an [`Observation`] (time, joint positions and velocities, sensor
 //! values: possibly noisy or delayed copies of the simulation's own) and writes a command. The
@@ -38,12 +38,15 @@ mod passive;
 mod pd_hold;
 mod replay;
 
+/// Where a command goes and the pose a robot holds are the robot's ([`crate::robot`]);
+/// re-exported here for controllers.
+pub use crate::robot::{Actuation, nominal_pose, reset_to_home};
 pub use passive::Passive;
 pub use pd_hold::{PdHold, PdHoldOptions, PdLoop, pd_gains};
 pub use replay::{JointTrajectory, Replay, ReplayOptions, TrajectoryJoint};
 
-use crate::error::{Error, Result};
-use crate::mj::{Data, JointType, Model, ObjType};
+use crate::error::Result;
+use crate::mj::{Data, Model};
 
 /// What a controller reads each step. Slices have the model's lengths (`nq`, `nv`,
 /// `nsensordata`).
@@ -63,74 +66,6 @@ impl<'a> Observation<'a> {
     /// The simulation's exact state, without noise or delay.
     pub fn of(data: &'a Data) -> Observation<'a> {
         Observation { time_secs: data.time_secs(), qpos: data.qpos(), qvel: data.qvel(), sensordata: data.sensordata() }
-    }
-}
-
-/// Where a command goes: `ctrl` when the model has actuators, else `qfrc_applied`.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-pub enum Actuation {
-    /// Command = `ctrl` (len `nu`), clamped to each actuator's `ctrlrange` when limited.
-    Ctrl,
-    /// Command = `qfrc_applied` (len `nv`), clamped to each joint's effort (`actuatorfrcrange`)
-    /// when limited; free and ball joints get none.
-    Qfrc,
-}
-
-impl Actuation {
-    /// [`Actuation::Ctrl`] for models with actuators, else [`Actuation::Qfrc`].
-    pub fn of(model: &Model) -> Actuation {
-        if model.nu() > 0 { Actuation::Ctrl } else { Actuation::Qfrc }
-    }
-
-    /// Length of a command: `nu` or `nv`.
-    pub fn len(self, model: &Model) -> usize {
-        match self {
-            Actuation::Ctrl => model.nu(),
-            Actuation::Qfrc => model.nv(),
-        }
-    }
-
-    /// Whether a command is empty (a model without actuators and DOFs).
-    pub fn is_empty(self, model: &Model) -> bool {
-        self.len(model) == 0
-    }
-
-    /// Limits of each command entry, `[low, high]` (infinite where unlimited; zero for the
-    /// DOFs of free and ball joints under [`Actuation::Qfrc`], which no motor drives).
-    pub fn limits(self, model: &Model) -> Vec<[f64; 2]> {
-        match self {
-            Actuation::Ctrl => (0..model.nu())
-                .map(|u| {
-                    if model.actuator_ctrllimited()[u] {
-                        model.actuator_ctrlrange()[u]
-                    } else {
-                        [f64::NEG_INFINITY, f64::INFINITY]
-                    }
-                })
-                .collect(),
-            Actuation::Qfrc => (0..model.nv())
-                .map(|dof| {
-                    let joint = model.dof_jntid()[dof] as usize;
-                    match model.joint_type(joint) {
-                        JointType::Free | JointType::Ball => [0.0, 0.0],
-                        _ if model.jnt_actfrclimited()[joint] => model.jnt_actfrcrange()[joint],
-                        _ => [f64::NEG_INFINITY, f64::INFINITY],
-                    }
-                })
-                .collect(),
-        }
-    }
-
-    /// Writes `command` into `data` (`ctrl` or `qfrc_applied`). MuJoCo clamps `ctrl` to limited
-    /// control ranges itself; controllers clamp `qfrc_applied` commands (see [`Actuation::limits`]).
-    ///
-    /// # Panics
-    /// If `command` does not have [`Actuation::len`] entries.
-    pub fn apply(self, data: &mut Data, command: &[f64]) {
-        match self {
-            Actuation::Ctrl => data.ctrl_mut().copy_from_slice(command),
-            Actuation::Qfrc => data.qfrc_applied_mut().copy_from_slice(command),
-        }
     }
 }
 
@@ -187,131 +122,20 @@ pub trait Controller: Send {
     /// start a control period, at the rate it declared). Messages borrow the controller's own
     /// buffers, so nothing is allocated per call. Default: nothing.
     fn diagnostics(&self, _emit: &mut dyn FnMut(usize, u64, crate::topics::TypedMessage<'_>)) {}
-}
 
-/// Names accepted by [`by_name`]: the one controller registry of twin (`twin sim`,
-/// `twin randomize`).
-pub const CONTROLLERS: &[&str] = &["pd-hold", "passive", "replay", "walk", "grasp"];
-
-/// What [`by_name`] may need beyond the model.
-#[derive(Debug, Clone, Default)]
-pub struct ControllerOptions {
-    /// Gains of `pd-hold` and `replay`. (default: [`PdHoldOptions::default`])
-    pub gains: PdHoldOptions,
-    /// The trajectory `replay` tracks (required for it). (default: none)
-    pub trajectory: Option<JointTrajectory>,
-    /// Parameters of `walk` (velocity command, gait, gains). (default: [`crate::walk::WalkOptions::default`])
-    pub walk: crate::walk::WalkOptions,
-    /// Parameters of `grasp` (its legs balance with `walk`). (default: [`crate::grasp::GraspOptions::default`])
-    pub grasp: crate::grasp::GraspOptions,
-}
-
-/// The controller called `name` for `model`: `pd-hold` (alias `hold`) holds the nominal pose,
-/// `passive` applies nothing, `replay` tracks `options.trajectory`, `walk` walks (or stands and
-/// balances) with `options.walk` ([`crate::walk::Walker`]).
-///
-/// # Errors
-/// [`Error::NotFound`] (kind `controller`) for an unknown name; [`Error::Options`] for
-/// `replay` without a trajectory, or a trajectory given to another controller; as
-/// [`Replay::new`] and [`crate::walk::Walker::new`].
-pub fn by_name_with(name: &str, model: &Model, options: &ControllerOptions) -> Result<Box<dyn Controller>> {
-    let canonical = if name == "hold" { "pd-hold" } else { name };
-    if canonical != "replay" && options.trajectory.is_some() {
-        return Err(Error::Options(format!("a trajectory is for the replay controller, not {name}")));
-    }
-    match canonical {
-        "pd-hold" => Ok(Box::new(PdHold::new(model, options.gains.clone()))),
-        "passive" => Ok(Box::new(Passive)),
-        "replay" => {
-            let Some(trajectory) = options.trajectory.clone() else {
-                return Err(Error::Options(
-                    "the replay controller needs a trajectory: a ROS 2 log or a CSV time_sec,<joint>,…".into(),
-                ));
-            };
-            let replay_options = ReplayOptions { gains: options.gains.clone() };
-            Ok(Box::new(Replay::new(model, trajectory, replay_options)?))
-        }
-        "walk" => Ok(Box::new(crate::walk::Walker::new(model, options.walk.clone())?)),
-        "grasp" => Ok(Box::new(crate::grasp::Grasper::new(model, options.grasp.clone(), options.walk.clone())?)),
-        _ => Err(Error::NotFound {
-            kind: "controller (available: pd-hold, passive, replay, walk, grasp)",
-            name: name.to_string(),
-        }),
-    }
-}
-
-/// [`by_name_with`] with default options (no trajectory).
-///
-/// # Errors
-/// As [`by_name_with`].
-pub fn by_name(name: &str, model: &Model) -> Result<Box<dyn Controller>> {
-    by_name_with(name, model, &ControllerOptions::default())
-}
-
-/// The pose a robot is meant to hold: keyframe `home` if the model has one, else `qpos0`
-/// (len `nq`).
-pub fn nominal_pose(model: &Model) -> Vec<f64> {
-    model.id(ObjType::Key, "home").and_then(|k| model.key_qpos(k)).unwrap_or_else(|| model.qpos0()).to_vec()
-}
-
-/// Puts `data` in the model's standing pose: keyframe `home` if the model has one; otherwise
-/// `qpos0` with the floating base raised or lowered so that the lowest robot geom touches
-/// z = 0. Runs `forward` so positions and sensors are current.
-///
-/// # Errors
-/// As [`Data::forward`].
-pub fn reset_to_home(data: &mut Data) -> Result<()> {
-    let model = data.model().clone();
-    if let Some(key) = model.id(ObjType::Key, "home") {
-        data.reset_to_keyframe(key)?;
-        return data.forward();
-    }
-    data.reset()?;
-    data.forward()?;
-    let Some(base) = model.free_joint() else {
-        return Ok(());
-    };
-    let lowest = lowest_robot_point_z(&model, data);
-    if lowest.is_finite() {
-        data.qpos_mut()[base.qpos_adr + 2] -= lowest;
-        data.forward()?;
-    }
-    Ok(())
-}
-
-/// Lowest z (world frame, metres) of any geom not attached to the world body, from the geoms'
-/// current poses; +inf when there is none.
-pub fn lowest_robot_point_z(model: &Model, data: &Data) -> f64 {
-    (0..model.ngeom())
-        .filter(|&g| model.geom_bodyid()[g] != 0)
-        .filter_map(|g| geom_lowest_z(model, data, g))
-        .fold(f64::INFINITY, f64::min)
-}
-
-/// Lowest z (world frame, metres) of geom `g` in its current pose: exact for spheres,
-/// capsules, cylinders, boxes and ellipsoids; the bounding sphere for meshes and others
-/// (conservative: may leave a small gap); `None` for planes.
-pub fn geom_lowest_z(model: &Model, data: &Data, g: usize) -> Option<f64> {
-    let z = data.geom_xpos()[g][2];
-    let size = model.geom_size()[g];
-    let m = data.geom_xmat()[g];
-    // Row z of the geom's world rotation: the world z component of each of its local axes.
-    let r = [m[6], m[7], m[8]];
-    let extent = match model.geom_type()[g] as u32 {
-        mujoco_sys::mjtGeom_mjGEOM_SPHERE => size[0],
-        mujoco_sys::mjtGeom_mjGEOM_CAPSULE => size[0] + size[1] * r[2].abs(),
-        mujoco_sys::mjtGeom_mjGEOM_CYLINDER => size[0] * (1.0 - r[2] * r[2]).max(0.0).sqrt() + size[1] * r[2].abs(),
-        mujoco_sys::mjtGeom_mjGEOM_BOX => (0..3).map(|k| size[k] * r[k].abs()).sum(),
-        mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => (0..3).map(|k| (size[k] * r[k]).powi(2)).sum::<f64>().sqrt(),
-        mujoco_sys::mjtGeom_mjGEOM_PLANE => return None,
-        _ => model.geom_rbound()[g],
-    };
-    Some(z - extent)
+    /// The joint positions the last `compute` steers to, for the tracking metrics
+    /// ([`crate::tracking`]): `emit(qpos address, target)`, rad (m) — a PD hold's or a position
+    /// servo's targets. Default: none (torque or velocity commands without a position target).
+    fn position_targets(&self, _emit: &mut dyn FnMut(usize, f64)) {}
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::error::Error;
+    use crate::mj::ObjType;
+    use crate::registry::by_name;
+    use crate::robot::lowest_robot_point_z;
     use std::sync::Arc;
 
     const BOX: &str = r#"<mujoco><worldbody><geom type="plane" size="1 1 0.1"/>

@@ -360,6 +360,12 @@ impl Controller for PdHold {
         "pd-hold"
     }
 
+    fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        for l in &self.loops {
+            emit(l.qpos_adr, l.target);
+        }
+    }
+
     fn reset(&mut self, model: &Model, _observation: &Observation<'_>) -> Result<()> {
         // Gains follow the episode's model (effort limits, gear and inertia may be randomized).
         self.build(model);

@@ -56,6 +56,9 @@ pub struct JointTrajectory {
     pub start_nanos: i64,
     /// The joints, in file order.
     pub joints: Vec<TrajectoryJoint>,
+    /// What was odd about the file's times (time going backwards or standing still), one line
+    /// each, for the caller to print; empty when nothing was.
+    pub warnings: Vec<String>,
 }
 
 /// Refuses a joint's sample times that go backwards or jump forward by more than
@@ -137,6 +140,7 @@ impl JointTrajectory {
         for j in &series.joints {
             check_time_jumps(path, topic, &j.name, &j.time_nanos)?;
         }
+        let warnings = series.report.warnings();
         let joints = series
             .joints
             .into_iter()
@@ -147,7 +151,7 @@ impl JointTrajectory {
                 name: j.name,
             })
             .collect();
-        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints, warnings })
     }
 
     /// From a `trajectory_msgs/msg/JointTrajectory` topic: each message's points start at its
@@ -224,7 +228,7 @@ impl JointTrajectory {
                 velocity: with_velocity.then(|| points.iter().map(|p| p.2[j]).collect()),
             })
             .collect();
-        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints })
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: t0, joints, warnings: Vec::new() })
     }
 
     /// From a CSV file: a header `time_sec,<joint>,<joint>,…` (a column `<joint>_vel` next to a
@@ -297,7 +301,7 @@ impl JointTrajectory {
                 velocity,
             });
         }
-        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: 0, joints })
+        Ok(JointTrajectory { source: path.to_path_buf(), start_nanos: 0, joints, warnings: Vec::new() })
     }
 }
 

@@ -6,10 +6,12 @@
 //! 1. **sensors**: the observation the controller gets: the state and `sensordata` of this
 //!    instant (`mj_step1` computes positions, velocities and position/velocity sensors before
 //!    the controller runs, so an IMU's orientation and rate match `qpos`), corrupted by the
-//!    [`SensorModel`] (white noise, bias) and delayed by its latency (a ring of past
-//!    observations). Acceleration-stage sensors (accelerometers, force sensors) hold the
-//!    previous step's values. Models on the RK4 integrator, which can't be split, step with
-//!    `mj_step` and their controllers see all sensors one step old;
+//!    [`SensorModel`] (white noise, constant bias, bias processes) and delayed by its latency
+//!    (a ring of past observations). Acceleration-stage sensors (accelerometers, force sensors)
+//!    hold the previous step's values. Models on the RK4 integrator, which can't be split,
+//!    step with `mj_step` and their controllers see all sensors one step old. This is twin's
+//!    one sensor model: observers get the same observation ([`StepView::observation`]), so a
+//!    recording, the live bridge and every sink publish exactly what the controller received;
 //! 2. **controller**: [`Controller::compute`] writes the command, which is scaled
 //!    ([`Episode::command_scale`]), checked for saturation and applied ([`Actuation::apply`]);
 //! 3. **disturbances**: each [`Disturbance`] acts on the state (pushes, pinned bases);
@@ -20,8 +22,11 @@
 //! 6. **controller's say**: [`Controller::proceed`] may end the rollout (a live bridge told to
 //!    stop) or abort it with an error (a lockstep peer that stopped answering).
 //!
-//! Random numbers (sensor noise, disturbances) come from one stream given to [`Engine::run`],
-//! drawn in this fixed order, so a rollout is a pure function of its inputs and seed.
+//! Random numbers (sensor noise and biases, disturbances) come from one stream given to
+//! [`Engine::run`], drawn in this fixed order (at the start: each bias process's turn-on and
+//! initial values; per step: the bias processes' drives, then each noisy entry's white noise in
+//! entry order, `qpos` before `sensordata`, then the disturbances), so a rollout is a pure
+//! function of its inputs and seed.
 //!
 //! ```no_run
 //! use std::sync::Arc;
@@ -45,6 +50,7 @@ pub mod observers;
 pub mod replay;
 
 pub use crate::control::{Actuation, Controller, Observation};
+pub use crate::convert::ImuBias as BiasModel;
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model};
@@ -83,6 +89,9 @@ pub struct StepView<'a> {
     pub qpos: &'a [f64],
     /// Joint velocities at `time_secs` (len `nv`).
     pub qvel: &'a [f64],
+    /// The observation the controller received for this step (noise, bias and latency of the
+    /// [`SensorModel`] included): what recorders publish.
+    pub observation: Observation<'a>,
     /// The command applied during the step (after scaling).
     pub command: &'a [f64],
     /// Whether some command entry was at a finite limit.
@@ -185,21 +194,77 @@ pub struct SensorModel {
     pub sensor_noise_std: Vec<f64>,
     /// Constant bias per `sensordata` entry (len `nsensordata`, or empty).
     pub sensor_bias: Vec<f64>,
+    /// Random bias processes: `(sensordata entry, model)`, e.g. an IMU's gyroscope and
+    /// accelerometer axes from the URDF's Gazebo `<noise>` tags (Gazebo's turn-on bias, a
+    /// first-order Gauss–Markov bias, twin's extra random walk; see [`BiasModel`]), advanced
+    /// exactly over each step. (default: none)
+    pub bias_processes: Vec<(usize, BiasModel)>,
     /// The controller sees the observation of this many steps ago.
     pub latency_steps: usize,
 }
 
 impl SensorModel {
-    fn is_exact(&self) -> bool {
-        self.latency_steps == 0 && !self.noisy_qpos() && !self.noisy_sensors()
-    }
-
-    fn noisy_qpos(&self) -> bool {
-        self.qpos_noise_std.iter().any(|&s| s > 0.0)
-    }
-
     fn noisy_sensors(&self) -> bool {
-        self.sensor_noise_std.iter().any(|&s| s > 0.0) || self.sensor_bias.iter().any(|&b| b != 0.0)
+        self.sensor_noise_std.iter().any(|&s| s > 0.0)
+            || self.sensor_bias.iter().any(|&b| b != 0.0)
+            || self.bias_processes.iter().any(|(_, b)| BiasState::acts(b))
+    }
+}
+
+/// One entry's bias process (see [`SensorModel::bias_processes`]).
+#[derive(Debug, Clone)]
+struct BiasState {
+    entry: usize,
+    model: BiasModel,
+    turn_on: f64,
+    markov: f64,
+    walk: f64,
+}
+
+impl BiasState {
+    /// Whether `model` makes any bias at all.
+    fn acts(model: &BiasModel) -> bool {
+        model.mean != 0.0 || model.stddev != 0.0 || model.dynamic_stddev > 0.0 || model.random_walk > 0.0
+    }
+
+    /// The process at time 0: its turn-on bias drawn (Gazebo: `mean + stddev·w`, added or
+    /// subtracted with equal probability) and the Gauss–Markov part in its stationary
+    /// distribution (`σ_b·√(τ/2)`), so statistics hold from t = 0.
+    fn start(entry: usize, model: BiasModel, rng: &mut ChaCha8Rng) -> BiasState {
+        let mut turn_on = 0.0;
+        if model.mean != 0.0 || model.stddev != 0.0 {
+            let magnitude = model.mean + model.stddev * rng.sample::<f64, _>(StandardNormal);
+            turn_on = if rng.random_bool(0.5) { magnitude } else { -magnitude };
+        }
+        let tau = model.dynamic_correlation_time_secs;
+        let markov = if model.dynamic_stddev > 0.0 && tau > 0.0 {
+            model.dynamic_stddev * (tau / 2.0).sqrt() * rng.sample::<f64, _>(StandardNormal)
+        } else {
+            0.0
+        };
+        BiasState { entry, model, turn_on, markov, walk: 0.0 }
+    }
+
+    /// Advances the process by `dt_secs`, exactly (no Euler error at any rate).
+    fn advance(&mut self, dt_secs: f64, rng: &mut ChaCha8Rng) {
+        let (sigma, tau) = (self.model.dynamic_stddev, self.model.dynamic_correlation_time_secs);
+        if sigma > 0.0 {
+            if tau > 0.0 {
+                // b' = φ·b + σ_b·√(τ/2·(1 − φ²))·w, φ = e^(−Δt/τ).
+                let phi = (-dt_secs / tau).exp();
+                let drive = sigma * (tau / 2.0 * -(-2.0 * dt_secs / tau).exp_m1()).sqrt();
+                self.markov = phi * self.markov + drive * rng.sample::<f64, _>(StandardNormal);
+            } else {
+                self.markov += sigma * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
+            }
+        }
+        if self.model.random_walk > 0.0 {
+            self.walk += self.model.random_walk * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
+        }
+    }
+
+    fn value(&self) -> f64 {
+        self.turn_on + self.markov + self.walk
     }
 }
 
@@ -301,7 +366,6 @@ impl Engine {
 
         let (nq, nv, ns) = (model.nq(), model.nv(), model.nsensordata());
         let sensors = &episode.sensors;
-        let exact = sensors.is_exact();
         let obs_len = nq + nv + ns;
         let depth = sensors.latency_steps + 1;
         let noisy_s = sensors.noisy_sensors();
@@ -313,11 +377,24 @@ impl Engine {
         let (qpos_noise, sensor_noise) = (noisy(&sensors.qpos_noise_std, nq), noisy(&sensors.sensor_noise_std, ns));
         // The bias of every `sensordata` entry (zero past the spec's).
         let bias: Vec<f64> = (0..ns).map(|k| sensors.sensor_bias.get(k).copied().unwrap_or(0.0)).collect();
-        let capture = |data: &Data, history: &mut [f64], slot: usize, rng: &mut ChaCha8Rng| {
+        let mut processes: Vec<BiasState> = sensors
+            .bias_processes
+            .iter()
+            .filter(|(k, b)| *k < ns && BiasState::acts(b))
+            .map(|&(k, b)| BiasState::start(k, b, rng))
+            .collect();
+        let dt = model.timestep_secs();
+        // `advance`: time moved by one step since the last capture (the bias processes go on).
+        let mut capture = |data: &Data, history: &mut [f64], slot: usize, rng: &mut ChaCha8Rng, advance: bool| {
             let o = &mut history[slot * obs_len..(slot + 1) * obs_len];
             o[..nq].copy_from_slice(data.qpos());
             o[nq..nq + nv].copy_from_slice(data.qvel());
             o[nq + nv..].copy_from_slice(data.sensordata());
+            if advance {
+                for p in &mut processes {
+                    p.advance(dt, rng);
+                }
+            }
             for &(k, s) in &qpos_noise {
                 o[k] += s * rng.sample::<f64, _>(StandardNormal);
             }
@@ -326,22 +403,23 @@ impl Engine {
                 for (v, b) in o.iter_mut().zip(&bias) {
                     *v += b;
                 }
+                for p in &processes {
+                    o[p.entry] += p.value();
+                }
                 for &(k, s) in &sensor_noise {
                     o[k] += s * rng.sample::<f64, _>(StandardNormal);
                 }
             }
         };
+        // The observations, a ring of `depth` (one slot when exact: the copy is what observers
+        // get, as acceleration-stage sensors change in the physics step). The whole delay line
+        // starts with the initial observation.
         self.history.clear();
-        if !exact {
-            // The whole delay line starts with the initial observation.
-            self.history.resize(obs_len * depth, 0.0);
-            for slot in 0..depth {
-                capture(data, &mut self.history, slot, rng);
-            }
-            controller.reset(model, &slot_observation(&self.history, 0, (nq, nv, ns), data.time_secs()))?;
-        } else {
-            controller.reset(model, &Observation::of(data))?;
+        self.history.resize(obs_len * depth, 0.0);
+        for slot in 0..depth {
+            capture(data, &mut self.history, slot, rng, false);
         }
+        controller.reset(model, &slot_observation(&self.history, 0, (nq, nv, ns), data.time_secs()))?;
 
         let actuation = Actuation::of(model);
         let limits = actuation.limits(model);
@@ -350,6 +428,7 @@ impl Engine {
         self.qpos_t.resize(nq, 0.0);
         self.qvel_t.clear();
         self.qvel_t.resize(nv, 0.0);
+
         for d in disturbances.iter_mut() {
             d.start(model, data)?;
         }
@@ -357,7 +436,6 @@ impl Engine {
             o.start(model, data)?;
         }
 
-        let dt = model.timestep_secs();
         // RK4 can't be split into mj_step1/mj_step2 (mj_step2 would integrate with Euler).
         let split = model.raw().opt.integrator != mujoco_sys::mjtIntegrator_mjINT_RK4 as i32;
         let mut outcome = Outcome { steps: 0, sim_secs: 0.0, ended_by: None, physics_error: None };
@@ -370,20 +448,14 @@ impl Engine {
                     outcome.physics_error = Some(e);
                     break;
                 }
-                if !exact {
-                    // The newest observation replaces the oldest; the next oldest is one further.
-                    capture(data, &mut self.history, oldest, rng);
-                    oldest = (oldest + 1) % depth;
-                }
+                // The newest observation replaces the oldest; the next oldest is one further.
+                capture(data, &mut self.history, oldest, rng, true);
+                oldest = (oldest + 1) % depth;
             }
             // 2. The controller sees the observation captured `latency_steps` steps ago.
             let time_secs = data.time_secs();
-            if exact {
-                controller.compute(model, &Observation::of(data), &mut self.command);
-            } else {
-                let observation = slot_observation(&self.history, oldest * obs_len, (nq, nv, ns), time_secs);
-                controller.compute(model, &observation, &mut self.command);
-            }
+            let observation = slot_observation(&self.history, oldest * obs_len, (nq, nv, ns), time_secs);
+            controller.compute(model, &observation, &mut self.command);
             // (Entries past `command_scale` keep their value: `c · 1` is `c`.)
             for (c, &k) in self.command.iter_mut().zip(&episode.command_scale) {
                 *c *= k;
@@ -417,7 +489,9 @@ impl Engine {
             }
             outcome.steps = step + 1;
             outcome.sim_secs = (step + 1) as f64 * dt;
-            // 5.
+            // 5. The observation the controller got is still in the ring (the next capture is
+            // after the observers).
+            let observation = slot_observation(&self.history, oldest * obs_len, (nq, nv, ns), time_secs);
             let view = StepView {
                 index: step,
                 time_secs,
@@ -425,6 +499,7 @@ impl Engine {
                 dt_secs: dt,
                 qpos: &self.qpos_t,
                 qvel: &self.qvel_t,
+                observation,
                 command: &self.command,
                 saturated,
                 actuation,
@@ -450,9 +525,9 @@ impl Engine {
             if end || !controller.proceed()? {
                 break;
             }
-            if !split && !exact {
+            if !split {
                 // The newest observation replaces the oldest; the next oldest is one further.
-                capture(data, &mut self.history, oldest, rng);
+                capture(data, &mut self.history, oldest, rng, true);
                 oldest = (oldest + 1) % depth;
             }
         }
@@ -515,7 +590,7 @@ mod tests {
             qpos_noise_std: vec![0.0, 0.1],
             sensor_noise_std: Vec::new(),
             sensor_bias: vec![0.5, -0.25],
-            latency_steps: 0,
+            ..SensorModel::default()
         };
         let episode = Episode { steps: 20, sensors, ..Episode::default() };
         let mut recorder = Recorder::default();

@@ -3,10 +3,10 @@
 //! held.
 
 use super::arm::below;
+use crate::checks::{Checks, Threshold};
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
-use crate::scenario::Checks;
 use nalgebra::{Matrix3, Rotation3, Vector2, Vector3};
 
 /// What a grasp check measured.
@@ -107,14 +107,13 @@ impl GraspCheck {
     }
 
     /// One scenario verdict per threshold.
-    pub fn verdicts(&self) -> Vec<crate::scenario::Verdict> {
-        use crate::scenario::Verdict as V;
+    pub fn verdicts(&self) -> Vec<Threshold> {
         let c = &self.checks;
         let m = &self.m;
         let mut out = Vec::new();
         let mut at_most = |name: &'static str, value: f64, t: Option<f64>| {
             if let Some(t) = t {
-                out.push(V { name, value, op: "<=", threshold: t, passed: value <= t });
+                out.push(Threshold::at_most(name, value, t));
             }
         };
         at_most("max_grip_force_n", m.max_grip_force_n, c.max_grip_force_n);
@@ -122,7 +121,7 @@ impl GraspCheck {
         at_most("max_tilt_deg", m.tilt_deg, c.max_tilt_deg);
         let mut at_least = |name: &'static str, value: f64, t: Option<f64>| {
             if let Some(t) = t {
-                out.push(V { name, value, op: ">=", threshold: t, passed: value >= t });
+                out.push(Threshold::at_least(name, value, t));
             }
         };
         at_least("min_clearance_m", m.min_clearance_m, c.min_clearance_m);

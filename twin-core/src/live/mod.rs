@@ -7,20 +7,46 @@
 //!   `/contacts/<body>`, a controller's diagnostics) is published as CDR;
 //! - a [`LiveController`], the [`Controller`](crate::control::Controller) of the run: it
 //!   publishes `/clock` at each control period, takes `Float64MultiArray` commands on
-//!   `/<robot>/joint_commands` and `JointTrajectory` on `/<robot>/joint_trajectory`, paces the
-//!   run (real time × factor, as fast as possible, or lockstep); `/clock` and the commands it
-//!   received are its own topics ([`Controller::topics`]), recorded byte for byte.
+//!   `/<robot>/joint_commands`, `JointTrajectory` on `/<robot>/joint_trajectory` and
+//!   `JointState` commands by joint name on `/<robot>/joint_command` (the convention of
+//!   `topic_based_ros2_control`), turns them into actuator commands with the loops and gains
+//!   twin's own controllers use ([`command`]), paces the run (real time × factor, as fast as
+//!   possible, or lockstep); `/clock` and the commands it received are its own topics
+//!   ([`Controller::topics`]), recorded byte for byte.
+//!
+//! What the bridge publishes is what the recorder writes, and the recorder writes the
+//! observation the engine gave the controller ([`crate::engine`]'s one sensor model): a node
+//! on the graph sees exactly what an in-process controller sees.
 //!
 //! ROS naming: topic `/x` is DDS topic `rt/x`, type `pkg/msg/T` is `pkg::msg::dds_::T_`. QoS:
 //! reliable + volatile (keep last 100; matches rclpy/rclcpp defaults and best-effort sensor
 //! subscriptions); `/tf_static` and `/robot_description` reliable + transient-local. A writer
 //! never blocks the simulation.
 //!
-//! Lockstep ([`Pacing::Lockstep`]): at each control period boundary t the twin publishes
-//! `/clock` = t (all state messages stamped before t are out), then takes exactly one command
-//! (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it from t for one
-//! control period. A rejected command counts as the period's command (the last good one is
-//! held), so the run stays deterministic.
+//! Lockstep ([`Pacing::Lockstep`]), the protocol:
+//! 1. **join**: before time starts, the twin says `/clock` = 0 (again every 200 ms) and waits,
+//!    at most [`LiveOptions::join_timeout_secs`], until the controller's command publisher has
+//!    matched one of its command readers (a command written before that match would be lost:
+//!    DDS does not keep volatile samples for readers it has not met), then up to 2 s more for
+//!    a reader of `/joint_states` (so the controller gets the first state);
+//! 2. **period 0** runs without waiting, under hold (the home pose): a `use_sim_time` timer
+//!    fires when simulation time has advanced by its period, so it can only fire once `/clock`
+//!    moves past 0;
+//! 3. **each later period k** (t_k = k·P): the twin publishes `/clock` = t_k (every state
+//!    message stamped before t_k is out), takes exactly the next command in arrival order
+//!    (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it over
+//!    [t_k, t_k + P). A rejected command counts as the period's command (the last good one is
+//!    held), so the run stays deterministic.
+//!
+//! In lockstep the state topics come once per period (the CLI sets their rate to the control
+//! rate), stamped t_k and published during period k. A timer-driven node ticks at `/clock` =
+//! t_k with the state of t_(k−1); a node that answers each `/joint_states` answers the state of
+//! t_k during period k, and twin applies that answer from t_(k+1). Either way a command acts
+//! one period after the state it answers (the one-period delay), and the k-th command a node
+//! sends is applied in period k: the run is a function of the node's answers alone, however
+//! long they take. Topics are not ordered against each other in DDS; the bridge writes the
+//! state before the `/clock` that follows it, from one thread, and on loopback they arrive in
+//! that order.
 //!
 //! Services ([`simulation`]): pause, resume, step, reset and quit through the
 //! `simulation_interfaces` services `/twin/get_simulation_state`, `/twin/set_simulation_state`,
@@ -38,16 +64,18 @@
 
 pub mod command;
 pub mod dds;
+pub mod loopback;
 pub mod service;
 pub mod simulation;
 
 pub use command::{CommandInterface, Commander};
+pub use loopback::Loopback;
 
 use crate::control::{Controller, Observation};
 use crate::engine::Disturbance;
 use crate::error::{Error, Result};
 use crate::log::cdr::{CdrReader, CdrWriter};
-use crate::log::{Clock, Float64MultiArray, JointTrajectory, RosMessage, RosString};
+use crate::log::{Clock, Float64MultiArray, JointState, JointTrajectory, RosMessage, RosString};
 use crate::mj::Model;
 use crate::robot::Robot;
 use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
@@ -91,6 +119,9 @@ pub struct LiveOptions {
     pub silence_timeout_secs: f64,
     /// Longest wait for a command in lockstep, wall s (default: 10).
     pub lockstep_timeout_secs: f64,
+    /// Lockstep: longest wait for the controller's command publisher before time starts, wall
+    /// s (default: 30: a Python node with rclpy takes a few seconds to start and discover).
+    pub join_timeout_secs: f64,
 }
 
 impl Default for LiveOptions {
@@ -103,6 +134,7 @@ impl Default for LiveOptions {
             pacing: Pacing::RealTime(1.0),
             silence_timeout_secs: 0.5,
             lockstep_timeout_secs: 10.0,
+            join_timeout_secs: 30.0,
         }
     }
 }
@@ -125,11 +157,16 @@ type Exchanged = Mutex<Vec<ExchangedMessage>>;
 const CLOCK: usize = 0;
 const COMMANDS: usize = 1;
 const TRAJECTORY: usize = 2;
+const BY_NAME: usize = 3;
+
+/// Lockstep join: how long the twin waits for a `/joint_states` reader once the command
+/// publisher has matched.
+const STATE_READER_GRACE: Duration = Duration::from_secs(2);
 
 /// Publishes the recorder's topics (a [`Sink`]).
 pub struct LiveSink {
     node: Arc<Node>,
-    writers: HashMap<String, RawWriter>,
+    writers: HashMap<String, Arc<RawWriter>>,
     /// Writer of each topic id.
     by_id: Vec<Option<String>>,
     /// Topics the bridge exchanges itself (`/clock`, its command inputs): recorded, never
@@ -138,7 +175,13 @@ pub struct LiveSink {
     cdr: CdrWriter,
     /// Failed writes (a reader that vanished mid-write), counted, not fatal.
     write_failures: u64,
+    /// The `/joint_states` writer, shared with the controller half, which asks it for matched
+    /// readers before time starts (lockstep join).
+    state_writer: SharedWriter,
 }
+
+/// A writer the sink creates and the controller half watches.
+type SharedWriter = Arc<Mutex<Option<Arc<RawWriter>>>>;
 
 impl Sink for LiveSink {
     fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
@@ -148,7 +191,12 @@ impl Sink for LiveSink {
             return Ok(false);
         }
         if !self.writers.contains_key(&topic.name) {
-            let w = self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?;
+            let w = Arc::new(self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?);
+            if topic.kind == TopicKind::JointStates
+                && let Ok(mut s) = self.state_writer.lock()
+            {
+                *s = Some(w.clone());
+            }
             self.writers.insert(topic.name.clone(), w);
         }
         if self.by_id.len() <= id {
@@ -192,6 +240,8 @@ pub struct LiveStats {
     pub service_calls: u64,
     /// Resets done through `/twin/reset_simulation` (or a stop).
     pub resets: u64,
+    /// Lockstep: wall seconds from the start until the controller's command publisher matched.
+    pub join_secs: Option<f64>,
 }
 
 impl LiveStats {
@@ -219,11 +269,16 @@ pub struct LiveController {
     clock: RawWriter,
     commands: RawReader,
     trajectories: RawReader,
+    /// `JointState` commands by joint name.
+    by_name: RawReader,
+    /// The sink's `/joint_states` writer (lockstep join).
+    state_writer: SharedWriter,
     poll: rustdds::mio1::Poll,
     events: rustdds::mio1::Events,
     exchanged: Exchanged,
     command_topic: String,
     trajectory_topic: String,
+    by_name_topic: String,
     steps_per_period: u64,
     step: u64,
     started: Option<(Instant, f64)>,
@@ -276,6 +331,17 @@ pub fn command_topic(robot: &Robot) -> String {
     format!("/{}/joint_commands", robot.name)
 }
 
+/// Topic of trajectory commands (`/<robot>/joint_trajectory`).
+pub fn trajectory_topic(robot: &Robot) -> String {
+    format!("/{}/joint_trajectory", robot.name)
+}
+
+/// Topic of `JointState` commands by joint name (`/<robot>/joint_command`): what
+/// `topic_based_ros2_control`'s `joint_commands_topic` is set to.
+pub fn by_name_topic(robot: &Robot) -> String {
+    format!("/{}/joint_command", robot.name)
+}
+
 /// Topic the recorder writes its per-step actuator command to in a live run (the usual
 /// `/<robot>/joint_commands` is the bridge's input).
 pub fn actuator_topic(robot: &Robot) -> String {
@@ -309,16 +375,18 @@ pub fn start(
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
     let exchanged: Exchanged = Mutex::default();
     let command_topic = command_topic(robot);
-    let trajectory_topic = format!("/{}/joint_trajectory", robot.name);
+    let trajectory_topic = trajectory_topic(robot);
+    let by_name_topic = by_name_topic(robot);
 
     let text = std::fs::read_to_string(&robot.path).unwrap_or_default();
     let mut sink = LiveSink {
         node: node.clone(),
         writers: HashMap::new(),
         by_id: Vec::new(),
-        own: vec!["/clock".into(), command_topic.clone(), trajectory_topic.clone()],
+        own: vec!["/clock".into(), command_topic.clone(), trajectory_topic.clone(), by_name_topic.clone()],
         cdr: CdrWriter::new(),
         write_failures: 0,
+        state_writer: SharedWriter::default(),
     };
     if crate::urdf::is_urdf(&text) {
         let w = node.writer("/robot_description", RosString::TYPE_NAME, TopicQos::Latched)?;
@@ -326,12 +394,13 @@ pub fn start(
         RosString { data: text }.encode(&mut cdr);
         w.write(RawCdr(cdr.bytes().to_vec()), None)
             .map_err(|e| Error::Live { message: format!("publishing /robot_description: {e}") })?;
-        sink.writers.insert("/robot_description".into(), w);
+        sink.writers.insert("/robot_description".into(), Arc::new(w));
     }
 
     let clock = node.writer("/clock", Clock::TYPE_NAME, TopicQos::Stream { depth: 100 })?;
     let mut commands = node.reader(&command_topic, Float64MultiArray::TYPE_NAME, 1000)?;
     let mut trajectories = node.reader(&trajectory_topic, JointTrajectory::TYPE_NAME, 10)?;
+    let mut by_name = node.reader(&by_name_topic, JointState::TYPE_NAME, 1000)?;
     let mut services = SimulationServices::new(&node)?;
     let poll = rustdds::mio1::Poll::new().map_err(|e| Error::Live { message: format!("creating a poller: {e}") })?;
     {
@@ -340,9 +409,10 @@ pub fn start(
         poll.registry()
             .register(&mut commands, Token(0), Interest::READABLE)
             .and_then(|()| poll.registry().register(&mut trajectories, Token(1), Interest::READABLE))
+            .and_then(|()| poll.registry().register(&mut by_name, Token(2), Interest::READABLE))
             .map_err(watch)?;
         for (k, r) in services.readers_mut().enumerate() {
-            poll.registry().register(r, Token(2 + k), Interest::READABLE).map_err(watch)?;
+            poll.registry().register(r, Token(3 + k), Interest::READABLE).map_err(watch)?;
         }
     }
     let model: &Model = &robot.model;
@@ -354,11 +424,14 @@ pub fn start(
         clock,
         commands,
         trajectories,
+        by_name,
+        state_writer: sink.state_writer.clone(),
         poll,
         events: rustdds::mio1::Events::with_capacity(16),
         exchanged,
         command_topic,
         trajectory_topic,
+        by_name_topic,
         steps_per_period,
         step: 0,
         started: None,
@@ -379,6 +452,59 @@ pub fn start(
         step_end_secs: 0.0,
     };
     Ok((sink, controller))
+}
+
+/// What [`run_periods`] did.
+#[derive(Debug, Clone)]
+pub struct PeriodsRun {
+    /// The simulation's report.
+    pub report: crate::sim::SimReport,
+    /// The bridge's statistics.
+    pub stats: LiveStats,
+    /// What was recorded and published.
+    pub summary: crate::sim::RecordSummary,
+}
+
+/// Runs `periods` control periods of `robot` against an external controller on the ROS 2
+/// graph: the bridge ([`start`]) with `options` (give [`Pacing::Lockstep`] for a deterministic
+/// run, and [`Loopback::live_options`] for loopback only), the recorder with `record` (its MCAP
+/// and rerun outputs, if any, and the bridge as a sink), `sim` for the seed (its duration is
+/// `periods` control periods). `stop` ends the run early; `log` gets the bridge's warnings.
+///
+/// # Errors
+/// As [`start`] and [`crate::sim::simulate_with`]: DDS, a controller that never joins or stops
+/// answering in lockstep, recording errors.
+pub fn run_periods(
+    robot: &Robot,
+    options: &LiveOptions,
+    periods: u64,
+    record: &crate::sim::RecordOptions,
+    sim: &crate::sim::SimOptions,
+    stop: &'static AtomicBool,
+    log: Box<dyn FnMut(&str) + Send>,
+) -> Result<PeriodsRun> {
+    let (sink, mut controller) = start(robot, options, stop, log)?;
+    let record = crate::sim::RecordOptions {
+        command_topic: Some(actuator_topic(robot)),
+        controller_topics: Controller::topics(&controller).into_iter().map(|t| t.name).collect(),
+        ..record.clone()
+    };
+    let mut recording = crate::sim::Recording::with_sinks(robot, &record, vec![Box::new(sink)])?;
+    let mut reset = controller.reset_disturbance();
+    let period_secs = controller.steps_per_period() as f64 * robot.model.timestep_secs();
+    let sim = crate::sim::SimOptions { duration_secs: periods as f64 * period_secs, ..sim.clone() };
+    let report = crate::sim::simulate_with(
+        robot,
+        &mut controller,
+        &sim,
+        Some(&mut recording),
+        &mut |_| {},
+        &mut [&mut reset],
+        &mut [],
+    )?;
+    let stats = controller.stats().clone();
+    let summary = recording.finish()?;
+    Ok(PeriodsRun { report, stats, summary })
 }
 
 impl LiveSink {
@@ -627,14 +753,123 @@ impl LiveController {
         }
     }
 
+    /// Applies one received `JointState` command by joint name (or rejects it).
+    fn take_by_name(&mut self, raw: RawCdr, t_nanos: u64) {
+        let decoded = CdrReader::new(&raw.0).and_then(|mut r| JointState::decode(&mut r));
+        self.record(BY_NAME, t_nanos, raw.0);
+        let verdict = match decoded {
+            Ok(m) => self.commander.set_by_name(&m, &self.qpos),
+            Err(e) => Err(format!("not a JointState: {}", e.message)),
+        };
+        match verdict {
+            Ok(()) => {
+                self.stats.commands_applied += 1;
+                self.last_good = Instant::now();
+            }
+            Err(why) => self.reject(&self.by_name_topic.clone(), t_nanos, &why),
+        }
+    }
+
     /// Takes every queued trajectory and command (real-time modes; the last good one wins).
     fn drain(&mut self, t_nanos: u64) {
         while let Ok(Some(s)) = self.trajectories.take_next_sample() {
             self.take_trajectory(s.into_value(), t_nanos);
         }
+        while let Ok(Some(s)) = self.by_name.take_next_sample() {
+            self.take_by_name(s.into_value(), t_nanos);
+        }
         while let Ok(Some(s)) = self.commands.take_next_sample() {
             self.take_command(s.into_value(), t_nanos);
         }
+    }
+
+    /// Takes the next command of any kind, if one is queued; whether one was.
+    fn take_one(&mut self, t_nanos: u64) -> bool {
+        if let Ok(Some(s)) = self.trajectories.take_next_sample() {
+            self.take_trajectory(s.into_value(), t_nanos);
+        } else if let Ok(Some(s)) = self.by_name.take_next_sample() {
+            self.take_by_name(s.into_value(), t_nanos);
+        } else if let Ok(Some(s)) = self.commands.take_next_sample() {
+            self.take_command(s.into_value(), t_nanos);
+        } else {
+            return false;
+        }
+        true
+    }
+
+    /// Lockstep, before time starts: waits until a command publisher has matched one of the
+    /// command readers (at most [`LiveOptions::join_timeout_secs`]), then up to
+    /// [`STATE_READER_GRACE`] for a `/joint_states` reader, saying `/clock` = 0 now and then.
+    fn join(&mut self) -> Result<()> {
+        use rustdds::StatusEvented;
+        let started = Instant::now();
+        let deadline = started + Duration::from_secs_f64(self.options.join_timeout_secs);
+        let mut resend = started;
+        let matched = |r: &RawReader, count: &mut i32| {
+            while let Some(status) = r.try_recv_status() {
+                if let rustdds::DataReaderStatus::SubscriptionMatched { current, .. } = status {
+                    *count = current.count();
+                }
+            }
+            *count > 0
+        };
+        let (mut a, mut b, mut c) = (0, 0, 0);
+        loop {
+            let now = Instant::now();
+            if now >= resend {
+                let _ = self.clock.write(RawCdr(self.clock_cdr.bytes().to_vec()), None);
+                resend = now + CLOCK_RESEND;
+            }
+            // (Each reader's status is drained every time: no short-circuit.)
+            let any =
+                matched(&self.commands, &mut a) | matched(&self.trajectories, &mut b) | matched(&self.by_name, &mut c);
+            if any {
+                break;
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                return Ok(());
+            }
+            if now >= deadline {
+                return Err(Error::Live {
+                    message: format!(
+                        "lockstep: no controller joined within {} s: nothing published on {}, {} or {} in domain {} (ROS_DOMAIN_ID); is it running, on the same domain \
+                         and interface (loopback: ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST)?",
+                        self.options.join_timeout_secs,
+                        self.command_topic,
+                        self.trajectory_topic,
+                        self.by_name_topic,
+                        self.options.domain_id
+                    ),
+                });
+            }
+            std::thread::sleep(Duration::from_millis(10));
+        }
+        let joined = started.elapsed();
+        let writer = self.state_writer.lock().ok().and_then(|w| w.clone());
+        let mut readers = 0;
+        let grace = Instant::now() + STATE_READER_GRACE;
+        if let Some(w) = writer {
+            while Instant::now() < grace {
+                while let Some(status) = w.try_recv_status() {
+                    if let rustdds::DataWriterStatus::PublicationMatched { current, .. } = status {
+                        readers = current.count();
+                    }
+                }
+                if readers > 0 {
+                    break;
+                }
+                std::thread::sleep(Duration::from_millis(10));
+            }
+        }
+        self.stats.join_secs = Some(joined.as_secs_f64());
+        if readers == 0 {
+            self.warn(format!(
+                "lockstep: the controller joined after {:.2} s but nothing reads /joint_states (waited {} s more); starting",
+                joined.as_secs_f64(),
+                STATE_READER_GRACE.as_secs()
+            ));
+        }
+        Ok(())
     }
 
     /// Lockstep: exactly one command (a trajectory also counts), waiting at most the timeout.
@@ -643,23 +878,22 @@ impl LiveController {
         let deadline = published + Duration::from_secs_f64(self.options.lockstep_timeout_secs);
         let mut resend = published + CLOCK_RESEND;
         loop {
-            if let Ok(Some(s)) = self.trajectories.take_next_sample() {
-                self.take_trajectory(s.into_value(), t_nanos);
-                break;
-            }
-            if let Ok(Some(s)) = self.commands.take_next_sample() {
-                self.take_command(s.into_value(), t_nanos);
+            if self.take_one(t_nanos) {
                 break;
             }
             let now = Instant::now();
             if now >= deadline {
                 return Err(Error::Live {
                     message: format!(
-                        "lockstep: no command on {} within {} s after /clock = {:.3} s; is the controller running \
-                         in domain {} (ROS_DOMAIN_ID) with use_sim_time? (--lockstep-timeout sets the wait)",
+                        "lockstep: no command on {} (nor {}, {}) within {} s after /clock = {:.3} s (command {} \
+                         of the run); is the controller still running in domain {} (ROS_DOMAIN_ID), sending one \
+                         command per /clock period? (--lockstep-timeout sets the wait)",
                         self.command_topic,
+                        self.trajectory_topic,
+                        self.by_name_topic,
                         self.options.lockstep_timeout_secs,
                         t_nanos as f64 * 1e-9,
+                        self.stats.periods,
                         self.options.domain_id
                     ),
                 });
@@ -688,6 +922,11 @@ impl LiveController {
         let t_nanos = (t_secs * 1e9).round().max(0.0) as u64;
         self.qpos.copy_from_slice(observation.qpos);
         self.qvel.copy_from_slice(observation.qvel);
+        let first = self.started.is_none();
+        if first && self.options.pacing == Pacing::Lockstep {
+            self.publish_clock(t_nanos);
+            self.join()?;
+        }
         let now = Instant::now();
         let (wall0, sim0) = *self.started.get_or_insert((now, t_secs));
         if let Pacing::RealTime(factor) = self.options.pacing {
@@ -701,8 +940,12 @@ impl LiveController {
             }
         }
         // /clock first: the state stamped before t is already out.
-        self.publish_clock(t_nanos);
+        if !first || self.options.pacing != Pacing::Lockstep {
+            self.publish_clock(t_nanos);
+        }
         match self.options.pacing {
+            // The first period runs under hold (see the module docs).
+            Pacing::Lockstep if first => {}
             Pacing::Lockstep => self.wait_one(t_nanos)?,
             _ => {
                 self.drain(t_nanos);
@@ -776,6 +1019,7 @@ impl Controller for LiveController {
             topic("/clock", Clock::TYPE_NAME, Some(self.options.control_rate_hz), CLOCK),
             topic(&self.command_topic, Float64MultiArray::TYPE_NAME, None, COMMANDS),
             topic(&self.trajectory_topic, JointTrajectory::TYPE_NAME, None, TRAJECTORY),
+            topic(&self.by_name_topic, JointState::TYPE_NAME, None, BY_NAME),
         ]
     }
 
@@ -795,5 +1039,79 @@ impl Drop for LiveController {
             let why = format!("the run ended with {left} steps still to take");
             let _ = self.services.answer(k, &id, state::PAUSED, &Outcome::new(result::OPERATION_FAILED, why));
         }
+    }
+}
+
+/// Who has joined: for [`crate::external`], which starts a controller process and waits until
+/// it has subscribed and published before simulated time starts.
+impl LiveController {
+    /// The cumulative numbers of subscriptions matched on `/clock`, of publications matched on
+    /// the command topic (`Float64MultiArray`) and on the trajectory topic since the bridge
+    /// started, as the latest match events say (`None`: no event since the last call). Takes
+    /// the writer's and readers' status events.
+    pub fn match_totals(&mut self) -> [Option<i32>; 3] {
+        use rustdds::StatusEvented;
+        let mut out = [None; 3];
+        while let Some(status) = self.clock.try_recv_status() {
+            if let rustdds::DataWriterStatus::PublicationMatched { total, .. } = status {
+                out[0] = Some(total.count());
+            }
+        }
+        for (k, reader) in [&self.commands, &self.trajectories].into_iter().enumerate() {
+            while let Some(status) = reader.try_recv_status() {
+                if let rustdds::DataReaderStatus::SubscriptionMatched { total, .. } = status {
+                    out[k + 1] = Some(total.count());
+                }
+            }
+        }
+        out
+    }
+
+    /// The position targets of the command in force ([`Commander::position_targets`]).
+    pub fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        self.commander.position_targets(emit);
+    }
+
+    /// Says that the caller ([`crate::external`], which starts the controller itself) has waited
+    /// for it to join and has held the first control period: lockstep then asks for a command
+    /// from the bridge's first period on (no join, no period under hold here).
+    pub fn mark_joined(&mut self) {
+        if self.started.is_none() {
+            self.started = Some((Instant::now(), 0.0));
+        }
+    }
+
+    /// Publishes (and records) `/clock` = `t_secs` outside the lockstep periods: after a reset
+    /// under a running controller, so that its sim-time timers start again from there.
+    pub fn announce_time(&mut self, t_secs: f64) {
+        self.publish_clock((t_secs * 1e9).round().max(0.0) as u64);
+    }
+
+    /// Drops every command and trajectory waiting in the readers (a new episode must not
+    /// start on a command meant for the last one).
+    pub fn discard_pending(&mut self) {
+        while let Ok(Some(_)) = self.commands.take_next_sample() {}
+        while let Ok(Some(_)) = self.trajectories.take_next_sample() {}
+    }
+}
+
+impl LiveSink {
+    /// The cumulative number of subscriptions matched on `topic`'s writer, as its latest match
+    /// event says (`None`: no writer for it, or no event since the last call).
+    pub fn subscription_total(&mut self, topic: &str) -> Option<i32> {
+        use rustdds::StatusEvented;
+        let w = self.writers.get(topic)?;
+        let mut last = None;
+        while let Some(status) = w.try_recv_status() {
+            if let rustdds::DataWriterStatus::PublicationMatched { total, .. } = status {
+                last = Some(total.count());
+            }
+        }
+        last
+    }
+
+    /// Whether the sink has a writer for `topic` (it offered it).
+    pub fn publishes(&self, topic: &str) -> bool {
+        self.writers.contains_key(topic)
     }
 }

@@ -63,6 +63,12 @@ pub struct JointStateReport {
     pub zero_stamps: u64,
     /// Samples whose time went backwards for their joint; the series is sorted.
     pub non_monotonic: u64,
+    /// The largest step back in time of a joint's samples, ns (0 when none went back).
+    pub largest_step_back_nanos: i64,
+    /// Samples stamped with the same time as their joint's previous sample (time stood still).
+    pub repeated_stamps: u64,
+    /// Samples of a joint, the most of them, that share one timestamp.
+    pub most_at_one_stamp: u64,
     /// Messages with an empty velocity array.
     pub empty_velocity: u64,
     /// Messages with an empty effort array.
@@ -82,8 +88,17 @@ impl JointStateReport {
         }
         if self.non_monotonic > 0 {
             w.push(format!(
-                "{} samples went back in time for their joint; the series were sorted by time",
-                self.non_monotonic
+                "time goes backwards: {} samples went back in time for their joint (by up to {:.6} s); the \
+                 series were sorted by time, check the log's clock",
+                self.non_monotonic,
+                self.largest_step_back_nanos as f64 * 1e-9
+            ));
+        }
+        if self.repeated_stamps > 0 {
+            w.push(format!(
+                "time stands still: {} samples carry the same timestamp as their joint's previous one (up to {} \
+                 samples at one instant); check the log's clock",
+                self.repeated_stamps, self.most_at_one_stamp
             ));
         }
         if self.malformed > 0 {
@@ -205,8 +220,11 @@ pub(crate) fn read_joint_states(log: &Log, topic: &str) -> Result<JointStateSeri
         }
         for (i, &slot) in slots.iter().enumerate() {
             let j = &mut out.joints[slot];
-            if j.time_nanos.last().is_some_and(|&t| time_nanos < t) {
+            if let Some(&t) = j.time_nanos.last()
+                && time_nanos < t
+            {
                 rep.non_monotonic += 1;
+                rep.largest_step_back_nanos = rep.largest_step_back_nanos.max(t - time_nanos);
             }
             j.time_nanos.push(time_nanos);
             j.position.push(js.position[i]);
@@ -223,6 +241,18 @@ pub(crate) fn read_joint_states(log: &Log, topic: &str) -> Result<JointStateSeri
     if rep.non_monotonic > 0 {
         for j in &mut out.joints {
             sort_by_time(j);
+        }
+    }
+    for j in &out.joints {
+        let mut run = 1u64;
+        for w in j.time_nanos.windows(2) {
+            if w[1] == w[0] {
+                rep.repeated_stamps += 1;
+                run += 1;
+                rep.most_at_one_stamp = rep.most_at_one_stamp.max(run);
+            } else {
+                run = 1;
+            }
         }
     }
     out.report = rep;

@@ -129,6 +129,95 @@ impl ModelEdit {
         Ok(self)
     }
 
+    /// Sets geom `geom`'s contact priority (of two geoms in contact, the one with the higher
+    /// priority gives the contact its friction and solver parameters).
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a bad id.
+    pub fn set_geom_priority(&mut self, geom: usize, priority: i32) -> Result<&mut Self> {
+        check("geom id", geom, self.model.ngeom())?;
+        let n = self.model.ngeom();
+        let m = self.raw_mut();
+        // SAFETY: geom_priority has ngeom entries; exclusive access.
+        let rows = unsafe { raw_slice_mut(m.geom_priority, n) };
+        rows[geom] = priority;
+        Ok(self)
+    }
+
+    /// Places box geom `geom`: its position and orientation (quaternion w x y z) in its body's
+    /// frame and its half sizes (m); its bounding sphere and box follow.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a geom that is not a box, non-positive or non-finite sizes, a
+    /// non-finite pose; [`Error::Size`] for a bad id.
+    pub fn set_geom_box(&mut self, geom: usize, pos: [f64; 3], quat: [f64; 4], half: [f64; 3]) -> Result<&mut Self> {
+        check("geom id", geom, self.model.ngeom())?;
+        finite("geom pose", &[pos[0], pos[1], pos[2], quat[0], quat[1], quat[2], quat[3]])?;
+        if self.model.geom_type()[geom] as u32 != mujoco_sys::mjtGeom_mjGEOM_BOX {
+            return Err(Error::InvalidEdit(format!("geom {geom} is not a box")));
+        }
+        if !half.iter().all(|h| *h > 0.0 && h.is_finite()) {
+            return Err(Error::InvalidEdit(format!("geom {geom}: half sizes {half:?} must be positive")));
+        }
+        let n = self.model.ngeom();
+        let m = self.raw_mut();
+        // SAFETY: geom_pos/size have ngeom rows of 3, geom_quat of 4, geom_aabb of 6, geom_rbound
+        // ngeom entries; id checked; exclusive access.
+        unsafe {
+            raw_slice_mut(m.geom_pos.cast::<[f64; 3]>(), n)[geom] = pos;
+            raw_slice_mut(m.geom_quat.cast::<[f64; 4]>(), n)[geom] = quat;
+            raw_slice_mut(m.geom_size.cast::<[f64; 3]>(), n)[geom] = half;
+            raw_slice_mut(m.geom_aabb.cast::<[f64; 6]>(), n)[geom] = [0.0, 0.0, 0.0, half[0], half[1], half[2]];
+            raw_slice_mut(m.geom_rbound, n)[geom] = (half[0] * half[0] + half[1] * half[1] + half[2] * half[2]).sqrt();
+        }
+        Ok(self)
+    }
+
+    /// Sets geom `geom`'s position in its body's frame, m.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a non-finite position; [`Error::Size`] for a bad id.
+    pub fn set_geom_pos(&mut self, geom: usize, pos: [f64; 3]) -> Result<&mut Self> {
+        check("geom id", geom, self.model.ngeom())?;
+        finite("geom position", &pos)?;
+        let n = self.model.ngeom();
+        let m = self.raw_mut();
+        // SAFETY: geom_pos has ngeom rows of 3; id checked; exclusive access.
+        unsafe { raw_slice_mut(m.geom_pos.cast::<[f64; 3]>(), n)[geom] = pos };
+        Ok(self)
+    }
+
+    /// Replaces heightfield `hfield`'s elevations: `data` (row-major, `nrow × ncol`, each in
+    /// [0, 1]) scaled by `elevation_m`, the height of 1 (the asset's `size[2]`).
+    ///
+    /// # Errors
+    /// [`Error::Size`] for a bad id or a data length other than `nrow × ncol`;
+    /// [`Error::InvalidEdit`] for values outside [0, 1] or a non-positive elevation.
+    pub fn set_hfield(&mut self, hfield: usize, elevation_m: f64, data: &[f32]) -> Result<&mut Self> {
+        let count = self.model.raw().nhfield.max(0) as usize;
+        check("heightfield id", hfield, count)?;
+        if !(elevation_m > 0.0 && elevation_m.is_finite() && data.iter().all(|v| (0.0..=1.0).contains(v))) {
+            return Err(Error::InvalidEdit(format!(
+                "heightfield {hfield}: elevation must be positive ({elevation_m}) and data within [0, 1]"
+            )));
+        }
+        let total = self.model.raw().nhfielddata.max(0) as usize;
+        let m = self.raw_mut();
+        // SAFETY: hfield_nrow/ncol/adr have nhfield entries, hfield_size nhfield rows of 4,
+        // hfield_data nhfielddata entries; id and length checked; exclusive access.
+        unsafe {
+            let rows = raw_slice_mut(m.hfield_nrow, count)[hfield] as usize;
+            let cols = raw_slice_mut(m.hfield_ncol, count)[hfield] as usize;
+            let adr = raw_slice_mut(m.hfield_adr, count)[hfield] as usize;
+            if data.len() != rows * cols || adr + data.len() > total {
+                return Err(Error::Size { what: "heightfield data", expected: rows * cols, got: data.len() });
+            }
+            raw_slice_mut(m.hfield_data, total)[adr..adr + data.len()].copy_from_slice(data);
+            raw_slice_mut(m.hfield_size.cast::<[f64; 4]>(), count)[hfield][2] = elevation_m;
+        }
+        Ok(self)
+    }
+
     fn set_dof(
         &mut self,
         what: &'static str,

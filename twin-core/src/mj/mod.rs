@@ -152,6 +152,13 @@ pub(crate) fn buf_to_string(buf: &[c_char]) -> String {
     String::from_utf8_lossy(&bytes).trim().to_string()
 }
 
+/// The version of the MuJoCo headers the bindings were generated from (`mjVERSION_HEADER`),
+/// e.g. `"4.0.1"`; [`init`] refuses a library of another version.
+pub fn header_version() -> String {
+    let v = mujoco_sys::mjVERSION_HEADER;
+    format!("{}.{}.{}", v / 1_000_000, v / 1_000 % 1_000, v % 1_000)
+}
+
 /// The MuJoCo library's version string, e.g. `"4.0.1"`.
 pub fn version() -> String {
     // SAFETY: returns a pointer to a static NUL-terminated string.

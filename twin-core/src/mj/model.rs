@@ -293,6 +293,8 @@ model_arrays! {
     geom_size: f64 x 3 = ngeom;
     /// Radius of each geom's bounding sphere, metres (len `ngeom`).
     geom_rbound: f64 = ngeom;
+    /// Each geom's bounding box in its own frame: centre then half-sizes, metres (len `ngeom`).
+    geom_aabb: f64 x 6 = ngeom;
     /// Transmission type of each actuator (`mjtTrn`) (len `nu`).
     actuator_trntype: i32 = nu;
     /// Transmission target ids of each actuator (len `nu`).
@@ -687,27 +689,6 @@ fn check_finite_attributes(path: Option<&Path>, text: &str) -> Result<()> {
 pub const TIMESTEP_RANGE_SECS: (f64, f64) = (1e-6, 0.1);
 
 impl Model {
-    /// Loads an MJCF or URDF file. A URDF (root `<robot>`) goes through twin's converter
-    /// ([`crate::convert`]) with default options: free-floating base placed on a floor, one
-    /// actuator per transmission, IMU and joint sensors, keyframe `home`.
-    ///
-    /// # Errors
-    /// [`Error::Io`] if the file can't be read, [`Error::Urdf`]/[`Error::Xml`] for an invalid
-    /// URDF, [`Error::Load`] with MuJoCo's message (element and line) if MuJoCo refuses it.
-    pub fn from_file(path: impl AsRef<Path>) -> Result<Model> {
-        init()?;
-        let path = path.as_ref();
-        let text = crate::fsio::read_to_string(path)?;
-        if crate::urdf::is_urdf(&text) {
-            let converted = crate::convert::convert_urdf_str(path, &text, &crate::convert::ConvertOptions::default())?;
-            return Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
-                Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-                other => other,
-            });
-        }
-        Self::from_mujoco_file(path)
-    }
-
     /// Loads a file with MuJoCo's own parser (`mj_loadXML`): MJCF, or a URDF through MuJoCo's
     /// URDF importer (no actuators, no sensors, welded root). Used to compare twin's converter
     /// against MuJoCo's import.
@@ -733,19 +714,6 @@ impl Model {
         let raised =
             if rc == 0 { Ok(()) } else { Err(Error::MuJoCo { call: "mj_loadXML", message: buf_to_string(&err) }) };
         Self::finish_load(out, raised, &err, Some(path))
-    }
-
-    /// Converts the URDF at `path` with `opts` ([`crate::convert::convert_urdf`]) and compiles it.
-    ///
-    /// # Errors
-    /// As [`crate::convert::convert_urdf`].
-    pub fn from_urdf(path: impl AsRef<Path>, opts: &crate::convert::ConvertOptions) -> Result<Model> {
-        let path = path.as_ref();
-        let converted = crate::convert::convert_urdf(path, opts)?;
-        Model::from_xml_str(&converted.mjcf).map_err(|e| match e {
-            Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
-            other => other,
-        })
     }
 
     /// Loads an MJCF (or URDF) document from a string. Relative file references (meshes)

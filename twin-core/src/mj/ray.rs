@@ -104,6 +104,8 @@ struct SceneGeom {
     mat: [f64; 9],
     /// Bounding-sphere radius about `pos`; infinite for planes.
     rbound: f64,
+    /// Bounding box in the geom's frame: centre, half-sizes (MuJoCo's `geom_aabb`).
+    aabb: [f64; 6],
 }
 
 /// A geom as seen from one ray origin (see [`RayScene::seen_from`]): what a ray test needs,
@@ -203,7 +205,8 @@ impl<'a> RayScene<'a> {
     /// (its `geom_xpos`/`geom_xmat`).
     pub fn new(data: &'a Data, filter: &RayFilter) -> RayScene<'a> {
         let model: &Model = data.model();
-        let (types, sizes, rbound) = (model.geom_type(), model.geom_size(), model.geom_rbound());
+        let (types, sizes, rbound, aabb) =
+            (model.geom_type(), model.geom_size(), model.geom_rbound(), model.geom_aabb());
         let (xpos, xmat) = (data.geom_xpos(), data.geom_xmat());
         let geoms = (0..model.ngeom())
             .filter(|&g| filter.sees(model, g))
@@ -215,7 +218,7 @@ impl<'a> RayScene<'a> {
                     _ => Kind::Primitive(Shape::of(ty, sizes[g])?),
                 };
                 let r = if ty == sys::mjtGeom_mjGEOM_PLANE { f64::INFINITY } else { rbound[g] };
-                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r })
+                Some(SceneGeom { id: g, kind, pos: xpos[g], mat: xmat[g], rbound: r, aabb: aabb[g] })
             })
             .collect();
         RayScene { model, data, geoms: without_twins(geoms) }
@@ -233,8 +236,9 @@ impl<'a> RayScene<'a> {
 
     /// The geoms as seen from `origin`, nearest first by a lower bound of their distance
     /// (planes: the perpendicular distance; others: to their bounding sphere), those beyond
-    /// `max_dist_m` left out. Computed once per origin, shared by every bundle.
-    fn seen_from(&self, origin: [f64; 3], max_dist_m: f64) -> Vec<Seen> {
+    /// `max_dist_m` left out, and those wholly nearer than `clip_m` (inside the sphere where
+    /// every ray's geometry is clipped). Computed once per origin, shared by every bundle.
+    fn seen_from(&self, origin: [f64; 3], max_dist_m: f64, clip_m: f64) -> Vec<Seen> {
         let mut seen: Vec<Seen> = self
             .geoms
             .iter()
@@ -242,6 +246,9 @@ impl<'a> RayScene<'a> {
             .filter_map(|(k, g)| {
                 let v = sub(g.pos, origin);
                 let d = dot(v, v).sqrt();
+                if d + g.rbound < clip_m || (clip_m > 0.0 && g.rbound.is_finite() && box_within(g, origin, clip_m)) {
+                    return None;
+                }
                 let (near, always, sin_b) = if g.rbound.is_infinite() {
                     // A plane: no point of it is nearer than its perpendicular distance.
                     let n = [g.mat[2], g.mat[5], g.mat[8]];
@@ -264,14 +271,14 @@ impl<'a> RayScene<'a> {
                     local_origin: to_local(&g.mat, sub(origin, g.pos)),
                     mat: g.mat,
                     kind: g.kind,
-                    corners: box_half(g).map(|h| {
+                    corners: box_half(g).map(|(centre, h)| {
                         // A hair larger, so that rounding never culls a geom a ray touches.
                         let h = h.map(|x| x * (1.0 + 1e-9) + 1e-12);
                         std::array::from_fn(|c| {
                             let l = [
-                                if c & 1 == 0 { -h[0] } else { h[0] },
-                                if c & 2 == 0 { -h[1] } else { h[1] },
-                                if c & 4 == 0 { -h[2] } else { h[2] },
+                                centre[0] + if c & 1 == 0 { -h[0] } else { h[0] },
+                                centre[1] + if c & 2 == 0 { -h[1] } else { h[1] },
+                                centre[2] + if c & 4 == 0 { -h[2] } else { h[2] },
                             ];
                             let m = &g.mat;
                             [
@@ -382,16 +389,17 @@ impl<'a> RayScene<'a> {
     /// The nearest hit of the ray from `origin` along the unit vector `dir` within
     /// `max_dist_m`.
     pub fn cast(&self, origin: [f64; 3], dir: [f64; 3], max_dist_m: f64) -> Option<RayHit> {
-        let seen = self.seen_from(origin, max_dist_m);
+        let seen = self.seen_from(origin, max_dist_m, 0.0);
         let mut candidates = Vec::new();
         Self::cull(&seen, 0..seen.len() as u32, &[dir], false, &mut candidates);
-        self.nearest(&seen, &origin, &dir, max_dist_m, &candidates, None, &mut RayStats::default()).map(|(h, _)| h)
+        self.nearest(&seen, &origin, &dir, max_dist_m, 0.0, &candidates, None, &mut RayStats::default()).map(|(h, _)| h)
     }
 
     /// The nearest hit among `candidates` (indices in `seen`, nearest-first), trying `hint`
     /// first (the geom the previous ray of the bundle hit: neighbouring rays mostly hit the
     /// same geom, and its distance then skips every candidate known to be farther). The answer
-    /// does not depend on the hint. Returns the hit and its index in `seen`.
+    /// does not depend on the hint. A geom whose hit is nearer than `clip_m` is clipped (not
+    /// seen along this ray). Returns the hit and its index in `seen`.
     #[allow(clippy::too_many_arguments)]
     #[inline(always)]
     fn nearest(
@@ -400,6 +408,7 @@ impl<'a> RayScene<'a> {
         origin: &[f64; 3],
         dir: &[f64; 3],
         max_dist_m: f64,
+        clip_m: f64,
         candidates: &[u32],
         hint: Option<u32>,
         stats: &mut RayStats,
@@ -411,6 +420,7 @@ impl<'a> RayScene<'a> {
             let s = &seen[i as usize];
             if let Some(d) = self.hit(s, origin, dir, max_dist_m, &mut st)
                 && d <= max_dist_m
+                && d >= clip_m
             {
                 best = Some((RayHit { dist_m: d, geom: self.geoms[s.k as usize].id }, i));
             }
@@ -426,6 +436,7 @@ impl<'a> RayScene<'a> {
             }
             if let Some(d) = self.hit(s, origin, dir, limit, &mut st)
                 && d <= limit
+                && d >= clip_m
             {
                 let id = self.geoms[s.k as usize].id;
                 if best.is_none_or(|(b, _)| d < b.dist_m || (d == b.dist_m && id < b.geom)) {
@@ -446,8 +457,14 @@ impl<'a> RayScene<'a> {
     /// of a scan). Groups run in parallel on the current rayon pool when `parallel`; the
     /// result does not depend on it. Returns what the cast cost.
     ///
+    /// `clip_m` clips what is near, as a camera's near plane does (a sensor inside its own
+    /// housing sees out of it): along ray `i` a geom whose nearest hit is nearer than
+    /// `clip_m[i]` is not seen, and the ray goes on to what lies behind. Empty: nothing is
+    /// clipped; one value: the same for every ray; else one per ray.
+    ///
     /// # Errors
-    /// [`Error::Size`] when `out` and `dirs` differ in length.
+    /// [`Error::Size`] when `out` and `dirs` differ in length, or `clip_m` has another length
+    /// than 0, 1 or theirs.
     #[allow(clippy::too_many_arguments)]
     pub fn cast_bundles(
         &self,
@@ -456,19 +473,29 @@ impl<'a> RayScene<'a> {
         dirs: &[[f64; 3]],
         bundle: usize,
         max_dist_m: f64,
+        clip_m: &[f64],
         parallel: bool,
         out: &mut [Option<RayHit>],
     ) -> Result<RayStats> {
         if out.len() != dirs.len() {
             return Err(Error::Size { what: "ray output length", expected: dirs.len(), got: out.len() });
         }
+        if clip_m.len() > 1 && clip_m.len() != dirs.len() {
+            return Err(Error::Size { what: "ray clip distances", expected: dirs.len(), got: clip_m.len() });
+        }
         let bundle = bundle.max(1);
-        let seen = self.seen_from(origin, max_dist_m);
+        let clip_at = |i: usize| match clip_m.len() {
+            0 => 0.0,
+            1 => clip_m[0],
+            _ => clip_m[i],
+        };
+        let min_clip = clip_m.iter().copied().fold(f64::INFINITY, f64::min);
+        let seen = self.seen_from(origin, max_dist_m, if min_clip.is_finite() { min_clip.max(0.0) } else { 0.0 });
         // Bundles are culled in groups first (an image's 4×4 tiles), then each bundle from
         // its group's candidates: most geoms are dropped once per group, not once per bundle.
         let group = bundle * GROUP_BUNDLES;
         let m = world_from_sensor;
-        let run = |(dirs_sensor, out): (&[[f64; 3]], &mut [Option<RayHit>]), scratch: &mut Scratch| {
+        let run = |(first, (dirs_sensor, out)): GroupChunk<'_>, scratch: &mut Scratch| {
             let Scratch { in_group, candidates, dirs } = scratch;
             dirs.clear();
             dirs.extend(dirs_sensor.iter().map(|d| {
@@ -483,11 +510,12 @@ impl<'a> RayScene<'a> {
             // The group by its cone only: the pyramid costs a pass over the rays, and pays off
             // on the bundles' smaller ones.
             Self::cull(&seen, 0..seen.len() as u32, dirs, false, in_group);
-            for (dirs, out) in dirs.chunks(bundle).zip(out.chunks_mut(bundle)) {
+            for (b, (dirs, out)) in dirs.chunks(bundle).zip(out.chunks_mut(bundle)).enumerate() {
                 Self::cull(&seen, in_group.iter().copied(), dirs, true, candidates);
                 let mut hint = None;
-                for (d, o) in dirs.iter().zip(out.iter_mut()) {
-                    let best = self.nearest(&seen, &origin, d, max_dist_m, candidates, hint, &mut stats);
+                for (r, (d, o)) in dirs.iter().zip(out.iter_mut()).enumerate() {
+                    let clip = clip_at(first + b * bundle + r);
+                    let best = self.nearest(&seen, &origin, d, max_dist_m, clip, candidates, hint, &mut stats);
                     hint = best.map(|(_, k)| k).or(hint);
                     *o = best.map(|(h, _)| h);
                 }
@@ -498,7 +526,8 @@ impl<'a> RayScene<'a> {
             use rayon::prelude::*;
             dirs.par_chunks(group)
                 .zip(out.par_chunks_mut(group))
-                .map_init(Scratch::default, |c, chunk| run(chunk, c))
+                .enumerate()
+                .map_init(Scratch::default, |c, (k, chunk)| run((k * group, chunk), c))
                 .reduce(RayStats::default, |mut a, b| {
                     a += b;
                     a
@@ -506,14 +535,17 @@ impl<'a> RayScene<'a> {
         } else {
             let mut scratch = Scratch::default();
             let mut stats = RayStats::default();
-            for chunk in dirs.chunks(group).zip(out.chunks_mut(group)) {
-                stats += run(chunk, &mut scratch);
+            for (k, chunk) in dirs.chunks(group).zip(out.chunks_mut(group)).enumerate() {
+                stats += run((k * group, chunk), &mut scratch);
             }
             stats
         };
         Ok(stats)
     }
 }
+
+/// One group of a cast: the index of its first ray, its rays (sensor frame) and their hits.
+type GroupChunk<'a> = (usize, (&'a [[f64; 3]], &'a mut [Option<RayHit>]));
 
 /// Per-thread lists of one group's cast: its candidates, a bundle's, its rays in the world.
 #[derive(Default)]
@@ -542,19 +574,55 @@ fn without_twins(geoms: Vec<SceneGeom>) -> Vec<SceneGeom> {
     kept
 }
 
-/// Half-sizes of a box about the geom's centre, in its frame, that holds it; `None` for an
-/// infinite plane.
-fn box_half(g: &SceneGeom) -> Option<[f64; 3]> {
-    let r = g.rbound;
+/// Whether every corner of `g`'s bounding box (MuJoCo's `geom_aabb`) is nearer to `origin`
+/// than `radius_m`: the geom lies wholly inside the sphere whose geometry is clipped (a camera's
+/// own head mesh, whose bounding sphere is larger).
+fn box_within(g: &SceneGeom, origin: [f64; 3], radius_m: f64) -> bool {
+    let [cx, cy, cz, hx, hy, hz] = g.aabb;
+    let r2 = radius_m * radius_m;
+    (0..8).all(|c| {
+        let l = [
+            cx + if c & 1 == 0 { -hx } else { hx },
+            cy + if c & 2 == 0 { -hy } else { hy },
+            cz + if c & 4 == 0 { -hz } else { hz },
+        ];
+        let m = &g.mat;
+        let w = [
+            g.pos[0] + m[0] * l[0] + m[1] * l[1] + m[2] * l[2] - origin[0],
+            g.pos[1] + m[3] * l[0] + m[4] * l[1] + m[5] * l[2] - origin[1],
+            g.pos[2] + m[6] * l[0] + m[7] * l[1] + m[8] * l[2] - origin[2],
+        ];
+        dot(w, w) < r2
+    })
+}
+
+/// A box that holds the geom, in its frame: its centre and half-sizes; `None` for an infinite
+/// plane.
+fn box_half(g: &SceneGeom) -> Option<([f64; 3], [f64; 3])> {
+    let at_centre = |h: [f64; 3]| Some(([0.0; 3], h));
     match g.kind {
-        Kind::Primitive(Shape::Plane { half }) => (half[0] > 0.0 && half[1] > 0.0).then_some([half[0], half[1], 0.0]),
-        Kind::Primitive(Shape::Sphere { radius }) => Some([radius; 3]),
-        Kind::Primitive(Shape::Capsule { radius, half_len }) => Some([radius, radius, half_len + radius]),
-        Kind::Primitive(Shape::Ellipsoid { inv_sq }) => Some(inv_sq.map(|s| 1.0 / s.sqrt())),
-        Kind::Primitive(Shape::Cylinder { radius, half_len }) => Some([radius, radius, half_len]),
-        Kind::Primitive(Shape::Box { half }) => Some(half),
-        // The cube about the bounding sphere.
-        Kind::Mesh | Kind::Hfield => r.is_finite().then_some([r; 3]),
+        Kind::Primitive(Shape::Plane { half }) => {
+            if half[0] > 0.0 && half[1] > 0.0 {
+                at_centre([half[0], half[1], 0.0])
+            } else {
+                None
+            }
+        }
+        Kind::Primitive(Shape::Sphere { radius }) => at_centre([radius; 3]),
+        Kind::Primitive(Shape::Capsule { radius, half_len }) => at_centre([radius, radius, half_len + radius]),
+        Kind::Primitive(Shape::Ellipsoid { inv_sq }) => at_centre(inv_sq.map(|s| 1.0 / s.sqrt())),
+        Kind::Primitive(Shape::Cylinder { radius, half_len }) => at_centre([radius, radius, half_len]),
+        Kind::Primitive(Shape::Box { half }) => at_centre(half),
+        // MuJoCo's bounding box of the mesh or height field (tighter than the bounding sphere's
+        // cube for long or flat meshes: a torso, a thigh), when it has one.
+        Kind::Mesh | Kind::Hfield => {
+            let [cx, cy, cz, hx, hy, hz] = g.aabb;
+            if hx > 0.0 && hy > 0.0 && hz > 0.0 && [cx, cy, cz, hx, hy, hz].iter().all(|x| x.is_finite()) {
+                Some(([cx, cy, cz], [hx, hy, hz]))
+            } else {
+                g.rbound.is_finite().then_some(([0.0; 3], [g.rbound; 3]))
+            }
+        }
     }
 }
 
@@ -851,7 +919,7 @@ mod tests {
             RayFilter { groups: [true; 6], exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
         let scene = RayScene::new(&data, &filter);
         let mut out = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, true, &mut out).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, &[], true, &mut out).unwrap();
         let mut hits = std::collections::BTreeSet::new();
         for (k, (a, b)) in reference.iter().zip(&out).enumerate() {
             match (a, b) {
@@ -870,7 +938,7 @@ mod tests {
         assert_eq!(scene.len(), 7, "the box's twin is left out of the scene");
         // Serial and parallel casts agree bit for bit.
         let mut serial = vec![None; dirs.len()];
-        scene.cast_bundles(origin, &IDENTITY, &dirs, 7, 50.0, false, &mut serial).unwrap();
+        scene.cast_bundles(origin, &IDENTITY, &dirs, 7, 50.0, &[], false, &mut serial).unwrap();
         assert_eq!(serial, out);
     }
 }

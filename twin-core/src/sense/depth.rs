@@ -212,8 +212,9 @@ pub struct DepthCameraOptions {
     /// Horizontal field of view, radians; `None`: the model camera's `fovy` (vertical) with
     /// square pixels. (default: `None`)
     pub hfov_rad: Option<f64>,
-    /// Nearest depth measured, metres; nearer returns read NaN, as a real sensor's do.
-    /// (default: 0.05)
+    /// Near clip, metres of depth: geometry nearer than this is not seen, as with a renderer's
+    /// near plane (Gazebo's `<clip><near>`), and what lies behind it is measured: a camera
+    /// inside its own housing or head sees out of it. (default: 0.05)
     pub min_range_m: f64,
     /// Farthest depth measured, metres; farther returns read NaN. (default: 10.0)
     pub max_range_m: f64,
@@ -267,6 +268,9 @@ pub struct DepthCamera {
     fan: RayFan,
     /// z component of each unnormalised ray (depth = distance × this), in tile order.
     depth_per_dist: Vec<f64>,
+    /// Distance along each ray of the near plane (`min_range_m / depth_per_dist`), in tile
+    /// order: nearer geometry is clipped.
+    clip_dist: Vec<f64>,
     /// Pixel index of each ray.
     pixel: Vec<u32>,
     frames: u64,
@@ -355,6 +359,7 @@ impl DepthCamera {
             }
         }
         let fan = RayFan::new(rays_optical, (TILE * TILE) as usize, opts.threads, &what())?;
+        let clip_dist = depth_per_dist.iter().map(|s| opts.min_range_m / s).collect();
         Ok(DepthCamera {
             camera,
             name: camera_name.to_string(),
@@ -364,6 +369,7 @@ impl DepthCamera {
             cam_from_optical: Rotation3::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
             fan,
             depth_per_dist,
+            clip_dist,
             pixel,
             frames: 0,
         })
@@ -424,7 +430,8 @@ impl DepthCamera {
         // The farthest distance along any ray that can still be within max depth.
         let max_dist = max_z / self.depth_per_dist.iter().copied().fold(1.0f64, f64::min);
         let rot = world_from_optical.rotation.to_rotation_matrix();
-        let hits = self.fan.cast(data, &self.options.filter, [origin.x, origin.y, origin.z], &rot, max_dist)?;
+        let origin = [origin.x, origin.y, origin.z];
+        let hits = self.fan.cast(data, &self.options.filter, origin, &rot, max_dist, &self.clip_dist)?;
         // Depth along the optical axis, in pixel order; NaN outside the range.
         let mut depth_m = vec![f32::NAN; self.intrinsics.len()];
         for ((hit, &k), &s) in hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
@@ -523,6 +530,25 @@ mod tests {
         }
     }
 
+    /// A camera inside its own housing (a box around it) and a head (a sphere it sits in):
+    /// with the near clip beyond them it sees the floor, 1 m down, in every pixel; with a near
+    /// clip inside the housing it sees the housing's inside.
+    #[test]
+    fn a_camera_inside_its_housing_sees_out_of_it() {
+        let xml = r#"<mujoco><worldbody><geom type="plane" size="3 3 0.1"/>
+            <body name="head" pos="0 0 1"><geom type="sphere" size="0.08" pos="-0.05 0 0"/>
+              <geom type="box" size="0.01 0.025 0.01"/>
+              <camera name="eye" fovy="60"/></body></worldbody></mujoco>"#;
+        let (model, data) = setup(xml);
+        let opts = DepthCameraOptions { width: 32, height: 24, min_range_m: 0.1, ..DepthCameraOptions::default() };
+        let frame = DepthCamera::new(&model, "eye", opts.clone()).unwrap().render(&model, &data).unwrap();
+        assert!(frame.depth_m.iter().all(|&z| (z - 1.0).abs() < 1e-6), "{:?}", &frame.depth_m[..8]);
+        // A near clip of 5 mm: the housing (1 cm below the camera along its axis) is what it sees.
+        let opts = DepthCameraOptions { min_range_m: 0.005, ..opts };
+        let frame = DepthCamera::new(&model, "eye", opts).unwrap().render(&model, &data).unwrap();
+        assert!((frame.depth_at(16, 12) - 0.01).abs() < 1e-6, "{}", frame.depth_at(16, 12));
+    }
+
     #[test]
     fn messages_carry_the_image() {
         let (model, data) = setup(BOX_SCENE);
@@ -558,12 +584,13 @@ mod tests {
             .unwrap();
         assert!(far.depth_at(0, 0).is_nan());
         assert!((far.depth_at(16, 12) - 0.8).abs() < 1e-6);
-        // Nearer than min range: NaN.
+        // Nearer than the near clip: the cube's top (depth 0.8) is clipped, the floor behind it
+        // seen.
         let near = DepthCamera::new(&model, "down", DepthCameraOptions { min_range_m: 0.9, ..base.clone() })
             .unwrap()
             .render(&model, &data)
             .unwrap();
-        assert!(near.depth_at(16, 12).is_nan() && (near.depth_at(0, 0) - 1.0).abs() < 1e-6);
+        assert!((near.depth_at(16, 12) - 1.0).abs() < 1e-6 && (near.depth_at(0, 0) - 1.0).abs() < 1e-6);
         // Noise: seeded, about the asked deviation, independent of the thread count.
         let noisy = |threads| {
             let o = DepthCameraOptions { noise_std_m: 0.01, seed: 7, threads, width: 160, height: 120, ..base.clone() };

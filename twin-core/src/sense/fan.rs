@@ -59,8 +59,9 @@ impl RayFan {
 
     /// Casts every ray from `origin` with the sensor turned by `world_from_sensor`, against
     /// the geoms of `data` (its last forward pass) that `filter` lets through, up to
-    /// `max_dist_m`: the nearest hit of each ray, in the fan's order. The result is the same
-    /// for any thread count.
+    /// `max_dist_m`, clipping what is nearer than `clip_m` along each ray (as
+    /// [`RayScene::cast_bundles`]): the nearest hit of each ray, in the fan's order. The
+    /// result is the same for any thread count.
     ///
     /// # Errors
     /// None in practice (the output always has the fan's length); passed on from
@@ -72,6 +73,7 @@ impl RayFan {
         origin: [f64; 3],
         world_from_sensor: &Rotation3<f64>,
         max_dist_m: f64,
+        clip_m: &[f64],
     ) -> Result<&[Option<RayHit>]> {
         self.hits.clear();
         self.hits.resize(self.dirs_sensor.len(), None);
@@ -80,7 +82,7 @@ impl RayFan {
         let rot: [f64; 9] = std::array::from_fn(|i| m[(i / 3, i % 3)]);
         let (dirs, hits, bundle) = (&self.dirs_sensor, &mut self.hits, self.bundle);
         let cast = |parallel, hits: &mut [Option<RayHit>]| {
-            scene.cast_bundles(origin, &rot, dirs, bundle, max_dist_m, parallel, hits)
+            scene.cast_bundles(origin, &rot, dirs, bundle, max_dist_m, clip_m, parallel, hits)
         };
         self.stats = match (&self.pool, self.threads) {
             (Some(pool), _) => pool.install(|| cast(true, hits))?,

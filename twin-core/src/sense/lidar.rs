@@ -256,7 +256,7 @@ impl Lidar {
         let world_from_sensor =
             Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), UnitQuaternion::from_rotation_matrix(&rot));
         let (lo, hi) = (self.options.min_range_m, self.options.max_range_m);
-        let hits = self.fan.cast(data, &self.options.filter, p, &rot, hi)?;
+        let hits = self.fan.cast(data, &self.options.filter, p, &rot, hi, &[])?;
         let mut rng = noise_rng(self.options.seed, self.scans);
         let noise = self.options.noise_std_m;
         let ranges_m = hits

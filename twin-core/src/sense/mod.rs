@@ -11,7 +11,9 @@ pub mod rig;
 pub use cup::{CupDetectOptions, CupEstimate, detect_cup};
 pub use depth::{DepthCamera, DepthCameraOptions, DepthFrame, Intrinsics};
 pub use lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
-pub use rig::{Device, Pipelined, RaySensor, RaySensorKind, Reading, SensorMessage, SensorStream, ray_sensors};
+pub use rig::{
+    Device, Pipelined, RaySensor, RaySensorKind, Reading, SensorMessage, SensorStream, ray_sensors, unrendered_cameras,
+};
 
 use crate::log::{Header, PointCloud2, PointField};
 

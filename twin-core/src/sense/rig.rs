@@ -1,6 +1,8 @@
-//! A robot's ray-cast sensors as its file describes them, with their topics: each Gazebo
-//! camera (`camera`, `depth`, `rgbd_camera`, …) is a depth camera publishing
+//! A robot's ray-cast sensors as its file describes them, with their topics: each Gazebo depth
+//! camera (`depth`, `depth_camera`, `rgbd_camera`) is a depth camera publishing
 //! `<prefix>/depth/image_raw` (`32FC1`), `<prefix>/depth/camera_info` and `<prefix>/points`;
+//! a colour camera (`camera`, `wideanglecamera`, `multicamera`) is not rendered (twin casts
+//! depth rays, it has no renderer for colour) and is named in [`unrendered_cameras`] instead;
 //! each `ray`/`gpu_ray`/`lidar` sensor publishes one ring as `sensor_msgs/LaserScan` (`scan`)
 //! or several as an organized `PointCloud2` (`points`). MJCF cameras that no metadata covers
 //! count as depth cameras when they give a `resolution` (beyond MuJoCo's default 1×1).
@@ -92,7 +94,7 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
     };
     for s in &robot.sensors {
         match s.kind.as_str() {
-            "camera" | "depth" | "depth_camera" | "rgbd_camera" | "wideanglecamera" | "multicamera" => {
+            "depth" | "depth_camera" | "rgbd_camera" => {
                 for (k, cam) in s.mujoco.iter().enumerate() {
                     let Some(id) = model.id(ObjType::Camera, cam) else { continue };
                     covered.push(id);
@@ -152,6 +154,10 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
             _ => {}
         }
     }
+    // The MuJoCo cameras of colour sensors are covered too: they are not depth cameras.
+    for s in robot.sensors.iter().filter(|s| is_colour_camera(&s.kind)) {
+        covered.extend(s.mujoco.iter().filter_map(|c| model.id(ObjType::Camera, c)));
+    }
     for c in &robot.cameras {
         let [w, h] = model.cam_resolution()[c.id];
         if covered.contains(&c.id) || c.name.is_empty() || (w <= 1 && h <= 1) {
@@ -167,6 +173,38 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
         });
     }
     out
+}
+
+/// Whether a Gazebo sensor type is a colour camera (not rendered by twin).
+fn is_colour_camera(kind: &str) -> bool {
+    matches!(kind, "camera" | "wideanglecamera" | "multicamera")
+}
+
+/// One note per colour camera of `robot`'s file (Gazebo `camera`, `wideanglecamera`,
+/// `multicamera`): twin does not render colour, so such a camera publishes nothing (it used to
+/// be turned into a depth camera, which it is not). Empty when there is none.
+pub fn unrendered_cameras(robot: &Robot) -> Vec<String> {
+    robot
+        .sensors
+        .iter()
+        .filter(|s| is_colour_camera(&s.kind))
+        .map(|s| {
+            let size = s
+                .mujoco
+                .first()
+                .and_then(|c| robot.model.id(ObjType::Camera, c))
+                .map(|id| {
+                    let [w, h] = robot.model.cam_resolution()[id];
+                    format!("{w}×{h} ")
+                })
+                .unwrap_or_default();
+            format!(
+                "camera sensor \"{}\" (Gazebo type=\"{}\", {size}colour) is not rendered: twin ray-casts depth \
+                 images only, so it publishes nothing (a depth or rgbd_camera sensor would be)",
+                s.name, s.kind
+            )
+        })
+        .collect()
 }
 
 fn depth_topics(prefix: &str) -> Vec<(String, SensorStream)> {
@@ -247,6 +285,14 @@ impl RaySensor {
         })
     }
 
+    /// Rays per reading: a camera's pixels, a LiDAR's beams.
+    pub fn rays(&self) -> usize {
+        match &self.kind {
+            RaySensorKind::Depth { options, .. } => options.width as usize * options.height as usize,
+            RaySensorKind::Lidar { options, .. } => options.horizontal.samples * options.vertical.samples,
+        }
+    }
+
     /// Where the sensor's frame sits on the robot: `(body, body_from_frame translation (m),
     /// rotation w x y z)`; a camera's frame is its optical frame (z forward, x right, y down),
     /// a LiDAR's its site. `None` when the model lacks the camera or site.
@@ -295,6 +341,10 @@ impl Device {
     }
 }
 
+/// What a pool thread hands back: the device, its scratch state, the reading and its wall
+/// time, seconds.
+type Finished = (Device, Data, Result<Reading>, f64);
+
 /// A device read on another thread while the simulation goes on: the reading asked for at one
 /// tick comes back at the next ([`Pipelined::submit`]) or at the end ([`Pipelined::finish`]),
 /// whatever the threads' timing, so recordings stay the same run to run. The simulation thread
@@ -305,8 +355,10 @@ impl Device {
 /// simulation's core: on 2 cores a 15 Hz camera at 2 ms a frame fills a sixth of the other one.
 pub struct Pipelined {
     idle: Option<(Device, Data)>,
-    pending: Option<std::sync::mpsc::Receiver<(Device, Data, Result<Reading>)>>,
+    pending: Option<std::sync::mpsc::Receiver<Finished>>,
     pool: rayon::ThreadPool,
+    readings: u64,
+    read_secs: f64,
 }
 
 impl std::fmt::Debug for Pipelined {
@@ -332,7 +384,13 @@ impl Pipelined {
             .thread_name(|i| format!("twin-rays-{i}"))
             .build()
             .map_err(|e| crate::Error::Options(format!("can't start {threads} ray-casting threads: {e}")))?;
-        Ok(Pipelined { idle: Some((device, Data::new(model)?)), pending: None, pool })
+        Ok(Pipelined { idle: Some((device, Data::new(model)?)), pending: None, pool, readings: 0, read_secs: 0.0 })
+    }
+
+    /// Readings taken so far and the wall time they took on the pool, seconds (the device's
+    /// cost, whether or not the simulation waited for it).
+    pub fn cost(&self) -> (u64, f64) {
+        (self.readings, self.read_secs)
     }
 
     /// Starts a reading of `data`'s poses (its last forward pass), stamped `stamp_nanos`, and
@@ -351,6 +409,7 @@ impl Pipelined {
         let (tx, rx) = std::sync::mpsc::channel();
         // Inside the pool, a device's `threads = 0` (the current pool) means this pool.
         self.pool.spawn(move || {
+            let started = std::time::Instant::now();
             let reading = device.read(&scratch).map(|mut r| {
                 match &mut r {
                     Reading::Depth(f) => f.stamp_nanos = stamp_nanos,
@@ -359,7 +418,7 @@ impl Pipelined {
                 r
             });
             // The receiver is gone only when the owner was dropped: nothing to hand back.
-            let _ = tx.send((device, scratch, reading));
+            let _ = tx.send((device, scratch, reading, started.elapsed().as_secs_f64()));
         });
         self.pending = Some(rx);
         Ok(previous)
@@ -371,10 +430,12 @@ impl Pipelined {
     /// The reading's error; [`crate::Error::Options`] if its thread died (a panic).
     pub fn finish(&mut self) -> Result<Option<Reading>> {
         let Some(rx) = self.pending.take() else { return Ok(None) };
-        let (device, scratch, reading) = rx
+        let (device, scratch, reading, secs) = rx
             .recv()
             .map_err(|_| crate::Error::Options("a ray-cast sensor's thread ended without its reading".into()))?;
         self.idle = Some((device, scratch));
+        self.readings += 1;
+        self.read_secs += secs;
         reading.map(Some)
     }
 }

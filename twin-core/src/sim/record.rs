@@ -2,13 +2,18 @@
 //! simulation time (log time = publish time = header stamp).
 //!
 //! Topics (`<robot>` = [`Robot::name`]):
-//! - `/joint_states` (`sensor_msgs/msg/JointState`): every hinge/slide joint; effort = the
-//!   actuator torque (force) on the joint, N·m (N); at [`RecordOptions::state_rate_hz`].
+//! - `/joint_states` (`sensor_msgs/msg/JointState`): every hinge/slide joint, position and
+//!   velocity as the controller observed them ([`StepView::observation`]: the engine's one
+//!   sensor model, noise and latency included); effort = the actuator torque (force) on the
+//!   joint, N·m (N); at [`RecordOptions::state_rate_hz`].
 //! - each IMU on its topic (`sensor_msgs/msg/Imu`) at its update rate: orientation from the
 //!   framequat sensor, angular velocity from the gyro, linear acceleration (specific force) from
-//!   the accelerometer, plus the IMU's configured Gaussian noise (seeded), covariances = σ².
+//!   the accelerometer, all as the controller observed them (the IMU's noise and biases are
+//!   the engine's, [`crate::engine::SensorModel`], seeded by the run); covariances = σ² of the
+//!   configured white noise.
 //! - `/odom` (`nav_msgs/msg/Odometry`, floating bases): pose of the base in `odom` (= the
-//!   simulation's world frame); twist in the child (base) frame, as REP-105 defines it.
+//!   simulation's world frame); twist in the child (base) frame, as REP-105 defines it. Ground
+//!   truth, like `/tf`: no sensor of the robot measures it.
 //! - `/tf` (`tf2_msgs/msg/TFMessage`): `odom` → base and every body relative to its parent, at
 //!   [`RecordOptions::tf_rate_hz`]; `/tf_static` once: IMU and ray-cast sensor frames that are
 //!   not bodies.
@@ -46,8 +51,6 @@ use crate::log::{
 };
 use crate::mj::{Data, ObjType};
 use crate::topics::{Sink, TopicInfo, TopicKind, TopicRates, TopicTable, TypedMessage, body_frame};
-use rand::{Rng, SeedableRng};
-use rand_distr::StandardNormal;
 use std::path::PathBuf;
 
 /// What to record and how often.
@@ -66,8 +69,6 @@ pub struct RecordOptions {
     pub tf_rate_hz: f64,
     /// Rate of the rerun poses and scalars, Hz (default: 50).
     pub rerun_rate_hz: f64,
-    /// Seed of the IMU noise (default: 0).
-    pub seed: u64,
     /// MCAP writer options (default: [`WriterOptions::default`]).
     pub writer: WriterOptions,
     /// Only these topics of the table in the MCAP file and on the live bridge, by exact name
@@ -91,7 +92,6 @@ impl Default for RecordOptions {
             state_rate_hz: 500.0,
             tf_rate_hz: 100.0,
             rerun_rate_hz: 50.0,
-            seed: 0,
             writer: WriterOptions::default(),
             topics: None,
             command_topic: None,
@@ -110,103 +110,37 @@ pub struct RecordSummary {
     pub mcap: Option<(PathBuf, WriteSummary)>,
     /// The `.rrd` file and its size, bytes.
     pub rrd: Option<(PathBuf, u64)>,
+    /// What each ray-cast sensor that was read cost ([`SensorCost`]), in the robot's order.
+    pub sensors: Vec<SensorCost>,
+}
+
+/// What a ray-cast sensor cost a recording.
+#[derive(Debug, Clone, PartialEq)]
+pub struct SensorCost {
+    /// The sensor's name.
+    pub name: String,
+    /// Rays per reading (pixels of a camera, beams of a LiDAR).
+    pub rays: usize,
+    /// Its rate, Hz.
+    pub rate_hz: f64,
+    /// Readings taken.
+    pub readings: u64,
+    /// Mean wall time of a reading on its thread pool, seconds.
+    pub secs_per_reading: f64,
+}
+
+impl SensorCost {
+    /// The sensor's time per simulated second, seconds: above 1 it alone keeps a run from real
+    /// time on the core that casts its rays.
+    pub fn secs_per_sim_sec(&self) -> f64 {
+        self.secs_per_reading * self.rate_hz
+    }
 }
 
 impl RecordSummary {
     /// Messages written, all topics.
     pub fn messages(&self) -> u64 {
         self.topics.iter().map(|(_, n)| n).sum()
-    }
-}
-
-/// Bias of one IMU group (gyroscope or accelerometer), per axis: Gazebo's constant turn-on
-/// bias, its first-order Gauss–Markov dynamic bias (or a random walk when no correlation time
-/// is given), and twin's extra random walk ([`crate::convert::ImuBias`]).
-#[derive(Debug, Clone)]
-struct BiasState {
-    model: crate::convert::ImuBias,
-    turn_on: [f64; 3],
-    markov: [f64; 3],
-    walk: [f64; 3],
-}
-
-impl BiasState {
-    fn new(model: crate::convert::ImuBias, rng: &mut rand_chacha::ChaCha8Rng) -> BiasState {
-        let mut turn_on = [0.0; 3];
-        if model.mean != 0.0 || model.stddev != 0.0 {
-            for b in &mut turn_on {
-                // Gazebo: mean + stddev·w, added or subtracted with equal probability.
-                let magnitude = model.mean + model.stddev * rng.sample::<f64, _>(StandardNormal);
-                *b = if rng.random_bool(0.5) { magnitude } else { -magnitude };
-            }
-        }
-        let mut markov = [0.0; 3];
-        let tau = model.dynamic_correlation_time_secs;
-        if model.dynamic_stddev > 0.0 && tau > 0.0 {
-            // Started in its stationary distribution (σ_b·√(τ/2)), so statistics hold from t = 0.
-            for b in &mut markov {
-                *b = model.dynamic_stddev * (tau / 2.0).sqrt() * rng.sample::<f64, _>(StandardNormal);
-            }
-        }
-        BiasState { model, turn_on, markov, walk: [0.0; 3] }
-    }
-
-    /// Advances the processes by `dt_secs`, exactly (no Euler error at any rate).
-    fn advance(&mut self, dt_secs: f64, rng: &mut rand_chacha::ChaCha8Rng) {
-        let (sigma, tau) = (self.model.dynamic_stddev, self.model.dynamic_correlation_time_secs);
-        if sigma > 0.0 {
-            if tau > 0.0 {
-                // b' = φ·b + σ_b·√(τ/2·(1 − φ²))·w, φ = e^(−Δt/τ).
-                let phi = (-dt_secs / tau).exp();
-                let drive = sigma * (tau / 2.0 * -(-2.0 * dt_secs / tau).exp_m1()).sqrt();
-                for b in &mut self.markov {
-                    *b = phi * *b + drive * rng.sample::<f64, _>(StandardNormal);
-                }
-            } else {
-                for b in &mut self.markov {
-                    *b += sigma * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
-                }
-            }
-        }
-        if self.model.random_walk > 0.0 {
-            for b in &mut self.walk {
-                *b += self.model.random_walk * dt_secs.sqrt() * rng.sample::<f64, _>(StandardNormal);
-            }
-        }
-    }
-
-    fn value(&self) -> [f64; 3] {
-        std::array::from_fn(|i| self.turn_on[i] + self.markov[i] + self.walk[i])
-    }
-}
-
-/// The bias part of one IMU's sensor model (the white noise is drawn with the sample).
-#[derive(Debug, Clone)]
-struct ImuNoise {
-    gyro: BiasState,
-    accel: BiasState,
-    /// Time of the previous sample, ns of simulation time.
-    last_nanos: Option<u64>,
-}
-
-impl ImuNoise {
-    fn new(meta: &crate::convert::ImuMeta, rng: &mut rand_chacha::ChaCha8Rng) -> ImuNoise {
-        ImuNoise {
-            gyro: BiasState::new(meta.gyro_bias, rng),
-            accel: BiasState::new(meta.accel_bias, rng),
-            last_nanos: None,
-        }
-    }
-
-    /// The (gyroscope, accelerometer) bias at the sample at `t_nanos`.
-    fn advance(&mut self, t_nanos: u64, rng: &mut rand_chacha::ChaCha8Rng) -> ([f64; 3], [f64; 3]) {
-        if let Some(last) = self.last_nanos {
-            let dt_secs = t_nanos.saturating_sub(last) as f64 * 1e-9;
-            self.gyro.advance(dt_secs, rng);
-            self.accel.advance(dt_secs, rng);
-        }
-        self.last_nanos = Some(t_nanos);
-        (self.gyro.value(), self.accel.value())
     }
 }
 
@@ -564,9 +498,6 @@ pub struct Recording {
     state: Schedule,
     tf_schedule: Schedule,
     imu_schedules: Vec<Schedule>,
-    /// Bias state of each IMU.
-    imu_noise: Vec<ImuNoise>,
-    rng: rand_chacha::ChaCha8Rng,
     /// Topic ids: `/joint_states`, `/odom`, `/tf`, the command, each IMU's, each body's contacts.
     joint_states_id: Option<usize>,
     odom_id: Option<usize>,
@@ -716,8 +647,6 @@ impl Recording {
                 }
             })
             .collect();
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(options.seed);
-        let imu_noise = robot.imus.iter().map(|imu| ImuNoise::new(&imu.meta, &mut rng)).collect();
         let mut rec = Recording {
             out: Outputs {
                 sinks: slots,
@@ -740,8 +669,6 @@ impl Recording {
                 .iter()
                 .map(|imu| Schedule::new(imu.meta.update_rate_hz.unwrap_or(options.state_rate_hz), dt_nanos))
                 .collect(),
-            imu_noise,
-            rng,
             joint_states_id: id_of(TopicKind::JointStates),
             odom_id: id_of(TopicKind::Odometry),
             tf_id: id_of(TopicKind::Tf),
@@ -871,16 +798,18 @@ impl Recording {
         if state_due {
             self.accumulate_contacts(data);
         }
-        let (qpos, qvel) = (step.qpos, step.qvel);
+        // /joint_states and the IMUs: what the controller observed; the rest is ground truth.
+        let observed = &step.observation;
+        let qvel = step.qvel;
         if state_due {
             if let Some(id) = self.joint_states_id.filter(|&id| self.out.takes(id)) {
                 let (actuator, applied) = (data.qfrc_actuator(), data.qfrc_applied());
                 let js = &mut self.joint_state;
                 js.header.stamp_nanos = stamp;
                 js.position.clear();
-                js.position.extend(self.joints.iter().map(|&(adr, _)| qpos[adr]));
+                js.position.extend(self.joints.iter().map(|&(adr, _)| observed.qpos[adr]));
                 js.velocity.clear();
-                js.velocity.extend(self.joints.iter().map(|&(_, dof)| qvel[dof]));
+                js.velocity.extend(self.joints.iter().map(|&(_, dof)| observed.qvel[dof]));
                 js.effort.clear();
                 js.effort.extend(self.joints.iter().map(|&(_, dof)| actuator[dof] + applied[dof]));
                 self.out.write(id, t_nanos, &TypedMessage::JointState(&self.joint_state))?;
@@ -925,20 +854,13 @@ impl Recording {
             if !self.imu_schedules[k].due(t_nanos) {
                 continue;
             }
-            // Noise is drawn whether or not a sink takes the topic: one IMU's values don't
-            // depend on which others are recorded.
-            let s = data.sensordata();
-            let msg = &mut self.imu_messages[k];
-            let (gyro_bias, accel_bias) = self.imu_noise[k].advance(t_nanos, &mut self.rng);
-            for i in 0..3 {
-                msg.angular_velocity[i] = s[imu.gyro_adr + i]
-                    + gyro_bias[i]
-                    + imu.meta.gyro_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-                msg.linear_acceleration[i] = s[imu.accel_adr + i]
-                    + accel_bias[i]
-                    + imu.meta.accel_noise_std * self.rng.sample::<f64, _>(StandardNormal);
-            }
             let Some(id) = self.imu_ids[k].filter(|&id| self.out.takes(id)) else { continue };
+            let s = observed.sensordata;
+            let msg = &mut self.imu_messages[k];
+            for i in 0..3 {
+                msg.angular_velocity[i] = s[imu.gyro_adr + i];
+                msg.linear_acceleration[i] = s[imu.accel_adr + i];
+            }
             let q = match imu.quat_adr {
                 Some(a) => [s[a], s[a + 1], s[a + 2], s[a + 3]],
                 None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
@@ -1018,7 +940,21 @@ impl Recording {
                 write_reading(&mut self.out, s, &reading)?;
             }
         }
-        let mut summary = RecordSummary { topics: self.out.counts, ..RecordSummary::default() };
+        let sensors = self
+            .sense
+            .iter()
+            .map(|s| {
+                let (readings, secs) = s.pipe.cost();
+                SensorCost {
+                    name: s.sensor.name.clone(),
+                    rays: s.sensor.rays(),
+                    rate_hz: s.sensor.rate_hz,
+                    readings,
+                    secs_per_reading: if readings > 0 { secs / readings as f64 } else { 0.0 },
+                }
+            })
+            .collect();
+        let mut summary = RecordSummary { topics: self.out.counts, sensors, ..RecordSummary::default() };
         for mut slot in self.out.sinks {
             slot.sink().finish()?;
             match slot {

@@ -610,6 +610,6 @@ fn imu_bias_tags_reach_the_metadata_and_survive_the_mjcf_round_trip() {
     let a = imu.accel_bias;
     assert_eq!((a.random_walk, a.dynamic_stddev, a.mean), (4e-3, 0.0, 0.0));
     let model = Model::from_xml_str(&c.mjcf).unwrap();
-    let meta = twin_core::convert::RobotMeta::from_model(&model).unwrap();
+    let meta = twin_core::convert::robot_meta(&model).unwrap();
     assert_eq!(meta.imus[0], *imu);
 }

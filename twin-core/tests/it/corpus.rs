@@ -4,8 +4,8 @@
 //! not robots (no `<link>`).
 //!
 //! The wheel is downloaded once into `TWIN_URDF_CACHE` (default: the target's tmp dir) with
-//! `TWIN_PYTHON`'s pip; without it the test fails. Prints the corpus table of
-//! `twin-core/src/convert/corpus.md` (`cargo test -p twin-core --test it corpus:: -- --nocapture`).
+//! the tests' Python (`test_python.rs`); without network the test fails. Prints the corpus table of
+//! `convert/corpus.md` (`cargo test -p twin-core --test it corpus:: -- --nocapture`).
 
 use std::path::{Path, PathBuf};
 use std::sync::{Arc, Mutex};

@@ -1,6 +1,6 @@
 //! The example-robot-data 6.0.0 wheel (PyPI) as test input: downloaded once into
-//! `TWIN_URDF_CACHE` (default: the target's tmp dir) with `TWIN_PYTHON`'s pip; without network or
-//! pip the calling test fails. One file, included by the test binaries of twin-core, sysid and
+//! `TWIN_URDF_CACHE` (default: the target's tmp dir) with the pip of the tests' Python
+//! (`test_python.rs`); without network the calling test fails. One file, included by the test binaries of twin-core, sysid and
 //! the CLI (`#[path]`), so that whichever runs first fetches it: `cargo test --workspace` runs
 //! sysid's tests before the others.
 
@@ -12,7 +12,7 @@ pub fn example_robot_data() -> PathBuf {
     let cache = std::env::var_os("TWIN_URDF_CACHE")
         .map(PathBuf::from)
         .unwrap_or_else(|| PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("urdf-cache"));
-    let python = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
+    let python = crate::test_python::python();
     let script = Path::new(env!("CARGO_MANIFEST_DIR"))
         .ancestors()
         .map(|d| d.join("twin-core/tests/python/fetch_example_robot_data.py"))
@@ -21,7 +21,8 @@ pub fn example_robot_data() -> PathBuf {
     let status = Command::new(&python).arg(&script).arg(&cache).status();
     assert!(
         status.as_ref().is_ok_and(|s| s.success()),
-        "could not fetch example-robot-data 6.0.0 with {python} {} ({status:?}): set TWIN_PYTHON to a Python with pip and network access to PyPI",
+        "could not fetch example-robot-data 6.0.0 with {} {} ({status:?}): it needs network access to PyPI",
+        python.display(),
         script.display()
     );
     cache.join("cmeel.prefix/share/example-robot-data/robots")

@@ -7,7 +7,7 @@ use twin_core::control::Controller;
 use twin_core::engine::{Flow, Observer, StepView};
 use twin_core::grasp::{GraspMeasure, Grasper, Phase};
 use twin_core::mj::ObjType;
-use twin_core::scenario::{Scenario, Verdict};
+use twin_core::scenario::{Scenario, Threshold};
 use twin_core::sim::{self, SimOptions};
 
 fn scenarios() -> PathBuf {
@@ -38,7 +38,7 @@ impl Observer for Watch {
 }
 
 struct Run {
-    verdicts: Vec<Verdict>,
+    verdicts: Vec<Threshold>,
     fell: bool,
     grasp: GraspMeasure,
     estimate_error_m: Option<f64>,
@@ -60,7 +60,7 @@ fn run(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> Run {
         .collect();
     let cup = model.require_id(ObjType::Body, "cup").unwrap();
     let mut watch = Watch { cup, arm_qpos, q0: Vec::new(), cup_start: None, max_arm_move: 0.0 };
-    let options = SimOptions { duration_secs: scenario.duration_secs };
+    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
     sim::simulate_with(&robot, &mut grasper, &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut watch])
         .unwrap();
     let verdicts = check.verdicts();
@@ -95,7 +95,7 @@ fn all_pass(r: &Run) -> bool {
     r.verdicts.iter().all(|v| v.passed)
 }
 
-fn verdict<'a>(r: &'a Run, name: &str) -> &'a Verdict {
+fn verdict<'a>(r: &'a Run, name: &str) -> &'a Threshold {
     r.verdicts.iter().find(|v| v.name == name).unwrap()
 }
 

@@ -2,8 +2,8 @@
 //! `mcap` + `mcap-ros2-support` packages and opened by `rosbags` with the same field values, and
 //! bags written by `rosbags` (ROS 2 folder layout) are read by twin with the same values.
 //!
-//! Python comes from `TWIN_PYTHON` (default `python3`); the tests skip with a note when it or
-//! the packages (`pip install mcap mcap-ros2-support rosbags numpy`) are missing.
+//! Python is the tests' venv (`test_python.rs`, from `.ci/requirements.txt`); without it the tests
+//! fail.
 
 use serde_json::Value as Json;
 use std::path::Path;
@@ -12,21 +12,18 @@ use twin_core::log::*;
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/log_interop.py");
 
-/// Runs the helper script; `None` (after printing why) when Python or a package is missing.
-fn python(args: &[&str]) -> Option<Json> {
-    let exe = std::env::var("TWIN_PYTHON").unwrap_or_else(|_| "python3".into());
-    let out = match Command::new(&exe).arg(SCRIPT).args(args).output() {
-        Ok(o) => o,
-        Err(e) => return missing_python(&format!("cannot run {exe}: {e}")),
-    };
-    if out.status.code() == Some(3) {
-        return missing_python(&format!(
-            "{} (pip install -r .ci/requirements.txt)",
-            String::from_utf8_lossy(&out.stderr).trim()
-        ));
-    }
-    assert!(out.status.success(), "{exe} {SCRIPT} {args:?} failed:\n{}", String::from_utf8_lossy(&out.stderr));
-    Some(serde_json::from_slice(&out.stdout).expect("script prints JSON"))
+/// Runs the helper script with the tests' Python.
+fn python(args: &[&str]) -> Json {
+    let exe = crate::test_python::python();
+    let out = Command::new(&exe).arg(SCRIPT).args(args).output();
+    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    assert!(
+        out.status.success(),
+        "{} {SCRIPT} {args:?} failed:\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("script prints JSON")
 }
 
 fn humanoid_joint_names() -> Vec<String> {
@@ -207,9 +204,7 @@ fn twin_written_log_decodes_identically_in_mcap_ros2_support_and_rosbags() {
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("run.mcap");
     let written = write_all_types(&path);
-    let Some(out) = python(&["decode", path.to_str().unwrap()]) else {
-        return;
-    };
+    let out = python(&["decode", path.to_str().unwrap()]);
     assert_eq!(out["profile"], "ros2");
     assert_eq!(out["library"], twin_core::log::writer::LIBRARY_IDENTIFIER);
     for reader in ["mcap_ros2", "rosbags"] {
@@ -229,9 +224,7 @@ fn twin_written_log_decodes_identically_in_mcap_ros2_support_and_rosbags() {
 fn rosbags_written_bag_reads_identically_in_twin() {
     let dir = tempfile::tempdir().unwrap();
     let bag = dir.path().join("bag");
-    let Some(expected) = python(&["write", bag.to_str().unwrap()]) else {
-        return;
-    };
+    let expected = python(&["write", bag.to_str().unwrap()]);
     let log = Log::open(&bag, ReadOptions::default()).unwrap();
     let info = log.info().unwrap();
     assert_eq!(info.message_count, 200);
@@ -295,15 +288,4 @@ fn rosbags_written_bag_reads_identically_in_twin() {
     })
     .unwrap();
     assert_eq!(n, 50);
-}
-
-/// A Python cross-check whose tool is missing fails the test (CI installs them from
-/// `.ci/requirements.txt` and sets TWIN_PYTHON). Only an explicit
-/// `TWIN_ALLOW_MISSING_PYTHON=1` turns the failure into a note, for machines without the tools.
-fn missing_python<T>(why: &str) -> Option<T> {
-    if std::env::var("TWIN_ALLOW_MISSING_PYTHON").is_ok_and(|v| v == "1") {
-        eprintln!("note: Python cross-check not run (TWIN_ALLOW_MISSING_PYTHON=1): {why}");
-        return None;
-    }
-    panic!("Python cross-check cannot run: {why}; set TWIN_PYTHON to a venv with .ci/requirements.txt");
 }

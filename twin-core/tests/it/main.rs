@@ -9,4 +9,6 @@ mod log_interop;
 mod physics;
 mod sense;
 mod sinks;
+mod terrain;
+mod test_python;
 mod walk;

@@ -95,9 +95,14 @@ fn controller_diagnostics_reach_the_mcap_file_and_every_sink() {
         point: PointStamped::default(),
         fresh: false,
     };
-    let report =
-        sim::simulate(&robot, &mut controller, &SimOptions { duration_secs: 0.5 }, Some(&mut recording), &mut |_| {})
-            .unwrap();
+    let report = sim::simulate(
+        &robot,
+        &mut controller,
+        &SimOptions { duration_secs: 0.5, ..SimOptions::default() },
+        Some(&mut recording),
+        &mut |_| {},
+    )
+    .unwrap();
     let summary = recording.finish().unwrap();
     assert_eq!(report.steps, 250);
 

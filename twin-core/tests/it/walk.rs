@@ -3,7 +3,7 @@
 
 use std::path::PathBuf;
 use twin_core::engine::{Check, Disturbance, Flow, Observer, StepView};
-use twin_core::scenario::{Push, Scenario, Verdict};
+use twin_core::scenario::{Push, Scenario, Threshold};
 use twin_core::sim::{self, SimOptions};
 use twin_core::walk::{GaitSummary, WalkOptions, Walker};
 
@@ -28,7 +28,7 @@ impl Observer for Last {
 
 /// Runs `scenario` (with `edit` applied) on the rollout engine and returns the gait metrics,
 /// the verdicts and the final state.
-fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Verdict>, Vec<f64>) {
+fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Threshold>, Vec<f64>) {
     edit(&mut scenario);
     let robot = scenario.robot(&humanoid()).unwrap();
     let mut controller = scenario.controller(&robot.model).unwrap();
@@ -36,7 +36,7 @@ fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (Ga
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
     let mut check = scenario.check(&robot.model).unwrap();
     let mut last = Last(Vec::new());
-    let options = SimOptions { duration_secs: scenario.duration_secs };
+    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
     sim::simulate_with(
         &robot,
         controller.as_mut(),
@@ -230,7 +230,14 @@ fn diagnostics_are_recorded() {
     let options = RecordOptions { mcap: Some(mcap.clone()), ..RecordOptions::default() };
     let mut recording = Recording::with_sinks(&robot, &options, Vec::new()).unwrap();
     let mut walker = Walker::new(&robot.model, WalkOptions { vx: 0.3, ..WalkOptions::default() }).unwrap();
-    sim::simulate(&robot, &mut walker, &SimOptions { duration_secs: 2.0 }, Some(&mut recording), &mut |_| {}).unwrap();
+    sim::simulate(
+        &robot,
+        &mut walker,
+        &SimOptions { duration_secs: 2.0, ..SimOptions::default() },
+        Some(&mut recording),
+        &mut |_| {},
+    )
+    .unwrap();
     recording.finish().unwrap();
     let log = Log::open(&mcap, ReadOptions::default()).unwrap();
     let (com, _) = log.read_typed::<PointStamped>("/walk/com").unwrap();

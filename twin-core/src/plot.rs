@@ -1,5 +1,8 @@
-//! Minimal SVG plots (lines, points, shaded bands; linear or log axes) for calibration
-//! reports. Deterministic text: the same data give the same bytes.
+//! Minimal SVG plots (lines, points, shaded bands, marker lines; linear or log axes): the one
+//! plotting helper of twin's reports (sysid's calibration and gap reports, `twin log analyze`,
+//! success-against-difficulty sweeps of `twin randomize --sweep`). A report builds [`Plot`]
+//! panels from its series and [`stack_svg`] renders them into one document. Deterministic
+//! text: the same data give the same bytes.
 
 use std::fmt::Write as _;
 
@@ -10,6 +13,7 @@ enum Item {
     Line { name: String, xy: Vec<(f64, f64)>, color: &'static str },
     Points { name: String, xy: Vec<(f64, f64)>, color: &'static str },
     Band { xlh: Vec<(f64, f64, f64)>, color: &'static str },
+    VLine { name: String, x: f64, color: &'static str },
 }
 
 /// One panel.
@@ -56,6 +60,11 @@ impl Plot {
         self.items.push(Item::Band { xlh, color });
     }
 
+    /// A dashed vertical line across the panel at `x` (an event: a fall's onset).
+    pub fn vline(&mut self, name: &str, x: f64, color: &'static str) {
+        self.items.push(Item::VLine { name: name.into(), x, color });
+    }
+
     fn tx(&self, v: f64) -> f64 {
         if self.log_x { v.max(1e-300).log10() } else { v }
     }
@@ -81,6 +90,7 @@ impl Plot {
                     add(x, l);
                     add(x, h)
                 }),
+                Item::VLine { .. } => {}
             }
         }
         let pad = |r: [f64; 2]| {
@@ -160,6 +170,33 @@ impl Plot {
         let mut legend = 0;
         for it in &self.items {
             match it {
+                Item::VLine { name, x, color } => {
+                    // Only inside the panel's x range (the range comes from the data).
+                    let inside = x.is_finite() && (!self.log_x || *x > 0.0) && (ML..=W - MR).contains(&px(*x));
+                    if !inside {
+                        continue;
+                    }
+                    let _ = writeln!(
+                        out,
+                        "<line x1=\"{x:.1}\" y1=\"{}\" x2=\"{x:.1}\" y2=\"{}\" stroke=\"{color}\" stroke-width=\"1.4\" \
+                         stroke-dasharray=\"6 4\"/>",
+                        y0 + MT,
+                        y0 + H - MB,
+                        x = px(*x)
+                    );
+                    let ly = y0 + MT + 12.0 + 16.0 * legend as f64;
+                    let lx = W - MR + 10.0;
+                    let _ = writeln!(
+                        out,
+                        "<line x1=\"{lx}\" y1=\"{ly}\" x2=\"{}\" y2=\"{ly}\" stroke=\"{color}\" stroke-dasharray=\"4 3\"/>\
+                         <text x=\"{}\" y=\"{}\" font-size=\"11\">{}</text>",
+                        lx + 18.0,
+                        lx + 24.0,
+                        ly + 4.0,
+                        escape(name)
+                    );
+                    legend += 1;
+                }
                 Item::Band { xlh, color } => {
                     let pts: Vec<String> = xlh
                         .iter()

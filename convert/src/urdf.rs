@@ -89,7 +89,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
             None => default.ok_or_else(|| err(node, format!("missing attribute {attr}"))),
         }
     };
-    let (urdf_dir, search) = crate::convert::mesh::search_paths(path, &[]);
+    let (urdf_dir, search) = crate::mesh::search_paths(path, &[]);
 
     for link in doc.root_element().children().filter(|n| n.has_tag_name("link")) {
         if let Some(inertial) = link.children().find(|n| n.has_tag_name("inertial")) {
@@ -111,7 +111,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
             let Some(filename) = mesh.attribute("filename") else {
                 return Err(err(mesh, "<mesh> without filename attribute".into()));
             };
-            if let Err(message) = crate::convert::mesh::resolve(filename, &urdf_dir, &search) {
+            if let Err(message) = crate::mesh::resolve(filename, &urdf_dir, &search) {
                 return Err(err(mesh, message));
             }
         }
@@ -122,7 +122,7 @@ pub fn validate(path: &Path, text: &str) -> Result<()> {
 /// Checks an inertia tensor `[ixx, ixy, ixz, iyy, iyz, izz]` (kg·m²): symmetric positive
 /// definite and its principal moments satisfy the triangle inequality. The message says why not.
 pub fn check_inertia(v: [f64; 6]) -> std::result::Result<(), String> {
-    crate::convert::inertia::check(&crate::convert::inertia::tensor(v))
+    crate::inertia::check(&crate::inertia::tensor(v))
 }
 
 #[cfg(test)]

@@ -15,7 +15,10 @@
 //!   `NAME.bak`, later ones as `NAME.bak.1`, `NAME.bak.2`, … (the oldest original is always
 //!   `NAME.bak`).
 //! - **Concurrent writers** of the same folder are serialized by an advisory lock (`flock`) on
-//!   the folder itself; no lock file is left behind. A writer that read the file it rewrites
+//!   the folder itself; no lock file is left behind. A folder's lock is keyed by its canonical
+//!   path, so every spelling of it (relative, absolute, through `..` or a symlink) is one lock,
+//!   taken once per commit; a writer waits at most [`LOCK_WAIT`] for another process's lock,
+//!   saying which folder it waits for, then gives up with an error. A writer that read the file it rewrites
 //!   passes what it read ([`Transaction::expect_unchanged`]): if another process changed the
 //!   file meanwhile, the write is refused instead of silently losing the other result.
 //! - **Several outputs** of one command are staged in a [`Transaction`] and renamed only when
@@ -24,7 +27,11 @@
 //!   ([`install_signal_handler`]), and, for a process killed with SIGKILL, by the next twin
 //!   writing the same file (temps whose process is gone are swept).
 
-use crate::{Error, Result};
+#![deny(unsafe_code)]
+
+mod error;
+
+pub use error::{Error, Result};
 use std::fs::{File, Metadata, OpenOptions};
 use std::io::{Read, Write};
 use std::os::unix::fs::{MetadataExt, OpenOptionsExt, PermissionsExt};
@@ -447,13 +454,54 @@ impl Drop for Temp {
 
 // ---- the one atomic writer ----
 
+/// The longest a commit waits for another process's lock on an output folder (30 s): a writer
+/// holds it only while renaming its files into place, so a longer wait means a stuck process.
+pub const LOCK_WAIT: std::time::Duration = std::time::Duration::from_secs(30);
+
 /// An advisory exclusive lock on a folder (flock), released on drop.
 struct DirLock(#[allow(dead_code)] File);
 
-fn lock_dir(dir: &Path) -> Result<DirLock> {
+/// The key of a folder's lock: its canonical path (symlinks, `.` and `..` resolved, absolute),
+/// so that two spellings of one folder are one lock.
+///
+/// # Errors
+/// [`Error::Io`] when the folder cannot be resolved (it vanished).
+pub fn lock_key(dir: &Path) -> Result<PathBuf> {
+    std::fs::canonicalize(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })
+}
+
+/// Locks the folder `dir` (a canonical path, [`lock_key`]), waiting at most `wait` for another
+/// holder and saying once on stderr which folder it waits for.
+fn lock_dir(dir: &Path, wait: std::time::Duration) -> Result<DirLock> {
     let f = File::open(dir).map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
-    f.lock().map_err(|source| Error::Io { path: dir.to_path_buf(), source })?;
-    Ok(DirLock(f))
+    let started = std::time::Instant::now();
+    let mut said = false;
+    loop {
+        match f.try_lock() {
+            Ok(()) => return Ok(DirLock(f)),
+            Err(std::fs::TryLockError::WouldBlock) => {}
+            Err(std::fs::TryLockError::Error(source)) => return Err(Error::Io { path: dir.to_path_buf(), source }),
+        }
+        if started.elapsed() >= wait {
+            return Err(bad(
+                dir,
+                format!(
+                    "another process has held the write lock of this folder for {:.0} s (another twin writing \
+                     here?); nothing was written: run again when it has finished",
+                    started.elapsed().as_secs_f64()
+                ),
+            ));
+        }
+        if !said {
+            eprintln!(
+                "waiting (at most {} s) for the write lock of folder {}: another process is writing there",
+                wait.as_secs(),
+                dir.display()
+            );
+            said = true;
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
 }
 
 #[derive(Debug)]
@@ -528,10 +576,13 @@ impl Transaction {
     /// # Errors
     /// [`Error::BadPath`] when a target changed since it was read or checked; [`Error::Io`].
     pub fn commit(self) -> Result<Vec<Written>> {
-        let mut dirs: Vec<PathBuf> = self.staged.iter().map(|s| parent_dir(&s.target.resolved).to_path_buf()).collect();
+        // One lock per folder, whatever the spelling of its outputs' paths: the same folder
+        // locked twice through two descriptors would wait for itself.
+        let mut dirs =
+            self.staged.iter().map(|s| lock_key(parent_dir(&s.target.resolved))).collect::<Result<Vec<PathBuf>>>()?;
         dirs.sort();
         dirs.dedup();
-        let _locks = dirs.iter().map(|d| lock_dir(d)).collect::<Result<Vec<_>>>()?;
+        let _locks = dirs.iter().map(|d| lock_dir(d, LOCK_WAIT)).collect::<Result<Vec<_>>>()?;
         // Everything that can be refused is refused before anything is renamed.
         let mut current = Vec::with_capacity(self.staged.len());
         for s in &self.staged {
@@ -732,6 +783,75 @@ mod tests {
         assert!(tx.commit().unwrap_err().to_string().contains("changed while twin worked"));
         assert_eq!(std::fs::read(&a).unwrap(), b"someone else");
         assert_eq!(names(dir.path()), ["a.txt"]);
+    }
+
+    /// Commits a transaction writing `first` and `second` (two spellings of files in one
+    /// folder) on another thread; fails instead of hanging if it does not end within 5 s.
+    fn commit_two_within_5_s(first: PathBuf, second: PathBuf) {
+        let (tx, rx) = std::sync::mpsc::channel();
+        std::thread::spawn(move || {
+            let run = || -> Result<Vec<Written>> {
+                let mut t = Transaction::new();
+                t.stage(&check_output(&first, &[])?, b"one", Backup::Numbered)?;
+                t.stage(&check_output(&second, &[])?, b"two", Backup::None)?;
+                t.commit()
+            };
+            let _ = tx.send(run().map(|w| w.len()));
+        });
+        let got = rx.recv_timeout(std::time::Duration::from_secs(5)).expect("the commit ended within 5 s");
+        assert_eq!(got.unwrap(), 2);
+    }
+
+    #[test]
+    fn one_folder_under_two_spellings_is_one_lock_absolute_and_dotdot() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        std::fs::write(dir.path().join("robot.urdf"), "old").unwrap();
+        let dotdot = dir.path().join("sub/../rep.json");
+        assert_eq!(lock_key(dir.path()).unwrap(), lock_key(&dir.path().join("sub/..")).unwrap());
+        commit_two_within_5_s(dir.path().join("robot.urdf"), dotdot);
+        assert_eq!(std::fs::read(dir.path().join("rep.json")).unwrap(), b"two");
+        assert_eq!(std::fs::read(dir.path().join("robot.urdf.bak")).unwrap(), b"old");
+    }
+
+    #[test]
+    fn one_folder_under_two_spellings_is_one_lock_symlink() {
+        let dir = tempfile::tempdir().unwrap();
+        let real = dir.path().join("real");
+        std::fs::create_dir(&real).unwrap();
+        let link = dir.path().join("link");
+        std::os::unix::fs::symlink(&real, &link).unwrap();
+        assert_eq!(lock_key(&real).unwrap(), lock_key(&link).unwrap());
+        commit_two_within_5_s(real.join("robot.urdf"), link.join("rep.json"));
+        assert_eq!(names(&real), ["rep.json", "robot.urdf"]);
+    }
+
+    #[test]
+    fn one_folder_under_two_spellings_is_one_lock_relative() {
+        // The folder spelled relative to the working directory: up to the root, then down.
+        let dir = tempfile::tempdir().unwrap();
+        let here = std::env::current_dir().unwrap();
+        let mut relative = PathBuf::new();
+        for _ in here.components().skip(1) {
+            relative.push("..");
+        }
+        relative.push(dir.path().strip_prefix("/").unwrap());
+        assert!(relative.is_relative());
+        assert_eq!(lock_key(&relative).unwrap(), lock_key(dir.path()).unwrap());
+        commit_two_within_5_s(dir.path().join("robot.urdf"), relative.join("rep.json"));
+        assert_eq!(names(dir.path()), ["rep.json", "robot.urdf"]);
+    }
+
+    #[test]
+    fn a_held_lock_is_waited_for_a_bounded_time_naming_the_folder() {
+        let dir = tempfile::tempdir().unwrap();
+        let key = lock_key(dir.path()).unwrap();
+        let _held = lock_dir(&key, LOCK_WAIT).unwrap();
+        let started = std::time::Instant::now();
+        let e = lock_dir(&key, std::time::Duration::from_millis(200)).err().expect("a second holder is refused");
+        assert!(started.elapsed() < std::time::Duration::from_secs(2));
+        let msg = e.to_string();
+        assert!(msg.contains(&key.display().to_string()) && msg.contains("write lock"), "{msg}");
     }
 
     #[test]

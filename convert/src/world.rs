@@ -27,7 +27,7 @@ pub(crate) fn prio_tag(mu: f64) -> String {
 }
 
 pub(crate) fn load(path: &Path) -> Result<World> {
-    let text = crate::fsio::read_to_string(path)?;
+    let text = twin_fsio::read_to_string(path)?;
     let doc = crate::urdf::parse(path, &text)?;
     let ctx = Ctx { path, doc: &doc };
     let root = doc.root_element();

@@ -1,13 +1,13 @@
 //! What twin knows about a robot beyond MuJoCo (name, IMU and sensor topics, rates, noise,
 //! frame ids, joint velocity limits, command interfaces, differential transmissions), carried
 //! inside the written MJCF as MuJoCo `<custom><text>` elements and read back from a compiled
-//! [`Model`], so `twin sim robot.xml` publishes what `twin sim robot.urdf` does.
+//! model's texts ([`RobotMeta::from_custom_texts`]), so `twin sim robot.xml` publishes what
+//! `twin sim robot.urdf` does.
 //!
 //! Each record is one text element named `twin:<kind>:<index>` whose data is
 //! `key=value;key=value`, with `%`, `;`, `=` and `,` percent-encoded in values.
 
 use super::{DifferentialMeta, ImuBias, ImuMeta, Interface, JointMeta, ScanMeta, SensorMeta};
-use crate::mj::Model;
 use std::collections::HashMap;
 
 /// The robot's ROS side, as the converter produced it.
@@ -236,9 +236,9 @@ impl RobotMeta {
         x
     }
 
-    /// The metadata an MJCF written by `twin convert` carries, or `None` for other models.
-    pub fn from_model(model: &Model) -> Option<RobotMeta> {
-        let texts = model.custom_texts();
+    /// The metadata an MJCF written by `twin convert` carries, read from its `<custom><text>`
+    /// elements as `(name, data)` pairs (a compiled model's texts), or `None` for other models.
+    pub fn from_custom_texts(texts: &[(&str, &str)]) -> Option<RobotMeta> {
         let robot = texts.iter().find(|(n, _)| *n == "twin:robot")?;
         let f = Fields::parse(robot.1);
         let mut meta = RobotMeta {

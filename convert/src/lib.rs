@@ -1,104 +1,24 @@
-//! URDF (+ Gazebo extensions, transmissions, `ros2_control`) → MuJoCo MJCF, with nothing
-//! silently lost: what has no MuJoCo equivalent is listed in [`ConvertedModel::notes`].
-//!
-//! ```no_run
-//! use twin_core::convert::{convert_urdf, ConvertOptions};
-//! let out = convert_urdf("models/humanoid.urdf".as_ref(), &ConvertOptions::default())?;
-//! println!("{} IMUs, topic {:?}", out.imus.len(), out.imus[0].topic);
-//! let model = twin_core::mj::Model::from_xml_str(&out.mjcf)?;
-//! # Ok::<(), twin_core::Error>(())
-//! ```
-//!
-//! ## What the generated model contains
-//! - One `body` per link, names kept (fixed-joint children stay bodies: `fusestatic="false"`,
-//!   so their frames, geoms and sensors survive), no inertia from geometry
-//!   (`inertiafromgeom="false"`).
-//! - Inertias as ROS and Gazebo take them: each link's tensor (rotated inertial
-//!   origin applied) is checked with a tolerance for floating-point noise; mass on fixed-joint
-//!   links is lumped into the body that moves them (parallel-axis theorem, as Gazebo and
-//!   MuJoCo's `fusestatic` do); a real violation (triangle inequality, negative moment) is
-//!   repaired by the smallest change of principal moments and listed in the notes with the link,
-//!   line and before/after ([`ConvertOptions::strict_inertia`] refuses instead). A moving link
-//!   without mass gets 1e-12 of the robot's mass, so the total equals the URDF's.
-//! - The root link gets a free joint named `floating_base` unless the URDF attaches it to a
-//!   `world` link or [`ConvertOptions::fixed_base`] is set. The root is placed so that the lowest
-//!   collision geom touches the floor (z = 0) at the zero joint pose, and keyframe `home` stores
-//!   that pose (the nominal standing pose for controllers).
-//! - Joints: revolute → hinge with range, continuous → unlimited hinge, prismatic → slide,
-//!   spherical → ball, planar → two slides (`<joint>_tx`, `<joint>_ty`) + hinge, floating → free;
-//!   `<dynamics damping friction>` → `damping` / `frictionloss`; effort → `actuatorfrcrange`;
-//!   velocity limits are kept in [`JointMeta`]; `<mimic>` → `<equality joint polycoef>`.
-//! - Actuators ([`ActuatorMode`], default `auto`), named after the joint: each joint named in a
-//!   `SimpleTransmission` (or a one-joint reducer) or `ros2_control` block gets its declared
-//!   interface: effort → `motor` (`forcerange` = `ctrlrange` = ±effort/gear), position →
-//!   `position` (kp = [`ConvertOptions::position_kp_per_effort`] × effort, kv =
-//!   [`ConvertOptions::position_kv_per_kp`] × kp), velocity → `velocity`; `mechanicalReduction`
-//!   → `gear`, so `ctrl` is in actuator (motor-side) units. Every other movable joint with an
-//!   effort limit gets a `motor` within ±effort; mimic joints get none (the equality drives them).
-//!   ros_control `DifferentialTransmission` and PAL's `HalfDifferentialTransmission` become two
-//!   fixed tendons with the coefficients of the actuator-to-joint effort map, one actuator each
-//!   (named like the transmission's actuators; see [`DifferentialMeta`]).
-//! - Sensors: every 1-DOF joint gets `<joint>_pos` (`jointpos`) and `<joint>_vel` (`jointvel`)
-//!   when [`ConvertOptions::joint_sensors`]; Gazebo IMU → site + `<imu>_quat` (`framequat`),
-//!   `<imu>_gyro`, `<imu>_accel` with the plugin's noise stored as `noise` (MuJoCo does not apply
-//!   it); camera → `camera` (Gazebo +X view axis turned to MuJoCo's −Z), imaged by ray casting
-//!   ([`crate::sense`]); ray/lidar → a site in the sensor frame, its beams cast at full resolution
-//!   on scan ticks ([`crate::sense::lidar`]); force_torque on a joint → site in the child
-//!   body + `<name>_force` / `<name>_torque`; contact → `touch` on a site covering the link's
-//!   first collision geom.
-//! - Contacts: robot collision geoms have `contype=2 conaffinity=1`, so they touch the floor and
-//!   world objects (`1/1`) but not each other (Gazebo's default); `selfCollide` links and
-//!   [`ConvertOptions::self_collision`] add bit 4. Gazebo `mu1`/`mu2` → `friction`; since MuJoCo
-//!   takes the max of two geoms' friction and Gazebo the min, every geom gets a `priority` that
-//!   ranks lower friction higher, which reproduces the min. Gazebo `kp`/`kd` → `solref` in its
-//!   direct form (−stiffness, −damping) with a constant impedance, scaled by the link's effective
-//!   mass at the home pose, so each contact point sinks Gazebo's `force/kp`; those geoms take
-//!   the highest priority and the min of their friction and the world's.
-//! - What twin publishes the robot by (name, IMU topics, rates, noise, frame ids, joint limits,
-//!   command interfaces, differentials) in `<custom><text name="twin:…">` ([`RobotMeta`]), read
-//!   back when the MJCF is loaded.
-//! - `<option integrator="implicitfast">` (stable with stiff PD gains and joint damping),
-//!   timestep [`ConvertOptions::timestep_secs`], no default armature (URDF has none; see
-//!   [`ConvertOptions::armature`]).
-//!
-//! ## Leniency
-//! What Gazebo and ROS ignore, the converter ignores with a note saying what it assumed: empty or
-//! non-numeric Gazebo tags, `<gazebo reference>` naming nothing (often an unexpanded xacro name),
-//! ROS 1 state interfaces (`JointStateInterface`), transmissions and `ros2_control` entries
-//! naming missing joints, mimics of missing joints, visual meshes that cannot be found or read.
-//! A file with no `<link>` is still an error, as are bad numbers in links and joints and
-//! missing collision meshes: one error with the file, line, element and what to do.
-//!
-//! ## Limitations
-//! Anisotropic friction (`mu1` ≠ `mu2` uses the smaller; `fdir1` noted), `minDepth`,
-//! `safety_controller`, `calibration`, transmissions with more than one joint other than
-//! differentials (e.g. PR2's `WristTransmission`: its joints get `auto` motors), differential
-//! joint offsets (they shift actuator positions only), and Gazebo plugins other than sensors and
-//! ros2_control are not converted; each is listed in the notes. Collada `up_axis` and materials
-//! are ignored (geometry and `<unit>` are honoured).
-//!
-//! ## Corpus
-//! Every URDF of PyPI's `example-robot-data` 6.0.0 converts without flags, loads, weighs what
-//! the URDF says and holds its home pose: see `corpus.md` next to this file (the table printed
-//! by `cargo test -p twin-core --test it corpus:: -- --nocapture`).
+#![doc = include_str!("../README.md")]
+#![deny(unsafe_code)]
 
+mod error;
 pub(crate) mod inertia;
 mod ir;
-pub(crate) mod mesh;
+pub mod mesh;
 mod meta;
 mod options;
 mod sensors;
 mod transmission;
 mod tree;
+pub mod urdf;
 mod world;
 
+pub use error::{Error, Result};
 pub use meta::RobotMeta;
 pub use options::{ActuatorMode, ConvertOptions};
 
 pub use ir::Interface;
 
-use crate::error::{Error, Result};
-use crate::mj::{JointType, Model, ObjType};
 use inertia::MassProps;
 use ir::{Ctx, GeomIr, JointIr, JointKind, LinkIr, Pose, RobotIr, Shape};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
@@ -106,6 +26,50 @@ use std::collections::{BTreeMap, HashMap};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use tree::Tree;
+
+/// What the converter needs of a physics engine: compiling the MJCF it generated and reading
+/// back the few facts that place the robot. The converter itself runs no engine; `twin-core`
+/// implements this with MuJoCo (`twin_core::convert::convert_urdf`).
+pub trait Compiler {
+    /// The engine's error for failures other than a refused document (those are
+    /// [`Compile::Rejected`]); conversion errors turn into it too.
+    type Error: From<Error>;
+
+    /// Compiles `mjcf` and measures it at its home pose ([`Probe`]); `bodies` are the bodies whose
+    /// [`Probe::body_invweight`] is wanted, in that order.
+    ///
+    /// # Errors
+    /// [`Compile::Rejected`] with the engine's message when it refuses the document.
+    fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> Result<Probe, Compile<Self::Error>>;
+
+    /// Compiles `mjcf` and returns its home pose: `qpos0` with every limited hinge and slide
+    /// clamped into its range (some URDFs put 0 outside the range, e.g. knees of quadrupeds).
+    ///
+    /// # Errors
+    /// As [`Compiler::probe`].
+    fn home_qpos(&mut self, mjcf: &str) -> Result<Vec<f64>, Compile<Self::Error>>;
+}
+
+/// Why a [`Compiler`] gave no answer.
+#[derive(Debug)]
+pub enum Compile<E> {
+    /// The engine refused the document; the message (which may name an element or a line of
+    /// the generated MJCF) is translated back to the URDF's file, line and element.
+    Rejected(String),
+    /// Any other failure, passed on as it is.
+    Other(E),
+}
+
+/// What a [`Compiler`] measured on a compiled model at its home pose.
+#[derive(Debug, Clone, Default, PartialEq)]
+pub struct Probe {
+    /// Lowest world z of any collision geom (contype or conaffinity set, planes ignored),
+    /// metres; `None` when the robot has none.
+    pub lowest_collision_z_m: Option<f64>,
+    /// Per body asked for: MuJoCo's `body_invweight0[0]` (inverse of the effective mass at the
+    /// body, 1/kg), `None` when the model has no such body.
+    pub body_invweight: Vec<Option<f64>>,
+}
 
 /// An IMU of the robot, with what logging and noise models need.
 #[derive(Debug, Clone, PartialEq)]
@@ -261,24 +225,33 @@ pub struct ConvertedModel {
     pub converted_meshes: Vec<PathBuf>,
 }
 
-/// Converts the URDF file at `path`.
+/// Converts the URDF file at `path`, compiling with `compiler`.
 ///
 /// # Errors
-/// [`Error::Io`] if it can't be read; [`Error::Xml`] for malformed XML; [`Error::Urdf`] naming
+/// [`Error::File`] if it can't be read; [`Error::Xml`] for malformed XML; [`Error::Urdf`] naming
 /// the file, line and element for invalid content (missing link, cycle, negative mass, bad
-/// inertia, missing mesh …); [`Error::Load`] if MuJoCo rejects the result.
-pub fn convert_urdf(path: &Path, opts: &ConvertOptions) -> Result<ConvertedModel> {
-    let text = crate::fsio::read_to_string(path)?;
-    convert_urdf_str(path, &text, opts)
+/// inertia, missing mesh …); [`Error::Load`] if the engine rejects the result; the compiler's
+/// own errors as they are.
+pub fn convert_urdf<C: Compiler>(
+    path: &Path,
+    opts: &ConvertOptions,
+    compiler: &mut C,
+) -> Result<ConvertedModel, C::Error> {
+    let text = twin_fsio::read_to_string(path).map_err(Error::from)?;
+    convert_urdf_str(path, &text, opts, compiler)
 }
 
 /// Converts URDF `text`; `path` names it in errors and anchors relative mesh paths.
 ///
 /// # Errors
 /// As [`convert_urdf`].
-pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Result<ConvertedModel> {
-    crate::mj::init()?;
-    let doc = crate::urdf::parse(path, text)?;
+pub fn convert_urdf_str<C: Compiler>(
+    path: &Path,
+    text: &str,
+    opts: &ConvertOptions,
+    compiler: &mut C,
+) -> Result<ConvertedModel, C::Error> {
+    let doc = urdf::parse(path, text)?;
     let ctx = Ctx { path, doc: &doc };
     let robot = ir::parse_robot(&ctx)?;
     let tree = Tree::build(&robot)?;
@@ -293,10 +266,10 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     // Pass 1: robot alone, to find the lowest collision point at the zero pose.
     let base_height_m = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
-        let model = conv.compile(&probe)?;
-        conv.contact_solrefs(&model);
-        let lowest = lowest_collision_z(&model)?;
-        match lowest {
+        let bodies = conv.contact_bodies();
+        let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies))?;
+        conv.contact_solrefs(&measured);
+        match measured.lowest_collision_z_m {
             Some(z) if conv.world_root => (-z).max(0.0),
             Some(z) => -z,
             None => 0.0,
@@ -306,8 +279,8 @@ pub fn convert_urdf_str(path: &Path, text: &str, opts: &ConvertOptions) -> Resul
     };
     // Pass 2: the real model; its qpos0 is the home pose.
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), None)?;
-    let model = conv.compile(&mjcf)?;
-    let mjcf = conv.emit(base_height_m, true, world.as_ref(), Some(&home_pose(&model)))?;
+    let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf))?;
+    let mjcf = conv.emit(base_height_m, true, world.as_ref(), Some(&home))?;
     let mut notes = robot.notes.clone();
     notes.append(&mut conv.notes);
     if let Some(w) = &world {
@@ -366,66 +339,6 @@ fn body_nesting(mjcf: &str) -> Option<Nesting> {
         }
     }
     deepest
-}
-
-/// `qpos0` with every limited hinge and slide clamped into its range (some URDFs put 0
-/// outside the range, e.g. knees of quadrupeds): the nominal pose of keyframe `home`.
-fn home_pose(model: &Model) -> Vec<f64> {
-    let mut q = model.qpos0().to_vec();
-    for j in 0..model.njnt() {
-        if model.jnt_limited()[j] && matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
-            let [lo, hi] = model.jnt_range()[j];
-            let a = model.jnt_qposadr()[j] as usize;
-            q[a] = q[a].clamp(lo, hi);
-        }
-    }
-    q
-}
-
-/// Lowest world z of any collision geom of the robot at the model's `qpos0` (planes ignored).
-fn lowest_collision_z(model: &Model) -> Result<Option<f64>> {
-    let model = std::sync::Arc::new(model.try_clone()?);
-    let mut data = crate::mj::Data::new(model.clone())?;
-    let home = home_pose(&model);
-    data.qpos_mut().copy_from_slice(&home);
-    data.forward()?;
-    let mut lowest: Option<f64> = None;
-    let m = &model;
-    for g in 0..m.ngeom() {
-        if m.geom_contype()[g] == 0 && m.geom_conaffinity()[g] == 0 {
-            continue;
-        }
-        let p = Vector3::from(data.geom_xpos()[g]);
-        let r = Matrix3::from_row_slice(&data.geom_xmat()[g]);
-        let s = m.geom_size()[g];
-        // Row 2 of R: how each geom axis maps onto world z.
-        let rz = Vector3::new(r[(2, 0)], r[(2, 1)], r[(2, 2)]);
-        let z = match m.geom_type()[g] as u32 {
-            mujoco_sys::mjtGeom_mjGEOM_PLANE => continue,
-            mujoco_sys::mjtGeom_mjGEOM_SPHERE => p.z - s[0],
-            mujoco_sys::mjtGeom_mjGEOM_CAPSULE => p.z - rz.z.abs() * s[1] - s[0],
-            mujoco_sys::mjtGeom_mjGEOM_CYLINDER => p.z - rz.z.abs() * s[1] - s[0] * (1.0 - rz.z * rz.z).max(0.0).sqrt(),
-            mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => {
-                p.z - ((s[0] * rz.x).powi(2) + (s[1] * rz.y).powi(2) + (s[2] * rz.z).powi(2)).sqrt()
-            }
-            mujoco_sys::mjtGeom_mjGEOM_BOX => p.z - (s[0] * rz.x.abs() + s[1] * rz.y.abs() + s[2] * rz.z.abs()),
-            mujoco_sys::mjtGeom_mjGEOM_MESH => {
-                let id = m.geom_dataid()[g];
-                if id < 0 {
-                    continue;
-                }
-                let adr = m.mesh_vertadr()[id as usize] as usize;
-                let n = m.mesh_vertnum()[id as usize] as usize;
-                m.mesh_vert()[adr..adr + n]
-                    .iter()
-                    .map(|v| p.z + rz.dot(&Vector3::new(v[0] as f64, v[1] as f64, v[2] as f64)))
-                    .fold(f64::INFINITY, f64::min)
-            }
-            _ => continue,
-        };
-        lowest = Some(lowest.map_or(z, |l: f64| l.min(z)));
-    }
-    Ok(lowest)
 }
 
 /// Constant impedance of contacts converted from Gazebo kp/kd (`solimp="d d …"`).
@@ -929,14 +842,25 @@ impl<'a> Converter<'a> {
         }
     }
 
-    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe `model`: each
-    /// link's effective mass at its contacts is `1 / body_invweight0` at the home pose.
-    fn contact_solrefs(&mut self, model: &Model) {
+    /// Bodies (links) with Gazebo kp/kd, whose effective mass the probe measures.
+    fn contact_bodies(&self) -> Vec<&'a str> {
+        let robot = self.robot;
+        (0..robot.links.len())
+            .filter(|&li| self.gazebo_contact[li].is_some())
+            .map(|li| robot.links[li].name.as_str())
+            .collect()
+    }
+
+    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe: each link's
+    /// effective mass at its contacts is `1 / body_invweight0` at the home pose (the bodies in
+    /// the order of [`Converter::contact_bodies`]).
+    fn contact_solrefs(&mut self, probe: &Probe) {
         let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
+        let mut invweights = probe.body_invweight.iter();
         for li in 0..self.robot.links.len() {
             let Some((kp, kd, line)) = self.gazebo_contact[li] else { continue };
             let name = &self.robot.links[li].name;
-            let inv = model.id(ObjType::Body, name).map_or(0.0, |b| model.body_invweight0()[b][0]);
+            let inv = invweights.next().copied().flatten().unwrap_or(0.0);
             let mass = if inv > 0.0 { 1.0 / inv } else { total };
             self.contact[li] = Some(self.direct_solref(name, line, kp, kd, mass));
         }
@@ -1006,7 +930,7 @@ impl<'a> Converter<'a> {
         };
         std::fs::create_dir_all(&dir).map_err(|e| format!("creating {}: {e}", dir.display()))?;
         // Atomic: parallel conversions of the same mesh never see a half-written file.
-        crate::fsio::write_atomic(&out, &mesh::obj(&tris), crate::fsio::Backup::None).map_err(|e| {
+        twin_fsio::write_atomic(&out, &mesh::obj(&tris), twin_fsio::Backup::None).map_err(|e| {
             match std::error::Error::source(&e) {
                 Some(source) => format!("writing converted mesh {e}: {source}"),
                 None => format!("writing converted mesh: {e}"),
@@ -1034,10 +958,14 @@ impl<'a> Converter<'a> {
             .or_else(|| self.robot.joints.iter().find(|j| j.name == name).map(|j| (j.line, "joint", j.name.clone())))
     }
 
-    /// Compiles the generated MJCF. MuJoCo's errors name the generated document (a line the
-    /// user never sees) or one of its elements: they are translated back to the URDF's file,
-    /// line and element, or explained.
-    fn compile(&self, mjcf: &str) -> Result<Model> {
+    /// Compiles the generated MJCF with `compile` (a [`Compiler`] call). The engine's errors
+    /// name the generated document (a line the user never sees) or one of its elements: they
+    /// are translated back to the URDF's file, line and element, or explained.
+    fn compile<T, E: From<Error>>(
+        &self,
+        mjcf: &str,
+        compile: impl FnOnce(&str) -> Result<T, Compile<E>>,
+    ) -> Result<T, E> {
         if let Some(deep) = body_nesting(mjcf)
             && deep.element_depth >= MAX_XML_DEPTH
         {
@@ -1056,11 +984,12 @@ impl<'a> Converter<'a> {
                     deep.root,
                     MAX_XML_DEPTH - 4,
                 ),
-            });
+            }
+            .into());
         }
-        Model::from_xml_str(mjcf).map_err(|e| match e {
-            Error::Load { message, .. } => self.translate(mjcf, message),
-            other => other,
+        compile(mjcf).map_err(|e| match e {
+            Compile::Rejected(message) => self.translate(mjcf, message).into(),
+            Compile::Other(other) => other,
         })
     }
 
@@ -1100,7 +1029,7 @@ impl<'a> Converter<'a> {
                 }
                 None
             });
-            let text = lines.get(n - 1).map_or(String::new(), |l| crate::fsio::excerpt(l.trim(), 120));
+            let text = lines.get(n - 1).map_or(String::new(), |l| twin_fsio::excerpt(l.trim(), 120));
             if let Some((line, element, name)) = hit {
                 return Error::Urdf {
                     path: self.robot.path.clone(),
@@ -1514,26 +1443,6 @@ impl<'a> Converter<'a> {
     }
 }
 
-/// Metadata of a compiled model for callers that only have a [`Model`]: the joints with an
-/// actuator, with the actuator id (first actuator acting on each joint).
-pub fn actuated_joints(model: &Model) -> Vec<(usize, usize)> {
-    let mut out = Vec::new();
-    for a in 0..model.nu() {
-        if model.actuator_trntype()[a] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
-            continue;
-        }
-        let j = model.actuator_trnid()[a][0];
-        if j >= 0 && !out.iter().any(|&(jj, _)| jj == j as usize) {
-            let j = j as usize;
-            if matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
-                out.push((j, a));
-            }
-        }
-    }
-    let _ = ObjType::Joint;
-    out
-}
-
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -1563,10 +1472,9 @@ mod tests {
     /// reported at the URDF element that line was written for.
     #[test]
     fn mujoco_errors_at_a_generated_line_point_at_the_urdf_element() {
-        crate::mj::init().unwrap();
         let text = chain_urdf(3);
         let path = Path::new("chain.urdf");
-        let doc = crate::urdf::parse(path, &text).unwrap();
+        let doc = urdf::parse(path, &text).unwrap();
         let robot = ir::parse_robot(&Ctx { path, doc: &doc }).unwrap();
         let tree = Tree::build(&robot).unwrap();
         let opts = ConvertOptions::default();

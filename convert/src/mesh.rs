@@ -41,7 +41,7 @@ pub(crate) fn find_package(pkg: &str, search: &[PathBuf]) -> Option<PathBuf> {
 /// description package keeps the URDF in `PKG/urdf/`), then its folder. Returns the URDF's
 /// absolute folder (for relative mesh paths) and that search list. The one place that decides
 /// how twin finds meshes.
-pub(crate) fn search_paths(urdf_path: &Path, package_paths: &[PathBuf]) -> (PathBuf, Vec<PathBuf>) {
+pub fn search_paths(urdf_path: &Path, package_paths: &[PathBuf]) -> (PathBuf, Vec<PathBuf>) {
     let mut search = package_paths.to_vec();
     if let Some(env) = std::env::var_os("ROS_PACKAGE_PATH") {
         search.extend(std::env::split_paths(&env).filter(|p| !p.as_os_str().is_empty()));
@@ -56,7 +56,7 @@ pub(crate) fn search_paths(urdf_path: &Path, package_paths: &[PathBuf]) -> (Path
 
 /// Resolves a URDF mesh `filename` to a file on disk. `search` lists package paths (user's,
 /// then `ROS_PACKAGE_PATH`, then the URDF's ancestor folders).
-pub(crate) fn resolve(filename: &str, urdf_dir: &Path, search: &[PathBuf]) -> std::result::Result<PathBuf, String> {
+pub fn resolve(filename: &str, urdf_dir: &Path, search: &[PathBuf]) -> std::result::Result<PathBuf, String> {
     if let Some(rest) = filename.strip_prefix("package://") {
         // `package:///pkg/...` is seen in the wild.
         let rest = rest.trim_start_matches('/');

@@ -1,0 +1,342 @@
+//! External controllers (`controller = "ros"`): real rclpy nodes (Fast DDS, loopback only, a
+//! domain id twin picks per worker) started, driven in lockstep and stopped by `twin sim`,
+//! `twin randomize` and `twin test`; misbehaving ones (`tests/python/bad_controller.py`) fail
+//! their episode with the reason, the batch ends and no process stays behind. And `twin test`'s
+//! verdicts and JUnit XML, read back with PyPI junitparser.
+//!
+//! Python comes from `TWIN_PYTHON` (default `python3`) and must have rclpy (ROS 2 Kilted
+//! wheels), its message packages, rmw_fastrtps_cpp and junitparser.
+
+use crate::common::{output_of, repo_root, twin, write};
+use std::path::{Path, PathBuf};
+use std::process::Command;
+use std::time::{Duration, Instant};
+
+fn python() -> String {
+    let exe = crate::test_python::python().to_string_lossy().into_owned();
+    let ok = Command::new(&exe).args(["-c", "import rclpy, sensor_msgs.msg, std_msgs.msg, junitparser"]).output();
+    match ok {
+        Ok(o) if o.status.success() => exe,
+        Ok(o) => panic!(
+            "{exe} lacks rclpy or junitparser ({}): pip install ros-kilted-rclpy ros-kilted-sensor-msgs \
+             ros-kilted-std-msgs ros-kilted-rmw-fastrtps-cpp junitparser, and set TWIN_PYTHON",
+            String::from_utf8_lossy(&o.stderr).trim()
+        ),
+        Err(e) => panic!("cannot run {exe} ({e}): set TWIN_PYTHON to a Python with rclpy"),
+    }
+}
+
+/// A tag no other test's processes carry: it goes on the controller's command line (a ROS
+/// node-name remap), so leftover processes can be found.
+fn tag(what: &str) -> String {
+    format!("twin_test_{what}_{}_{}", std::process::id(), Instant::now().elapsed().as_nanos() % 1000)
+}
+
+/// Processes whose command line contains `tag`.
+fn processes_with(tag: &str) -> Vec<String> {
+    let mut found = Vec::new();
+    for e in std::fs::read_dir("/proc").unwrap().flatten() {
+        if !e.file_name().to_string_lossy().chars().all(|c| c.is_ascii_digit()) {
+            continue;
+        }
+        if let Ok(cmd) = std::fs::read(e.path().join("cmdline")) {
+            let cmd = String::from_utf8_lossy(&cmd).replace('\0', " ");
+            // A zombie has an empty command line; a process of ours carries the tag.
+            if cmd.contains(tag) {
+                let stat = std::fs::read_to_string(e.path().join("stat")).unwrap_or_default();
+                found.push(format!(
+                    "{} {cmd} [{}]",
+                    e.file_name().to_string_lossy(),
+                    stat.split(' ').nth(2).unwrap_or("?")
+                ));
+            }
+        }
+    }
+    found
+}
+
+/// Asserts no process carries `tag` (waiting at most a second for the kernel to reap them).
+fn assert_none_left(tag: &str) {
+    let deadline = Instant::now() + Duration::from_secs(1);
+    loop {
+        let left = processes_with(tag);
+        if left.is_empty() {
+            return;
+        }
+        assert!(Instant::now() < deadline, "processes left behind: {left:?}");
+        std::thread::sleep(Duration::from_millis(50));
+    }
+}
+
+/// A scenario in `dir` standing the humanoid for `duration` s under `command`.
+fn scenario(dir: &Path, name: &str, duration: f64, command: &str, ros_extra: &str) -> PathBuf {
+    let model = repo_root().join("models/humanoid.urdf");
+    write(
+        dir,
+        name,
+        &format!(
+            "model = {model:?}\nduration = {duration}\ncontroller = \"ros\"\n\n[ros]\ncommand = {command:?}\n{ros_extra}\n\n\
+             [checks]\nmax_distance = 10.0\n"
+        ),
+    )
+}
+
+fn hold_pose(python: &str, tag: &str) -> String {
+    let script = repo_root().join("scenarios/controllers/hold_pose.py");
+    format!("exec {python} {} --ros-args -p use_sim_time:=true -r __node:={tag}", script.display())
+}
+
+fn bad(python: &str, mode: &str, tag: &str) -> String {
+    let script = repo_root().join("tests/python/bad_controller.py");
+    format!("exec {python} {} {mode} --after 0.1 --tag {tag}", script.display())
+}
+
+/// Runs `twin randomize --scenario` and returns (ok, stdout, stderr, wall seconds).
+fn randomize(scenario: &Path, out: &Path, episodes: u32, threads: u32) -> (bool, String, String, f64) {
+    let t = Instant::now();
+    let o = twin()
+        .args(["randomize", "--scenario"])
+        .arg(scenario)
+        .args(["--episodes", &episodes.to_string(), "--threads", &threads.to_string(), "--seed", "3", "--out"])
+        .arg(out)
+        .output()
+        .unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    (ok, stdout, stderr, t.elapsed().as_secs_f64())
+}
+
+fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
+    let mut r = csv.lines();
+    let header: Vec<&str> = r.next().unwrap().split(',').collect();
+    let k = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
+    // The failure column may hold commas: split the fixed part only up to it.
+    r.map(|l| l.split(',').nth(k).unwrap_or("")).collect()
+}
+
+#[test]
+fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let tag = tag("hold");
+    // 0.3 s: 30 control periods of 10 ms; the first holds the start pose while /joint_states
+    // goes out, the 29 others take one command each from the node.
+    let s = scenario(dir.path(), "hold.toml", 0.3, &hold_pose(&python, &tag), "join_timeout_secs = 30.0");
+    let (ok1, out1, err1, _) = randomize(&s, &dir.path().join("t1"), 4, 1);
+    assert!(ok1, "{out1}\n{err1}");
+    let (ok2, out2, err2, _) = randomize(&s, &dir.path().join("t2"), 4, 2);
+    assert!(ok2, "{out2}\n{err2}");
+    let csv1 = std::fs::read_to_string(dir.path().join("t1/episodes.csv")).unwrap();
+    let csv2 = std::fs::read_to_string(dir.path().join("t2/episodes.csv")).unwrap();
+    assert_eq!(csv1, csv2, "episodes.csv differs between 1 and 2 threads");
+    assert_eq!(column(&csv1, "checks"), vec!["controller=PASS;scenario=PASS"; 4], "{csv1}");
+    assert_eq!(column(&csv1, "metric:controller.commands"), vec!["29"; 4], "{csv1}");
+    assert_eq!(column(&csv1, "metric:controller.periods"), vec!["29"; 4], "{csv1}");
+    // Four processes each time, one per episode: their starts are in the workers' logs.
+    let logs: String = std::fs::read_dir(dir.path().join("t2/controller_logs"))
+        .unwrap()
+        .flatten()
+        .map(|e| std::fs::read_to_string(e.path()).unwrap())
+        .collect();
+    assert_eq!(logs.matches("--- twin: run ").count(), 4, "{logs}");
+    assert_eq!(logs.matches("it ended after SIGINT").count(), 4, "{logs}");
+    assert_none_left(&tag);
+}
+
+#[test]
+fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_nothing() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let bounds = "join_timeout_secs = 30.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5";
+    for (mode, kind, why) in [
+        ("crash", "controller: exited", "exit status: 3 at t = 0.100 s"),
+        ("hang", "controller: no command", "after /clock = 0.100 s"),
+        ("ignore", "controller: never joined", "it had not subscribed to /clock"),
+    ] {
+        let tag = tag(mode);
+        // A node that never joins is given 6 s; the others up to 30 s (a loaded machine).
+        let b = if mode == "ignore" { bounds.replace("30.0", "6.0") } else { bounds.to_string() };
+        let s = scenario(dir.path(), &format!("{mode}.toml"), 0.5, &bad(&python, mode, &tag), &b);
+        let out = dir.path().join(mode);
+        let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 2);
+        // The batch itself runs to its end; each episode fails with its reason.
+        assert!(ok, "{mode}: {stdout}\n{stderr}");
+        assert!(secs < 60.0, "{mode}: {secs} s");
+        let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+        assert_eq!(column(&csv, "success"), vec!["0"; 2], "{mode}: {csv}");
+        for line in csv.lines().skip(1) {
+            assert!(line.contains(&kind.to_string()) && line.contains(why), "{mode}: {line}");
+        }
+        let summary: serde_json::Value =
+            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+        let failures = &summary["summary"]["failures"];
+        assert_eq!(failures[0]["kind"], kind, "{mode}: {summary}");
+        assert_eq!(failures[0]["episodes"], 2, "{mode}: {summary}");
+        assert!(stdout.contains(&format!("failed checks: {kind} ×2")), "{mode}: {stdout}");
+        assert_none_left(&tag);
+    }
+    // A node that ignores SIGINT and SIGTERM is killed (SIGKILL) at the end of its episode.
+    let tag = tag("sigint");
+    let s = scenario(dir.path(), "sigint.toml", 0.2, &bad(&python, "sigint", &tag), bounds);
+    let out = dir.path().join("sigint");
+    let (ok, stdout, stderr, _) = randomize(&s, &out, 1, 1);
+    assert!(ok, "{stdout}\n{stderr}");
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(column(&csv, "success"), vec!["1"], "{csv}");
+    let log = std::fs::read_to_string(out.join("controller_logs/worker-1.log")).unwrap();
+    assert!(log.contains("it ended after SIGKILL"), "{log}");
+    assert_none_left(&tag);
+}
+
+#[test]
+fn ctrl_c_ends_a_batch_with_its_controllers() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let tag = tag("ctrlc");
+    let s = scenario(dir.path(), "long.toml", 600.0, &hold_pose(&python, &tag), "stop_timeout_secs = 1.0");
+    // No pushes (the default spec's would end episodes early by a fall): the episodes are still
+    // running when Ctrl-C comes.
+    let spec = repo_root().join("scenarios/hold_pose_randomize.toml");
+    let text = std::fs::read_to_string(&s).unwrap();
+    std::fs::write(&s, format!("randomize = {spec:?}\n{text}")).unwrap();
+    let out = dir.path().join("out");
+    let mut child = twin()
+        .args(["randomize", "--scenario"])
+        .arg(&s)
+        .args(["--episodes", "4", "--threads", "2", "--out"])
+        .arg(&out)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // Until both controllers run.
+    let deadline = Instant::now() + Duration::from_secs(60);
+    while processes_with(&tag).len() < 2 {
+        assert!(Instant::now() < deadline, "the controllers never started");
+        std::thread::sleep(Duration::from_millis(100));
+    }
+    std::thread::sleep(Duration::from_secs(2));
+    let pid = nix::unistd::Pid::from_raw(child.id() as i32);
+    nix::sys::signal::kill(pid, nix::sys::signal::Signal::SIGINT).unwrap();
+    let stopped = Instant::now();
+    let status = loop {
+        if let Some(s) = child.try_wait().unwrap() {
+            break s;
+        }
+        if stopped.elapsed() > Duration::from_secs(30) {
+            let _ = child.kill();
+            panic!("twin still running 30 s after Ctrl-C");
+        }
+        std::thread::sleep(Duration::from_millis(50));
+    };
+    let o = child.wait_with_output().unwrap();
+    assert_eq!(status.code(), Some(130), "{}", String::from_utf8_lossy(&o.stderr));
+    assert_none_left(&tag);
+}
+
+#[test]
+fn twin_sim_runs_a_scenario_with_an_rclpy_controller_and_keeps_its_log() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let tag = tag("sim");
+    let s = scenario(dir.path(), "hold.toml", 0.2, &hold_pose(&python, &tag), "");
+    let record = dir.path().join("run.mcap");
+    let o = twin().args(["sim", "--scenario"]).arg(&s).arg("--record").arg(&record).output().unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    assert!(ok, "{stdout}\n{stderr}");
+    // 20 periods, the first held: 19 commands from the node.
+    assert!(stdout.contains("19 control periods, 19 commands applied, 0 rejected"), "{stdout}");
+    let log = std::fs::read_to_string(dir.path().join("run.controller.log")).unwrap();
+    assert!(log.contains("--- twin: run 1 on domain ") && log.contains("it ended after SIGINT"), "{log}");
+    assert_none_left(&tag);
+}
+
+#[test]
+fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let model = repo_root().join("models/humanoid.urdf");
+    // pd-hold stands 0.5 s in every episode of the default spec: 4 of 4, whose 95 % Wilson lower
+    // bound is 4/(4 + 1.96²) = 0.510.
+    let body = |min: f64| {
+        format!(
+            "model = {model:?}\nduration = 0.5\ncontroller = \"pd-hold\"\n[checks]\nfalls = 0\n\
+             [test]\nepisodes = 4\nmin_success_lower_95 = {min}\nseed = 5\n"
+        )
+    };
+    let pass = write(dir.path(), "pass.toml", &body(0.5));
+    let fail = write(dir.path(), "fail.toml", &body(0.6));
+    let junit = dir.path().join("report.xml");
+    let o =
+        twin().arg("test").arg(&pass).arg(&fail).arg("--junit").arg(&junit).args(["--threads", "2"]).output().unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    assert!(!ok, "a failed threshold must fail: {stdout}\n{stderr}");
+    assert!(stdout.contains("PASS 4/4 lower95 0.510 (min 0.5)"), "{stdout}");
+    assert!(stdout.contains("FAIL 4/4 lower95 0.510 (min 0.6)"), "{stdout}");
+    assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
+    let read = Command::new(&python)
+        .arg("-c")
+        .arg(
+            "import sys, junitparser\n\
+             x = junitparser.JUnitXml.fromfile(sys.argv[1])\n\
+             for s in x:\n\
+             \x20   for c in s:\n\
+             \x20       r = [type(r).__name__ + ':' + (r.message or '') for r in c.result]\n\
+             \x20       print(s.name.split('/')[-1], s.tests, s.failures, c.classname, c.name, r)\n",
+        )
+        .arg(&junit)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&read.stdout);
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    assert_eq!(lines[0], "pass.toml 2 0 pass nominal []");
+    assert_eq!(lines[1], "pass.toml 2 0 pass randomized []");
+    assert_eq!(lines[2], "fail.toml 2 1 fail nominal []");
+    assert!(
+        lines[3]
+            .starts_with("fail.toml 2 1 fail randomized ['Failure:success 4/4 = 100.0 %, 95 % lower bound 0.510 < 0.6"),
+        "{text}"
+    );
+    // All passing: exit 0.
+    let o = twin().arg("test").arg(&pass).output().unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    assert!(ok, "{stdout}\n{stderr}");
+}
+
+/// The README's "Test your controller with twin" commands (scenario, randomize, test) run as
+/// shown, from the repository root, their outputs (`runs/…`) in a scratch folder.
+#[test]
+fn readme_test_your_controller_commands_run() {
+    let python = python();
+    let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
+    let start = readme.find("## Test your controller with twin").expect("README has the section");
+    let section = &readme[start..];
+    let section = &section[..section[3..].find("\n## ").map_or(section.len(), |k| k + 3)];
+    let scratch = tempfile::tempdir().unwrap();
+    let mut commands = Vec::new();
+    let mut in_sh = false;
+    for line in section.lines() {
+        match line.trim() {
+            "```sh" => in_sh = true,
+            "```" => in_sh = false,
+            l if in_sh && l.starts_with("target/release/twin ") => commands.push(l.to_string()),
+            _ => {}
+        }
+    }
+    assert_eq!(commands.len(), 3, "{commands:?}");
+    for command in &commands {
+        let args: Vec<String> = command
+            .split_whitespace()
+            .skip(1)
+            .map(|a| a.replace("runs/", &format!("{}/", scratch.path().display())))
+            .collect();
+        let o = twin().args(&args).env("TWIN_PYTHON", &python).output().unwrap();
+        let (ok, stdout, stderr) = output_of(o);
+        assert!(ok, "README `{command}` failed:\n{stdout}\n{stderr}");
+    }
+    assert!(scratch.path().join("hold.controller.log").is_file());
+    assert!(scratch.path().join("hold/episodes.csv").is_file());
+    let junit = std::fs::read_to_string(scratch.path().join("twin-test.xml")).unwrap();
+    assert!(junit.contains("<testsuites name=\"twin test\" tests=\"2\" failures=\"0\""), "{junit}");
+}

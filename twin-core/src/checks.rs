@@ -1,0 +1,161 @@
+//! The thresholds a scenario checks a run against ([`Checks`], the `[checks]` table of a
+//! scenario file) and each one's outcome ([`Threshold`]).
+//!
+//! Data flows from the run's measurements to lines of PASS/FAIL: the gait summary
+//! ([`GaitSummary`]) through [`Checks::evaluate`], the grasp measurements through the grasp
+//! check; the scenario gathers both into the run's [`crate::engine::Verdict`]. This module sits
+//! below both the scenario and the grasp check, so neither imports the other for them.
+
+use crate::walk::GaitSummary;
+
+/// Thresholds on [`GaitSummary`]; each one present is checked.
+#[derive(Debug, Clone, Default, PartialEq, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Checks {
+    /// Most falls allowed (0 or 1 in a single run).
+    pub falls: Option<u32>,
+    /// Least displacement along the initial heading, m.
+    pub min_forward: Option<f64>,
+    /// Largest lateral drift (absolute), m.
+    pub max_lateral_drift: Option<f64>,
+    /// Largest net displacement, m (standing).
+    pub max_distance: Option<f64>,
+    /// Least average speed, m/s.
+    pub min_average_speed: Option<f64>,
+    /// Largest foot slide in one stance, m.
+    pub max_slip: Option<f64>,
+    /// Largest mean foot slide per stance, m.
+    pub max_mean_slip: Option<f64>,
+    /// Largest RMS velocity-tracking error, m/s.
+    pub max_velocity_error: Option<f64>,
+    /// Least heading change, degrees (signed as the command: a negative threshold asks for at
+    /// least that much turning right).
+    pub min_turn_deg: Option<f64>,
+    /// Least number of steps.
+    pub min_steps: Option<u64>,
+    /// Largest RMS step-length error, m.
+    pub max_step_length_error: Option<f64>,
+    /// Largest cost of transport.
+    pub max_cost_of_transport: Option<f64>,
+    /// Grasp: least clearance between the arms and the rest of the robot, and no robot contact
+    /// with the world other than feet and gripper–cup, m (0: touching fails).
+    pub min_clearance_m: Option<f64>,
+    /// Grasp: largest finger–cup normal force of one finger, N.
+    pub max_grip_force_n: Option<f64>,
+    /// Grasp: least mean finger–cup normal force of each finger while the cup is held up, N.
+    pub min_grip_force_n: Option<f64>,
+    /// Grasp: largest cup displacement in the grasp frame after the lift started (the grasp
+    /// frame, once at the cup, rose 1 cm), m.
+    pub max_slip_m: Option<f64>,
+    /// Grasp: largest cup tilt in the grasp frame after the lift started, degrees.
+    pub max_tilt_deg: Option<f64>,
+    /// Grasp: least margin of the CoM's ground projection inside the support polygon, m.
+    pub min_com_margin_m: Option<f64>,
+    /// Grasp: least cup height above its start, held for `min_hold_secs` at the end of the
+    /// run, m.
+    pub min_lift_m: Option<f64>,
+    /// Grasp: how long the cup must stay lifted at the end of the run, s (default with
+    /// `min_lift_m`: 2).
+    pub min_hold_secs: Option<f64>,
+}
+
+impl Checks {
+    /// Whether any grasp threshold is set (the grasp check then runs).
+    pub fn has_grasp(&self) -> bool {
+        self.min_clearance_m.is_some()
+            || self.max_grip_force_n.is_some()
+            || self.min_grip_force_n.is_some()
+            || self.max_slip_m.is_some()
+            || self.max_tilt_deg.is_some()
+            || self.min_com_margin_m.is_some()
+            || self.min_lift_m.is_some()
+            || self.min_hold_secs.is_some()
+    }
+}
+
+/// One threshold's outcome: the measured value against the threshold (a line of a scenario's
+/// report; the run's [`crate::engine::Verdict`] gathers them).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Threshold {
+    /// Check name (its key).
+    pub name: &'static str,
+    /// Measured value.
+    pub value: f64,
+    /// `<=` or `>=`.
+    pub op: &'static str,
+    /// Threshold.
+    pub threshold: f64,
+    /// Whether it passed.
+    pub passed: bool,
+}
+
+impl std::fmt::Display for Threshold {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        write!(
+            f,
+            "{} {:<22} {:.4} {} {}",
+            if self.passed { "PASS" } else { "FAIL" },
+            self.name,
+            self.value,
+            self.op,
+            self.threshold
+        )
+    }
+}
+
+impl Threshold {
+    /// `value` must be at most `threshold`.
+    pub fn at_most(name: &'static str, value: f64, threshold: f64) -> Threshold {
+        Threshold { name, value, op: "<=", threshold, passed: value <= threshold }
+    }
+
+    /// `value` must be at least `threshold`.
+    pub fn at_least(name: &'static str, value: f64, threshold: f64) -> Threshold {
+        Threshold { name, value, op: ">=", threshold, passed: value >= threshold }
+    }
+}
+
+impl Checks {
+    /// Each threshold present against `summary`; a fall fails every non-empty set of checks.
+    pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Threshold> {
+        let c = self;
+        let mut out = Vec::new();
+        let mut at_most = |name: &'static str, value: f64, threshold: Option<f64>| {
+            if let Some(t) = threshold {
+                out.push(Threshold::at_most(name, value, t));
+            }
+        };
+        at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
+        at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
+        at_most("max_distance", summary.distance_m, c.max_distance);
+        at_most("max_slip", summary.slip_max_m, c.max_slip);
+        at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
+        at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
+        at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
+        at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
+        let mut at_least = |name: &'static str, value: f64, threshold: Option<f64>| {
+            if let Some(t) = threshold {
+                out.push(Threshold::at_least(name, value, t));
+            }
+        };
+        at_least("min_forward", summary.forward_m, c.min_forward);
+        at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
+        at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
+        if let Some(t) = c.min_turn_deg {
+            let sign = if t < 0.0 { -1.0 } else { 1.0 };
+            let turned = summary.yaw_change_rad.to_degrees();
+            out.push(Threshold {
+                name: "min_turn_deg",
+                value: turned,
+                op: ">=",
+                threshold: t,
+                passed: sign * turned >= sign * t,
+            });
+        }
+        // A fall fails every run that has checks, whether or not `falls` is among them.
+        if summary.fell && c.falls.is_none() && !out.is_empty() {
+            out.push(Threshold::at_most("falls", 1.0, 0.0));
+        }
+        out
+    }
+}
