@@ -45,7 +45,7 @@ pub struct PdHoldOptions {
     /// tips over, whatever its effort limit. Example-robot-data's Romeo (25.8 N·m ankles,
     /// 40.5 kg) got 103 N·m/rad per ankle from `effort / saturation_error` against the
     /// 120 N·m/rad per ankle its inverted pendulum needs, and fell in 1.4 s. `0`: no floor.
-    /// (default: 1.5: the shipped humanoid's gains stay as they were)
+    /// (default: 3.0)
     pub stance_stiffness_margin: f64,
 }
 
@@ -90,10 +90,11 @@ pub struct PdLoop {
 }
 
 /// How far the free-fall estimate of the loops' stability margin may exceed
-/// [`PdHoldOptions::max_loop_margin`] (see [`PdHold`]'s stability cap): the shipped humanoid at
-/// 0.7 times its masses (about 1.18) keeps its gains; a light pendulum in free fall (1.25)
-/// diverges.
-const FREE_FALL_ALLOWANCE: f64 = 1.22;
+/// [`PdHoldOptions::max_loop_margin`] (see [`PdHold`]'s stability cap). 1.0 since the cap is
+/// applied mode by mode: with 1.22 (what one factor on every loop allowed) several modes sat at
+/// a free-fall margin of 1.2 at once and Solo, Solo12 and Bolt diverged in their first second
+/// (|q̇| up to 5·10⁶); with 1.0 none does.
+const FREE_FALL_ALLOWANCE: f64 = 1.0;
 
 /// Rate at which a velocity servo is sent back to its target, 1/s: `q̇_cmd = rate · (q_target − q)`.
 const VELOCITY_SERVO_RATE: f64 = 10.0;
