@@ -66,8 +66,8 @@ pub struct ExternalController {
     hold: PdHold,
     step: u64,
     steps_per_period: u64,
-    /// Steps held at the start of this episode: one control period, two under a kept process
-    /// (see [`ExternalController::compute`]).
+    /// Steps held at the start of every episode: one control period (see
+    /// [`ExternalController::compute`]).
     hold_steps: u64,
     /// Episodes started on this controller.
     runs: u64,
@@ -324,6 +324,27 @@ impl ExternalController {
         Ok(())
     }
 
+    /// Says `t_secs` (the episode's start) on `/clock` after a reset under a kept process (a
+    /// jump back in time), and again every 10 ms for `reset_settle_secs` of wall time before
+    /// the episode starts and the first lockstep period says the next time. ROS nodes subscribe to `/clock` keeping only the latest message
+    /// (depth 1): had the next time come while the node was still busy with the last
+    /// episode's messages, it would have replaced the jump, the node's timer would have taken
+    /// *it* for the jump (rcl: fire one period after a backward jump) and skipped the period
+    /// twin waits a command for. Said again, the same time changes nothing for the node. Wall
+    /// time only: the simulation does not move meanwhile, so the run stays deterministic.
+    fn announce_jump(&mut self, t_secs: f64) {
+        let until = Instant::now() + Duration::from_secs_f64(self.options.reset_settle_secs);
+        self.inner.announce_time(t_secs);
+        loop {
+            std::thread::sleep(Duration::from_millis(10).min(until.saturating_duration_since(Instant::now())));
+            self.inner.repeat_time();
+            let now = Instant::now();
+            if now >= until || self.stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+    }
+
     /// Why the process can't go on, if it has exited.
     fn exit_reason(&mut self) -> Option<String> {
         let status = self.process.as_mut()?.exited()?;
@@ -359,26 +380,26 @@ impl Controller for ExternalController {
         }
         let stats = self.inner.stats();
         self.stats_at_reset = (stats.periods, stats.commands_applied);
-        self.hold_steps = if fresh { self.steps_per_period } else { 2 * self.steps_per_period };
+        self.hold_steps = self.steps_per_period;
         if fresh {
             self.start_process()?;
         } else {
             self.note(&format!("run {}: the same process, the simulation reset under it", self.runs));
+            self.announce_jump(observation.time_secs);
         }
         Ok(())
     }
 
     /// The first control period holds the start pose while the state goes out; then the
-    /// process commands, one command per period. Under a kept process (`restart = "never"`)
-    /// the hold lasts two periods and the second one's start is said on `/clock`: a sim-time
-    /// timer that saw time jump back (ROS resets it to fire one period after the jump) fires
-    /// again at the first lockstep period.
+    /// process commands, one command per period. A kept process (`restart = "never"`) was
+    /// told the episode's start time at the reset, alone for `reset_settle_secs`
+    /// ([`ExternalController::announce_jump`]): its sim-time timers saw time jump back (rcl
+    /// then fires them one period after the jump), so they fire at the first lockstep period
+    /// as a fresh process's do, and every episode runs the same periods whichever process it
+    /// got (the same `episodes.csv` whatever the thread count).
     fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
         self.time_secs = observation.time_secs;
         if self.failed || self.step < self.hold_steps {
-            if !self.failed && self.step == self.hold_steps - self.steps_per_period && self.step > 0 {
-                self.inner.announce_time(observation.time_secs);
-            }
             self.hold.compute(model, observation, command);
             self.step += 1;
             return;

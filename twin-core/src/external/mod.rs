@@ -16,7 +16,9 @@
 //!    exactly one command per control period, waiting at most `period_timeout_secs` for it;
 //! 5. stops it: SIGINT, then SIGTERM, then SIGKILL to its process group, each after
 //!    `stop_timeout_secs` — per episode (`restart = "episode"`, the default) or at the end
-//!    (`restart = "never"`: one process per worker, the simulation reset under it).
+//!    (`restart = "never"`: one process per worker, the simulation reset under it; twin then
+//!    says the jump back in time on `/clock` alone for `reset_settle_secs`, because ROS
+//!    nodes keep only the latest `/clock` message and would otherwise miss the jump).
 //!
 //! What goes wrong with the process — it exits, never joins, stops answering — fails that
 //! run with the reason (the `controller` check's cause, [`ControllerHealth`]), never the batch.
@@ -65,6 +67,7 @@ pub enum Interface {
 /// period_timeout_secs = 5.0        # longest wait for one period's command
 /// stop_timeout_secs = 2.0          # wait after each of SIGINT, SIGTERM (then SIGKILL)
 /// restart = "episode"              # episode | never (twin randomize)
+/// reset_settle_secs = 0.1          # restart = "never": the jump back on /clock, alone, this long
 /// subscribes = ["/joint_states"]   # topics the process must subscribe to before time starts
 /// ```
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
@@ -93,6 +96,14 @@ pub struct RosOptions {
     /// When `twin randomize` starts a new process (default: every episode).
     #[serde(default = "default_restart")]
     pub restart: Restart,
+    /// Under a kept process (`restart = "never"`), how long twin says the jump back in time on
+    /// `/clock` (again every 10 ms) before the first lockstep period, wall seconds (default:
+    /// 0.1). rclpy's and rclcpp's `/clock` subscriptions keep only the latest message (depth
+    /// 1, best effort): a node busy with the last episode's messages that gets the jump and
+    /// the first period's time together keeps the second alone, reads it as the jump, and its
+    /// sim-time timer waits one more period, so no command comes.
+    #[serde(default = "default_reset_settle")]
+    pub reset_settle_secs: f64,
     /// Topics (besides `/clock`) the process must subscribe to before simulated time starts,
     /// so that it misses none of their messages (default: `["/joint_states"]`).
     #[serde(default = "default_subscribes")]
@@ -116,6 +127,9 @@ fn default_stop() -> f64 {
 }
 fn default_restart() -> Restart {
     Restart::Episode
+}
+fn default_reset_settle() -> f64 {
+    0.1
 }
 fn default_subscribes() -> Vec<String> {
     vec!["/joint_states".into()]
@@ -141,6 +155,7 @@ impl RosOptions {
         positive("join_timeout_secs", self.join_timeout_secs, "seconds")?;
         positive("period_timeout_secs", self.period_timeout_secs, "seconds")?;
         positive("stop_timeout_secs", self.stop_timeout_secs, "seconds")?;
+        positive("reset_settle_secs", self.reset_settle_secs, "seconds")?;
         if let Some(t) = self.subscribes.iter().find(|t| !t.starts_with('/')) {
             return Err(("subscribes", format!("topic {t:?} must start with `/`")));
         }

@@ -1081,17 +1081,27 @@ impl LiveController {
         }
     }
 
-    /// Publishes (and records) `/clock` = `t_secs` outside the lockstep periods: after a reset
-    /// under a running controller, so that its sim-time timers start again from there.
+    /// Publishes `/clock` = `t_secs` outside the lockstep periods (not recorded: a fresh
+    /// process gets the same time from the join, unrecorded too): after a reset under a running
+    /// controller, so that its sim-time timers start again from there.
     pub fn announce_time(&mut self, t_secs: f64) {
-        self.publish_clock((t_secs * 1e9).round().max(0.0) as u64);
+        self.clock_cdr.reset();
+        Clock { clock_nanos: (t_secs * 1e9).round().max(0.0) as i64 }.encode(&mut self.clock_cdr);
+        self.repeat_time();
     }
 
-    /// Drops every command and trajectory waiting in the readers (a new episode must not
-    /// start on a command meant for the last one).
+    /// Says the last `/clock` again (not recorded again: a node sees the same time, which
+    /// fires nothing).
+    pub fn repeat_time(&mut self) {
+        let _ = self.clock.write(RawCdr(self.clock_cdr.bytes().to_vec()), None);
+    }
+
+    /// Drops every command waiting in the readers (a new episode must not start on a command
+    /// meant for the last one).
     pub fn discard_pending(&mut self) {
         while let Ok(Some(_)) = self.commands.take_next_sample() {}
         while let Ok(Some(_)) = self.trajectories.take_next_sample() {}
+        while let Ok(Some(_)) = self.by_name.take_next_sample() {}
     }
 }
 
