@@ -180,15 +180,19 @@ fn summary_names_friction_as_what_separates_failures() {
          {FOOT_PUSH}"
     );
     let spec = Spec::from_toml_str(&text).unwrap();
+    // 96 episodes: with the stance-stiffness floor of PD hold's gains only about one episode
+    // in six falls, and 24 episodes (4 falls) let one of the 31 mass draws out-separate
+    // friction by chance (right thigh, SMD 1.57 against friction's -1.07 at seed 5); at 96,
+    // friction leads at seeds 1, 2 and 5 (SMD -1.06 to -1.24, next |SMD| <= 0.97).
     let b = batch(&spec, 2.5, 5);
     let dir = tempfile::tempdir().unwrap();
-    let r = run(&b, &spec, 24, 0, dir.path());
+    let r = run(&b, &spec, 96, 0, dir.path());
     let s = &r.summary;
-    assert!(s.fell >= 4 && s.succeeded >= 4, "{s:?}");
+    assert!(s.fell >= 8 && s.succeeded >= 8, "{s:?}");
     let top = &s.separation[0];
     assert_eq!(top.parameter, "friction", "{:?}", &s.separation[..3]);
     assert!(top.smd < -1.0 && top.mean_failed < top.mean_succeeded, "{top:?}");
-    assert!(r.summary.to_text(24).contains("friction"));
+    assert!(r.summary.to_text(96).contains("friction"));
 }
 
 #[test]

@@ -3,7 +3,11 @@
 //! engine (`twin_core::engine`) existed (commit 923c32e), so these prove the engine kept every
 //! episode's draws, random streams, step order and metrics. One column has been re-pinned
 //! since: `steps_taken`, when touch-downs began to need 0.05 s in the air (a chattering
-//! sole counted dozens of "steps" standing); every other byte is still 923c32e's.
+//! sole counted dozens of "steps" standing); and every metric of the
+//! episodes (not their draws) when PD hold's gains got the stance-stiffness floor (its
+//! stiffer legs: default case's max tilt 0.721 -> 0.579 rad, drift 0.484 -> 0.387 m;
+//! harsh case still 2 of 12 standing). The draws are still 923c32e's.
+
 //! The cases:
 //! - `default/`: the default spec (friction, mass, IMU noise, initial pose, base pushes);
 //! - `harsh/`: the default spec plus latency, encoder noise, IMU bias, actuator strength,

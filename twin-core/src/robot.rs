@@ -394,7 +394,7 @@ const FOOT_TOLERANCE_M: f64 = 0.01;
 
 /// The feet of a floating-base robot, from the kinematic tree and the geometry: in the home
 /// pose ([`reset_to_home`]), the bodies with a collision geom within 1 cm of
-/// the lowest point of the robot, keeping of each touching chain only its body nearest the
+/// the robot's lowest collision geom, keeping of each touching chain only its body nearest the
 /// base (a toe body under a touching foot belongs to that foot). Sorted by body id.
 ///
 /// # Errors
@@ -402,20 +402,19 @@ const FOOT_TOLERANCE_M: f64 = 0.01;
 pub fn find_feet(model: &Model) -> Result<Vec<usize>> {
     let mut data = Data::new(Arc::new(model.try_clone()?))?;
     reset_to_home(&mut data)?;
-    let lowest = lowest_robot_point_z(model, &data);
+    // The lowest collision geom: a visual mesh below the collision geometry (the G1's feet
+    // touch the ground with four small spheres above the sole's mesh) touches nothing.
+    let collision_lowest: Vec<(usize, f64)> = (0..model.ngeom())
+        .filter(|&g| model.geom_bodyid()[g] != 0 && (model.geom_contype()[g] != 0 || model.geom_conaffinity()[g] != 0))
+        .filter_map(|g| geom_lowest_z(model, &data, g).map(|z| (model.geom_bodyid()[g] as usize, z)))
+        .collect();
+    let lowest = collision_lowest.iter().map(|&(_, z)| z).fold(f64::INFINITY, f64::min);
     if !lowest.is_finite() {
         return Ok(Vec::new());
     }
     let mut touching = vec![false; model.nbody()];
-    for g in 0..model.ngeom() {
-        let body = model.geom_bodyid()[g] as usize;
-        let collides = model.geom_contype()[g] != 0 || model.geom_conaffinity()[g] != 0;
-        if body == 0 || !collides {
-            continue;
-        }
-        if let Some(z) = geom_lowest_z(model, &data, g)
-            && z <= lowest + FOOT_TOLERANCE_M
-        {
+    for &(body, z) in &collision_lowest {
+        if z <= lowest + FOOT_TOLERANCE_M {
             touching[body] = true;
         }
     }

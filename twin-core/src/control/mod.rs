@@ -42,7 +42,7 @@ mod replay;
 /// re-exported here for controllers.
 pub use crate::robot::{Actuation, nominal_pose, reset_to_home};
 pub use passive::Passive;
-pub use pd_hold::{PdHold, PdHoldOptions, PdLoop, pd_gains};
+pub use pd_hold::{PdHold, PdHoldOptions, PdLoop, pd_gains, stance_stiffness};
 pub use replay::{JointTrajectory, Replay, ReplayOptions, TrajectoryJoint};
 
 use crate::error::Result;

@@ -39,6 +39,14 @@ pub struct PdHoldOptions {
     /// limits (1000 N·m on a 2 kg quadruped) stay stable. `f64::INFINITY`: no cap. (default:
     /// 0.98; the shipped humanoid keeps its gains, down to 0.7 times its masses)
     pub max_loop_margin: f64,
+    /// Floor on the stiffness of the joints between a floating base and its feet, as a
+    /// multiple of the stiffness gravity asks of them for the robot to stand in its home pose
+    /// ([`stance_stiffness`]): a leg joint whose PD spring is softer than the weight it carries
+    /// tips over, whatever its effort limit. Example-robot-data's Romeo (25.8 N·m ankles,
+    /// 40.5 kg) got 103 N·m/rad per ankle from `effort / saturation_error` against the
+    /// 120 N·m/rad per ankle its inverted pendulum needs, and fell in 1.4 s. `0`: no floor.
+    /// (default: 3.0)
+    pub stance_stiffness_margin: f64,
 }
 
 impl Default for PdHoldOptions {
@@ -50,6 +58,7 @@ impl Default for PdHoldOptions {
             min_natural_freq_hz: None,
             stability_dt_secs: None,
             max_loop_margin: 0.98,
+            stance_stiffness_margin: 3.0,
         }
     }
 }
@@ -81,10 +90,11 @@ pub struct PdLoop {
 }
 
 /// How far the free-fall estimate of the loops' stability margin may exceed
-/// [`PdHoldOptions::max_loop_margin`] (see [`PdHold`]'s stability cap): the shipped humanoid at
-/// 0.7 times its masses (about 1.18) keeps its gains; a light pendulum in free fall (1.25)
-/// diverges.
-const FREE_FALL_ALLOWANCE: f64 = 1.22;
+/// [`PdHoldOptions::max_loop_margin`] (see [`PdHold`]'s stability cap). 1.0 since the cap is
+/// applied mode by mode: with 1.22 (what one factor on every loop allowed) several modes sat at
+/// a free-fall margin of 1.2 at once and Solo, Solo12 and Bolt diverged in their first second
+/// (|q̇| up to 5·10⁶); with 1.0 none does.
+const FREE_FALL_ALLOWANCE: f64 = 1.0;
 
 /// Rate at which a velocity servo is sent back to its target, 1/s: `q̇_cmd = rate · (q_target − q)`.
 const VELOCITY_SERVO_RATE: f64 = 10.0;
@@ -124,9 +134,15 @@ impl PdHold {
         let actuation = Actuation::of(model);
         let limits = actuation.limits(model);
         let o = &self.options;
+        let stance = if o.stance_stiffness_margin > 0.0 { stance_stiffness(model) } else { vec![0.0; model.nv()] };
         let gains = |effort: f64, dof: usize, gear: f64| {
             let inertia = 1.0 / model.dof_invweight0()[dof].max(1e-12);
-            let (kp, kd) = pd_gains(Some(effort), inertia, o);
+            let (mut kp, mut kd) = pd_gains(Some(effort), inertia, o);
+            let floor = o.stance_stiffness_margin * stance[dof];
+            if floor > kp {
+                kp = floor;
+                kd = 2.0 * o.damping_ratio * (kp * inertia).sqrt();
+            }
             // Joint-space gains, expressed in command units (torque = gear · ctrl).
             (kp / gear, kd / gear)
         };
@@ -194,18 +210,30 @@ impl PdHold {
                 }
             }
         }
-        if let Some(scale) = self.stability_scale(model) {
+        if let Some(scales) = self.stability_scales(model) {
+            let mut k = 0;
             for l in &mut self.loops {
-                l.kp *= scale;
-                l.kd *= scale.sqrt();
+                if l.interface == Interface::Effort && l.kp > 0.0 {
+                    l.kp *= scales[k];
+                    l.kd *= scales[k].sqrt();
+                    k += 1;
+                }
             }
         }
     }
 
-    /// The factor on every kp that brings the coupled loops' stability margin down to
-    /// [`PdHoldOptions::max_loop_margin`], when it is above (see there); `None` when it is not, or
-    /// when the inertia can't be evaluated.
-    fn stability_scale(&self, model: &Model) -> Option<f64> {
+    /// The factor on each torque loop's kp (in loop order, servos skipped) that brings the
+    /// coupled loops' stability margin down to [`PdHoldOptions::max_loop_margin`], when it is
+    /// above (see there); `None` when it is not, or when the inertia can't be evaluated.
+    ///
+    /// The loops that are scaled are those of the mode that breaks the margin: each round
+    /// takes the largest eigenvalue's mode of `K^½ M⁻¹ K^½` (or of the damping's, whichever
+    /// term dominates) and scales each loop by the factor that mode needs, raised to its
+    /// share of the mode (`v_i² / max v²`): a light wrist with a placeholder effort limit gets
+    /// soft, the legs keep the stiffness they stand with. (One factor on every loop took the
+    /// G1's ankles to 0.37 of their gains, 51 N·m/rad for its 33 kg, and it fell in 1.1 s; the
+    /// iCub's to 5·10⁻¹⁰.) After [`MODE_ROUNDS`] rounds, one factor on every loop finishes.
+    fn stability_scales(&self, model: &Model) -> Option<Vec<f64>> {
         let cap = self.options.max_loop_margin;
         let torque: Vec<&PdLoop> =
             self.loops.iter().filter(|l| l.interface == Interface::Effort && l.kp > 0.0).collect();
@@ -228,26 +256,104 @@ impl PdHold {
         let full_inv = m.cholesky()?.inverse();
         let free = DMatrix::from_fn(n, n, |i, j| full_inv[(dofs[i], dofs[j])]);
         let dt = model.timestep_secs();
-        let scale = |m_inv: &DMatrix<f64>, cap: f64| -> Option<f64> {
-            // λmax(M⁻¹K) = λmax(K^½ M⁻¹ K^½), symmetric; the same for D.
-            let largest = |gain: &dyn Fn(&PdLoop) -> f64| {
-                let r: Vec<f64> = torque.iter().map(|l| (gain(l) * l.gear).max(0.0).sqrt()).collect();
-                DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigenvalues().max()
+        let kp: Vec<f64> = torque.iter().map(|l| (l.kp * l.gear).max(0.0)).collect();
+        let kd: Vec<f64> = torque.iter().map(|l| (l.kd * l.gear).max(0.0)).collect();
+        // Per bound: the factor on every loop that meets its cap (`None`: met), and the mode
+        // that needs it (the unit eigenvector of the dominating term).
+        let needed = |m_inv: &DMatrix<f64>, cap: f64, s: &[f64]| -> Option<(f64, nalgebra::DVector<f64>)> {
+            let largest = |gain: &[f64], power: f64| {
+                let r: Vec<f64> = gain.iter().zip(s).map(|(g, s)| (g * s.powf(power)).sqrt()).collect();
+                let e = DMatrix::from_fn(n, n, |i, j| r[i] * m_inv[(i, j)] * r[j]).symmetric_eigen();
+                let k = e.eigenvalues.imax();
+                (e.eigenvalues[k], e.eigenvectors.column(k).into_owned())
             };
-            let a_k = largest(&|l| l.kp).sqrt() * dt;
-            let a_d = largest(&|l| l.kd) * dt / 2.0;
+            let (lk, vk) = largest(&kp, 1.0);
+            let (ld, vd) = largest(&kd, 0.5);
+            let a_k = lk.max(0.0).sqrt() * dt;
+            let a_d = ld * dt / 2.0;
             if !(a_k.is_finite() && a_d.is_finite()) || a_k * a_k / 4.0 + a_d <= cap {
                 return None;
             }
             // With kp·s and kd·√s the margin is s·a_K²/4 + √s·a_D: solve for √s.
             let r = (-a_d + (a_d * a_d + a_k * a_k * cap).sqrt()) / (a_k * a_k / 2.0);
-            Some(r * r)
+            Some((r * r, if a_k * a_k / 4.0 >= a_d { vk } else { vd }))
         };
-        match (scale(&held, cap), scale(&free, cap * FREE_FALL_ALLOWANCE)) {
-            (Some(a), Some(b)) => Some(a.min(b)),
-            (a, b) => a.or(b),
+        let mut s = vec![1.0; n];
+        let mut scaled = false;
+        for round in 0..=MODE_ROUNDS {
+            let worst = match (needed(&held, cap, &s), needed(&free, cap * FREE_FALL_ALLOWANCE, &s)) {
+                (Some(a), Some(b)) => Some(if a.0 <= b.0 { a } else { b }),
+                (a, b) => a.or(b),
+            };
+            let Some((factor, mode)) = worst else { break };
+            scaled = true;
+            if !(factor.is_finite() && factor > 0.0) {
+                return None;
+            }
+            if round == MODE_ROUNDS {
+                s.iter_mut().for_each(|x| *x *= factor);
+                break;
+            }
+            let top = mode.iter().fold(0.0_f64, |a, v| a.max(v * v));
+            for (x, v) in s.iter_mut().zip(mode.iter()) {
+                *x *= factor.powf(v * v / top.max(1e-300));
+            }
+        }
+        scaled.then_some(s)
+    }
+}
+
+/// Rounds of [`PdHold`]'s mode-by-mode stability scaling before one factor on every loop.
+const MODE_ROUNDS: usize = 40;
+
+/// Per DOF (len `nv`), the stiffness gravity asks of each hinge for the robot to stand on its
+/// feet in the home pose, N·m/rad (0 on other DOFs, and on every DOF of a robot without a
+/// floating base or feet): on a joint between the floating base and a foot, the robot as an
+/// inverted pendulum on it, `m·g·(z_com − z_joint)` shared by the feet; on any other joint, the
+/// part of the robot it carries when that part's centre of mass is above it (a torso on its
+/// waist), `m_sub·g·(z_sub − z_joint)`; each for the part of the joint's axis that tips it (its
+/// horizontal part; a yaw axis carries nothing). Feet: [`crate::robot::find_feet`].
+pub fn stance_stiffness(model: &Model) -> Vec<f64> {
+    let mut out = vec![0.0; model.nv()];
+    let Some(base) = model.free_joint() else { return out };
+    let Ok(feet) = crate::robot::find_feet(model) else { return out };
+    if feet.is_empty() {
+        return out;
+    }
+    let Ok(mut data) = crate::mj::Data::new(Arc::new(model.clone())) else { return out };
+    data.qpos_mut().copy_from_slice(&nominal_pose(model));
+    if data.forward().is_err() {
+        return out;
+    }
+    let g = -model.gravity()[2];
+    let parent = model.body_parentid();
+    let mut on_leg = vec![false; model.nbody()];
+    for &foot in &feet {
+        let mut b = foot;
+        while b != base.body && b != 0 {
+            on_leg[b] = true;
+            b = parent[b] as usize;
         }
     }
+    let (com_z, mass) = (data.subtree_com()[base.body][2], model.body_subtreemass()[base.body]);
+    for j in 0..model.njnt() {
+        let b = model.jnt_bodyid()[j] as usize;
+        if model.joint_type(j) != JointType::Hinge || !crate::robot::in_subtree(model, base.body, b) {
+            continue;
+        }
+        let x = data.xmat()[b];
+        let (p, a) = (model.jnt_pos()[j], model.jnt_axis()[j]);
+        let anchor_z = data.xpos()[b][2] + x[6] * p[0] + x[7] * p[1] + x[8] * p[2];
+        let norm = (a[0] * a[0] + a[1] * a[1] + a[2] * a[2]).sqrt().max(1e-12);
+        let axis_z = (x[6] * a[0] + x[7] * a[1] + x[8] * a[2]) / norm;
+        let load = if on_leg[b] {
+            mass * g / feet.len() as f64 * (com_z - anchor_z)
+        } else {
+            model.body_subtreemass()[b] * g * (data.subtree_com()[b][2] - anchor_z)
+        };
+        out[model.jnt_dofadr()[j] as usize] = load.max(0.0) * (1.0 - axis_z * axis_z);
+    }
+    out
 }
 
 impl Controller for PdHold {
@@ -350,7 +456,7 @@ mod tests {
         let (qvel, _) = hold_run(&model, &mut uncapped, 200);
         assert!(qvel > 1e3, "without the cap the explicit loop diverges (max |q̇| {qvel})");
         let mut capped = PdHold::new(&model, PdHoldOptions::default());
-        assert!(capped.stability_scale(&model).is_none(), "the built gains meet the margin already");
+        assert!(capped.stability_scales(&model).is_none(), "the built gains meet the margin already");
         let kp_ratio = capped.loops()[0].kp / uncapped.loops()[0].kp;
         assert!(kp_ratio < 1e-2, "kp scaled by {kp_ratio}");
         let (qvel, errors) = hold_run(&model, &mut capped, 1000);

@@ -777,9 +777,33 @@ impl Body {
             let g = lowest_by_body[foot].map(|(_, g)| g).ok_or_else(|| {
                 walk_err(format!("foot \"{}\" has no collision geometry (its sole)", model.name(ObjType::Body, foot)))
             })?;
+            // The sole: every collision geom of the foot whose bottom is within 1 cm of its
+            // lowest (a box; or the four small spheres at the corners of the G1's soles, whose
+            // contact points span it), as the rectangle around their footprints; one geom
+            // alone, its own bottom.
             let (bottom_z, half) = geom_bottom(model, &frames, g);
             let foot_rot = frames.xrot[foot];
-            let centre_world = Vector3::new(frames.geom_center(model, g).x, frames.geom_center(model, g).y, bottom_z);
+            let soles: Vec<usize> = (0..model.ngeom())
+                .filter(|&k| model.geom_bodyid()[k] as usize == foot && collides(k))
+                .filter(|&k| geom_bottom(model, &frames, k).0 <= bottom_z + 0.01)
+                .collect();
+            let (centre_world, half) = if soles.len() <= 1 {
+                (Vector3::new(frames.geom_center(model, g).x, frames.geom_center(model, g).y, bottom_z), half)
+            } else {
+                let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+                for &k in &soles {
+                    // A sphere touches at the point under its centre.
+                    let sphere = model.geom_type()[k] as u32 == mujoco_sys::mjtGeom_mjGEOM_SPHERE;
+                    let h = if sphere { [0.0; 2] } else { geom_bottom(model, &frames, k).1 };
+                    let c = frames.geom_center(model, k);
+                    for a in 0..2 {
+                        lo[a] = lo[a].min(c[a] - h[a]);
+                        hi[a] = hi[a].max(c[a] + h[a]);
+                    }
+                }
+                let centre = Vector3::new((lo[0] + hi[0]) / 2.0, (lo[1] + hi[1]) / 2.0, bottom_z);
+                (centre, [(hi[0] - lo[0]) / 2.0, (hi[1] - lo[1]) / 2.0])
+            };
             let sole_in_foot = foot_rot.inverse() * (centre_world - frames.xpos[foot]);
             Ok(Leg {
                 side,

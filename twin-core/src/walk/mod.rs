@@ -35,6 +35,7 @@
 //! Legs, feet (the lowest collision bodies), pelvis (the free joint's body) and IMU are found in
 //! the model; [`kin::BodyNames`] overrides them.
 
+pub mod derive;
 pub mod hip;
 pub mod kin;
 pub mod metrics;
@@ -42,6 +43,7 @@ pub mod plan;
 pub mod preview;
 pub mod steer;
 
+pub use derive::Proportions;
 pub use kin::{BodyNames, Side};
 pub use metrics::{GaitMetrics, GaitSummary, GaitTargets, SegmentTracking};
 pub use plan::Command;
