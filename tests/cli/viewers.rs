@@ -12,8 +12,15 @@ use std::sync::mpsc;
 use std::time::Duration;
 
 /// The npm packages of the client, installed once under the target folder (a missing npm or
-/// registry fails the test).
+/// registry fails the test). The tests of this file run in parallel threads of one process:
+/// the `OnceLock` makes the second caller wait for the first install instead of running a
+/// second `npm install` into the same folder (which removed the first one's packages under it).
 fn node_modules() -> PathBuf {
+    static MODULES: std::sync::OnceLock<PathBuf> = std::sync::OnceLock::new();
+    MODULES.get_or_init(install_node_modules).clone()
+}
+
+fn install_node_modules() -> PathBuf {
     let dir = PathBuf::from(env!("CARGO_TARGET_TMPDIR")).join("foxglove-node");
     let marker = dir.join("node_modules/@foxglove/rosmsg2-serialization/package.json");
     if !marker.is_file() {
