@@ -242,6 +242,21 @@ fn run_one(
         None => Robot::load(&model_path)?,
     };
     let model = robot.model.clone();
+    let controller =
+        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    // The walker's options for this robot, derived once from the nominal model (every episode's
+    // walker gets the same): a scenario's, or with none the defaults.
+    let scenario = match scenario {
+        Some(mut s) if controller == "walk" => {
+            s.controller = controller.clone();
+            s.fit_walk(&model)?;
+            Some(s)
+        }
+        s => s,
+    };
+    let walk_alone = (controller == "walk" && scenario.is_none())
+        .then(|| twin_core::walk::WalkOptions::default().for_robot(&model, &|_| false))
+        .transpose()?;
     // Without --config, a scenario's own spec (e.g. the grasp scenario's cup and camera draws).
     let config = args.config.clone().or_else(|| scenario.as_ref().and_then(|s| s.randomize.clone()));
     let mut spec = match &config {
@@ -283,8 +298,6 @@ fn run_one(
             skipped.join(", ")
         );
     }
-    let controller =
-        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
     let external = controller == twin_core::scenario::EXTERNAL_CONTROLLER;
     let options = EpisodeOptions {
         duration_secs: duration,
@@ -299,6 +312,11 @@ fn run_one(
     // The nominal robot, for `twin log analyze` of the worst episodes' recordings.
     let nominal = (args.record_worst > 0).then(|| robot.clone());
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
+    if let Some(walk) = walk_alone {
+        batch = batch.with_controller(move |r| {
+            Ok(Box::new(twin_core::walk::Walker::new(&r.model, walk.clone())?) as Box<dyn twin_core::control::Controller>)
+        })?;
+    }
     if let Some(mut s) = scenario {
         // The scenario's walker (its options, the --controller override) on each worker, its
         // checks, and its scripted pushes besides the spec's random ones.

@@ -172,8 +172,9 @@ pub enum InterfaceKind {
 /// `twin sim`, step by step: what to run ([`Plan`]), the robot, the controller, the outputs
 /// (recording and the live bridge), the run, the report, the verdicts.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let plan = Plan::of(&args)?;
+    let mut plan = Plan::of(&args)?;
     let (robot, mut stribeck) = load_robot(&args, &plan)?;
+    plan.fit_walk(&robot.model)?;
     // A scenario's own ROS 2 node (`controller = "ros"`): started, driven in lockstep, stopped.
     let external = plan.scenario.as_ref().filter(|s| s.is_external() && plan.controller == "ros");
     let (mut controller, mut health) = match external {
@@ -371,6 +372,22 @@ impl Plan {
         // --seed wins over the scenario's.
         let seed = args.seed.or(scenario.as_ref().map(|s| s.seed)).unwrap_or(0);
         Ok(Plan { scenario, controller, controller_options, duration_secs, seed, model_path, state_rate_hz })
+    }
+}
+
+impl Plan {
+    /// The walker's options for the robot it drives: what the scenario and the command line
+    /// leave unset derived from the robot ([`Scenario::fit_walk`]).
+    fn fit_walk(&mut self, model: &twin_core::mj::Model) -> anyhow::Result<()> {
+        if self.controller != "walk" {
+            return Ok(());
+        }
+        if let Some(s) = self.scenario.as_mut() {
+            s.controller = self.controller.clone();
+            s.fit_walk(model)?;
+            self.controller_options.walk = s.walk.clone();
+        }
+        Ok(())
     }
 }
 

@@ -113,6 +113,9 @@ fn default_scenarios(dir: &Path) -> anyhow::Result<Vec<PathBuf>> {
 fn batch(scenario: &Scenario, spec: Option<&Spec>, seed: u64, logs: &Path) -> anyhow::Result<(Batch, Spec)> {
     let model_path = scenario.model.clone().unwrap_or_else(super::default_model);
     let robot = scenario.robot(&model_path)?;
+    let mut scenario = scenario.clone();
+    scenario.fit_walk(&robot.model)?;
+    let scenario = &scenario;
     let (spec, layout) = match spec {
         Some(spec) => {
             let layout = Layout::new(spec, &robot.model)?;

@@ -178,6 +178,9 @@ pub struct Scenario {
     pub friction: Option<f64>,
     /// Walking options.
     pub walk: WalkOptions,
+    /// The `[walk]` keys the file (or the command line) gave: [`Scenario::fit_walk`] derives
+    /// the others from the robot.
+    pub walk_given: std::collections::BTreeSet<String>,
     /// Pushes.
     pub pushes: Vec<Push>,
     /// Checks.
@@ -262,6 +265,7 @@ impl Scenario {
             armature: WALK_ARMATURE,
             friction: None,
             walk: WalkOptions::default(),
+            walk_given: Default::default(),
             pushes: Vec::new(),
             checks: Checks::default(),
             world: None,
@@ -382,6 +386,11 @@ impl Scenario {
                 });
             }
         }
+        // The `[walk]` keys written (parsed once more as a plain table: serde's defaults hide them).
+        let walk_given = toml::from_str::<toml::Table>(text)
+            .ok()
+            .and_then(|t| t.get("walk").and_then(|w| w.as_table()).map(|w| w.keys().cloned().collect()))
+            .unwrap_or_default();
         let resolve = |m: PathBuf| if m.is_absolute() { m } else { path.parent().unwrap_or(Path::new(".")).join(m) };
         let model = file.model.map(resolve);
         let world = file.world.map(resolve);
@@ -395,6 +404,7 @@ impl Scenario {
             armature: file.armature.unwrap_or(WALK_ARMATURE),
             friction: file.friction,
             walk: file.walk,
+            walk_given,
             pushes: file.push,
             checks: file.checks,
             world,
@@ -490,6 +500,25 @@ impl Scenario {
             }
         }
         Ok(robot)
+    }
+
+    /// The walking options for the robot `model` ([`WalkOptions::for_robot`]): every option the
+    /// robot's proportions give ([`crate::walk::derive::DERIVED`]) that the scenario (or the
+    /// command line, through [`Scenario::walk_given`]) does not set is derived from it, and
+    /// counts as given from then on (a second call changes nothing). For the shipped humanoid
+    /// they are the defaults. Only a walking scenario (`controller = "walk"`) is fitted.
+    ///
+    /// # Errors
+    /// [`Error::Walk`] when the walker can't drive the model: no two legs with feet, or steps
+    /// the legs can't reach (the message says what to change).
+    pub fn fit_walk(&mut self, model: &Model) -> Result<()> {
+        if self.controller != "walk" {
+            return Ok(());
+        }
+        let given = self.walk_given.clone();
+        self.walk = self.walk.for_robot(model, &|key| given.contains(key))?;
+        self.walk_given.extend(crate::walk::derive::DERIVED.iter().map(|k| k.to_string()));
+        Ok(())
     }
 
     /// The scenario's controller for `model`, from twin's registry
