@@ -384,8 +384,14 @@ impl Plan {
         }
         if let Some(s) = self.scenario.as_mut() {
             s.controller = self.controller.clone();
+            let before = s.walk.clone();
             s.fit_walk(model)?;
             self.controller_options.walk = s.walk.clone();
+            // Say what was derived for this robot (nothing for the shipped humanoid).
+            let changed = s.walk.changes_from(&before);
+            if !changed.is_empty() {
+                eprintln!("walker options derived from the robot: {}", changed.join(", "));
+            }
         }
         Ok(())
     }

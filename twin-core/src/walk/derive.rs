@@ -154,6 +154,17 @@ impl WalkOptions {
         }
         Ok(o)
     }
+
+    /// The options that differ from `before`, as `name = value` (TOML), in field order: what
+    /// [`WalkOptions::for_robot`] changed.
+    pub fn changes_from(&self, before: &WalkOptions) -> Vec<String> {
+        let (Ok(toml::Value::Table(b)), Ok(toml::Value::Table(a))) =
+            (toml::Value::try_from(before), toml::Value::try_from(self))
+        else {
+            return Vec::new();
+        };
+        a.iter().filter(|(k, v)| b.get(*k) != Some(*v)).map(|(k, v)| format!("{k} = {v}")).collect()
+    }
 }
 
 #[cfg(test)]

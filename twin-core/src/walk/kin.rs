@@ -543,6 +543,47 @@ impl Tree {
         self.jnt_body[joint]
     }
 
+    /// The bodies that turn rigidly with `root` about the unit `axis` (world, at `frames`):
+    /// `root` and the bodies below it reached through joints that can't take the turn (hinges
+    /// whose axis is within 45° of perpendicular to `axis`, slides), none below `excluded`
+    /// (e.g. the legs, held by the ground); and their moment of inertia about the line through
+    /// `point` along `axis`, kg·m² (own inertias as in [`Tree::subtree_axis_inertia`]). What a
+    /// torque on `root` meets within one physics step: a joint that can take the turn puts
+    /// what is beyond it behind its spring, which at the step's Nyquist frequency transmits
+    /// next to nothing.
+    pub fn rigid_axis_inertia(
+        &self,
+        model: &Model,
+        frames: &Frames,
+        root: usize,
+        (point, axis): (Vector3<f64>, Vector3<f64>),
+        excluded: &[usize],
+    ) -> (Vec<bool>, f64) {
+        let mut rigid = vec![false; self.parent.len()];
+        let mut inertia = 0.0;
+        // Parents come before children (MuJoCo's numbering).
+        for b in root..self.parent.len() {
+            let with_parent = b == root
+                || (rigid[self.parent[b]]
+                    && !excluded.contains(&b)
+                    && (self.joints[b].0..self.joints[b].1).all(|j| match self.joint[j].kind {
+                        JointType::Hinge => frames.axis[j].dot(&axis).abs() < std::f64::consts::FRAC_1_SQRT_2,
+                        JointType::Slide => true,
+                        _ => false,
+                    }));
+            if !with_parent {
+                continue;
+            }
+            rigid[b] = true;
+            let c = frames.xpos[b] + frames.xrot[b] * self.body_ipos[b];
+            let r = c - point;
+            let perp = r - axis * axis.dot(&r);
+            let principal = model.body_inertia()[b];
+            inertia += self.mass[b] * perp.norm_squared() + (principal[0] + principal[1] + principal[2]) / 3.0;
+        }
+        (rigid, inertia)
+    }
+
     /// Moment of inertia of the subtree below hinge `joint` about its axis at `frames`, kg·m²
     /// (bodies' own inertias approximated as point masses plus their principal moments' mean).
     pub fn subtree_axis_inertia(&self, model: &Model, frames: &Frames, joint: usize) -> f64 {

@@ -733,3 +733,93 @@ fn walks_from_a_raised_start() {
     let below = flat[2] + 0.03 - last[2];
     assert!((0.05..0.085).contains(&below), "base {below} m below its rest height over the platform");
 }
+
+/// Every shipped walking scenario's options come out of [`Scenario::fit_walk`] bit for bit
+/// as written: the shipped humanoid's derived options are its defaults, and what a file sets
+/// stays. (Their results are pinned by the tests above.)
+#[test]
+fn shipped_scenarios_keep_their_options_when_fitted_to_the_humanoid() {
+    let mut files: Vec<PathBuf> = std::fs::read_dir(scenarios())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .filter(|p| p.extension().is_some_and(|e| e == "toml"))
+        .collect();
+    files.sort();
+    let mut fitted = 0;
+    for f in files {
+        let Ok(s) = Scenario::load(&f) else { continue };
+        if s.controller != "walk" {
+            continue;
+        }
+        let robot = s.robot(&humanoid()).unwrap();
+        let mut after = s.clone();
+        after.fit_walk(&robot.model).unwrap();
+        assert_eq!(after.walk, s.walk, "{}", f.display());
+        fitted += 1;
+    }
+    assert!(fitted >= 3, "walking scenarios fitted: {fitted}");
+    // `twin sim --controller walk` without a file: the defaults.
+    let mut s = Scenario::defaults("walk", 1.0);
+    let robot = s.robot(&humanoid()).unwrap();
+    s.fit_walk(&robot.model).unwrap();
+    assert_eq!(s.walk, WalkOptions::default());
+}
+
+fn example_robot(path: &str) -> PathBuf {
+    crate::example_robot_data::example_robot_data().join(path)
+}
+
+/// Another maker's biped gets its walking options from its own proportions, and an option
+/// its scenario sets keeps its value. The Unitree G1's hip pitch joints sit at y = ±0.064452 m
+/// in its URDF (`left_hip_pitch_joint` / `right_hip_pitch_joint` origins): its step width is
+/// that spacing, 0.13 m, not the shipped humanoid's 0.18 m.
+#[test]
+fn another_biped_gets_options_from_its_proportions_and_keeps_the_given_ones() {
+    let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
+    let text = format!("model = {g1:?}\nduration = 1.0\n[walk]\nstep_period = 0.5\n");
+    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
+    let robot = s.robot(&g1).unwrap();
+    s.fit_walk(&robot.model).unwrap();
+    let p = twin_core::walk::Proportions::of(&robot.model, &s.walk.bodies).unwrap();
+    println!("G1 {p:?}\n{:?}", s.walk);
+    assert_eq!(s.walk.step_period, 0.5, "given: kept");
+    assert!((s.walk.step_width - 0.13).abs() < 1e-12, "step width {}", s.walk.step_width);
+    assert!((p.hip_spacing_m - 2.0 * 0.064452).abs() < 1e-3, "hip spacing {}", p.hip_spacing_m);
+    // Lengths scale with the leg length (in 5 % steps), the walking CoM below the standing one.
+    let scale = (p.leg_length_m / twin_core::walk::derive::REFERENCE_LEG_LENGTH_M * 20.0).round() / 20.0;
+    assert!((s.walk.max_step_length - 0.2 * scale).abs() < 1e-12, "{} at scale {scale}", s.walk.max_step_length);
+    assert!(s.walk.com_height < p.com_height_m, "crouch {} below standing {}", s.walk.com_height, p.com_height_m);
+    // A second fit changes nothing; the walker takes the options.
+    let once = s.walk.clone();
+    s.fit_walk(&robot.model).unwrap();
+    assert_eq!(s.walk, once);
+    Walker::new(&robot.model, s.walk.clone()).unwrap();
+}
+
+/// Example-robot-data's Romeo (Aldebaran, 40.5 kg) stands 10 s under the walker with its
+/// derived options and no robot-specific one: it crouches to the derived CoM height and
+/// holds it, upright, without a step.
+#[test]
+fn romeo_stands_ten_seconds_under_the_walker() {
+    let romeo = example_robot("romeo_description/urdf/romeo.urdf");
+    let text = format!("model = {romeo:?}\nduration = 10.0\n[checks]\nfalls = 0\n");
+    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
+    let robot = s.robot(&romeo).unwrap();
+    s.fit_walk(&robot.model).unwrap();
+    let mut controller = s.controller(&robot.model).unwrap();
+    let mut check = s.check(&robot.model).unwrap();
+    let mut last = Last(Vec::new());
+    let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
+    sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut last])
+        .unwrap();
+    let summary = check.metrics.summary();
+    println!("{summary}");
+    assert!(!summary.fell, "{summary}");
+    assert!(check.verdict().passed);
+    let q = &last.0;
+    // Base height: the pelvis above the floor; tilt from its quaternion (w x y z).
+    let (w, x, y) = (q[3], q[4], q[5]);
+    let tilt = 2.0 * ((x * x + y * y).sqrt()).atan2(w.abs());
+    assert!(tilt < 0.1, "tilt {tilt} rad");
+    assert!(q[2] > 0.6, "pelvis height {} m", q[2]);
+}
