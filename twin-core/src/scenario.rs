@@ -9,8 +9,8 @@
 //! armature = 0.01                    # joint armature, kg·m² (default: walk::WALK_ARMATURE)
 //! # friction = 0.8                   # sliding friction of every geom (default: the model's)
 //!
-//! [walk]                             # walk::WalkOptions, by field name
-//! vx = 0.3
+//! [walk]                             # walk::WalkOptions, by field name; the gait options
+//! vx = 0.3                           # not written here come from the robot (walk::derive)
 //! # or a schedule, piecewise constant from each time (s, m/s, m/s, rad/s; walk::steer):
 //! # commands = [[0.0, 0.25, 0.0, 0.0], [5.0, 0.0, 0.0, 0.4], [9.0, 0.0, 0.0, 0.0]]
 //!

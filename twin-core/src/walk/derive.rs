@@ -12,6 +12,11 @@
 //! the crouch from the legs' kinematics). Joint gains come from the one gain rule
 //! ([`crate::control::PdHold`]) on the robot's effort limits. Options a user gives keep their
 //! values.
+//!
+//! Where: [`crate::scenario::Scenario::fit_walk`] derives them once from the nominal model,
+//! for `twin sim --controller walk` (a scenario or the defaults; it prints what it derived),
+//! `twin test` and `twin randomize` (every episode's walker gets the nominal robot's
+//! options); the `[walk]` keys a scenario writes keep their values.
 
 use super::kin::{Body, BodyNames, Tree};
 use super::{WalkOptions, Walker};
@@ -100,6 +105,9 @@ pub const DERIVED: &[&str] = &[
     "preview_horizon",
 ];
 
+/// What [`Walker::new`]'s reach check says when the legs can't reach the longest step.
+const REACH_REFUSAL: &str = "can't reach a step";
+
 /// How far the reach check may lower the walking CoM below the scaled crouch, in steps of
 /// [`CROUCH_STEP`] of the leg length.
 const CROUCH_STEPS: usize = 8;
@@ -147,7 +155,9 @@ impl WalkOptions {
                 o.com_height = crouched - k as f64 * CROUCH_STEP * p.leg_length_m;
                 match Walker::new(model, o.clone()) {
                     Ok(_) => break,
-                    Err(Error::Walk { .. }) if k < CROUCH_STEPS => continue,
+                    // Lower only while the steps are out of reach (a lower crouch needs more
+                    // torque, not less, of actuators too weak to hold it).
+                    Err(Error::Walk { message }) if k < CROUCH_STEPS && message.contains(REACH_REFUSAL) => continue,
                     Err(e) => return Err(e),
                 }
             }

@@ -767,7 +767,9 @@ impl Walker {
         };
         walker.hip = walker.new_hip(model);
         walker.check_reach()?;
+        walker.check_torque_actuators(model)?;
         walker.build_loops(model);
+        walker.check_strength(model)?;
         walker.tilt_rate_gains = walker.stable_tilt_rate_gains(model);
         Ok(walker)
     }
@@ -866,6 +868,88 @@ impl Walker {
         if !self.straight() {
             self.line = None;
         }
+    }
+
+    /// Refuses legs driven by position or velocity servos: the walker commands joint torques
+    /// (PD toward its IK targets plus the feed-forward that holds the weight), which a servo's
+    /// `ctrl` would take as a target angle or speed. Example-robot-data's Talos declares position
+    /// transmissions; converted with torque motors it stands under the walker.
+    fn check_torque_actuators(&self, model: &Model) -> Result<()> {
+        let legs: Vec<usize> = self.body.legs.iter().flat_map(|l| l.joints.iter().copied()).collect();
+        for a in crate::robot::actuators_of(model, &[]) {
+            let Some(joint) = a.joint.filter(|j| legs.contains(j)) else { continue };
+            if a.interface != crate::convert::Interface::Effort {
+                return Err(Error::Walk {
+                    message: format!(
+                        "the leg joint \"{}\" is driven by a {:?} servo (actuator \"{}\"), and the walker \
+                         commands joint torques: convert the URDF with torque motors \
+                         (`twin convert --actuators motor ROBOT.urdf`) and walk the MJCF it writes",
+                        model.name(ObjType::Joint, joint),
+                        format!("{:?}", a.interface).to_lowercase(),
+                        a.name
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Refuses a robot whose leg actuators can't hold its weight in the walking crouch: with
+    /// the CoM at `com_height` over the middle of the feet where they stand in the home pose,
+    /// each sole carrying half the weight at its centre, every leg joint's static torque
+    /// ([`Tree::static_torque`]) must lie within what its actuator gives (its command range
+    /// times its gear). Walking needs more (a whole leg's share in single support, the ankles'
+    /// ZMP work); a robot that can't hold the crouch falls before its first step.
+    fn check_strength(&self, model: &Model) -> Result<()> {
+        let home = self.nominal.clone();
+        let mut frames = self.tree.frames();
+        self.tree.forward(&home, &mut frames);
+        let pelvis = self.body.pelvis;
+        let com = frames.com();
+        let pelvis_pos = frames.xpos[pelvis];
+        let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
+        let mut q = home.clone();
+        for (leg, ik) in self.ik.iter().enumerate() {
+            let sole = self.sole_world(&frames, leg);
+            let rot = self.body.legs[leg].foot_rot_home;
+            let foot = sole - rot * self.body.legs[leg].sole_in_foot;
+            let target = (foot - Vector3::new(pelvis_pos.x, pelvis_pos.y, pelvis_z), rot);
+            let mut ql: Vec<f64> = (0..ik.len()).map(|k| home[ik.qpos_adr(k)]).collect();
+            ik.bend_knee(&mut ql, 0.5);
+            ik.solve(target, &mut ql, 200, 1e-3);
+            for (k, v) in ql.iter().enumerate() {
+                q[ik.qpos_adr(k)] = *v;
+            }
+        }
+        let b = self.body.base_qpos;
+        q[b + 2] += pelvis_z - pelvis_pos.z;
+        let mut crouched = self.tree.frames();
+        self.tree.forward(&q, &mut crouched);
+        let weight = -self.gravity * self.tree.total_mass_kg;
+        let forces: Vec<(usize, Vector3<f64>, Vector3<f64>)> = (0..2)
+            .map(|leg| (self.body.legs[leg].foot, self.sole_world(&crouched, leg), weight / 2.0))
+            .collect();
+        for l in self.loops.iter().filter(|l| l.leg.is_some()) {
+            let needed = self.tree.static_torque(&crouched, l.joint, self.gravity, &forces);
+            let (a, b) = (l.limits[0] * l.gear, l.limits[1] * l.gear);
+            let (lo, hi) = (a.min(b), a.max(b));
+            if needed < lo - 1e-9 || needed > hi + 1e-9 {
+                return Err(Error::Walk {
+                    message: format!(
+                        "the actuator of joint \"{}\" gives {:.1} N·m but holding the robot's {:.1} kg \
+                         on both feet with the CoM at com_height {} m takes {:.1} N·m: raise com_height \
+                         (a straighter leg needs less), or give the joint a stronger actuator (its \
+                         effort limit in the URDF)",
+                        model.name(ObjType::Joint, l.joint),
+                        if needed > 0.0 { hi } else { lo },
+                        self.tree.total_mass_kg,
+                        self.options.com_height,
+                        needed
+                    ),
+                });
+            }
+        }
+        Ok(())
     }
 
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
