@@ -314,7 +314,8 @@ fn run_one(
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(walk) = walk_alone {
         batch = batch.with_controller(move |r| {
-            Ok(Box::new(twin_core::walk::Walker::new(&r.model, walk.clone())?) as Box<dyn twin_core::control::Controller>)
+            Ok(Box::new(twin_core::walk::Walker::new(&r.model, walk.clone())?)
+                as Box<dyn twin_core::control::Controller>)
         })?;
     }
     if let Some(mut s) = scenario {

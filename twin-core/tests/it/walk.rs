@@ -796,15 +796,12 @@ fn another_biped_gets_options_from_its_proportions_and_keeps_the_given_ones() {
     Walker::new(&robot.model, s.walk.clone()).unwrap();
 }
 
-/// Example-robot-data's Romeo (Aldebaran, 40.5 kg) stands 10 s under the walker with its
-/// derived options and no robot-specific one: it crouches to the derived CoM height and
-/// holds it, upright, without a step.
-#[test]
-fn romeo_stands_ten_seconds_under_the_walker() {
-    let romeo = example_robot("romeo_description/urdf/romeo.urdf");
-    let text = format!("model = {romeo:?}\nduration = 10.0\n[checks]\nfalls = 0\n");
+/// `path` stands 10 s under the walker with its derived options and no robot-specific one:
+/// no fall, the pelvis upright (tilt < 0.1 rad) and above `min_height_m`.
+fn stands_ten_seconds_under_the_walker(path: &std::path::Path, min_height_m: f64) {
+    let text = format!("model = {path:?}\nduration = 10.0\n[checks]\nfalls = 0\n");
     let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
-    let robot = s.robot(&romeo).unwrap();
+    let robot = s.robot(path).unwrap();
     s.fit_walk(&robot.model).unwrap();
     let mut controller = s.controller(&robot.model).unwrap();
     let mut check = s.check(&robot.model).unwrap();
@@ -813,13 +810,69 @@ fn romeo_stands_ten_seconds_under_the_walker() {
     sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut last])
         .unwrap();
     let summary = check.metrics.summary();
-    println!("{summary}");
+    println!("{}: {summary}", path.display());
     assert!(!summary.fell, "{summary}");
     assert!(check.verdict().passed);
     let q = &last.0;
-    // Base height: the pelvis above the floor; tilt from its quaternion (w x y z).
-    let (w, x, y) = (q[3], q[4], q[5]);
-    let tilt = 2.0 * ((x * x + y * y).sqrt()).atan2(w.abs());
-    assert!(tilt < 0.1, "tilt {tilt} rad");
-    assert!(q[2] > 0.6, "pelvis height {} m", q[2]);
+    // The free joint first: position, then the quaternion w x y z; tilt = the angle between
+    // the pelvis's z axis and the world's.
+    let (w, x, y, z) = (q[3], q[4], q[5], q[6]);
+    let up_z = 1.0 - 2.0 * (x * x + y * y) / (w * w + x * x + y * y + z * z);
+    let tilt = up_z.clamp(-1.0, 1.0).acos();
+    assert!(tilt < 0.1, "{}: tilt {tilt} rad", path.display());
+    assert!(q[2] > min_height_m, "{}: pelvis height {} m", path.display(), q[2]);
+}
+
+/// Example-robot-data's Romeo (Aldebaran, 40.5 kg) and Unitree G1 (33 kg) stand 10 s under
+/// the walker, crouched to their derived CoM heights. (The G1 did not stand a second before
+/// the torso-tilt rate loop was bounded by its light pelvis: `Walker::stable_tilt_rate_gains`.)
+/// Their pelvises stand 0.79 m (G1) and 0.80 m (Romeo) high in the home pose; crouched, a few
+/// centimetres lower.
+#[test]
+fn romeo_and_g1_stand_ten_seconds_under_the_walker() {
+    stands_ten_seconds_under_the_walker(&example_robot("romeo_description/urdf/romeo.urdf"), 0.6);
+    stands_ten_seconds_under_the_walker(&example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf"), 0.65);
+}
+
+/// The walker refuses what it can't drive, saying what to change, instead of a fall: legs on
+/// position servos (Talos's transmissions), and actuators too weak to hold the crouch (the
+/// shipped humanoid with every effort limit cut to 10 N·m: its knees need 14.8 N·m at the
+/// 0.62-m crouch, half its weight on each foot).
+#[test]
+fn walker_refuses_servo_legs_and_weak_actuators() {
+    let talos = example_robot("talos_data/robots/talos_full_v2.urdf");
+    let robot = twin_core::robot::Robot::load(&talos).unwrap();
+    let e = Walker::new(&robot.model, WalkOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("position servo") && e.contains("--actuators motor"), "{e}");
+    let text = std::fs::read_to_string(humanoid()).unwrap();
+    let weak = with_efforts_of_ten(&text);
+    let dir = std::env::temp_dir().join(format!("twin-weak-{}", std::process::id()));
+    std::fs::create_dir_all(&dir).unwrap();
+    let path = dir.join("weak.urdf");
+    std::fs::write(&path, weak).unwrap();
+    let mut s = Scenario::defaults("walk", 1.0);
+    let robot = s.robot(&path).unwrap();
+    let e = s.fit_walk(&robot.model).unwrap_err().to_string();
+    assert!(e.contains("left_knee_joint") && e.contains("gives -10.0 N·m") && e.contains("raise com_height"), "{e}");
+    std::fs::remove_dir_all(&dir).ok();
+}
+
+/// Every effort limit of a URDF (`effort="…"` and ros2_control's `min`/`max` params) set to 10.
+fn with_efforts_of_ten(text: &str) -> String {
+    let mut out = String::new();
+    for line in text.lines() {
+        let mut l = line.to_string();
+        if let Some(i) = l.find("effort=\"") {
+            let end = l[i + 8..].find('"').map(|e| i + 8 + e).unwrap();
+            l.replace_range(i..=end, "effort=\"10\"");
+        }
+        for (tag, v) in [("<param name=\"min\">", "-10"), ("<param name=\"max\">", "10")] {
+            if let (Some(i), Some(j)) = (l.find(tag), l.find("</param>")) {
+                l.replace_range(i + tag.len()..j, v);
+            }
+        }
+        out.push_str(&l);
+        out.push('\n');
+    }
+    out
 }
