@@ -56,7 +56,8 @@
 //!
 //! Services ([`simulation`]): pause, resume, step, reset and quit through the
 //! `simulation_interfaces` services `/twin/get_simulation_state`, `/twin/set_simulation_state`,
-//! `/twin/step_simulation` and `/twin/reset_simulation`. Requests are taken at each control
+//! `/twin/step_simulation` and `/twin/reset_simulation`, and Gazebo Classic's `std_srvs/srv/Empty`
+//! `/pause_physics`, `/unpause_physics`, `/reset_simulation` and `/reset_world`. Requests are taken at each control
 //! period's start (after its `/clock`), and at every step while paused. While paused the
 //! simulation waits (no steps, no `/clock`); after a resume, real-time pacing starts again
 //! from the current simulated time (no catching up). A reset acts through [`ResetOnRequest`](crate::engine::disturb::ResetOnRequest), the
@@ -99,7 +100,7 @@ use crate::robot::Robot;
 use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
 use crate::walk::{Command as WalkCommand, Walker};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
-use simulation::{Call, Outcome, SimulationServices, result, scope, state};
+use simulation::{Call, Gazebo, Outcome, SimulationServices, result, scope, state};
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -626,6 +627,10 @@ impl LiveController {
             let outcome = self.call(model, t_secs, k, id, call);
             self.stats.service_calls += 1;
             if let Some(outcome) = outcome {
+                // A std_srvs/Empty reply can't say it: a warning does.
+                if simulation::SERVICES[k].1 == simulation::EMPTY && outcome.code != result::OK {
+                    self.warn(format!("{}: not done: {}", simulation::SERVICES[k].0, outcome.message));
+                }
                 let current = if self.paused { state::PAUSED } else { state::PLAYING };
                 if let Err(e) = self.services.answer(k, &id, current, &outcome) {
                     self.warn(e.to_string());
@@ -690,6 +695,24 @@ impl LiveController {
                 Outcome::ok()
             }
             Call::Reset(_) => Outcome::new(result::OK, "twin spawns nothing: nothing to remove"),
+            Call::Gazebo(Gazebo::Pause | Gazebo::Unpause) if self.stepping.is_some() => Outcome::new(
+                result::INCORRECT_STATE,
+                "a StepSimulation is in progress: pause/unpause when it has replied",
+            ),
+            Call::Gazebo(Gazebo::Pause) => {
+                self.paused = true;
+                Outcome::ok()
+            }
+            Call::Gazebo(Gazebo::Unpause) => {
+                if self.paused {
+                    self.resume(t_secs);
+                }
+                Outcome::ok()
+            }
+            Call::Gazebo(Gazebo::ResetSimulation | Gazebo::ResetWorld) => {
+                self.reset(model, t_secs);
+                Outcome::ok()
+            }
         })
     }
 
