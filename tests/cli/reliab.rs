@@ -7,17 +7,22 @@ use std::path::{Path, PathBuf};
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 
-/// Runs `twin args` in `dir`, killing it after `limit`: (status ok, stdout, stderr). Fails the
-/// test when the command does not end in time (a hang).
-fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) {
-    let mut child = twin()
+/// Starts `twin args` in `dir` with stdout and stderr piped.
+fn spawn_in(dir: &Path, args: &[&str]) -> std::process::Child {
+    twin()
         .current_dir(dir)
         .args(args)
         .stdin(Stdio::null())
         .stdout(Stdio::piped())
         .stderr(Stdio::piped())
         .spawn()
-        .expect("twin starts");
+        .expect("twin starts")
+}
+
+/// Runs `twin args` in `dir`, killing it after `limit`: (status ok, stdout, stderr). Fails the
+/// test when the command does not end in time (a hang).
+fn run_in(dir: &Path, args: &[&str], limit: Duration) -> (bool, String, String) {
+    let mut child = spawn_in(dir, args);
     // Drained while it runs: a child blocked on a full pipe would look like a hang.
     let drain = |mut r: Box<dyn std::io::Read + Send>| {
         std::thread::spawn(move || {
@@ -50,6 +55,14 @@ fn refused(dir: &Path, args: &[&str]) -> String {
     let (ok, _, err) = run_in(dir, args, QUICK);
     assert!(!ok, "{args:?} succeeded");
     err
+}
+
+/// Each of `cases` (`twin` arguments), run in `dir`, fails with `needle` in its message.
+fn refused_naming(dir: &Path, cases: &[Vec<&str>], needle: &str) {
+    for args in cases {
+        let err = refused(dir, args);
+        assert!(err.contains(needle), "{args:?}: {err}");
+    }
 }
 
 fn humanoid() -> PathBuf {
@@ -87,10 +100,7 @@ fn fifos_as_inputs_are_refused_without_blocking() {
         vec!["log", "info", "log.mcap"],
         vec!["sysid", "--log", "log.csv", "--update", "m.urdf"],
     ];
-    for args in cases {
-        let err = refused(d, &args);
-        assert!(err.contains("FIFO"), "{args:?}: {err}");
-    }
+    refused_naming(d, &cases, "FIFO");
 }
 
 #[test]
@@ -241,16 +251,14 @@ fn a_urdf_with_a_dtd_is_refused_the_same_way_everywhere() {
     let text = std::fs::read_to_string(humanoid()).unwrap();
     let body = text.trim_start_matches(|c| c != '<').replacen("<?xml version=\"1.0\"?>", "", 1);
     write(d, "dtd.urdf", &format!("<?xml version=\"1.0\"?>\n<!DOCTYPE robot [ <!ENTITY m \"1.0\"> ]>\n{body}"));
-    for args in [
+    let cases = [
         vec!["info", "dtd.urdf"],
         vec!["check", "dtd.urdf"],
         vec!["convert", "dtd.urdf", "-o", "x.xml"],
         vec!["sim", "dtd.urdf", "--duration", "0.01"],
         vec!["randomize", "dtd.urdf", "--episodes", "1", "--duration", "0.01"],
-    ] {
-        let err = refused(d, &args);
-        assert!(err.contains("DOCTYPE"), "{args:?}: {err}");
-    }
+    ];
+    refused_naming(d, &cases, "DOCTYPE");
 }
 
 #[test]
@@ -498,18 +506,6 @@ fn time_jumps_in_a_log_are_reported_not_rendered() {
         assert!(err.contains("clock is broken") && err.contains("31536000."), "{args:?}: {err}");
     }
     assert!(!d.join("jump.rrd").exists() || std::fs::metadata(d.join("jump.rrd")).unwrap().len() < 1 << 20);
-}
-
-/// Starts `twin args` in `dir` with stdout and stderr piped.
-fn spawn_in(dir: &Path, args: &[&str]) -> std::process::Child {
-    twin()
-        .current_dir(dir)
-        .args(args)
-        .stdin(Stdio::null())
-        .stdout(Stdio::piped())
-        .stderr(Stdio::piped())
-        .spawn()
-        .expect("twin starts")
 }
 
 /// Waits (bounded) until `ready` holds, then sends SIGINT to `child` and waits (bounded) for
