@@ -23,16 +23,7 @@ const GYRO_STD: f64 = 0.002;
 
 /// Every message of `file` decoded by the Python readers (the tests' venv, `test_python.rs`).
 fn python_decode(file: &Path) -> Json {
-    let exe = crate::test_python::python();
-    let out = Command::new(&exe).arg(SCRIPT).arg("decode").arg(file).output();
-    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
-    assert!(
-        out.status.success(),
-        "{} {SCRIPT} decode failed:\n{}",
-        exe.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("script prints JSON")
+    crate::test_python::script_json(SCRIPT, &["decode".as_ref(), file.as_os_str()])
 }
 
 /// `rerun rrd verify FILE` with the `rerun` of the tests' venv (rerun-sdk).
