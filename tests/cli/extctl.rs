@@ -227,6 +227,68 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
     assert_none_left(&tag);
 }
 
+/// The number just before `what` in `text` (`(42.1 per period` → 42.1).
+fn number_before(text: &str, what: &str) -> f64 {
+    let end = text.find(what).unwrap_or_else(|| panic!("no {what:?} in {text}"));
+    let start = text[..end].rfind(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(0, |k| k + 1);
+    text[start..end].parse().unwrap_or_else(|e| panic!("{:?} before {what:?}: {e}", &text[start..end]))
+}
+
+/// A node whose thread publishes commands in a wall-time loop as fast as it can, from t = 0.1 s
+/// on, whatever the simulation time: each episode fails as a flood (twin takes one command per
+/// period and counts those still queued at the next period's start), with the topic, the rate
+/// in commands per period and per simulated second, and the limit; the 3 s episodes end early,
+/// the batch ends, and no process is left.
+#[test]
+fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let tag = tag("flood");
+    // A limit below the default (10): the Python flooder's rate per period depends on how
+    // fast the bridge turns periods over (11–18 per period measured here with the default).
+    let bounds = "join_timeout_secs = 30.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5\n\
+                  flood_commands_per_period = 4.0";
+    let s = scenario(dir.path(), "flood.toml", 3.0, &bad(&python, "flood", &tag), bounds);
+    let out = dir.path().join("flood");
+    let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 1);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(secs < 90.0, "{secs} s");
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(column(&csv, "success"), vec!["0"; 2], "{csv}");
+    for line in csv.lines().skip(1) {
+        assert!(line.contains("controller: flood: "), "{line}");
+        assert!(line.contains("most on /humanoid/joint_commands"), "{line}");
+        assert!(
+            line.contains("the limit is 4 per period averaged over 1 s (flood_commands_per_period)"),
+            "{line}"
+        );
+        // The window is 100 periods of 10 ms; the rate is above the limit, and per simulated
+        // second it is 100 times the rate per period.
+        assert!(line.contains("in the last 100 periods before t = "), "{line}");
+        let per_period = number_before(line, " per period, ");
+        let per_sim_sec = number_before(line, " per simulated second");
+        assert!(per_period > 4.0, "{per_period}: {line}");
+        // (Printed to 0.01 per period and 1 per second.)
+        assert!((per_sim_sec - 100.0 * per_period).abs() <= 1.0, "{line}");
+        // Found before the end of the 3 s episode.
+        let t = number_before(line, " s, most on");
+        assert!(t > 0.1 && t < 3.0, "{t}: {line}");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let failures = &summary["summary"]["failures"];
+    assert_eq!(failures[0]["kind"], "controller: flood", "{summary}");
+    assert_eq!(failures[0]["episodes"], 2, "{summary}");
+    assert!(stdout.contains("failed checks: controller: flood ×2"), "{stdout}");
+    let logs: String = std::fs::read_dir(out.join("controller_logs"))
+        .unwrap()
+        .flatten()
+        .map(|e| std::fs::read_to_string(e.path()).unwrap())
+        .collect();
+    assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 2, "{logs}");
+    assert_none_left(&tag);
+}
+
 #[test]
 fn ctrl_c_ends_a_batch_with_its_controllers() {
     let python = python();

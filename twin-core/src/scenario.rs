@@ -52,6 +52,8 @@
 //! [ros]                               # external::RosOptions, by field name
 //! command = "python3 controllers/hold_pose.py --ros-args -p use_sim_time:=true"
 //! period_timeout_secs = 5.0
+//! flood_commands_per_period = 10.0    # commands beyond one per period (averaged over
+//! flood_window_secs = 1.0             #   this much simulated time) that fail the run
 //!
 //! [test]                              # TestOptions: `twin test`
 //! episodes = 20

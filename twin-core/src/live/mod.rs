@@ -37,6 +37,12 @@
 //!    (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it over
 //!    [t_k, t_k + P). A rejected command counts as the period's command (the last good one is
 //!    held), so the run stays deterministic.
+//! 4. **flood**: just before each later period's `/clock`, every command still queued is taken:
+//!    the first stays for that period, the others (commands beyond one per period) are dropped
+//!    and counted; above [`LiveOptions::flood_commands_per_period`] on average over
+//!    [`LiveOptions::flood_window_secs`] the run fails, naming the topic and the rate
+//!    ([`flood`]). A node that sends one command per period has no surplus: the commands
+//!    applied are the same with or without the count.
 //!
 //! In lockstep the state topics come once per period (the CLI sets their rate to the control
 //! rate), stamped t_k and published during period k. A timer-driven node ticks at `/clock` =
@@ -75,6 +81,7 @@
 
 pub mod command;
 pub mod dds;
+pub mod flood;
 pub mod loopback;
 pub mod service;
 pub mod simulation;
@@ -137,6 +144,12 @@ pub struct LiveOptions {
     /// Steering a walker: simulated time without a Twist on `/cmd_vel` after which it stops
     /// and stands, s (default: 0.5, as `diff_drive_controller`'s `cmd_vel_timeout`).
     pub cmd_vel_timeout_secs: f64,
+    /// Lockstep: commands beyond the one each control period uses, averaged over
+    /// [`LiveOptions::flood_window_secs`], above which the run fails as a flood (default: 10;
+    /// a well-behaved node sends none beyond, a timer twice as fast as the control rate one).
+    pub flood_commands_per_period: f64,
+    /// Lockstep: the window of that average, simulated s (default: 1).
+    pub flood_window_secs: f64,
 }
 
 impl Default for LiveOptions {
@@ -151,6 +164,8 @@ impl Default for LiveOptions {
             lockstep_timeout_secs: 10.0,
             join_timeout_secs: 30.0,
             cmd_vel_timeout_secs: 0.5,
+            flood_commands_per_period: 10.0,
+            flood_window_secs: 1.0,
         }
     }
 }
@@ -334,6 +349,13 @@ pub struct LiveController {
     dt_secs: f64,
     /// Simulated time at the end of the step being taken, s.
     step_end_secs: f64,
+    /// Lockstep: the surplus of commands over one per period ([`flood`]).
+    flood: flood::FloodWatch,
+    /// Lockstep: the command kept for the next period when the surplus was taken (its input
+    /// topic index and bytes).
+    held: Option<(usize, RawCdr)>,
+    /// Why the run failed as a flood, if it did.
+    flooded: Option<String>,
 }
 
 /// Topic of the commands (`/<robot>/joint_commands`).
@@ -380,6 +402,19 @@ pub fn start(
     {
         return Err(Error::Live {
             message: format!("real-time factor must be positive (got {f}); use max for no pacing"),
+        });
+    }
+    if !(options.flood_commands_per_period >= 0.0 && options.flood_commands_per_period.is_finite()) {
+        return Err(Error::Live {
+            message: format!(
+                "flood limit must be a number of commands per period ≥ 0 (got {})",
+                options.flood_commands_per_period
+            ),
+        });
+    }
+    if !(options.flood_window_secs > 0.0 && options.flood_window_secs.is_finite()) {
+        return Err(Error::Live {
+            message: format!("flood window must be a positive number of seconds (got {})", options.flood_window_secs),
         });
     }
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
@@ -472,6 +507,13 @@ pub fn start(
         quit: false,
         dt_secs: dt,
         step_end_secs: 0.0,
+        flood: flood::FloodWatch::new(
+            options.flood_commands_per_period,
+            options.flood_window_secs,
+            steps_per_period as f64 * dt,
+        ),
+        held: None,
+        flooded: None,
     };
     Ok((sink, controller))
 }
@@ -880,9 +922,67 @@ impl LiveController {
         }
     }
 
+    /// Lockstep, just before a period's `/clock`: takes every queued command, keeps the first
+    /// (in [`LiveController::take_one`]'s order) for the period that `/clock` opens, drops
+    /// the others (the surplus) and counts them ([`flood`]). A flood fails the run.
+    fn take_surplus(&mut self, t_secs: f64) -> Result<()> {
+        const ORDER: [usize; flood::INPUTS] = [TRAJECTORY, BY_NAME, COMMANDS, CMD_VEL];
+        let mut surplus = [0u64; flood::INPUTS];
+        for (slot, input) in ORDER.into_iter().enumerate() {
+            loop {
+                let reader = match input {
+                    TRAJECTORY => &mut self.trajectories,
+                    BY_NAME => &mut self.by_name,
+                    COMMANDS => &mut self.commands,
+                    _ => &mut self.twist,
+                };
+                let Ok(Some(sample)) = reader.take_next_sample() else { break };
+                if self.held.is_none() {
+                    self.held = Some((input, sample.into_value()));
+                } else {
+                    surplus[slot] += 1;
+                }
+            }
+        }
+        let Some(f) = self.flood.push(surplus) else { return Ok(()) };
+        let topic = match ORDER[f.input] {
+            TRAJECTORY => self.trajectory_topic.clone(),
+            BY_NAME => self.by_name_topic.clone(),
+            COMMANDS => self.command_topic.clone(),
+            _ => crate::topics::CMD_VEL_TOPIC.to_string(),
+        };
+        let why = format!(
+            "{} commands beyond one per control period in the last {} periods before t = {t_secs:.3} s, most on {topic} \
+             ({:.2} per period, {:.0} per simulated second); the limit is {} per period averaged over {} s \
+             (flood_commands_per_period); is the controller publishing on a wall-time loop instead of once per /clock period?",
+            f.surplus,
+            f.window_periods,
+            f.per_period,
+            f.per_sim_sec,
+            self.options.flood_commands_per_period,
+            self.options.flood_window_secs
+        );
+        self.flooded = Some(why.clone());
+        Err(Error::Live { message: format!("lockstep: the controller floods: {why}") })
+    }
+
+    /// Why the run failed as a flood of commands ([`flood`]), if it did.
+    pub fn flood(&self) -> Option<&str> {
+        self.flooded.as_deref()
+    }
+
     /// Takes the next command of any kind, if one is queued; whether one was.
     fn take_one(&mut self, t_nanos: u64) -> bool {
-        if let Ok(Some(s)) = self.trajectories.take_next_sample() {
+        if let Some((input, raw)) = self.held.take() {
+            match input {
+                TRAJECTORY => self.take_trajectory(raw, t_nanos),
+                BY_NAME => self.take_by_name(raw, t_nanos),
+                COMMANDS => {
+                    self.take_command(raw, t_nanos);
+                }
+                _ => self.take_twist(raw, t_nanos),
+            }
+        } else if let Ok(Some(s)) = self.trajectories.take_next_sample() {
             self.take_trajectory(s.into_value(), t_nanos);
         } else if let Ok(Some(s)) = self.by_name.take_next_sample() {
             self.take_by_name(s.into_value(), t_nanos);
@@ -1042,6 +1142,10 @@ impl LiveController {
                 self.stats.jitter_micros.push(late.as_secs_f64() * 1e6);
             }
         }
+        // Lockstep: the surplus over one command per period, before the period opens.
+        if !first && self.options.pacing == Pacing::Lockstep {
+            self.take_surplus(t_secs)?;
+        }
         // /clock first: the state stamped before t is already out.
         if !first || self.options.pacing != Pacing::Lockstep {
             self.publish_clock(t_nanos);
@@ -1082,6 +1186,8 @@ impl Controller for LiveController {
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         self.commander = Commander::new(model, self.options.command_interface);
         self.step = 0;
+        self.flood.reset();
+        self.flooded = None;
         if let Some(w) = self.walker.as_mut() {
             w.reset(model, observation)?;
         }
@@ -1230,6 +1336,7 @@ impl LiveController {
     /// Drops every command waiting in the readers (a new episode must not start on a command
     /// meant for the last one).
     pub fn discard_pending(&mut self) {
+        self.held = None;
         while let Ok(Some(_)) = self.commands.take_next_sample() {}
         while let Ok(Some(_)) = self.trajectories.take_next_sample() {}
         while let Ok(Some(_)) = self.by_name.take_next_sample() {}
