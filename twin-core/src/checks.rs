@@ -174,36 +174,47 @@ impl Threshold {
     }
 }
 
+/// The thresholds a set of checks names, in the order they are added: a check the scenario
+/// leaves out (`None`) adds nothing.
+#[derive(Debug, Default)]
+pub struct Thresholds(pub Vec<Threshold>);
+
+impl Thresholds {
+    /// [`Threshold::at_most`] when `threshold` is set.
+    pub fn at_most(&mut self, name: &'static str, value: f64, threshold: Option<f64>) {
+        if let Some(t) = threshold {
+            self.0.push(Threshold::at_most(name, value, t));
+        }
+    }
+
+    /// [`Threshold::at_least`] when `threshold` is set.
+    pub fn at_least(&mut self, name: &'static str, value: f64, threshold: Option<f64>) {
+        if let Some(t) = threshold {
+            self.0.push(Threshold::at_least(name, value, t));
+        }
+    }
+}
+
 impl Checks {
     /// Each threshold present against `summary`; a fall fails every non-empty set of checks.
     pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Threshold> {
         let c = self;
-        let mut out = Vec::new();
-        let mut at_most = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Threshold::at_most(name, value, t));
-            }
-        };
-        at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
-        at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
-        at_most("max_distance", summary.distance_m, c.max_distance);
-        at_most("max_slip", summary.slip_max_m, c.max_slip);
-        at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
-        at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
-        at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
-        at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
-        let mut at_least = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Threshold::at_least(name, value, t));
-            }
-        };
-        at_least("min_forward", summary.forward_m, c.min_forward);
-        at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
-        at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
+        let mut out = Thresholds::default();
+        out.at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
+        out.at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
+        out.at_most("max_distance", summary.distance_m, c.max_distance);
+        out.at_most("max_slip", summary.slip_max_m, c.max_slip);
+        out.at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
+        out.at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
+        out.at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
+        out.at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
+        out.at_least("min_forward", summary.forward_m, c.min_forward);
+        out.at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
+        out.at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
         if let Some(t) = c.min_turn_deg {
             let sign = if t < 0.0 { -1.0 } else { 1.0 };
             let turned = summary.yaw_change_rad.to_degrees();
-            out.push(Threshold {
+            out.0.push(Threshold {
                 name: "min_turn_deg",
                 value: turned,
                 op: ">=",
@@ -212,9 +223,9 @@ impl Checks {
             });
         }
         // A fall fails every run that has checks, whether or not `falls` is among them.
-        if summary.fell && c.falls.is_none() && !out.is_empty() {
-            out.push(Threshold::at_most("falls", 1.0, 0.0));
+        if summary.fell && c.falls.is_none() && !out.0.is_empty() {
+            out.0.push(Threshold::at_most("falls", 1.0, 0.0));
         }
-        out
+        out.0
     }
 }

@@ -3,7 +3,7 @@
 //! held.
 
 use super::arm::below;
-use crate::checks::{Checks, Threshold};
+use crate::checks::{Checks, Threshold, Thresholds};
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
@@ -110,28 +110,18 @@ impl GraspCheck {
     pub fn verdicts(&self) -> Vec<Threshold> {
         let c = &self.checks;
         let m = &self.m;
-        let mut out = Vec::new();
-        let mut at_most = |name: &'static str, value: f64, t: Option<f64>| {
-            if let Some(t) = t {
-                out.push(Threshold::at_most(name, value, t));
-            }
-        };
-        at_most("max_grip_force_n", m.max_grip_force_n, c.max_grip_force_n);
-        at_most("max_slip_m", m.slip_m, c.max_slip_m);
-        at_most("max_tilt_deg", m.tilt_deg, c.max_tilt_deg);
-        let mut at_least = |name: &'static str, value: f64, t: Option<f64>| {
-            if let Some(t) = t {
-                out.push(Threshold::at_least(name, value, t));
-            }
-        };
-        at_least("min_clearance_m", m.min_clearance_m, c.min_clearance_m);
-        at_least("min_grip_force_n", m.hold_grip_force_n, c.min_grip_force_n);
-        at_least("min_com_margin_m", m.min_com_margin_m, c.min_com_margin_m);
+        let mut out = Thresholds::default();
+        out.at_most("max_grip_force_n", m.max_grip_force_n, c.max_grip_force_n);
+        out.at_most("max_slip_m", m.slip_m, c.max_slip_m);
+        out.at_most("max_tilt_deg", m.tilt_deg, c.max_tilt_deg);
+        out.at_least("min_clearance_m", m.min_clearance_m, c.min_clearance_m);
+        out.at_least("min_grip_force_n", m.hold_grip_force_n, c.min_grip_force_n);
+        out.at_least("min_com_margin_m", m.min_com_margin_m, c.min_com_margin_m);
         if c.min_lift_m.is_some() || c.min_hold_secs.is_some() {
-            at_least("min_lift_m", m.final_lift_m, c.min_lift_m);
-            at_least("min_hold_secs", m.held_secs, Some(c.min_hold_secs.unwrap_or(2.0)));
+            out.at_least("min_lift_m", m.final_lift_m, c.min_lift_m);
+            out.at_least("min_hold_secs", m.held_secs, Some(c.min_hold_secs.unwrap_or(2.0)));
         }
-        out
+        out.0
     }
 
     fn bind(&mut self, model: &Model) -> Result<()> {
