@@ -109,14 +109,11 @@ impl Checks {
         let unknown = summary.joints.is_empty();
         let (rms, max) = if unknown { (f64::NAN, f64::NAN) } else { (summary.rms(), summary.max()) };
         let fraction = if summary.sim_secs > 0.0 { summary.saturated_secs / summary.sim_secs } else { 0.0 };
-        [
-            ("max_tracking_rms_rad", rms, self.max_tracking_rms_rad),
-            ("max_tracking_error_rad", max, self.max_tracking_error_rad),
-            ("max_saturated_fraction", fraction, self.max_saturated_fraction),
-        ]
-        .into_iter()
-        .filter_map(|(name, value, t)| t.map(|t| Threshold::at_most(name, value, t)))
-        .collect()
+        let mut out = Thresholds::default();
+        out.at_most("max_tracking_rms_rad", rms, self.max_tracking_rms_rad);
+        out.at_most("max_tracking_error_rad", max, self.max_tracking_error_rad);
+        out.at_most("max_saturated_fraction", fraction, self.max_saturated_fraction);
+        out.0
     }
 
     /// Whether any grasp threshold is set (the grasp check then runs).
