@@ -3,7 +3,7 @@
 
 use super::common::{assert_untouched, output_of, repo_root, twin, write};
 use std::os::unix::fs::{MetadataExt, PermissionsExt};
-use std::path::{Path, PathBuf};
+use std::path::Path;
 use std::process::Stdio;
 use std::time::{Duration, Instant};
 

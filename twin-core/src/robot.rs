@@ -412,20 +412,6 @@ pub fn end_effectors(model: &Model) -> Vec<usize> {
     (1..model.nbody()).filter(|&b| !has_child[b] && has_geom[b]).collect()
 }
 
-/// Whether body `b` is `root` or inside its subtree.
-pub fn in_subtree(model: &Model, root: usize, mut b: usize) -> bool {
-    let parent = model.body_parentid();
-    loop {
-        if b == root {
-            return true;
-        }
-        if b == 0 {
-            return false;
-        }
-        b = parent[b] as usize;
-    }
-}
-
 /// Where a command goes: `ctrl` when the model has actuators, else `qfrc_applied`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Actuation {

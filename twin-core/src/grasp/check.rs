@@ -2,7 +2,6 @@
 //! reach without collision, grip force within bounds, no slip in the hand, balance, lifted and
 //! held.
 
-use super::arm::below;
 use crate::checks::{Checks, Threshold, Thresholds};
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
@@ -143,7 +142,7 @@ impl GraspCheck {
         let parent = model.body_parentid();
         for (k, &g) in ids.iter().enumerate() {
             let hand = parent[g] as usize;
-            let gripper_bodies: Vec<usize> = (0..model.nbody()).filter(|&b| below(model, hand, b)).collect();
+            let gripper_bodies = model.subtree(hand);
             let mut fingers: Vec<usize> = (0..model.njnt())
                 .filter(|&j| model.joint_type(j) == crate::mj::JointType::Slide)
                 .map(|j| model.jnt_bodyid()[j] as usize)
@@ -181,7 +180,7 @@ impl GraspCheck {
                 })
                 .unwrap_or(self.robot_root);
             let top = up.iter().copied().take_while(|&x| x != trunk).last().unwrap_or(hand);
-            let arm_bodies: Vec<usize> = (0..model.nbody()).filter(|&x| below(model, top, x)).collect();
+            let arm_bodies = model.subtree(top);
             self.grippers.push(GripperSet {
                 grasp_body: g,
                 fingers: [fingers[0], fingers[1]],
@@ -191,7 +190,7 @@ impl GraspCheck {
         }
         // Watched pairs: each arm's geoms against every other robot geom outside that arm,
         // except the trunk body the arm hangs from (its shoulder joint sits on it).
-        let robot: Vec<usize> = (0..model.nbody()).filter(|&b| below(model, self.robot_root, b)).collect();
+        let robot = model.subtree(self.robot_root);
         let mut pairs = Vec::new();
         for (k, gs) in self.grippers.iter().enumerate() {
             let top = *gs.arm_bodies.iter().min().unwrap_or(&0);
@@ -298,7 +297,7 @@ impl Observer for GraspCheck {
         let data = step.data;
         let model = data.model().clone();
         let body_of = |g: i32| if g < 0 { 0 } else { model.geom_bodyid()[g as usize] as usize };
-        let is_robot = |b: usize| b != 0 && below(&model, self.robot_root, b);
+        let is_robot = |b: usize| b != 0 && model.in_subtree(self.robot_root, b);
         // Contacts: forbidden ones, finger forces, the support polygon.
         let mut finger_force = vec![[0.0f64; 2]; self.grippers.len()];
         let mut support = Vec::new();
