@@ -902,7 +902,7 @@ impl Walker {
             if a.interface != crate::convert::Interface::Effort {
                 return Err(Error::Walk {
                     message: format!(
-                        "the leg joint \"{}\" is driven by a {:?} servo (actuator \"{}\"), and the walker \
+                        "the leg joint \"{}\" is driven by a {} servo (actuator \"{}\"), and the walker \
                          commands joint torques: convert the URDF with torque motors \
                          (`twin convert --actuators motor ROBOT.urdf`) and walk the MJCF it writes",
                         model.name(ObjType::Joint, joint),
