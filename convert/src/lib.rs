@@ -302,13 +302,7 @@ pub fn convert_urdf_str<C: Compiler>(
     if let Some(w) = &world {
         notes.extend(w.notes.iter().cloned());
     }
-    Ok(ConvertedModel {
-        meta: conv.meta(),
-        mjcf,
-        base_height_m,
-        notes,
-        converted_meshes: conv.converted,
-    })
+    Ok(ConvertedModel { meta: conv.meta(), mjcf, base_height_m, notes, converted_meshes: conv.converted })
 }
 
 /// Deepest element nesting MuJoCo's XML parser (tinyxml2, `TINYXML2_MAX_ELEMENT_DEPTH`)

@@ -360,7 +360,13 @@ fn heightmap_of<'a, 'input>(node: roxmltree::Node<'a, 'input>) -> Option<roxmltr
 
 /// The file a `<uri>` names (`file://` or a plain path, relative to the world file); a `model://`
 /// URI or a missing file is an error at `node` naming the `what` and asking for `wanted`.
-fn world_file(ctx: &Ctx<'_, '_>, node: roxmltree::Node<'_, '_>, uri: &str, what: &str, wanted: &str) -> Result<PathBuf> {
+fn world_file(
+    ctx: &Ctx<'_, '_>,
+    node: roxmltree::Node<'_, '_>,
+    uri: &str,
+    what: &str,
+    wanted: &str,
+) -> Result<PathBuf> {
     let file = uri.strip_prefix("file://").unwrap_or(uri);
     let p = ctx.path.parent().unwrap_or(Path::new(".")).join(file);
     if uri.starts_with("model://") || !p.is_file() {

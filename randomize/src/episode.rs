@@ -498,7 +498,8 @@ impl Worker {
             },
             command_scale: draw.command_scale,
         };
-        let mut push = draw.push_interval_secs.map(|every| Push::new(every, draw.push_speed_mps, batch.layout.push_body));
+        let mut push =
+            draw.push_interval_secs.map(|every| Push::new(every, draw.push_speed_mps, batch.layout.push_body));
         let mut scripted = batch.disturbances.as_ref().map_or_else(Vec::new, |f| f(&model));
         let mut disturbances: Vec<&mut dyn Disturbance> = Vec::new();
         if let Some(p) = push.as_mut() {

@@ -231,11 +231,8 @@ fn sim_and_view_refuse_folders_devices_and_inputs_as_outputs() {
 #[test]
 fn sim_refuses_unknown_topics() {
     let dir = tempfile::tempdir().unwrap();
-    let (ok, _, err) = run_in(
-        dir.path(),
-        &["sim", HUMANOID, "--duration", "0.01", "--record", "r.mcap", "--topics", "/nope"],
-        QUICK,
-    );
+    let (ok, _, err) =
+        run_in(dir.path(), &["sim", HUMANOID, "--duration", "0.01", "--record", "r.mcap", "--topics", "/nope"], QUICK);
     assert!(!ok, "{err}");
     assert!(err.contains("/nope") && err.contains("/joint_states"), "{err}");
     assert!(!dir.path().join("r.mcap").exists(), "no file is created");

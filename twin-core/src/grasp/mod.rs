@@ -372,7 +372,6 @@ impl Grasper {
         arm::solve(scratch, &self.arms[a], target, q, iterations, 0.05)
     }
 
-
     /// The plan for the estimate `cup`, or why the cup can't be grasped.
     fn plan(&mut self, qpos: &[f64], cup: &CupSighting) -> std::result::Result<Plan, String> {
         let grasp = Vector3::new(cup.centre_world.x, cup.centre_world.y, cup.table_height_m + cup.height_m / 2.0);
