@@ -3,9 +3,13 @@
 //!
 //! Data flows from the run's measurements to lines of PASS/FAIL: the gait summary
 //! ([`GaitSummary`]) through [`Checks::evaluate`], the grasp measurements through the grasp
-//! check; the scenario gathers both into the run's [`crate::engine::Verdict`]. This module sits
+//! check, the controller's tracking ([`TrackingSummary`]: commanded against actual joint
+//! positions, for any controller that says its position targets) through
+//! [`Checks::evaluate_tracking`]; the scenario gathers them into the run's
+//! [`crate::engine::Verdict`]. This module sits
 //! below both the scenario and the grasp check, so neither imports the other for them.
 
+use crate::tracking::TrackingSummary;
 use crate::walk::GaitSummary;
 
 /// Thresholds on [`GaitSummary`]; each one present is checked.
@@ -57,9 +61,61 @@ pub struct Checks {
     /// Grasp: how long the cup must stay lifted at the end of the run, s (default with
     /// `min_lift_m`: 2).
     pub min_hold_secs: Option<f64>,
+    /// Tracking: largest RMS of commanded − actual position of the worst-tracking joint over
+    /// the run, rad (m for slides). Fails a controller that gives no position targets.
+    pub max_tracking_rms_rad: Option<f64>,
+    /// Tracking: largest |commanded − actual| position of any joint at any step, rad (m).
+    /// Fails a controller that gives no position targets.
+    pub max_tracking_error_rad: Option<f64>,
+    /// Tracking: largest fraction (0–1) of the run's simulated time with some actuator
+    /// command at its limit (saturated).
+    pub max_saturated_fraction: Option<f64>,
 }
 
 impl Checks {
+    /// Whether any tracking threshold is set (the tracking metrics are then measured).
+    pub fn has_tracking(&self) -> bool {
+        self.max_tracking_rms_rad.is_some()
+            || self.max_tracking_error_rad.is_some()
+            || self.max_saturated_fraction.is_some()
+    }
+
+    /// Checks the values of the thresholds that have a range: `Err((key, message))`.
+    ///
+    /// # Errors
+    /// The first key out of range.
+    pub fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
+        for (key, v) in [
+            ("max_tracking_rms_rad", self.max_tracking_rms_rad),
+            ("max_tracking_error_rad", self.max_tracking_error_rad),
+        ] {
+            if let Some(v) = v
+                && !(v >= 0.0 && v.is_finite())
+            {
+                return Err((key, format!("must be a non-negative number of radians (m for slide joints) (got {v})")));
+            }
+        }
+        if let Some(f) = self.max_saturated_fraction
+            && !(0.0..=1.0).contains(&f)
+        {
+            return Err(("max_saturated_fraction", format!("must be a fraction of the run within 0..=1 (got {f})")));
+        }
+        Ok(())
+    }
+
+    /// Each tracking threshold present against `summary`. Without position targets from the
+    /// controller the tracking errors are unknown (NaN) and their thresholds fail.
+    pub fn evaluate_tracking(&self, summary: &TrackingSummary) -> Vec<Threshold> {
+        let unknown = summary.joints.is_empty();
+        let (rms, max) = if unknown { (f64::NAN, f64::NAN) } else { (summary.rms(), summary.max()) };
+        let fraction = if summary.sim_secs > 0.0 { summary.saturated_secs / summary.sim_secs } else { 0.0 };
+        let mut out = Thresholds::default();
+        out.at_most("max_tracking_rms_rad", rms, self.max_tracking_rms_rad);
+        out.at_most("max_tracking_error_rad", max, self.max_tracking_error_rad);
+        out.at_most("max_saturated_fraction", fraction, self.max_saturated_fraction);
+        out.0
+    }
+
     /// Whether any grasp threshold is set (the grasp check then runs).
     pub fn has_grasp(&self) -> bool {
         self.min_clearance_m.is_some()
