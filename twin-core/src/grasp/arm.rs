@@ -223,8 +223,8 @@ fn prioritized(j: &DMatrix<f64>, e: &DVector<f64>, weights: &[f64], rows: usize,
 pub struct Target {
     /// Grasp point, world, m.
     pub position: Vector3<f64>,
-    /// Pitch the approach axis (the grasp frame's −z) down by this much, rad, as a soft task
-    /// (`None`: any approach).
+    /// Pitch the approach axis (the grasp frame's −z) down by this much, rad, with the jaw axis
+    /// level, as soft tasks (`None`: the position alone, any orientation).
     pub approach: Option<f64>,
 }
 
@@ -242,21 +242,6 @@ const W_JAW: f64 = 0.3;
 /// Weight of the approach-direction task.
 const W_APPROACH: f64 = 0.3;
 
-/// [`solve`] for the grasp point's position alone.
-///
-/// # Errors
-/// As [`Data::kinematics_with_velocity`].
-pub(crate) fn solve_position(
-    scratch: &mut Data,
-    arm: &Arm,
-    position: Vector3<f64>,
-    q: &mut [f64],
-    iterations: usize,
-    damping: f64,
-) -> Result<IkResult> {
-    solve_tasks(scratch, arm, &Target { position, approach: None }, q, iterations, damping, false)
-}
-
 /// Damped least squares on MuJoCo's Jacobians (`mj_jac` at the grasp point, rotational
 /// Jacobian for the jaw and approach axes): moves `q` (the arm's joints) towards `target`
 /// on `scratch` (whose other joints stay as they are), `iterations` times, each step at most
@@ -272,18 +257,7 @@ pub(crate) fn solve(
     iterations: usize,
     damping: f64,
 ) -> Result<IkResult> {
-    solve_tasks(scratch, arm, target, q, iterations, damping, true)
-}
-
-fn solve_tasks(
-    scratch: &mut Data,
-    arm: &Arm,
-    target: &Target,
-    q: &mut [f64],
-    iterations: usize,
-    damping: f64,
-    jaw_task: bool,
-) -> Result<IkResult> {
+    let jaw_task = target.approach.is_some();
     let nv = scratch.model().nv();
     let n = arm.joints.len();
     let mut jacp = vec![0.0; 3 * nv];
@@ -394,7 +368,7 @@ mod tests {
             d.qpos_mut().copy_from_slice(&qpos);
             let mut q = arm.q(&qpos);
             let p = Vector3::from(p);
-            solve_position(&mut d, &arm, p, &mut q, 200, 0.05).unwrap();
+            solve(&mut d, &arm, &Target { position: p, approach: None }, &mut q, 200, 0.05).unwrap();
             let r = solve(&mut d, &arm, &Target { position: p, approach: Some(0.1) }, &mut q, 300, 0.05).unwrap();
             assert!(r.position_error_m < 0.01 && r.jaw_tilt_rad < 0.05, "{p:?}: {r:?}");
             // The solution is where MuJoCo's forward kinematics puts the grasp frame.

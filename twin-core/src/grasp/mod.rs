@@ -372,14 +372,6 @@ impl Grasper {
         arm::solve(scratch, &self.arms[a], target, q, iterations, 0.05)
     }
 
-    /// Position-only IK of arm `a` (no orientation tasks), 200 iterations.
-    fn ik_position_only(&mut self, a: usize, qpos: &[f64], target: &Target, q: &mut [f64]) -> Result<IkResult> {
-        let scratch =
-            self.scratch.as_mut().ok_or_else(|| Error::Grasp { message: "IK before the first observation".into() })?;
-        scratch.qpos_mut().copy_from_slice(qpos);
-        arm::solve_position(scratch, &self.arms[a], target.position, q, 200, 0.05)
-    }
-
     /// The plan for the estimate `cup`, or why the cup can't be grasped.
     fn plan(&mut self, qpos: &[f64], cup: &CupSighting) -> std::result::Result<Plan, String> {
         let grasp = Vector3::new(cup.centre_world.x, cup.centre_world.y, cup.table_height_m + cup.height_m / 2.0);
@@ -398,7 +390,7 @@ impl Grasper {
             // The grasp pose first (its approach axis is the approach path): position alone
             // (well-posed from a hanging arm), then with the jaw level and the approach pitch.
             let reach = Target { position: grasp, approach: None };
-            self.ik_position_only(a, qpos, &reach, &mut q).map_err(|e| e.to_string())?;
+            self.ik(a, qpos, &reach, &mut q, 200).map_err(|e| e.to_string())?;
             let target = Target { position: grasp, approach: Some(self.options.approach_pitch_rad) };
             let r = self.ik(a, qpos, &target, &mut q, 400).map_err(|e| e.to_string())?;
             let mut failed = (r.position_error_m > self.options.reach_tolerance_m
