@@ -10,26 +10,21 @@
 #   benches/external_controller.sh [EPISODES=8] [DURATION=2] [REPEAT=2]
 # TWIN: binary (default target/release/twin); TWIN_PYTHON: a Python with rclpy.
 set -euo pipefail
-cd "$(dirname "$0")/.."
 episodes=${1:-8}
 duration=${2:-2}
 repeat=${3:-2}
-twin=${TWIN:-target/release/twin}
-[[ -x "$twin" ]] || cargo build --release --locked --bin twin
+source "$(dirname "$0")/common.sh"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 sed 's/^restart = "episode".*/restart = "never"/' scenarios/hold_pose.toml > scenarios/.bench_hold_never.toml
 trap 'rm -rf "$work" scenarios/.bench_hold_never.toml' EXIT
 args=(randomize --episodes "$episodes" --threads 2 --seed 3 --duration "$duration")
-now() { date +%s.%N; }
-since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.3f", b - a }'; }
 declare -A secs=()
 for r in $(seq "$repeat"); do
   t=$(now); "$twin" "${args[@]}" --scenario scenarios/hold_pose.toml --controller pd-hold --out "$work/pd" >/dev/null 2>&1; secs[pd]+="$(since "$t") "
   t=$(now); "$twin" "${args[@]}" --scenario scenarios/hold_pose.toml --out "$work/ep" >/dev/null 2>&1; secs[ep]+="$(since "$t") "
   t=$(now); "$twin" "${args[@]}" --scenario scenarios/.bench_hold_never.toml --out "$work/nv" >/dev/null 2>&1; secs[nv]+="$(since "$t") "
 done
-median() { tr ' ' '\n' | grep . | sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
 printf '%-26s %10s %12s %14s\n' row "wall (s)" "episodes/s" "s per episode"
 for row in pd ep nv; do
   m=$(echo "${secs[$row]}" | median)

@@ -19,11 +19,9 @@
 # client's packages (default: the test's, target/tmp/foxglove-node/node_modules; installed there
 # with npm when missing).
 set -euo pipefail
-cd "$(dirname "$0")/.."
 duration=${1:-10}
 repeat=${2:-5}
-twin=${TWIN:-target/release/twin}
-[[ -x "$twin" ]] || cargo build --release --locked --bin twin
+source "$(dirname "$0")/common.sh"
 modules=${FOXGLOVE_NODE_MODULES:-target/tmp/foxglove-node/node_modules}
 if [[ ! -f "$modules/@foxglove/rosmsg2-serialization/package.json" ]]; then
   prefix=$(dirname "$modules")
@@ -84,7 +82,6 @@ for r in $(seq "$repeat"); do
   done
   node_cpu+="$(cpu_per_step "$work/client.$r.cpu" "$work/c.$r") "
 done
-median() { tr ' ' '\n' | grep . | sort -g | awk '{ v[NR] = $1 } END { print (NR % 2) ? v[(NR + 1) / 2] : (v[NR / 2] + v[NR / 2 + 1]) / 2 }'; }
 echo "twin ${args[*]}  ($repeat repetitions, interleaved; medians)"
 grep -m1 '^simulated' "$work/a.1"
 printf '%-44s %12s %12s %13s %9s %9s\n' row "wall µs/step" "loop CPU µs" "process CPU µs" "vs a" "vs b"

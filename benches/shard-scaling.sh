@@ -8,16 +8,12 @@
 # shards merge into the 2-thread run's summary.
 #   benches/shard-scaling.sh [EPISODES=96] [REPEAT=3]   (TWIN: binary, default target/release/twin)
 set -euo pipefail
-cd "$(dirname "$0")/.."
 episodes=${1:-96}
 repeat=${2:-3}
-twin=${TWIN:-target/release/twin}
-[[ -x "$twin" ]] || cargo build --release --locked --bin twin
+source "$(dirname "$0")/common.sh"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 args=(randomize --episodes "$episodes" --seed 3)
-now() { date +%s.%N; }
-since() { awk -v a="$1" -v b="$(now)" 'BEGIN { printf "%.3f", b - a }'; }
 declare -A secs=()
 for r in $(seq "$repeat"); do
   t=$(now); "$twin" "${args[@]}" --threads 1 --out "$work/t1" >/dev/null 2>&1; secs[t1]+="$(since "$t") "

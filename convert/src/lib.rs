@@ -220,24 +220,14 @@ pub struct DifferentialMeta {
 /// The result of a conversion.
 #[derive(Debug, Clone)]
 pub struct ConvertedModel {
-    /// What twin publishes the robot by (also inside [`ConvertedModel::mjcf`]).
+    /// What twin publishes the robot by (also inside [`ConvertedModel::mjcf`]): its name, floating
+    /// base, IMUs, other sensors, joints in URDF order (fixed joints included) and differential
+    /// transmissions (converted to tendons).
     pub meta: RobotMeta,
     /// The MJCF document (mesh files referenced by absolute path).
     pub mjcf: String,
-    /// Robot name (`<robot name>`).
-    pub robot_name: String,
-    /// Whether the root has a free joint.
-    pub floating_base: bool,
     /// Height of the root link origin in the `home` pose, metres.
     pub base_height_m: f64,
-    /// IMUs.
-    pub imus: Vec<ImuMeta>,
-    /// Other sensors.
-    pub sensors: Vec<SensorMeta>,
-    /// Joints in URDF order (fixed joints included).
-    pub joints: Vec<JointMeta>,
-    /// Differential transmissions, converted to tendons.
-    pub differentials: Vec<DifferentialMeta>,
     /// Everything that was approximated, repaired or dropped, one line each.
     pub notes: Vec<String>,
     /// Mesh files written by the conversion (ASCII STL / Collada → OBJ).
@@ -312,19 +302,7 @@ pub fn convert_urdf_str<C: Compiler>(
     if let Some(w) = &world {
         notes.extend(w.notes.iter().cloned());
     }
-    Ok(ConvertedModel {
-        meta: conv.meta(),
-        mjcf,
-        robot_name: robot.name.clone(),
-        floating_base: conv.floating,
-        base_height_m,
-        imus: conv.imus,
-        sensors: conv.sensor_meta,
-        joints: conv.joint_meta,
-        differentials: conv.differential_meta,
-        notes,
-        converted_meshes: conv.converted,
-    })
+    Ok(ConvertedModel { meta: conv.meta(), mjcf, base_height_m, notes, converted_meshes: conv.converted })
 }
 
 /// Deepest element nesting MuJoCo's XML parser (tinyxml2, `TINYXML2_MAX_ELEMENT_DEPTH`)

@@ -10,8 +10,9 @@
 use super::{DifferentialMeta, ImuBias, ImuMeta, Interface, JointMeta, ScanMeta, SensorMeta};
 use std::collections::HashMap;
 
-/// The robot's ROS side, as the converter produced it.
-#[derive(Debug, Clone, PartialEq)]
+/// The robot's ROS side, as the converter produced it. The default is a robot with no name
+/// (twin then names it after the model or the file) and no metadata.
+#[derive(Debug, Clone, Default, PartialEq)]
 pub struct RobotMeta {
     /// Robot name (`<robot name>`): the topic prefix.
     pub name: String,

@@ -7,7 +7,7 @@ use crate::error::Result;
 use crate::hfield::Heightfield;
 use nalgebra::Matrix3;
 use std::fmt::Write as _;
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// The parts of a world that go into the robot's MJCF.
 #[derive(Debug, Default)]
@@ -141,19 +141,7 @@ fn sdf_geometry(ctx: &Ctx<'_, '_>, geom: roxmltree::Node<'_, '_>, w: &mut World,
             " type=\"plane\" size=\"0 0 0.05\"".to_string()
         }
         "mesh" => {
-            let uri = child_text(shape, "uri").unwrap_or("");
-            let file = uri.strip_prefix("file://").unwrap_or(uri);
-            let dir = ctx.path.parent().unwrap_or(Path::new("."));
-            let p = dir.join(file);
-            if uri.starts_with("model://") || !p.is_file() {
-                return Err(ctx.err(
-                    shape,
-                    format!(
-                        "mesh \"{uri}\" not found (looked at {}): give a path relative to the world file",
-                        p.display()
-                    ),
-                ));
-            }
+            let p = world_file(ctx, shape, child_text(shape, "uri").unwrap_or(""), "mesh", "a path")?;
             let p = std::path::absolute(&p).unwrap_or(p);
             let scale = child_text(shape, "scale").and_then(parse_vec::<3>).unwrap_or([1.0; 3]);
             let mname = format!("world_{name}");
@@ -272,12 +260,7 @@ fn sdf(ctx: &Ctx<'_, '_>, root: roxmltree::Node<'_, '_>) -> Result<World> {
                 let Some(shape) = sdf_geometry(ctx, c, &mut w, &gname)? else {
                     continue;
                 };
-                let mu = child(c, "surface")
-                    .and_then(|s| child(s, "friction"))
-                    .and_then(|fr| child(fr, "ode"))
-                    .and_then(|o| child_text(o, "mu"))
-                    .and_then(ir::parse_num)
-                    .unwrap_or(1.0);
+                let mu = ode_mu(c);
                 w.mus.push(mu);
                 let rgba = children(*l, "visual")
                     .find_map(sdf_rgba)
@@ -375,6 +358,36 @@ fn heightmap_of<'a, 'input>(node: roxmltree::Node<'a, 'input>) -> Option<roxmltr
     child(node, "geometry").and_then(|g| child(g, "heightmap"))
 }
 
+/// The file a `<uri>` names (`file://` or a plain path, relative to the world file); a `model://`
+/// URI or a missing file is an error at `node` naming the `what` and asking for `wanted`.
+fn world_file(
+    ctx: &Ctx<'_, '_>,
+    node: roxmltree::Node<'_, '_>,
+    uri: &str,
+    what: &str,
+    wanted: &str,
+) -> Result<PathBuf> {
+    let file = uri.strip_prefix("file://").unwrap_or(uri);
+    let p = ctx.path.parent().unwrap_or(Path::new(".")).join(file);
+    if uri.starts_with("model://") || !p.is_file() {
+        return Err(ctx.err(
+            node,
+            format!("{what} \"{uri}\" not found (looked at {}): give {wanted} relative to the world file", p.display()),
+        ));
+    }
+    Ok(p)
+}
+
+/// A `<collision>`'s Coulomb friction, `<surface><friction><ode><mu>` (SDFormat's default 1).
+fn ode_mu(collision: roxmltree::Node<'_, '_>) -> f64 {
+    child(collision, "surface")
+        .and_then(|s| child(s, "friction"))
+        .and_then(|fr| child(fr, "ode"))
+        .and_then(|o| child_text(o, "mu"))
+        .and_then(ir::parse_num)
+        .unwrap_or(1.0)
+}
+
 /// A `<heightmap>` (`<uri>` a grayscale PNG relative to the world file, `<size>` its extent and
 /// height range, `<pos>` its centre in the collision's frame) as an `<hfield>` asset and an
 /// `hfield` geom in world coordinates (Gazebo's surface: the image's top row at +y, black at
@@ -390,18 +403,7 @@ fn heightmap(
     body: &mut String,
 ) -> Result<()> {
     let uri_node = child(hm, "uri").ok_or_else(|| ctx.err(hm, "<heightmap> without <uri>: name a grayscale PNG"))?;
-    let uri = uri_node.text().unwrap_or("").trim();
-    let file = uri.strip_prefix("file://").unwrap_or(uri);
-    let p = ctx.path.parent().unwrap_or(Path::new(".")).join(file);
-    if uri.starts_with("model://") || !p.is_file() {
-        return Err(ctx.err(
-            uri_node,
-            format!(
-                "heightmap \"{uri}\" not found (looked at {}): give a PNG path relative to the world file",
-                p.display()
-            ),
-        ));
-    }
+    let p = world_file(ctx, uri_node, uri_node.text().unwrap_or("").trim(), "heightmap", "a PNG path")?;
     let vec3 = |tag: &str, default: [f64; 3]| -> Result<[f64; 3]> {
         match child(hm, tag) {
             Some(n) => {
@@ -428,12 +430,7 @@ fn heightmap(
     let centre = world_from_collision.xyz + world_from_collision.rot * nalgebra::Vector3::from(pos);
     let h = Heightfield::from_png(&p, size, [centre.x, centre.y, centre.z], yaw).map_err(|m| ctx.err(uri_node, m))?;
     heightmap_notes(ctx, hm, w);
-    let mu = child(collision, "surface")
-        .and_then(|s| child(s, "friction"))
-        .and_then(|fr| child(fr, "ode"))
-        .and_then(|o| child_text(o, "mu"))
-        .and_then(ir::parse_num)
-        .unwrap_or(1.0);
+    let mu = ode_mu(collision);
     w.mus.push(mu);
     let asset = format!("world_{gname}");
     let _ = writeln!(w.assets, "    {}", h.hfield_element(&esc(&asset)));

@@ -134,7 +134,7 @@ fn the_robot_stands_on_the_floor_at_its_lowest_collision_point() {
     let out = convert(&mut engine);
     assert_eq!(engine.compiled.len(), 2, "a probe compile and a home compile");
     assert!((out.base_height_m - 0.2).abs() < 1e-12, "{}", out.base_height_m);
-    assert!(out.floating_base);
+    assert!(out.meta.floating_base);
     let doc = roxmltree::Document::parse(&out.mjcf).unwrap();
     let base = doc.descendants().find(|n| n.attribute("name") == Some("base")).unwrap();
     assert_eq!(attr_nums(base, "pos"), vec![0.0, 0.0, 0.2]);
@@ -182,7 +182,7 @@ fn a_position_interface_gets_a_position_servo_scaled_by_effort() {
     assert_eq!(attr_nums(servo, "kp"), vec![kp]);
     assert_eq!(attr_nums(servo, "kv"), vec![kp * opts.position_kv_per_kp]);
     assert_eq!(attr_nums(servo, "ctrlrange"), vec![-1.0, 1.0]);
-    let joint = out.joints.iter().find(|j| j.name == "shoulder").unwrap();
+    let joint = out.meta.joints.iter().find(|j| j.name == "shoulder").unwrap();
     assert_eq!(joint.actuator, Some(("shoulder".into(), Interface::Position)));
     assert_eq!(joint.velocity_limit, Some(2.0));
     // Forced motors instead: a motor within ±effort.

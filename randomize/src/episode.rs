@@ -483,34 +483,23 @@ impl Worker {
         trajectory: Option<&mut Trajectory>,
         recording: Option<&mut dyn Observer>,
     ) -> Result<EpisodeResult> {
-        let Draw {
-            values,
-            model,
-            sensor_noise_std,
-            sensor_bias,
-            qpos_noise_std,
-            latency_steps,
-            init_qpos,
-            push_interval_secs,
-            push_speed_mps,
-            command_scale,
-        } = draw;
-        let model = Arc::new(model);
+        let model = Arc::new(draw.model);
         let episode = Episode {
-            initial_qpos: Some(init_qpos),
+            initial_qpos: Some(draw.init_qpos),
             steps: batch.steps_per_episode(),
             // The robot's IMU bias processes (twin's one sensor model, `twin_core::sim::sensor_model`)
             // with the drawn white noise, bias and latency.
             sensors: SensorModel {
-                qpos_noise_std,
-                sensor_noise_std,
-                sensor_bias,
+                qpos_noise_std: draw.qpos_noise_std,
+                sensor_noise_std: draw.sensor_noise_std,
+                sensor_bias: draw.sensor_bias,
                 bias_processes: twin_core::sim::sensor_model(&batch.robot).bias_processes,
-                latency_steps,
+                latency_steps: draw.latency_steps,
             },
-            command_scale,
+            command_scale: draw.command_scale,
         };
-        let mut push = push_interval_secs.map(|every| Push::new(every, push_speed_mps, batch.layout.push_body));
+        let mut push =
+            draw.push_interval_secs.map(|every| Push::new(every, draw.push_speed_mps, batch.layout.push_body));
         let mut scripted = batch.disturbances.as_ref().map_or_else(Vec::new, |f| f(&model));
         let mut disturbances: Vec<&mut dyn Disturbance> = Vec::new();
         if let Some(p) = push.as_mut() {
@@ -569,7 +558,7 @@ impl Worker {
             max_tilt_rad: fall.max_tilt_rad,
             saturation_secs: saturation.secs,
             energy_j: energy.joules,
-            params: values,
+            params: draw.values,
             checks: self.checks.iter().map(|c| c.verdict()).collect::<Vec<Verdict>>(),
         })
     }

@@ -95,7 +95,7 @@ fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -
     writeln!(
         out,
         "robot {}: {} bodies, {} joints, {} actuators, {} sensors, {} cameras, total mass {:.3} kg",
-        c.robot_name,
+        c.meta.name,
         m.nbody() - 1,
         m.njnt(),
         m.nu(),
@@ -106,10 +106,10 @@ fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -
     writeln!(
         out,
         "base: {} (root at z = {:.4} m in keyframe `home`)",
-        if c.floating_base { "free-floating" } else { "fixed" },
+        if c.meta.floating_base { "free-floating" } else { "fixed" },
         c.base_height_m
     )?;
-    for imu in &c.imus {
+    for imu in &c.meta.imus {
         writeln!(
             out,
             "imu {} on {}: sensors {0}_quat/{0}_gyro/{0}_accel, rate {} Hz, gyro σ {} rad/s, accel σ {} m/s², topic {}",
@@ -121,7 +121,7 @@ fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -
             imu.topic.as_deref().unwrap_or("-")
         )?;
     }
-    for s in &c.sensors {
+    for s in &c.meta.sensors {
         writeln!(out, "sensor {} ({}) on {}: {}", s.name, s.kind, s.reference, s.mujoco.join(", "))?;
     }
     if !c.notes.is_empty() {

@@ -753,6 +753,7 @@ mod live {
             cmd_vel_timeout_secs: args.cmd_vel_timeout,
             lockstep_timeout_secs: args.lockstep_timeout,
             join_timeout_secs: args.join_timeout,
+            ..LiveOptions::default()
         })
     }
 

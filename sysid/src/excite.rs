@@ -578,34 +578,23 @@ impl<'a> Problem<'a> {
                         &mut penalty,
                     );
                 }
-                if qd[j].abs() > lim.velocity {
-                    note(
-                        format!(
-                            "joint \"{name}\" velocity {:.3} beyond its limit {:.3} at t = {t:.2} s",
-                            qd[j], lim.velocity
-                        ),
-                        qd[j].abs() / lim.velocity - 1.0,
-                        &mut penalty,
-                    );
-                }
-                if qdd[j].abs() > lim.acceleration {
-                    note(
-                        format!(
-                            "joint \"{name}\" acceleration {:.3} beyond its limit {:.3} at t = {t:.2} s",
-                            qdd[j], lim.acceleration
-                        ),
-                        qdd[j].abs() / lim.acceleration - 1.0,
-                        &mut penalty,
-                    );
-                }
-                if let Some(tmax) = lim.torque
-                    && tau[j].abs() > tmax
-                {
-                    note(
-                        format!("joint \"{name}\" torque {:.2} beyond its limit {tmax:.2} at t = {t:.2} s", tau[j]),
-                        tau[j].abs() / tmax - 1.0,
-                        &mut penalty,
-                    );
+                // Velocity, acceleration and torque: how far beyond its limit, as a fraction of it.
+                for (what, value, limit, digits) in [
+                    ("velocity", qd[j], Some(lim.velocity), 3),
+                    ("acceleration", qdd[j], Some(lim.acceleration), 3),
+                    ("torque", tau[j], lim.torque, 2),
+                ] {
+                    if let Some(max) = limit
+                        && value.abs() > max
+                    {
+                        note(
+                            format!(
+                                "joint \"{name}\" {what} {value:.digits$} beyond its limit {max:.digits$} at t = {t:.2} s"
+                            ),
+                            value.abs() / max - 1.0,
+                            &mut penalty,
+                        );
+                    }
                 }
             }
             let ncols = self.ncols;

@@ -341,12 +341,7 @@ impl JointLog {
             Some(t) => t.to_string(),
             None => {
                 let info = log.info()?;
-                let candidates: Vec<&str> = info
-                    .topics
-                    .iter()
-                    .filter(|t| t.type_name.ends_with("JointState"))
-                    .map(|t| t.topic.as_str())
-                    .collect();
+                let candidates = info.topics_of_type("JointState");
                 match candidates.as_slice() {
                     [one] => one.to_string(),
                     [] => {
@@ -524,12 +519,7 @@ impl JointLog {
             info.topics.iter().map(|t| format!("{} ({})", t.topic, t.type_name)).collect::<Vec<_>>().join(", ");
         match info.topics.iter().find(|t| t.topic == odom_topic) {
             None => {
-                let odoms: Vec<&str> = info
-                    .topics
-                    .iter()
-                    .filter(|t| t.type_name.ends_with("Odometry"))
-                    .map(|t| t.topic.as_str())
-                    .collect();
+                let odoms = info.topics_of_type("Odometry");
                 let hint = if odoms.is_empty() {
                     "record the base pose and twist as nav_msgs/msg/Odometry (from motion capture or the state                      estimator), or hang the robot on a gantry and use --base fixed"
                         .to_string()

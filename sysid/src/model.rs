@@ -401,21 +401,11 @@ impl RobotModel {
             message: "the model has no free joint for a floating base".into(),
         })?;
         let body = free.body;
-        let parent = model.body_parentid();
-        let in_subtree = |mut b: usize| {
-            while b != 0 {
-                if b == body {
-                    return true;
-                }
-                b = parent[b] as usize;
-            }
-            false
-        };
         let mut links = Vec::new();
         let mut existing = std::mem::take(&mut robot.links).into_iter().peekable();
         for b in 1..model.nbody() {
             let known = existing.next_if(|l| l.body == b);
-            let floating = in_subtree(b);
+            let floating = model.in_subtree(body, b);
             match known {
                 Some(mut l) => {
                     l.floating = floating;

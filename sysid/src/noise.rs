@@ -100,7 +100,7 @@ pub fn read_imus(path: &Path, topic: Option<&str>) -> Result<(Vec<ImuLog>, Vec<S
     let source_name = path.display().to_string();
     let topics: Vec<String> = match topic {
         Some(t) => vec![t.to_string()],
-        None => info.topics.iter().filter(|t| t.type_name.ends_with("Imu")).map(|t| t.topic.clone()).collect(),
+        None => info.topics_of_type("Imu").into_iter().map(str::to_string).collect(),
     };
     if topics.is_empty() {
         let listing = info.topics.iter().map(|t| format!("{} ({})", t.topic, t.type_name)).collect::<Vec<_>>();

@@ -1,6 +1,7 @@
 //! `twin calibrate noise` and `twin sysid friction`: still and sweep logs through ROS 2 bags,
 //! URDF write-back with backup, plots, spec fragment, and refusals that leave the URDF alone.
 
+use super::common::assert_untouched;
 use std::path::Path;
 use std::process::{Command, Output};
 use sysid::noise::{AxisTruth, synth_imu};
@@ -116,8 +117,7 @@ fn calibrate_noise_refuses_a_moving_robot_and_a_short_log_leaving_the_urdf_untou
     let err = stderr(&out);
     assert!(!out.status.success() && err.contains("too short for τ up to 100 s"), "{err}");
     assert!(!err.contains("panicked"), "{err}");
-    assert_eq!(std::fs::read(d.join("humanoid.urdf")).unwrap(), original);
-    assert!(!d.join("humanoid.urdf.bak").exists());
+    assert_untouched(&d.join("humanoid.urdf"), &original);
 }
 
 #[test]
@@ -195,8 +195,7 @@ fn sysid_friction_refuses_a_log_without_constant_velocity_and_leaves_the_urdf_un
     assert!(!out.status.success(), "{err}");
     assert!(err.contains("arm6.urdf was not changed") && err.contains("no constant-velocity segment"), "{err}");
     assert!(err.contains("joint \"shoulder_pan_joint\""), "{err}");
-    assert_eq!(std::fs::read(d.join("arm6.urdf")).unwrap(), original);
-    assert!(!d.join("arm6.urdf.bak").exists());
+    assert_untouched(&d.join("arm6.urdf"), &original);
 }
 
 /// `twin sim --friction-fit`: the fitted Stribeck curves of `twin sysid friction --report`

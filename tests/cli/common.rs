@@ -35,3 +35,12 @@ pub fn write(dir: &Path, name: &str, text: &str) -> PathBuf {
     std::fs::write(&path, text).unwrap();
     path
 }
+
+/// `file` is byte for byte `original` and no backup (`FILE.bak`) was made: a refused or dry run
+/// left the user's file alone.
+pub fn assert_untouched(file: &Path, original: &[u8]) {
+    assert!(std::fs::read(file).unwrap() == original, "{} changed", file.display());
+    let mut backup = file.as_os_str().to_owned();
+    backup.push(".bak");
+    assert!(!Path::new(&backup).exists(), "{} was written", Path::new(&backup).display());
+}

@@ -227,6 +227,65 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
     assert_none_left(&tag);
 }
 
+/// The number just before `what` in `text` (`(42.1 per period` → 42.1).
+fn number_before(text: &str, what: &str) -> f64 {
+    let end = text.find(what).unwrap_or_else(|| panic!("no {what:?} in {text}"));
+    let start = text[..end].rfind(|c: char| !(c.is_ascii_digit() || c == '.')).map_or(0, |k| k + 1);
+    text[start..end].parse().unwrap_or_else(|e| panic!("{:?} before {what:?}: {e}", &text[start..end]))
+}
+
+/// A node whose thread publishes commands in a wall-time loop as fast as it can, from t = 0.1 s
+/// on, whatever the simulation time: each episode fails as a flood (twin takes one command per
+/// period and counts those still queued at the next period's start), with the topic, the rate
+/// in commands per period and per simulated second, and the limit; the 3 s episodes end early,
+/// the batch ends, and no process is left.
+#[test]
+fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let tag = tag("flood");
+    // A limit below the default (10): the Python flooder's rate per period depends on how
+    // fast the bridge turns periods over (11–18 per period measured here with the default).
+    let bounds = "join_timeout_secs = 30.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5\n\
+                  flood_commands_per_period = 4.0";
+    let s = scenario(dir.path(), "flood.toml", 3.0, &bad(&python, "flood", &tag), bounds);
+    let out = dir.path().join("flood");
+    let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 1);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(secs < 90.0, "{secs} s");
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(column(&csv, "success"), vec!["0"; 2], "{csv}");
+    for line in csv.lines().skip(1) {
+        assert!(line.contains("controller: flood: "), "{line}");
+        assert!(line.contains("most on /humanoid/joint_commands"), "{line}");
+        assert!(line.contains("the limit is 4 per period averaged over 1 s (flood_commands_per_period)"), "{line}");
+        // The window is 100 periods of 10 ms; the rate is above the limit, and per simulated
+        // second it is 100 times the rate per period.
+        assert!(line.contains("in the last 100 periods before t = "), "{line}");
+        let per_period = number_before(line, " per period, ");
+        let per_sim_sec = number_before(line, " per simulated second");
+        assert!(per_period > 4.0, "{per_period}: {line}");
+        // (Printed to 0.01 per period and 1 per second.)
+        assert!((per_sim_sec - 100.0 * per_period).abs() <= 1.0, "{line}");
+        // Found before the end of the 3 s episode.
+        let t = number_before(line, " s, most on");
+        assert!(t > 0.1 && t < 3.0, "{t}: {line}");
+    }
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let failures = &summary["summary"]["failures"];
+    assert_eq!(failures[0]["kind"], "controller: flood", "{summary}");
+    assert_eq!(failures[0]["episodes"], 2, "{summary}");
+    assert!(stdout.contains("failed checks: controller: flood ×2"), "{stdout}");
+    let logs: String = std::fs::read_dir(out.join("controller_logs"))
+        .unwrap()
+        .flatten()
+        .map(|e| std::fs::read_to_string(e.path()).unwrap())
+        .collect();
+    assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 2, "{logs}");
+    assert_none_left(&tag);
+}
+
 #[test]
 fn ctrl_c_ends_a_batch_with_its_controllers() {
     let python = python();
@@ -342,6 +401,72 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
     let o = twin().arg("test").arg(&pass).output().unwrap();
     let (ok, stdout, stderr) = output_of(o);
     assert!(ok, "{stdout}\n{stderr}");
+}
+
+/// Tracking thresholds in `[checks]` decide a run like any check. pd-hold (its position
+/// targets: the home pose) under a 60 N forward push for 0.1 s: the ankles take it and track
+/// worst (about 0.02 rad RMS). A scenario asking for 0.01 rad fails its nominal run, `twin test`
+/// exits non-zero and the JUnit failure (read with junitparser) names the key and the number,
+/// and both randomized episodes fail it too; with 0.5 rad it passes, and `twin sim --scenario` measures the same RMS on the same joints.
+#[test]
+fn twin_test_fails_on_a_tracking_threshold_and_junit_names_it() {
+    let python = python();
+    let dir = tempfile::tempdir().unwrap();
+    let model = repo_root().join("models/humanoid.urdf");
+    let body = |rms: f64| {
+        format!(
+            "model = {model:?}\nduration = 0.5\ncontroller = \"pd-hold\"\n[[push]]\ntime = 0.1\nduration = 0.1\n\
+             force = [60.0, 0.0, 0.0]\n[checks]\nfalls = 0\nmax_tracking_rms_rad = {rms}\nmax_tracking_error_rad = 0.5\n\
+             max_saturated_fraction = 0.5\n[test]\nepisodes = 2\nmin_success_lower_95 = 0.3\nseed = 5\n"
+        )
+    };
+    let tight = write(dir.path(), "tight.toml", &body(0.01));
+    let loose = write(dir.path(), "loose.toml", &body(0.5));
+    let junit = dir.path().join("report.xml");
+    let o = twin()
+        .arg("test")
+        .arg(&tight)
+        .arg(&loose)
+        .arg("--junit")
+        .arg(&junit)
+        .args(["--threads", "1"])
+        .output()
+        .unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    assert!(!ok, "a failed tracking threshold must fail: {stdout}\n{stderr}");
+    assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
+    let read = Command::new(&python)
+        .arg("-c")
+        .arg(
+            "import sys, junitparser\n\
+             for s in junitparser.JUnitXml.fromfile(sys.argv[1]):\n\
+             \x20   for c in s:\n\
+             \x20       print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))\n",
+        )
+        .arg(&junit)
+        .output()
+        .unwrap();
+    let text = String::from_utf8_lossy(&read.stdout);
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let lines: Vec<&str> = text.lines().collect();
+    assert_eq!(lines.len(), 4, "{text}");
+    // tight: nominal fails naming the key, with the measured RMS of the worst joint.
+    assert!(lines[0].starts_with("tight nominal scenario: failed: max_tracking_rms_rad"), "{text}");
+    let measured = number_before(lines[0].split("FAIL max_tracking_rms_rad").nth(1).unwrap(), " <= 0.01");
+    assert!(measured > 0.01 && measured < 0.05, "{measured}: {text}");
+    assert!(!lines[0].contains("FAIL max_tracking_error_rad") && !lines[0].contains("FAIL max_saturated"), "{text}");
+    // Randomized (the default spec, seed 5): both episodes fail the 0.01 rad (2/2 pass 0.5 rad,
+    // whose 95 % lower bound 0.342 clears 0.3).
+    assert!(lines[1].starts_with("tight randomized success 0/2 = 0.0 %, 95 % lower bound 0.000 < 0.3"), "{text}");
+    assert!(lines[1].ends_with("failed checks: scenario: failed ×2"), "{text}");
+    assert_eq!(lines[2], "loose nominal ", "{text}");
+    assert_eq!(lines[3], "loose randomized ", "{text}");
+    // The loose scenario's table line and the same RMS in `twin sim --scenario`'s report.
+    let o = twin().args(["sim", "--scenario"]).arg(&loose).output().unwrap();
+    let (ok, stdout, stderr) = output_of(o);
+    assert!(ok, "{stdout}\n{stderr}");
+    assert!(stdout.contains(&format!("PASS max_tracking_rms_rad   {measured:.4} <= 0.5")), "{measured}: {stdout}");
+    assert!(stdout.contains(&format!("worst (RMS/max): left_ankle_pitch_joint {measured:.4}/")), "{stdout}");
 }
 
 /// The README's "Test your controller with twin" commands (scenario, randomize, test) run as

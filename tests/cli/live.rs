@@ -436,7 +436,7 @@ const README: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
 /// to install.
 fn rclpy_python() -> String {
     let exe = crate::test_python::python().to_string_lossy().into_owned();
-    let probe = "import rclpy, sensor_msgs.msg, std_msgs.msg, rosgraph_msgs.msg, rmw_fastrtps_cpp";
+    let probe = "import rclpy, sensor_msgs.msg, std_msgs.msg, rosgraph_msgs.msg, std_srvs.srv, rmw_fastrtps_cpp";
     match Command::new(&exe).args(["-c", probe]).output() {
         Ok(o) if o.status.success() => exe,
         Ok(o) => panic!(
@@ -681,6 +681,46 @@ fn ros_joint_state_commands_by_name_from_rclpy_move_the_named_joint_only() {
             assert!((last.position[i] - first.position[i]).abs() < 0.05, "{name} moved to {}", last.position[i]);
         }
     }
+}
+
+/// Gazebo Classic's `std_srvs/srv/Empty` services called from a real rclpy client (PyPI
+/// `ros-kilted-std-srvs`) against `twin sim --ros` in real time: `/pause_physics` stops `/clock`
+/// (not one message in 1 s of wall time), `/unpause_physics` starts it again, `/reset_simulation`
+/// and `/reset_world` bring the elbow the client had moved to -0.6 rad back to where the first
+/// `/joint_states` had it (time goes on: twin keeps `/clock` monotonic).
+#[test]
+fn ros_gazebo_empty_services_from_rclpy_pause_unpause_and_reset() {
+    let twin_args: Vec<String> =
+        ["--ros", "--rtf", "1", "--duration", "15", "--record", "run.mcap"].map(String::from).to_vec();
+    let node_args: Vec<String> = ["--mode", "services", "--out", "NODE_OUT"].map(String::from).to_vec();
+    let run = run_rclpy(12, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    let text = std::fs::read_to_string(&run.node_out)
+        .unwrap_or_else(|e| panic!("the client wrote nothing ({e}): it failed or timed out\n{}", run.stdout));
+    let node: Json = serde_json::from_str(&text).unwrap();
+    let f = |v: &Json| v.as_f64().unwrap_or_else(|| panic!("not a number: {v} in {node}"));
+    // Paused: the same /clock before and after 1 s of wall time, and no /clock message at all.
+    let paused = &node["paused"];
+    assert_eq!(f(&paused["clock_before"]), f(&paused["clock_after"]), "{node}");
+    assert_eq!(paused["clocks"], 0, "{node}");
+    // Resumed in real time: about 0.5 s of simulated time in 0.5 s of wall time.
+    let unpaused = &node["unpaused"];
+    let advanced = f(&unpaused["clock_after"]) - f(&unpaused["clock_before"]);
+    assert!((0.25..0.75).contains(&advanced), "advanced {advanced} s in 0.5 s wall: {node}");
+    // Both resets: from the commanded -0.6 rad back to the start, time going on.
+    let start = f(&node["elbow_start"]);
+    for name in ["/reset_simulation", "/reset_world"] {
+        let r = &node[name];
+        assert!((f(&r["elbow_before"]) + 0.6).abs() < 0.03, "{name}: {node}");
+        assert!((start + 0.6).abs() > 0.3, "the elbow starts at {start}");
+        assert!(
+            (f(&r["elbow_after"]) - start).abs() < 0.02,
+            "{name}: elbow at {} of {start}: {node}",
+            r["elbow_after"]
+        );
+        assert!(f(&r["clock_after"]) > f(&r["clock_before"]), "{name}: {node}");
+    }
+    // twin answered the four calls and made two resets.
+    assert!(run.stdout.contains("4 service calls, 2 resets"), "{}", run.stdout);
 }
 
 /// The README's "Steer the walker": its `twin sim` arguments (after `sim`, the recording as

@@ -23,16 +23,7 @@ const GYRO_STD: f64 = 0.002;
 
 /// Every message of `file` decoded by the Python readers (the tests' venv, `test_python.rs`).
 fn python_decode(file: &Path) -> Json {
-    let exe = crate::test_python::python();
-    let out = Command::new(&exe).arg(SCRIPT).arg("decode").arg(file).output();
-    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
-    assert!(
-        out.status.success(),
-        "{} {SCRIPT} decode failed:\n{}",
-        exe.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("script prints JSON")
+    crate::test_python::script_json(SCRIPT, &["decode".as_ref(), file.as_os_str()])
 }
 
 /// `rerun rrd verify FILE` with the `rerun` of the tests' venv (rerun-sdk).
@@ -402,22 +393,23 @@ fn replay_and_view_warn_when_time_goes_backwards_or_stands_still() {
     let stamps: Vec<i64> =
         (0..3000).map(|k| 100_000_000_000 + k * 10_000_000 - if k >= 2000 { 15_000_000_000 } else { 0 }).collect();
     knee_log(&back, &stamps);
-    let (ok, _, stderr) = run(&["sim", "--duration", "0.1", "--controller", "replay", "--trajectory", s(&back)]);
-    assert!(ok, "{stderr}");
-    assert!(stderr.contains("back.mcap") && stderr.contains("time goes backwards"), "{stderr}");
+    // Replayed by `twin sim` and shown by `twin view`, both warn naming the file: sim's stderr.
+    let replayed_with_warning = |log: &Path, name: &str, warning: &str| {
+        let (ok, _, stderr) = run(&["sim", "--duration", "0.1", "--controller", "replay", "--trajectory", s(log)]);
+        assert!(ok && stderr.contains(name) && stderr.contains(warning), "{stderr}");
+        let rrd = log.with_extension("rrd");
+        let (ok, stdout, view_stderr) = run(&["view", s(log), "-o", s(&rrd)]);
+        assert!(ok && view_stderr.contains(warning), "{stdout}{view_stderr}");
+        stderr
+    };
+    let stderr = replayed_with_warning(&back, "back.mcap", "time goes backwards");
     assert!(stderr.contains("1000 samples") && stderr.contains("14.99"), "{stderr}");
-    let (ok, _, stderr) = run(&["view", s(&back), "-o", s(&tmp(&dir, "back.rrd"))]);
-    assert!(ok && stderr.contains("time goes backwards"), "{stderr}");
 
     // 10 000 samples sharing one stamp.
     let still = tmp(&dir, "still.mcap");
     knee_log(&still, &vec![5_000_000_000; 10_000]);
-    let (ok, _, stderr) = run(&["sim", "--duration", "0.1", "--controller", "replay", "--trajectory", s(&still)]);
-    assert!(ok, "{stderr}");
-    assert!(stderr.contains("still.mcap") && stderr.contains("time stands still"), "{stderr}");
+    let stderr = replayed_with_warning(&still, "still.mcap", "time stands still");
     assert!(stderr.contains("9999 samples") && stderr.contains("10000 samples at one instant"), "{stderr}");
-    let (ok, stdout, stderr) = run(&["view", s(&still), "-o", s(&tmp(&dir, "still.rrd"))]);
-    assert!(ok && stderr.contains("time stands still"), "{stdout}{stderr}");
 }
 
 /// `--seed` seeds the run's one sensor model: another seed, another IMU noise in what is

@@ -6,7 +6,9 @@ Behaves as scenarios/controllers/hold_pose.py until simulation time reaches --af
   crash   exits with status 3;
   hang    stops answering (keeps running, sends nothing more);
   ignore  (never joins) sleeps without ever creating a node;
-  sigint  ignores SIGINT and SIGTERM, so that only SIGKILL stops it (it behaves otherwise).
+  sigint  ignores SIGINT and SIGTERM, so that only SIGKILL stops it (it behaves otherwise);
+  flood   publishes commands in a loop on wall time, as fast as it can (or at --rate HZ),
+          whatever the simulation time, from within its timer callback (which never returns).
 """
 
 import signal
@@ -17,6 +19,7 @@ import time
 def main():
     mode = sys.argv[1]
     after = float(sys.argv[sys.argv.index("--after") + 1]) if "--after" in sys.argv else 0.1
+    rate = float(sys.argv[sys.argv.index("--rate") + 1]) if "--rate" in sys.argv else 0.0
     if mode == "ignore":
         while True:
             time.sleep(1.0)
@@ -36,6 +39,20 @@ def main():
             self.create_subscription(JointState, "/joint_states", self.on_joints, 10)
             self.pub = self.create_publisher(Float64MultiArray, "/humanoid/joint_commands", 10)
             self.create_timer(0.01, self.tick)
+            self.flooding = False
+
+        def flood(self):
+            msg = Float64MultiArray(data=self.hold)
+            period = 1.0 / rate if rate > 0.0 else 0.0
+            sent, start = 0, time.monotonic()
+            while rclpy.ok():
+                try:
+                    self.pub.publish(msg)
+                except Exception:  # the context shut down (SIGINT): stop
+                    return
+                sent += 1
+                if period > 0.0:
+                    time.sleep(max(0.0, start + sent * period - time.monotonic()))
 
         def on_joints(self, msg):
             if self.hold is None:
@@ -50,6 +67,10 @@ def main():
                 os._exit(3)
             if t >= after and mode == "hang":
                 return
+            if t >= after and mode == "flood" and not self.flooding and self.hold is not None:
+                self.flooding = True
+                print(f"flooding from t = {t:.3f} s", flush=True)
+                self.flood()
             if self.hold is not None:
                 self.pub.publish(Float64MultiArray(data=self.hold))
 

@@ -8,7 +8,7 @@ writes one JSON object to --out: every message it received, decoded, per topic.
 
 Modes (--mode):
   lockstep   one Float64MultiArray (--command, a JSON list) per /clock received
-  bad        a wrong-length, a NaN and an undecodable-length command, then good ones per /clock
+  bad        one command per /clock: a too-short, a NaN and a too-long one, then good ones
   flood      --flood-count good commands at up to --flood-hz, no matter the clock
   quit       answer --quit-after clocks, then leave (a peer that disconnects mid-run)
   services   no commands; calls twin's simulation_interfaces services (pause, step, resume,
@@ -242,7 +242,7 @@ def main():
     sent = 0
     started = time.monotonic()
     last_clock = -1.0
-    bad_sent = False
+    bad_left = None  # mode bad: the bad commands still to send, one per /clock
     finished = False
     flood_rate = None
 
@@ -353,13 +353,13 @@ def main():
                 answered = c
                 if a.mode == "quit" and sent >= a.quit_after:
                     break
-                if a.mode == "bad" and not bad_sent:
-                    # Each of these takes a period's slot in lockstep and is rejected.
-                    send(command[:-1])
-                    send([math.nan] + command[1:])
-                    send(command + [0.0])
-                    sent += 3
-                    bad_sent = True
+                if a.mode == "bad" and bad_left is None:
+                    bad_left = [command[:-1], [math.nan] + command[1:], command + [0.0]]
+                if bad_left:
+                    # Each takes its period's slot in lockstep and is rejected (one per period:
+                    # twin drops commands beyond one per period as a flood's surplus).
+                    send(bad_left.pop(0))
+                    sent += 1
                     continue
                 send(command)
                 sent += 1

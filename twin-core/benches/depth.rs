@@ -19,31 +19,17 @@
 
 mod common;
 
-use common::{median, thread_cpu_secs, with_camera};
+use common::{median, time_camera, with_camera};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
-use twin_core::mj::{Data, Model, ObjType};
+use twin_core::mj::{Data, ObjType};
 use twin_core::sense::{DepthCamera, DepthCameraOptions};
 
 fn default_talos() -> String {
     let cache = std::env::var("TWIN_URDF_CACHE")
         .unwrap_or_else(|_| concat!(env!("CARGO_MANIFEST_DIR"), "/../target/tmp/urdf-cache").to_string());
     format!("{cache}/cmeel.prefix/share/example-robot-data/robots/talos_data/robots/talos_full_v2.urdf")
-}
-
-/// Renders `camera` `frames` times: median wall ms, mean CPU ms, valid pixels.
-fn time_camera(model: &Model, data: &Data, camera: &mut DepthCamera, frames: usize) -> (f64, f64, usize) {
-    let valid = camera.render(model, data).unwrap().depth_m.iter().filter(|z| z.is_finite()).count();
-    let cpu = thread_cpu_secs();
-    let times: Vec<f64> = (0..frames)
-        .map(|_| {
-            let t = Instant::now();
-            std::hint::black_box(camera.render(model, data).unwrap());
-            t.elapsed().as_secs_f64() * 1e3
-        })
-        .collect();
-    (median(times), (thread_cpu_secs() - cpu) * 1e3 / frames as f64, valid)
 }
 
 fn main() {

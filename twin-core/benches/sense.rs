@@ -17,10 +17,9 @@
 
 mod common;
 
-use common::{median, thread_cpu_secs, with_camera};
+use common::{median, time_camera, with_camera};
 use nalgebra::Vector3;
 use std::sync::Arc;
-use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
 use twin_core::engine::{Flow, Observer, StepView};
 use twin_core::grasp::Grasper;
@@ -100,19 +99,7 @@ fn main() {
     for threads in [1usize, 0] {
         let opts = DepthCameraOptions { threads, ..DepthCameraOptions::default() };
         let mut camera = DepthCamera::new(&model, "bench_head", opts).unwrap();
-        let first = camera.render(&model, &data).unwrap();
-        let valid = first.depth_m.iter().filter(|z| z.is_finite()).count();
-        // The thread's CPU time advances in scheduler ticks (4 ms) when it is not switched
-        // out: measured over all the frames, not frame by frame.
-        let cpu_start = thread_cpu_secs();
-        let times: Vec<f64> = (0..frames)
-            .map(|_| {
-                let t = Instant::now();
-                std::hint::black_box(camera.render(&model, &data).unwrap());
-                t.elapsed().as_secs_f64() * 1e3
-            })
-            .collect();
-        let cpu_ms = (thread_cpu_secs() - cpu_start) * 1e3 / frames as f64;
+        let (wall_ms, cpu_ms, valid) = time_camera(&model, &data, &mut camera, frames);
         let (label, cpu) = if threads == 1 {
             ("1".to_string(), format!("{cpu_ms:.2}"))
         } else {
@@ -121,8 +108,7 @@ fn main() {
         let st = camera.last_ray_stats();
         let per_ray = |n: u64| n as f64 / st.rays as f64;
         println!(
-            "| 320×240 | {label} | {:.2} | {cpu} | {valid} | {:.2} | {:.2} |",
-            median(times),
+            "| 320×240 | {label} | {wall_ms:.2} | {cpu} | {valid} | {:.2} | {:.2} |",
             per_ray(st.sphere_tests),
             per_ray(st.exact_tests)
         );
@@ -149,22 +135,11 @@ fn main() {
         let mut gdata = Data::new(gmodel.clone()).unwrap();
         twin_core::control::reset_to_home(&mut gdata).unwrap();
         let mut camera = DepthCamera::new(&gmodel, &cam_name, head_options(1)).unwrap();
-        let cpu_start = thread_cpu_secs();
-        let times: Vec<f64> = (0..frames)
-            .map(|_| {
-                let t = Instant::now();
-                std::hint::black_box(camera.render(&gmodel, &gdata).unwrap());
-                t.elapsed().as_secs_f64() * 1e3
-            })
-            .collect();
-        let cpu_ms = (thread_cpu_secs() - cpu_start) * 1e3 / frames as f64;
-        let frame = camera.render(&gmodel, &gdata).unwrap();
+        let (wall_ms, cpu_ms, valid) = time_camera(&gmodel, &gdata, &mut camera, frames);
         let st = camera.last_ray_stats();
         println!(
-            "| 320×240, grasp scenario's `{cam_name}` ({} geoms) | 1 | {:.2} | {cpu_ms:.2} | {} | {:.2} | {:.2} |",
+            "| 320×240, grasp scenario's `{cam_name}` ({} geoms) | 1 | {wall_ms:.2} | {cpu_ms:.2} | {valid} | {:.2} | {:.2} |",
             gmodel.ngeom(),
-            median(times),
-            frame.depth_m.iter().filter(|z| z.is_finite()).count(),
             st.sphere_tests as f64 / st.rays as f64,
             st.exact_tests as f64 / st.rays as f64
         );

@@ -3,9 +3,13 @@
 //!
 //! Data flows from the run's measurements to lines of PASS/FAIL: the gait summary
 //! ([`GaitSummary`]) through [`Checks::evaluate`], the grasp measurements through the grasp
-//! check; the scenario gathers both into the run's [`crate::engine::Verdict`]. This module sits
+//! check, the controller's tracking ([`TrackingSummary`]: commanded against actual joint
+//! positions, for any controller that says its position targets) through
+//! [`Checks::evaluate_tracking`]; the scenario gathers them into the run's
+//! [`crate::engine::Verdict`]. This module sits
 //! below both the scenario and the grasp check, so neither imports the other for them.
 
+use crate::tracking::TrackingSummary;
 use crate::walk::GaitSummary;
 
 /// Thresholds on [`GaitSummary`]; each one present is checked.
@@ -57,9 +61,61 @@ pub struct Checks {
     /// Grasp: how long the cup must stay lifted at the end of the run, s (default with
     /// `min_lift_m`: 2).
     pub min_hold_secs: Option<f64>,
+    /// Tracking: largest RMS of commanded − actual position of the worst-tracking joint over
+    /// the run, rad (m for slides). Fails a controller that gives no position targets.
+    pub max_tracking_rms_rad: Option<f64>,
+    /// Tracking: largest |commanded − actual| position of any joint at any step, rad (m).
+    /// Fails a controller that gives no position targets.
+    pub max_tracking_error_rad: Option<f64>,
+    /// Tracking: largest fraction (0–1) of the run's simulated time with some actuator
+    /// command at its limit (saturated).
+    pub max_saturated_fraction: Option<f64>,
 }
 
 impl Checks {
+    /// Whether any tracking threshold is set (the tracking metrics are then measured).
+    pub fn has_tracking(&self) -> bool {
+        self.max_tracking_rms_rad.is_some()
+            || self.max_tracking_error_rad.is_some()
+            || self.max_saturated_fraction.is_some()
+    }
+
+    /// Checks the values of the thresholds that have a range: `Err((key, message))`.
+    ///
+    /// # Errors
+    /// The first key out of range.
+    pub fn validate(&self) -> std::result::Result<(), (&'static str, String)> {
+        for (key, v) in [
+            ("max_tracking_rms_rad", self.max_tracking_rms_rad),
+            ("max_tracking_error_rad", self.max_tracking_error_rad),
+        ] {
+            if let Some(v) = v
+                && !(v >= 0.0 && v.is_finite())
+            {
+                return Err((key, format!("must be a non-negative number of radians (m for slide joints) (got {v})")));
+            }
+        }
+        if let Some(f) = self.max_saturated_fraction
+            && !(0.0..=1.0).contains(&f)
+        {
+            return Err(("max_saturated_fraction", format!("must be a fraction of the run within 0..=1 (got {f})")));
+        }
+        Ok(())
+    }
+
+    /// Each tracking threshold present against `summary`. Without position targets from the
+    /// controller the tracking errors are unknown (NaN) and their thresholds fail.
+    pub fn evaluate_tracking(&self, summary: &TrackingSummary) -> Vec<Threshold> {
+        let unknown = summary.joints.is_empty();
+        let (rms, max) = if unknown { (f64::NAN, f64::NAN) } else { (summary.rms(), summary.max()) };
+        let fraction = if summary.sim_secs > 0.0 { summary.saturated_secs / summary.sim_secs } else { 0.0 };
+        let mut out = Thresholds::default();
+        out.at_most("max_tracking_rms_rad", rms, self.max_tracking_rms_rad);
+        out.at_most("max_tracking_error_rad", max, self.max_tracking_error_rad);
+        out.at_most("max_saturated_fraction", fraction, self.max_saturated_fraction);
+        out.0
+    }
+
     /// Whether any grasp threshold is set (the grasp check then runs).
     pub fn has_grasp(&self) -> bool {
         self.min_clearance_m.is_some()
@@ -115,36 +171,47 @@ impl Threshold {
     }
 }
 
+/// The thresholds a set of checks names, in the order they are added: a check the scenario
+/// leaves out (`None`) adds nothing.
+#[derive(Debug, Default)]
+pub struct Thresholds(pub Vec<Threshold>);
+
+impl Thresholds {
+    /// [`Threshold::at_most`] when `threshold` is set.
+    pub fn at_most(&mut self, name: &'static str, value: f64, threshold: Option<f64>) {
+        if let Some(t) = threshold {
+            self.0.push(Threshold::at_most(name, value, t));
+        }
+    }
+
+    /// [`Threshold::at_least`] when `threshold` is set.
+    pub fn at_least(&mut self, name: &'static str, value: f64, threshold: Option<f64>) {
+        if let Some(t) = threshold {
+            self.0.push(Threshold::at_least(name, value, t));
+        }
+    }
+}
+
 impl Checks {
     /// Each threshold present against `summary`; a fall fails every non-empty set of checks.
     pub fn evaluate(&self, summary: &GaitSummary) -> Vec<Threshold> {
         let c = self;
-        let mut out = Vec::new();
-        let mut at_most = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Threshold::at_most(name, value, t));
-            }
-        };
-        at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
-        at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
-        at_most("max_distance", summary.distance_m, c.max_distance);
-        at_most("max_slip", summary.slip_max_m, c.max_slip);
-        at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
-        at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
-        at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
-        at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
-        let mut at_least = |name: &'static str, value: f64, threshold: Option<f64>| {
-            if let Some(t) = threshold {
-                out.push(Threshold::at_least(name, value, t));
-            }
-        };
-        at_least("min_forward", summary.forward_m, c.min_forward);
-        at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
-        at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
+        let mut out = Thresholds::default();
+        out.at_most("falls", f64::from(u8::from(summary.fell)), c.falls.map(f64::from));
+        out.at_most("max_lateral_drift", summary.lateral_m.abs(), c.max_lateral_drift);
+        out.at_most("max_distance", summary.distance_m, c.max_distance);
+        out.at_most("max_slip", summary.slip_max_m, c.max_slip);
+        out.at_most("max_mean_slip", summary.slip_mean_m, c.max_mean_slip);
+        out.at_most("max_velocity_error", summary.velocity_rms_error_mps, c.max_velocity_error);
+        out.at_most("max_step_length_error", summary.step_length_rms_error_m, c.max_step_length_error);
+        out.at_most("max_cost_of_transport", summary.cost_of_transport, c.max_cost_of_transport);
+        out.at_least("min_forward", summary.forward_m, c.min_forward);
+        out.at_least("min_average_speed", summary.average_speed_mps, c.min_average_speed);
+        out.at_least("min_steps", summary.steps as f64, c.min_steps.map(|s| s as f64));
         if let Some(t) = c.min_turn_deg {
             let sign = if t < 0.0 { -1.0 } else { 1.0 };
             let turned = summary.yaw_change_rad.to_degrees();
-            out.push(Threshold {
+            out.0.push(Threshold {
                 name: "min_turn_deg",
                 value: turned,
                 op: ">=",
@@ -153,9 +220,9 @@ impl Checks {
             });
         }
         // A fall fails every run that has checks, whether or not `falls` is among them.
-        if summary.fell && c.falls.is_none() && !out.is_empty() {
-            out.push(Threshold::at_most("falls", 1.0, 0.0));
+        if summary.fell && c.falls.is_none() && !out.0.is_empty() {
+            out.0.push(Threshold::at_most("falls", 1.0, 0.0));
         }
-        out
+        out.0
     }
 }

@@ -9,7 +9,7 @@
 //! ```no_run
 //! use twin_core::convert::{convert_urdf, ConvertOptions};
 //! let out = convert_urdf("models/humanoid.urdf".as_ref(), &ConvertOptions::default())?;
-//! println!("{} IMUs, topic {:?}", out.imus.len(), out.imus[0].topic);
+//! println!("{} IMUs, topic {:?}", out.meta.imus.len(), out.meta.imus[0].topic);
 //! let model = twin_core::mj::Model::from_xml_str(&out.mjcf)?;
 //! # Ok::<(), twin_core::Error>(())
 //! ```

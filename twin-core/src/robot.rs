@@ -11,14 +11,15 @@
 //!
 //! ## Where the metadata comes from
 //! - URDF: twin's converter ([`crate::convert`]) gives IMU topics, rates and noise, joint
-//!   velocity/effort limits and each actuator's command interface ([`RobotMetadata`]).
+//!   velocity/effort limits and each actuator's command interface ([`RobotMeta`]).
 //! - MJCF or scene: what the compiled model holds (IMUs as `<name>_gyro` + `<name>_accel`
 //!   sensor pairs with their `noise`, published on `/<robot>/<name>`; effort limits from
 //!   `actuatorfrcrange`; the interface from the actuator's gain/bias).
-//!   [`RobotMetadata::from_mjcf`] is the one place where metadata stored in an MJCF is read.
+//!   [`crate::convert::robot_meta`] is the one place where metadata stored in an MJCF (by
+//!   `twin convert`) is read.
 //! - Feet and end-effectors come from the kinematic tree and the geometry, never from names.
 
-use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, SensorMeta};
+use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, RobotMeta, SensorMeta};
 use crate::error::Result;
 use crate::mj::{Data, FreeJoint, JointType, Model, ObjType};
 use std::path::{Path, PathBuf};
@@ -98,36 +99,6 @@ pub struct Actuator {
     pub ctrl_range: Option<[f64; 2]>,
 }
 
-/// What the model file says beyond MuJoCo's model: the converter's output for a URDF, or the
-/// metadata stored in an MJCF.
-#[derive(Debug, Clone, Default, PartialEq)]
-pub struct RobotMetadata {
-    /// Robot name (topic prefix).
-    pub name: Option<String>,
-    /// IMUs with their topics, rates and noise.
-    pub imus: Vec<ImuMeta>,
-    /// Joints with their limits and command interfaces.
-    pub joints: Vec<JointMeta>,
-    /// Other sensors (cameras, LiDARs, force/torque, contact), as the converter described them.
-    pub sensors: Vec<SensorMeta>,
-}
-
-impl RobotMetadata {
-    /// Metadata stored inside an MJCF, for a model loaded from one. This is the single place
-    /// where MJCF-stored robot metadata enters a [`Robot`]: an MJCF written by `twin convert`
-    /// carries the URDF's ROS side in `<custom>` texts ([`crate::convert::RobotMeta`]); other
-    /// MJCFs carry none beyond the model itself (sensor noise, `actuatorfrcrange`), which
-    /// [`Robot::from_parts`] reads.
-    pub fn from_mjcf(model: &Model) -> Option<RobotMetadata> {
-        crate::convert::robot_meta(model).map(|m| RobotMetadata {
-            name: Some(m.name),
-            imus: m.imus,
-            joints: m.joints,
-            sensors: m.sensors,
-        })
-    }
-}
-
 /// A compiled robot and what twin knows about it beyond the model.
 #[derive(Debug, Clone)]
 pub struct Robot {
@@ -186,14 +157,12 @@ impl Robot {
     pub fn load_with_extra(path: impl AsRef<Path>, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
         let path = path.as_ref();
         let loaded = crate::convert::load(path, options, extra_mjcf)?;
+        // A URDF's metadata from its conversion; an MJCF's from the `<custom>` texts that
+        // `twin convert` writes (other MJCFs carry none beyond the model itself: sensor noise,
+        // `actuatorfrcrange`, which `from_parts` reads).
         let meta = match loaded.converted {
-            Some(converted) => Some(RobotMetadata {
-                name: Some(converted.robot_name),
-                imus: converted.imus,
-                joints: converted.joints,
-                sensors: converted.sensors,
-            }),
-            None => RobotMetadata::from_mjcf(&loaded.model),
+            Some(converted) => Some(converted.meta),
+            None => crate::convert::robot_meta(&loaded.model),
         };
         Robot::from_parts(Arc::new(loaded.model), path, meta)
     }
@@ -204,7 +173,7 @@ impl Robot {
     /// # Errors
     /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
     pub fn from_model(model: Arc<Model>, name: &str, path: &Path) -> Result<Robot> {
-        let meta = RobotMetadata { name: Some(name.to_string()), ..RobotMetadata::default() };
+        let meta = RobotMeta { name: name.to_string(), ..RobotMeta::default() };
         Robot::from_parts(model, path, Some(meta))
     }
 
@@ -212,13 +181,11 @@ impl Robot {
     ///
     /// # Errors
     /// [`Error::MuJoCo`](crate::Error::MuJoCo) if MuJoCo fails while posing the model to find its feet.
-    pub fn from_parts(model: Arc<Model>, path: &Path, meta: Option<RobotMetadata>) -> Result<Robot> {
+    pub fn from_parts(model: Arc<Model>, path: &Path, meta: Option<RobotMeta>) -> Result<Robot> {
         let meta = meta.unwrap_or_default();
         let stem = path.file_stem().and_then(|s| s.to_str()).unwrap_or("robot");
         // The file's robot name, else the model's own name, else the file name.
-        let raw_name = meta
-            .name
-            .as_deref()
+        let raw_name = Some(meta.name.as_str())
             .filter(|n| !n.is_empty())
             .or(Some(model.model_name()).filter(|n| !n.is_empty() && *n != "MuJoCo Model"))
             .unwrap_or(stem);
@@ -443,20 +410,6 @@ pub fn end_effectors(model: &Model) -> Vec<usize> {
         has_geom[b as usize] = true;
     }
     (1..model.nbody()).filter(|&b| !has_child[b] && has_geom[b]).collect()
-}
-
-/// Whether body `b` is `root` or inside its subtree.
-pub fn in_subtree(model: &Model, root: usize, mut b: usize) -> bool {
-    let parent = model.body_parentid();
-    loop {
-        if b == root {
-            return true;
-        }
-        if b == 0 {
-            return false;
-        }
-        b = parent[b] as usize;
-    }
 }
 
 /// Where a command goes: `ctrl` when the model has actuators, else `qfrc_applied`.

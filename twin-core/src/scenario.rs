@@ -22,6 +22,11 @@
 //! [checks]                           # each present threshold is a PASS/FAIL line
 //! falls = 0
 //! min_forward = 10.0
+//! # Tracking, any controller that gives position targets (pd-hold, position commands of a
+//! # ROS node): commanded − actual joint position.
+//! max_tracking_rms_rad = 0.05         # RMS of the worst-tracking joint, rad
+//! max_tracking_error_rad = 0.2        # largest error of any joint at any step, rad
+//! max_saturated_fraction = 0.1        # of the run with some actuator command at its limit
 //! ```
 //!
 //! Grasping scenarios (`controller = "grasp"`, see `scenarios/grasp.toml`) add a world, the
@@ -52,6 +57,8 @@
 //! [ros]                               # external::RosOptions, by field name
 //! command = "python3 controllers/hold_pose.py --ros-args -p use_sim_time:=true"
 //! period_timeout_secs = 5.0
+//! flood_commands_per_period = 10.0    # commands beyond one per period (averaged over
+//! flood_window_secs = 1.0             #   this much simulated time) that fail the run
 //!
 //! [test]                              # TestOptions: `twin test`
 //! episodes = 20
@@ -356,6 +363,7 @@ impl Scenario {
             return Err(bad(Some("test"), "min_success_lower_95", format!("must be within 0..=1 (got {p})")));
         }
         file.grasp.validate().map_err(|(key, m)| bad(Some("grasp"), key, m))?;
+        file.checks.validate().map_err(|(key, m)| bad(Some("checks"), key, m))?;
         if let Some(t) = &file.terrain {
             t.validate().map_err(|(key, m)| bad(Some("terrain"), key, m))?;
             if file.world.is_some() && t.kind != "flat" {
@@ -555,7 +563,8 @@ impl Scenario {
             )
         });
         let collisions = self.terrain.as_ref().map(|_| crate::terrain::Collisions::new(model));
-        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp, collisions })
+        let tracking = self.checks.has_tracking().then(crate::tracking::Tracking::new);
+        Ok(ScenarioCheck { metrics: self.metrics(model)?, checks: self.checks.clone(), grasp, collisions, tracking })
     }
 
     /// Each check against `summary`.
@@ -575,6 +584,8 @@ pub struct ScenarioCheck {
     pub grasp: Option<crate::grasp::GraspCheck>,
     /// The robot's first run-in with the terrain's boxes, when the scenario has terrain.
     pub collisions: Option<crate::terrain::Collisions>,
+    /// Commanded against actual joint positions, when the scenario has tracking thresholds.
+    pub tracking: Option<crate::tracking::Tracking>,
 }
 
 impl ScenarioCheck {
@@ -583,6 +594,9 @@ impl ScenarioCheck {
         let mut v = self.checks.evaluate(&self.metrics.summary());
         if let Some(g) = &self.grasp {
             v.extend(g.verdicts());
+        }
+        if let Some(t) = &self.tracking {
+            v.extend(self.checks.evaluate_tracking(&t.summary()));
         }
         v
     }
@@ -596,6 +610,9 @@ impl Observer for ScenarioCheck {
         if let Some(c) = self.collisions.as_mut() {
             c.start(model, data)?;
         }
+        if let Some(t) = self.tracking.as_mut() {
+            t.start(model, data)?;
+        }
         self.metrics.start(model, data)
     }
 
@@ -605,6 +622,9 @@ impl Observer for ScenarioCheck {
         }
         if let Some(c) = self.collisions.as_mut() {
             c.observe(step)?;
+        }
+        if let Some(t) = self.tracking.as_mut() {
+            t.observe(step)?;
         }
         self.metrics.observe(step)
     }
@@ -638,11 +658,18 @@ impl Check for ScenarioCheck {
                 // The episode's own fall detection reports falls.
                 .filter(|m| m.name != "fell")
                 .chain(self.grasp.iter().flat_map(|g| g.verdicts()).map(|v| Measurement::new(v.name, v.value, "")))
+                .chain(
+                    self.tracking
+                        .iter()
+                        .flat_map(|t| self.checks.evaluate_tracking(&t.summary()))
+                        .map(|v| Measurement::new(v.name, v.value, "")),
+                )
                 .collect(),
             details: verdicts
                 .iter()
                 .map(ToString::to_string)
                 .chain(self.collision().map(|c| format!("collision: {c}")))
+                .chain(self.tracking.iter().map(|t| t.summary().to_string()))
                 .collect(),
             cause: (!failed.is_empty()).then(|| match self.collision() {
                 // Running into the terrain, not a mystery fall.
@@ -735,5 +762,28 @@ mod tests {
         let slip = v.iter().find(|v| v.name == "max_slip").unwrap();
         assert!(!slip.passed);
         assert_eq!(slip.to_string(), "FAIL max_slip               0.0500 <= 0.01");
+    }
+
+    #[test]
+    fn tracking_thresholds_are_range_checked_and_fail_without_targets() {
+        let e = parse("duration = 1\n[checks]\nfalls = 0\nmax_saturated_fraction = 1.5\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:4: `checks.max_saturated_fraction`") && e.contains("0..=1"), "{e}");
+        let e = parse("duration = 1\n[checks]\nmax_tracking_rms_rad = -0.1\n").unwrap_err().to_string();
+        assert!(e.starts_with("s.toml:3: `checks.max_tracking_rms_rad`") && e.contains("non-negative"), "{e}");
+        let s = parse("duration = 1\n[checks]\nmax_tracking_rms_rad = 0.05\nmax_saturated_fraction = 0.1\n").unwrap();
+        assert!(s.checks.has_tracking());
+        let summary = crate::tracking::TrackingSummary {
+            joints: vec![crate::tracking::JointTracking { joint: "elbow".into(), rms: 0.08, max: 0.3 }],
+            saturated_secs: 0.05,
+            sim_secs: 1.0,
+        };
+        let v = s.checks.evaluate_tracking(&summary);
+        assert_eq!(v.len(), 2);
+        assert_eq!(v[0].to_string(), "FAIL max_tracking_rms_rad   0.0800 <= 0.05");
+        assert_eq!(v[1].to_string(), "PASS max_saturated_fraction 0.0500 <= 0.1");
+        // No position targets: the error is unknown and fails.
+        let none =
+            s.checks.evaluate_tracking(&crate::tracking::TrackingSummary { sim_secs: 1.0, ..Default::default() });
+        assert!(!none[0].passed && none[0].value.is_nan());
     }
 }

@@ -139,66 +139,37 @@ impl Recorder {
             let pose =
                 rerun::Transform3D::from_translation_rotation(vec3(model.geom_pos()[g]), quat(model.geom_quat()[g]));
             let s = model.geom_size()[g];
-            let logged = match model.geom_type()[g] as u32 {
+            let solid = rerun::FillMode::Solid;
+            let shape: Box<dyn rerun::AsComponents> = match model.geom_type()[g] as u32 {
                 sys::mjtGeom_mjGEOM_PLANE => {
                     // An infinite plane (size 0) is drawn as a 10 m square.
                     let hx = if s[0] > 0.0 { s[0] } else { 5.0 };
                     let hy = if s[1] > 0.0 { s[1] } else { 5.0 };
-                    rec.log_static(
-                        entity.as_str(),
-                        &[
-                            &pose as &dyn rerun::AsComponents,
-                            &rerun::Boxes3D::from_half_sizes([[hx as f32, hy as f32, 0.0]])
-                                .with_colors([color])
-                                .with_fill_mode(rerun::FillMode::Solid),
-                        ],
+                    Box::new(
+                        rerun::Boxes3D::from_half_sizes([[hx as f32, hy as f32, 0.0]])
+                            .with_colors([color])
+                            .with_fill_mode(solid),
                     )
                 }
-                sys::mjtGeom_mjGEOM_SPHERE => rec.log_static(
-                    entity.as_str(),
-                    &[
-                        &pose as &dyn rerun::AsComponents,
-                        &rerun::Ellipsoids3D::from_radii([s[0] as f32])
-                            .with_colors([color])
-                            .with_fill_mode(rerun::FillMode::Solid),
-                    ],
+                sys::mjtGeom_mjGEOM_SPHERE => Box::new(
+                    rerun::Ellipsoids3D::from_radii([s[0] as f32]).with_colors([color]).with_fill_mode(solid),
                 ),
-                sys::mjtGeom_mjGEOM_ELLIPSOID => rec.log_static(
-                    entity.as_str(),
-                    &[
-                        &pose as &dyn rerun::AsComponents,
-                        &rerun::Ellipsoids3D::from_half_sizes([vec3(s)])
-                            .with_colors([color])
-                            .with_fill_mode(rerun::FillMode::Solid),
-                    ],
+                sys::mjtGeom_mjGEOM_ELLIPSOID => Box::new(
+                    rerun::Ellipsoids3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid),
                 ),
-                sys::mjtGeom_mjGEOM_BOX => rec.log_static(
-                    entity.as_str(),
-                    &[
-                        &pose as &dyn rerun::AsComponents,
-                        &rerun::Boxes3D::from_half_sizes([vec3(s)])
-                            .with_colors([color])
-                            .with_fill_mode(rerun::FillMode::Solid),
-                    ],
+                sys::mjtGeom_mjGEOM_BOX => {
+                    Box::new(rerun::Boxes3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid))
+                }
+                sys::mjtGeom_mjGEOM_CYLINDER => Box::new(
+                    rerun::Cylinders3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
+                        .with_colors([color])
+                        .with_fill_mode(solid),
                 ),
-                sys::mjtGeom_mjGEOM_CYLINDER => rec.log_static(
-                    entity.as_str(),
-                    &[
-                        &pose as &dyn rerun::AsComponents,
-                        &rerun::Cylinders3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
-                            .with_colors([color])
-                            .with_fill_mode(rerun::FillMode::Solid),
-                    ],
-                ),
-                sys::mjtGeom_mjGEOM_CAPSULE => rec.log_static(
-                    entity.as_str(),
-                    &[
-                        &pose as &dyn rerun::AsComponents,
-                        // rerun's capsule runs from the origin along +Z; MuJoCo's is centred.
-                        &rerun::Capsules3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
-                            .with_translations([[0.0, 0.0, -s[1] as f32]])
-                            .with_colors([color]),
-                    ],
+                // rerun's capsule runs from the origin along +Z; MuJoCo's is centred.
+                sys::mjtGeom_mjGEOM_CAPSULE => Box::new(
+                    rerun::Capsules3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
+                        .with_translations([[0.0, 0.0, -s[1] as f32]])
+                        .with_colors([color]),
                 ),
                 sys::mjtGeom_mjGEOM_MESH if model.geom_dataid()[g] >= 0 => {
                     let mesh = model.geom_dataid()[g] as usize;
@@ -207,18 +178,13 @@ impl Recorder {
                     let vertices = model.mesh_vert()[v0..v0 + nv].to_vec();
                     let faces: Vec<[u32; 3]> =
                         model.mesh_face()[f0..f0 + nf].iter().map(|f| f.map(|i| i as u32)).collect();
-                    rec.log_static(
-                        entity.as_str(),
-                        &[
-                            &pose as &dyn rerun::AsComponents,
-                            &rerun::Mesh3D::new(vertices).with_triangle_indices(faces).with_albedo_factor(color.0),
-                        ],
-                    )
+                    Box::new(rerun::Mesh3D::new(vertices).with_triangle_indices(faces).with_albedo_factor(color.0))
                 }
                 // Height fields and SDFs have no rerun primitive; they are left out.
-                _ => Ok(()),
+                _ => continue,
             };
-            logged.map_err(|e| self.err(e))?;
+            rec.log_static(entity.as_str(), &[&pose as &dyn rerun::AsComponents, shape.as_ref()])
+                .map_err(|e| self.err(e))?;
         }
         Ok(())
     }

@@ -33,6 +33,18 @@ fn model_params(robot: &RobotModel, layout: &sysid::regressor::Layout, armature:
     params
 }
 
+/// MuJoCo's inverse dynamics (`qfrc_inverse`) of each of the robot's joints at `q`, `qd`, `qdd`
+/// (one entry a joint, in joint order): what the regressor's `Y·π` must equal.
+fn joint_inverse_dynamics(robot: &RobotModel, data: &mut Data, q: &[f64], qd: &[f64], qdd: &[f64]) -> Vec<f64> {
+    for (j, joint) in robot.joints.iter().enumerate() {
+        data.qpos_mut()[joint.qpos_adr] = q[j];
+        data.qvel_mut()[joint.dof] = qd[j];
+        data.qacc_mut()[joint.dof] = qdd[j];
+    }
+    data.inverse().unwrap();
+    robot.joints.iter().map(|joint| data.qfrc_inverse()[joint.dof]).collect()
+}
+
 fn check_against_inverse_dynamics(urdf: &Path) {
     // Damping and armature are part of MuJoCo's inverse dynamics; constraint forces (friction
     // loss, joint limits at random poses, self-contacts) are not part of the rigid-body model.
@@ -61,14 +73,8 @@ fn check_against_inverse_dynamics(urdf: &Path) {
         let qd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 3.0).collect();
         let qdd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 10.0).collect();
         let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
-        for (j, joint) in robot.joints.iter().enumerate() {
-            data.qpos_mut()[joint.qpos_adr] = q[j];
-            data.qvel_mut()[joint.dof] = qd[j];
-            data.qacc_mut()[joint.dof] = qdd[j];
-        }
-        data.inverse().unwrap();
-        for (j, joint) in robot.joints.iter().enumerate() {
-            let expected = data.qfrc_inverse()[joint.dof];
+        let inverse = joint_inverse_dynamics(&robot, &mut data, &q, &qd, &qdd);
+        for (j, (joint, &expected)) in robot.joints.iter().zip(&inverse).enumerate() {
             let err = (tau[j] - expected).abs() / (1.0 + expected.abs());
             worst = worst.max(err);
             assert!(
@@ -117,14 +123,8 @@ fn regressor_on_a_free_base_model_matches_inverse_dynamics_of_the_joints() {
     let (q, qd, qdd) = ([0.4, -1.1], [1.3, -0.7], [-2.0, 5.0]);
     let mut rows = Vec::new();
     let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
-    for (j, joint) in robot.joints.iter().enumerate() {
-        data.qpos_mut()[joint.qpos_adr] = q[j];
-        data.qvel_mut()[joint.dof] = qd[j];
-        data.qacc_mut()[joint.dof] = qdd[j];
-    }
-    data.inverse().unwrap();
-    for (j, joint) in robot.joints.iter().enumerate() {
-        let expected = data.qfrc_inverse()[joint.dof];
+    let inverse = joint_inverse_dynamics(&robot, &mut data, &q, &qd, &qdd);
+    for (j, (joint, &expected)) in robot.joints.iter().zip(&inverse).enumerate() {
         assert!((tau[j] - expected).abs() < 1e-9 * (1.0 + expected.abs()), "{}: {} vs {expected}", joint.name, tau[j]);
     }
 }

@@ -338,7 +338,7 @@ pub fn stance_stiffness(model: &Model) -> Vec<f64> {
     let (com_z, mass) = (data.subtree_com()[base.body][2], model.body_subtreemass()[base.body]);
     for j in 0..model.njnt() {
         let b = model.jnt_bodyid()[j] as usize;
-        if model.joint_type(j) != JointType::Hinge || !crate::robot::in_subtree(model, base.body, b) {
+        if model.joint_type(j) != JointType::Hinge || !model.in_subtree(base.body, b) {
             continue;
         }
         let x = data.xmat()[b];

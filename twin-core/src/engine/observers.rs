@@ -227,7 +227,7 @@ impl Touchdowns {
         let geom_foot = (0..model.ngeom())
             .map(|g| {
                 let body = model.geom_bodyid()[g] as usize;
-                feet.iter().position(|&f| crate::robot::in_subtree(model, f, body)).map_or(-1, |k| k as i32)
+                feet.iter().position(|&f| model.in_subtree(f, body)).map_or(-1, |k| k as i32)
             })
             .collect();
         Touchdowns { geom_foot, air_secs: vec![0.0; feet.len()], now: vec![false; feet.len()], count: 0 }

@@ -127,6 +127,8 @@ pub fn external(
         silence_timeout_secs: options.period_timeout_secs,
         lockstep_timeout_secs: options.period_timeout_secs,
         join_timeout_secs: options.join_timeout_secs,
+        flood_commands_per_period: options.flood_commands_per_period,
+        flood_window_secs: options.flood_window_secs,
         ..LiveOptions::default()
     };
     let stop = crate::fsio::interrupt_flag();
@@ -424,7 +426,8 @@ impl Controller for ExternalController {
             match self.inner.proceed() {
                 Ok(go) => go,
                 Err(_) => {
-                    let why = self.exit_reason().unwrap_or_else(|| {
+                    let flood = self.inner.flood().map(|f| format!("flood: {f}"));
+                    let why = flood.or_else(|| self.exit_reason()).unwrap_or_else(|| {
                         format!(
                             "no command: none within {} s (period_timeout_secs) after /clock = {:.3} s: the process \
                              hangs or stopped publishing (see {})",

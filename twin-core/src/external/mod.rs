@@ -70,6 +70,8 @@ pub enum Interface {
 /// restart = "episode"              # episode | never (twin randomize)
 /// reset_settle_secs = 0.1          # restart = "never": the jump back on /clock, alone, this long
 /// subscribes = ["/joint_states"]   # topics the process must subscribe to before time starts
+/// flood_commands_per_period = 10.0 # commands beyond one per period, averaged over
+/// flood_window_secs = 1.0          #   this much simulated time, that fail the episode
 /// ```
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -109,6 +111,16 @@ pub struct RosOptions {
     /// so that it misses none of their messages (default: `["/joint_states"]`).
     #[serde(default = "default_subscribes")]
     pub subscribes: Vec<String>,
+    /// Commands beyond one per control period, averaged over `flood_window_secs`, above which
+    /// the episode fails as a flood (default: 10). Twin takes one command per period; the
+    /// others still queued when the next period opens are dropped and counted
+    /// ([`crate::live::flood`]). A node with one command per `/clock` period sends none beyond;
+    /// a timer at twice the control rate sends 1.
+    #[serde(default = "default_flood")]
+    pub flood_commands_per_period: f64,
+    /// The window of that average, simulated seconds (default: 1).
+    #[serde(default = "default_flood_window")]
+    pub flood_window_secs: f64,
 }
 
 fn default_interface() -> Interface {
@@ -131,6 +143,12 @@ fn default_restart() -> Restart {
 }
 fn default_reset_settle() -> f64 {
     0.1
+}
+fn default_flood() -> f64 {
+    10.0
+}
+fn default_flood_window() -> f64 {
+    1.0
 }
 fn default_subscribes() -> Vec<String> {
     vec!["/joint_states".into()]
@@ -157,6 +175,13 @@ impl RosOptions {
         positive("period_timeout_secs", self.period_timeout_secs, "seconds")?;
         positive("stop_timeout_secs", self.stop_timeout_secs, "seconds")?;
         positive("reset_settle_secs", self.reset_settle_secs, "seconds")?;
+        positive("flood_window_secs", self.flood_window_secs, "seconds")?;
+        if !(self.flood_commands_per_period >= 0.0 && self.flood_commands_per_period.is_finite()) {
+            return Err((
+                "flood_commands_per_period",
+                format!("must be a number of commands per period ≥ 0 (got {})", self.flood_commands_per_period),
+            ));
+        }
         if let Some(t) = self.subscribes.iter().find(|t| !t.starts_with('/')) {
             return Err(("subscribes", format!("topic {t:?} must start with `/`")));
         }

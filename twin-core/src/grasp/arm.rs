@@ -70,10 +70,6 @@ fn ancestors(model: &Model, mut b: usize) -> Vec<usize> {
     out
 }
 
-/// Whether `b` is `root` or below it.
-pub(crate) fn below(model: &Model, root: usize, b: usize) -> bool {
-    crate::robot::in_subtree(model, root, b)
-}
 
 /// The command loop of 1-DOF joint `joint`, with the PD gain rule's gains at
 /// `saturation_error`.
@@ -172,7 +168,7 @@ impl Arm {
                 ),
             });
         }
-        let gripper_bodies: Vec<usize> = (0..model.nbody()).filter(|&b| below(model, hand, b)).collect();
+        let gripper_bodies = model.subtree(hand);
         let mut fingers = Vec::new();
         for j in 0..model.njnt() {
             let b = model.jnt_bodyid()[j] as usize;

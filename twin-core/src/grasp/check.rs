@@ -2,8 +2,7 @@
 //! reach without collision, grip force within bounds, no slip in the hand, balance, lifted and
 //! held.
 
-use super::arm::below;
-use crate::checks::{Checks, Threshold};
+use crate::checks::{Checks, Threshold, Thresholds};
 use crate::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType};
@@ -110,28 +109,18 @@ impl GraspCheck {
     pub fn verdicts(&self) -> Vec<Threshold> {
         let c = &self.checks;
         let m = &self.m;
-        let mut out = Vec::new();
-        let mut at_most = |name: &'static str, value: f64, t: Option<f64>| {
-            if let Some(t) = t {
-                out.push(Threshold::at_most(name, value, t));
-            }
-        };
-        at_most("max_grip_force_n", m.max_grip_force_n, c.max_grip_force_n);
-        at_most("max_slip_m", m.slip_m, c.max_slip_m);
-        at_most("max_tilt_deg", m.tilt_deg, c.max_tilt_deg);
-        let mut at_least = |name: &'static str, value: f64, t: Option<f64>| {
-            if let Some(t) = t {
-                out.push(Threshold::at_least(name, value, t));
-            }
-        };
-        at_least("min_clearance_m", m.min_clearance_m, c.min_clearance_m);
-        at_least("min_grip_force_n", m.hold_grip_force_n, c.min_grip_force_n);
-        at_least("min_com_margin_m", m.min_com_margin_m, c.min_com_margin_m);
+        let mut out = Thresholds::default();
+        out.at_most("max_grip_force_n", m.max_grip_force_n, c.max_grip_force_n);
+        out.at_most("max_slip_m", m.slip_m, c.max_slip_m);
+        out.at_most("max_tilt_deg", m.tilt_deg, c.max_tilt_deg);
+        out.at_least("min_clearance_m", m.min_clearance_m, c.min_clearance_m);
+        out.at_least("min_grip_force_n", m.hold_grip_force_n, c.min_grip_force_n);
+        out.at_least("min_com_margin_m", m.min_com_margin_m, c.min_com_margin_m);
         if c.min_lift_m.is_some() || c.min_hold_secs.is_some() {
-            at_least("min_lift_m", m.final_lift_m, c.min_lift_m);
-            at_least("min_hold_secs", m.held_secs, Some(c.min_hold_secs.unwrap_or(2.0)));
+            out.at_least("min_lift_m", m.final_lift_m, c.min_lift_m);
+            out.at_least("min_hold_secs", m.held_secs, Some(c.min_hold_secs.unwrap_or(2.0)));
         }
-        out
+        out.0
     }
 
     fn bind(&mut self, model: &Model) -> Result<()> {
@@ -153,7 +142,7 @@ impl GraspCheck {
         let parent = model.body_parentid();
         for (k, &g) in ids.iter().enumerate() {
             let hand = parent[g] as usize;
-            let gripper_bodies: Vec<usize> = (0..model.nbody()).filter(|&b| below(model, hand, b)).collect();
+            let gripper_bodies = model.subtree(hand);
             let mut fingers: Vec<usize> = (0..model.njnt())
                 .filter(|&j| model.joint_type(j) == crate::mj::JointType::Slide)
                 .map(|j| model.jnt_bodyid()[j] as usize)
@@ -191,7 +180,7 @@ impl GraspCheck {
                 })
                 .unwrap_or(self.robot_root);
             let top = up.iter().copied().take_while(|&x| x != trunk).last().unwrap_or(hand);
-            let arm_bodies: Vec<usize> = (0..model.nbody()).filter(|&x| below(model, top, x)).collect();
+            let arm_bodies = model.subtree(top);
             self.grippers.push(GripperSet {
                 grasp_body: g,
                 fingers: [fingers[0], fingers[1]],
@@ -201,7 +190,7 @@ impl GraspCheck {
         }
         // Watched pairs: each arm's geoms against every other robot geom outside that arm,
         // except the trunk body the arm hangs from (its shoulder joint sits on it).
-        let robot: Vec<usize> = (0..model.nbody()).filter(|&b| below(model, self.robot_root, b)).collect();
+        let robot = model.subtree(self.robot_root);
         let mut pairs = Vec::new();
         for (k, gs) in self.grippers.iter().enumerate() {
             let top = *gs.arm_bodies.iter().min().unwrap_or(&0);
@@ -308,7 +297,7 @@ impl Observer for GraspCheck {
         let data = step.data;
         let model = data.model().clone();
         let body_of = |g: i32| if g < 0 { 0 } else { model.geom_bodyid()[g as usize] as usize };
-        let is_robot = |b: usize| b != 0 && below(&model, self.robot_root, b);
+        let is_robot = |b: usize| b != 0 && model.in_subtree(self.robot_root, b);
         // Contacts: forbidden ones, finger forces, the support polygon.
         let mut finger_force = vec![[0.0f64; 2]; self.grippers.len()];
         let mut support = Vec::new();

@@ -507,25 +507,27 @@ impl Grasper {
 
     /// Arm `a`'s grasp point with its joints at `q`.
     fn grasp_point(&mut self, a: usize, qpos: &[f64], q: &[f64]) -> Option<Vector3<f64>> {
-        let scratch = self.scratch.as_mut()?;
-        scratch.qpos_mut().copy_from_slice(qpos);
-        for (l, &v) in self.arms[a].joints.iter().zip(q) {
-            scratch.qpos_mut()[l.qpos_adr] = v;
-        }
-        scratch.kinematics_with_velocity().ok()?;
-        Some(Vector3::from(scratch.xpos()[self.arms[a].grasp_body]))
+        let body = self.arms[a].grasp_body;
+        let scratch = self.posed(a, qpos, q)?;
+        Some(Vector3::from(scratch.xpos()[body]))
     }
 
     /// Arm `a`'s approach axis (world) with its joints at `q`.
     fn approach_of(&mut self, a: usize, qpos: &[f64], q: &[f64]) -> Option<Vector3<f64>> {
+        let body = self.arms[a].grasp_body;
+        let m = self.posed(a, qpos, q)?.xmat()[body];
+        Some(Vector3::new(-m[2], -m[5], -m[8]))
+    }
+
+    /// The scratch data at `qpos` with arm `a`'s joints at `q`, its kinematics computed.
+    fn posed(&mut self, a: usize, qpos: &[f64], q: &[f64]) -> Option<&Data> {
         let scratch = self.scratch.as_mut()?;
         scratch.qpos_mut().copy_from_slice(qpos);
         for (l, &v) in self.arms[a].joints.iter().zip(q) {
             scratch.qpos_mut()[l.qpos_adr] = v;
         }
         scratch.kinematics_with_velocity().ok()?;
-        let m = scratch.xmat()[self.arms[a].grasp_body];
-        Some(Vector3::new(-m[2], -m[5], -m[8]))
+        Some(scratch)
     }
 
     fn set_phase(&mut self, phase: Phase, t: f64) {

@@ -37,6 +37,12 @@
 //!    (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it over
 //!    [t_k, t_k + P). A rejected command counts as the period's command (the last good one is
 //!    held), so the run stays deterministic.
+//! 4. **flood**: just before each later period's `/clock`, every command still queued is taken:
+//!    the first stays for that period, the others (commands beyond one per period) are dropped
+//!    and counted; above [`LiveOptions::flood_commands_per_period`] on average over
+//!    [`LiveOptions::flood_window_secs`] the run fails, naming the topic and the rate
+//!    ([`flood`]). A node that sends one command per period has no surplus: the commands
+//!    applied are the same with or without the count.
 //!
 //! In lockstep the state topics come once per period (the CLI sets their rate to the control
 //! rate), stamped t_k and published during period k. A timer-driven node ticks at `/clock` =
@@ -50,7 +56,8 @@
 //!
 //! Services ([`simulation`]): pause, resume, step, reset and quit through the
 //! `simulation_interfaces` services `/twin/get_simulation_state`, `/twin/set_simulation_state`,
-//! `/twin/step_simulation` and `/twin/reset_simulation`. Requests are taken at each control
+//! `/twin/step_simulation` and `/twin/reset_simulation`, and Gazebo Classic's `std_srvs/srv/Empty`
+//! `/pause_physics`, `/unpause_physics`, `/reset_simulation` and `/reset_world`. Requests are taken at each control
 //! period's start (after its `/clock`), and at every step while paused. While paused the
 //! simulation waits (no steps, no `/clock`); after a resume, real-time pacing starts again
 //! from the current simulated time (no catching up). A reset acts through [`ResetOnRequest`](crate::engine::disturb::ResetOnRequest), the
@@ -75,6 +82,7 @@
 
 pub mod command;
 pub mod dds;
+pub mod flood;
 pub mod loopback;
 pub mod service;
 pub mod simulation;
@@ -92,7 +100,7 @@ use crate::robot::Robot;
 use crate::topics::{Qos, Sink, TopicInfo, TopicKind, TypedMessage};
 use crate::walk::{Command as WalkCommand, Walker};
 use dds::{Node, RawCdr, RawReader, RawWriter, TopicQos};
-use simulation::{Call, Outcome, SimulationServices, result, scope, state};
+use simulation::{Call, Gazebo, Outcome, SimulationServices, result, scope, state};
 use std::collections::HashMap;
 use std::net::IpAddr;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -137,6 +145,12 @@ pub struct LiveOptions {
     /// Steering a walker: simulated time without a Twist on `/cmd_vel` after which it stops
     /// and stands, s (default: 0.5, as `diff_drive_controller`'s `cmd_vel_timeout`).
     pub cmd_vel_timeout_secs: f64,
+    /// Lockstep: commands beyond the one each control period uses, averaged over
+    /// [`LiveOptions::flood_window_secs`], above which the run fails as a flood (default: 10;
+    /// a well-behaved node sends none beyond, a timer twice as fast as the control rate one).
+    pub flood_commands_per_period: f64,
+    /// Lockstep: the window of that average, simulated s (default: 1).
+    pub flood_window_secs: f64,
 }
 
 impl Default for LiveOptions {
@@ -151,6 +165,8 @@ impl Default for LiveOptions {
             lockstep_timeout_secs: 10.0,
             join_timeout_secs: 30.0,
             cmd_vel_timeout_secs: 0.5,
+            flood_commands_per_period: 10.0,
+            flood_window_secs: 1.0,
         }
     }
 }
@@ -334,6 +350,13 @@ pub struct LiveController {
     dt_secs: f64,
     /// Simulated time at the end of the step being taken, s.
     step_end_secs: f64,
+    /// Lockstep: the surplus of commands over one per period ([`flood`]).
+    flood: flood::FloodWatch,
+    /// Lockstep: the command kept for the next period when the surplus was taken (its input
+    /// topic index and bytes).
+    held: Option<(usize, RawCdr)>,
+    /// Why the run failed as a flood, if it did.
+    flooded: Option<String>,
 }
 
 /// Topic of the commands (`/<robot>/joint_commands`).
@@ -380,6 +403,19 @@ pub fn start(
     {
         return Err(Error::Live {
             message: format!("real-time factor must be positive (got {f}); use max for no pacing"),
+        });
+    }
+    if !(options.flood_commands_per_period >= 0.0 && options.flood_commands_per_period.is_finite()) {
+        return Err(Error::Live {
+            message: format!(
+                "flood limit must be a number of commands per period ≥ 0 (got {})",
+                options.flood_commands_per_period
+            ),
+        });
+    }
+    if !(options.flood_window_secs > 0.0 && options.flood_window_secs.is_finite()) {
+        return Err(Error::Live {
+            message: format!("flood window must be a positive number of seconds (got {})", options.flood_window_secs),
         });
     }
     let node = Arc::new(Node::new(options.domain_id, options.interface)?);
@@ -472,6 +508,13 @@ pub fn start(
         quit: false,
         dt_secs: dt,
         step_end_secs: 0.0,
+        flood: flood::FloodWatch::new(
+            options.flood_commands_per_period,
+            options.flood_window_secs,
+            steps_per_period as f64 * dt,
+        ),
+        held: None,
+        flooded: None,
     };
     Ok((sink, controller))
 }
@@ -584,6 +627,10 @@ impl LiveController {
             let outcome = self.call(model, t_secs, k, id, call);
             self.stats.service_calls += 1;
             if let Some(outcome) = outcome {
+                // A std_srvs/Empty reply can't say it: a warning does.
+                if simulation::SERVICES[k].1 == simulation::EMPTY && outcome.code != result::OK {
+                    self.warn(format!("{}: not done: {}", simulation::SERVICES[k].0, outcome.message));
+                }
                 let current = if self.paused { state::PAUSED } else { state::PLAYING };
                 if let Err(e) = self.services.answer(k, &id, current, &outcome) {
                     self.warn(e.to_string());
@@ -648,6 +695,24 @@ impl LiveController {
                 Outcome::ok()
             }
             Call::Reset(_) => Outcome::new(result::OK, "twin spawns nothing: nothing to remove"),
+            Call::Gazebo(Gazebo::Pause | Gazebo::Unpause) if self.stepping.is_some() => Outcome::new(
+                result::INCORRECT_STATE,
+                "a StepSimulation is in progress: pause/unpause when it has replied",
+            ),
+            Call::Gazebo(Gazebo::Pause) => {
+                self.paused = true;
+                Outcome::ok()
+            }
+            Call::Gazebo(Gazebo::Unpause) => {
+                if self.paused {
+                    self.resume(t_secs);
+                }
+                Outcome::ok()
+            }
+            Call::Gazebo(Gazebo::ResetSimulation | Gazebo::ResetWorld) => {
+                self.reset(model, t_secs);
+                Outcome::ok()
+            }
         })
     }
 
@@ -880,9 +945,67 @@ impl LiveController {
         }
     }
 
+    /// Lockstep, just before a period's `/clock`: takes every queued command, keeps the first
+    /// (in [`LiveController::take_one`]'s order) for the period that `/clock` opens, drops
+    /// the others (the surplus) and counts them ([`flood`]). A flood fails the run.
+    fn take_surplus(&mut self, t_secs: f64) -> Result<()> {
+        const ORDER: [usize; flood::INPUTS] = [TRAJECTORY, BY_NAME, COMMANDS, CMD_VEL];
+        let mut surplus = [0u64; flood::INPUTS];
+        for (slot, input) in ORDER.into_iter().enumerate() {
+            loop {
+                let reader = match input {
+                    TRAJECTORY => &mut self.trajectories,
+                    BY_NAME => &mut self.by_name,
+                    COMMANDS => &mut self.commands,
+                    _ => &mut self.twist,
+                };
+                let Ok(Some(sample)) = reader.take_next_sample() else { break };
+                if self.held.is_none() {
+                    self.held = Some((input, sample.into_value()));
+                } else {
+                    surplus[slot] += 1;
+                }
+            }
+        }
+        let Some(f) = self.flood.push(surplus) else { return Ok(()) };
+        let topic = match ORDER[f.input] {
+            TRAJECTORY => self.trajectory_topic.clone(),
+            BY_NAME => self.by_name_topic.clone(),
+            COMMANDS => self.command_topic.clone(),
+            _ => crate::topics::CMD_VEL_TOPIC.to_string(),
+        };
+        let why = format!(
+            "{} commands beyond one per control period in the last {} periods before t = {t_secs:.3} s, most on {topic} \
+             ({:.2} per period, {:.0} per simulated second); the limit is {} per period averaged over {} s \
+             (flood_commands_per_period); is the controller publishing on a wall-time loop instead of once per /clock period?",
+            f.surplus,
+            f.window_periods,
+            f.per_period,
+            f.per_sim_sec,
+            self.options.flood_commands_per_period,
+            self.options.flood_window_secs
+        );
+        self.flooded = Some(why.clone());
+        Err(Error::Live { message: format!("lockstep: the controller floods: {why}") })
+    }
+
+    /// Why the run failed as a flood of commands ([`flood`]), if it did.
+    pub fn flood(&self) -> Option<&str> {
+        self.flooded.as_deref()
+    }
+
     /// Takes the next command of any kind, if one is queued; whether one was.
     fn take_one(&mut self, t_nanos: u64) -> bool {
-        if let Ok(Some(s)) = self.trajectories.take_next_sample() {
+        if let Some((input, raw)) = self.held.take() {
+            match input {
+                TRAJECTORY => self.take_trajectory(raw, t_nanos),
+                BY_NAME => self.take_by_name(raw, t_nanos),
+                COMMANDS => {
+                    self.take_command(raw, t_nanos);
+                }
+                _ => self.take_twist(raw, t_nanos),
+            }
+        } else if let Ok(Some(s)) = self.trajectories.take_next_sample() {
             self.take_trajectory(s.into_value(), t_nanos);
         } else if let Ok(Some(s)) = self.by_name.take_next_sample() {
             self.take_by_name(s.into_value(), t_nanos);
@@ -1042,6 +1165,10 @@ impl LiveController {
                 self.stats.jitter_micros.push(late.as_secs_f64() * 1e6);
             }
         }
+        // Lockstep: the surplus over one command per period, before the period opens.
+        if !first && self.options.pacing == Pacing::Lockstep {
+            self.take_surplus(t_secs)?;
+        }
         // /clock first: the state stamped before t is already out.
         if !first || self.options.pacing != Pacing::Lockstep {
             self.publish_clock(t_nanos);
@@ -1082,6 +1209,8 @@ impl Controller for LiveController {
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         self.commander = Commander::new(model, self.options.command_interface);
         self.step = 0;
+        self.flood.reset();
+        self.flooded = None;
         if let Some(w) = self.walker.as_mut() {
             w.reset(model, observation)?;
         }
@@ -1230,6 +1359,7 @@ impl LiveController {
     /// Drops every command waiting in the readers (a new episode must not start on a command
     /// meant for the last one).
     pub fn discard_pending(&mut self) {
+        self.held = None;
         while let Ok(Some(_)) = self.commands.take_next_sample() {}
         while let Ok(Some(_)) = self.trajectories.take_next_sample() {}
         while let Ok(Some(_)) = self.by_name.take_next_sample() {}

@@ -7,10 +7,24 @@
 //! | `/twin/step_simulation` | `StepSimulation` | while paused, `steps` physics steps, then paused again; replies when done |
 //! | `/twin/reset_simulation` | `ResetSimulation` | the robot's state (positions, velocities, activations) back to the start; the controller's command back to holding the home pose |
 //!
+//! And Gazebo Classic's (`gazebo_ros`) `std_srvs/srv/Empty` services, for the scripts and
+//! tools written against it (`std_srvs` has wheels on PyPI; `simulation_interfaces` has none):
+//!
+//! | service | type | what it does |
+//! |---|---|---|
+//! | `/pause_physics` | `std_srvs/srv/Empty` | pauses (as `SetSimulationState` `PAUSED`; already paused: nothing) |
+//! | `/unpause_physics` | `std_srvs/srv/Empty` | resumes (as `PLAYING`; already playing: nothing) |
+//! | `/reset_simulation` | `std_srvs/srv/Empty` | the robot's state back to the start, as `/twin/reset_simulation` (time is not reset, see below) |
+//! | `/reset_world` | `std_srvs/srv/Empty` | the same (Gazebo: poses reset, time kept) |
+//!
+//! An `Empty` reply carries no result: a call twin can't do (pausing or resuming during a
+//! `StepSimulation`) is answered all the same and said in a warning.
+//!
 //! Simulation time is not reset: `/clock` and the recordings stay monotonic, so a reset
 //! asked with the `SCOPE_TIME` bit (`SCOPE_TIME`, `SCOPE_ALL`) is refused with
-//! `RESULT_FEATURE_UNSUPPORTED`; `SCOPE_DEFAULT` and `SCOPE_STATE` reset the state. twin spawns
-//! nothing, so `SCOPE_SPAWNED` has nothing to do.
+//! `RESULT_FEATURE_UNSUPPORTED`; `SCOPE_DEFAULT` and `SCOPE_STATE` reset the state. Gazebo's
+//! `/reset_simulation` also sets time back to 0; twin's resets the state alone, as
+//! `/reset_world` does. twin spawns nothing, so `SCOPE_SPAWNED` has nothing to do.
 
 use super::service::{Request, RequestId, ServiceServer};
 use crate::error::Result;
@@ -58,13 +72,37 @@ pub mod scope {
     pub const ALL: u8 = 255;
 }
 
-/// Service names of the bridge, with their `simulation_interfaces` types.
-pub const SERVICES: [(&str, &str); 4] = [
+/// The type of Gazebo Classic's services: no request fields, no reply fields.
+pub const EMPTY: &str = "std_srvs/srv/Empty";
+
+/// Service names of the bridge, with their types: the `simulation_interfaces` ones, then
+/// Gazebo Classic's ([`Gazebo`], in its order).
+pub const SERVICES: [(&str, &str); 8] = [
     ("/twin/get_simulation_state", "simulation_interfaces/srv/GetSimulationState"),
     ("/twin/set_simulation_state", "simulation_interfaces/srv/SetSimulationState"),
     ("/twin/step_simulation", "simulation_interfaces/srv/StepSimulation"),
     ("/twin/reset_simulation", "simulation_interfaces/srv/ResetSimulation"),
+    ("/pause_physics", EMPTY),
+    ("/unpause_physics", EMPTY),
+    ("/reset_simulation", EMPTY),
+    ("/reset_world", EMPTY),
 ];
+
+/// Index in [`SERVICES`] of the first Gazebo service.
+const FIRST_GAZEBO: usize = 4;
+
+/// Gazebo Classic's `std_srvs/srv/Empty` services, in [`SERVICES`] order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Gazebo {
+    /// `/pause_physics`.
+    Pause,
+    /// `/unpause_physics`.
+    Unpause,
+    /// `/reset_simulation`.
+    ResetSimulation,
+    /// `/reset_world`.
+    ResetWorld,
+}
 
 /// What a client asked.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -77,9 +115,11 @@ pub enum Call {
     Step(u64),
     /// `ResetSimulation` with this scope.
     Reset(u8),
+    /// A Gazebo Classic service.
+    Gazebo(Gazebo),
 }
 
-/// The four servers.
+/// The servers of [`SERVICES`].
 pub struct SimulationServices {
     servers: Vec<ServiceServer>,
 }
@@ -154,6 +194,11 @@ impl SimulationServices {
     /// [`crate::Error::Live`] when the reply can't be written.
     pub fn answer(&self, k: usize, id: &RequestId, current: u8, outcome: &Outcome) -> Result<()> {
         self.servers[k].reply(id, |w| {
+            if SERVICES[k].1 == EMPTY {
+                // An empty structure: its one placeholder byte (`structure_needs_at_least_one_member`).
+                w.u8(0);
+                return;
+            }
             if k == 0 {
                 w.u8(current);
             }
@@ -169,6 +214,12 @@ fn decode(k: usize, request: &Request) -> std::result::Result<Call, String> {
         0 => Call::GetState,
         1 => Call::SetState(r.u8().map_err(bad)?),
         2 => Call::Step(r.u64().map_err(bad)?),
-        _ => Call::Reset(r.u8().map_err(bad)?),
+        3 => Call::Reset(r.u8().map_err(bad)?),
+        k => Call::Gazebo(match k - FIRST_GAZEBO {
+            0 => Gazebo::Pause,
+            1 => Gazebo::Unpause,
+            2 => Gazebo::ResetSimulation,
+            _ => Gazebo::ResetWorld,
+        }),
     })
 }

@@ -62,6 +62,11 @@ impl LogInfo {
     pub fn duration_secs(&self) -> f64 {
         self.end_nanos.saturating_sub(self.start_nanos) as f64 * 1e-9
     }
+
+    /// The topics whose message type ends in `type_suffix` (`"JointState"`, `"Odometry"`), by name.
+    pub fn topics_of_type(&self, type_suffix: &str) -> Vec<&str> {
+        self.topics.iter().filter(|t| t.type_name.ends_with(type_suffix)).map(|t| t.topic.as_str()).collect()
+    }
 }
 
 pub(crate) fn log_info(log: &Log) -> Result<LogInfo> {

@@ -2,9 +2,13 @@ use super::model::{raw_slice, raw_slice_mut};
 use super::{Model, ModelLayout, ffi, guarded, init};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
-use std::ffi::c_int;
+use std::ffi::{c_char, c_int};
 use std::ptr::NonNull;
 use std::sync::Arc;
+
+/// A shim stage on a model/data pair: `(m, d, err, err_sz)`, non-zero with a message in `err`
+/// when MuJoCo raised.
+type Stage = unsafe extern "C" fn(*const sys::mjModel, *mut sys::mjData, *mut c_char, c_int) -> c_int;
 
 /// Simulation state of one [`Model`] (`mjData`). Owns an `Arc` of its model so it can't outlive
 /// it; `Send` so each worker thread can own one.
@@ -340,6 +344,16 @@ impl Data {
         guarded("mj_step", |e, n| unsafe { ffi::twin_step(m, d, e, n) })
     }
 
+    /// Runs one of the shim's guarded stages that take only the model/data pair
+    /// (`twin_step1`, `twin_forward`, …), `call` naming it in an error.
+    #[inline]
+    fn stage(&mut self, call: &'static str, stage: Stage) -> Result<()> {
+        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
+        // SAFETY: live model/data pair made for each other; exclusive through &mut self; every
+        // `Stage` is a shim function reading `m`, writing `d` and at most `n` bytes of `e`.
+        guarded(call, |e, n| unsafe { stage(m, d, e, n) })
+    }
+
     /// Advances `n` timesteps in one guarded C loop (no per-step work in Rust).
     ///
     /// # Errors
@@ -356,9 +370,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn step1(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_step1", |e, n| unsafe { ffi::twin_step1(m, d, e, n) })
+        self.stage("mj_step1", ffi::twin_step1)
     }
 
     /// Second half of a step (`mj_step2`).
@@ -366,9 +378,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn step2(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_step2", |e, n| unsafe { ffi::twin_step2(m, d, e, n) })
+        self.stage("mj_step2", ffi::twin_step2)
     }
 
     /// Forward dynamics without integration (`mj_forward`): positions, sensors, accelerations.
@@ -376,9 +386,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn forward(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_forward", |e, n| unsafe { ffi::twin_forward(m, d, e, n) })
+        self.stage("mj_forward", ffi::twin_forward)
     }
 
     /// Inverse dynamics (`mj_inverse`): from qpos, qvel, qacc to [`Data::qfrc_inverse`].
@@ -386,9 +394,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn inverse(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_inverse", |e, n| unsafe { ffi::twin_inverse(m, d, e, n) })
+        self.stage("mj_inverse", ffi::twin_inverse)
     }
 
     /// Recursive Newton–Euler (`mj_rne`): M(q)·q̈ + C(q, q̇) with `with_acceleration`, else
@@ -412,9 +418,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn kinematics_with_velocity(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_kinematics", |e, n| unsafe { ffi::twin_kinematics_vel(m, d, e, n) })
+        self.stage("mj_kinematics", ffi::twin_kinematics_vel)
     }
 
     /// Body poses and contacts only (`mj_kinematics`, `mj_collision`): [`Data::contacts`] at
@@ -423,9 +427,7 @@ impl Data {
     /// # Errors
     /// As [`Data::step`].
     pub fn kinematics_collision(&mut self) -> Result<()> {
-        let (m, d) = (self.model.as_ptr(), self.ptr.as_ptr());
-        // SAFETY: as in step.
-        guarded("mj_collision", |e, n| unsafe { ffi::twin_kinematics_collision(m, d, e, n) })
+        self.stage("mj_collision", ffi::twin_kinematics_collision)
     }
 
     /// Jacobian of body `body`'s frame origin and its time derivative (`mj_jacBody`,

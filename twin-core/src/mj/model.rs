@@ -958,6 +958,26 @@ impl Model {
         self.body_mass().iter().sum()
     }
 
+    /// Whether body `body` is `root` or inside its kinematic subtree (the one walk up the tree).
+    pub fn in_subtree(&self, root: usize, mut body: usize) -> bool {
+        let parent = self.body_parentid();
+        loop {
+            if body == root {
+                return true;
+            }
+            if body == 0 {
+                return false;
+            }
+            body = parent[body] as usize;
+        }
+    }
+
+    /// The bodies of the kinematic subtree rooted at `root` (itself included), in body order:
+    /// e.g. a whole robot from its root body, or a gripper from its hand.
+    pub fn subtree(&self, root: usize) -> Vec<usize> {
+        (0..self.nbody()).filter(|&b| self.in_subtree(root, b)).collect()
+    }
+
     /// The free joint (the floating base), if the model has one: the first in joint order.
     pub fn free_joint(&self) -> Option<FreeJoint> {
         (0..self.njnt()).find(|&j| self.joint_type(j) == JointType::Free).map(|j| FreeJoint {

@@ -54,25 +54,6 @@ impl RayFilter {
         self.groups[model.geom_group()[g].clamp(0, 5) as usize]
     }
 
-    /// The bodies of the kinematic subtree rooted at `body` (itself included), e.g. a whole
-    /// robot from its root body, for [`RayFilter::exclude_bodies`].
-    pub fn subtree(model: &Model, body: usize) -> Vec<usize> {
-        let parent = model.body_parentid();
-        (0..model.nbody())
-            .filter(|&b| {
-                let mut x = b;
-                loop {
-                    if x == body {
-                        return true;
-                    }
-                    if x == 0 {
-                        return false;
-                    }
-                    x = parent[x] as usize;
-                }
-            })
-            .collect()
-    }
 }
 
 /// Where a ray hit.
@@ -900,7 +881,7 @@ mod tests {
         }
         let reference = data.multi_ray(origin, &dirs, None, true, Some(robot), 50.0).unwrap();
         let filter =
-            RayFilter { groups: [true; 6], exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
+            RayFilter { groups: [true; 6], exclude_bodies: model.subtree(robot), ..RayFilter::default() };
         let scene = RayScene::new(&data, &filter);
         let mut out = vec![None; dirs.len()];
         scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, &[], true, &mut out).unwrap();

@@ -146,7 +146,7 @@ fn geom_parts(model: &Model, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
         .iter()
         .map(|&b| {
             let b = b as usize;
-            let body = if !crate::robot::in_subtree(model, base, b) {
+            let body = if !model.in_subtree(base, b) {
                 BodyPart::Scene
             } else {
                 match feet.iter().position(|&f| f == b) {

@@ -108,14 +108,14 @@ fn humanoid_matches_mujoco_own_import_and_adds_actuators_sensors_friction() {
 #[test]
 fn metadata_keeps_imu_topic_rates_limits_and_home_pose() {
     let c = convert_urdf(&humanoid(), &ConvertOptions::default()).unwrap();
-    assert_eq!(c.imus.len(), 1);
-    let imu = &c.imus[0];
+    assert_eq!(c.meta.imus.len(), 1);
+    let imu = &c.meta.imus[0];
     assert_eq!(imu.topic.as_deref(), Some("/humanoid/imu/data"));
     assert_eq!(imu.update_rate_hz, Some(200.0));
     assert_eq!(imu.gyro_noise_std, 0.002);
     assert_eq!(imu.accel_noise_std, 0.017);
     assert_eq!(imu.frame_id, "imu_link");
-    let knee = c.joints.iter().find(|j| j.name == "left_knee_joint").unwrap();
+    let knee = c.meta.joints.iter().find(|j| j.name == "left_knee_joint").unwrap();
     assert_eq!(knee.velocity_limit, Some(10.0));
     assert_eq!(knee.effort_limit, Some(120.0));
     // Nominal standing height documented in models/README.md: 0.71 m.
@@ -380,7 +380,7 @@ fn differential_transmissions_map_efforts_like_ros_control() {
         &ConvertOptions { fixed_base: true, ..ConvertOptions::default() },
     )
     .unwrap();
-    assert_eq!(c.differentials.len(), 2);
+    assert_eq!(c.meta.differentials.len(), 2);
     let m = std::sync::Arc::new(Model::from_xml_str(&c.mjcf).unwrap());
     assert_eq!(m.nu(), 4);
     let mut d = Data::new(m.clone()).unwrap();
@@ -601,7 +601,7 @@ fn imu_bias_tags_reach_the_metadata_and_survive_the_mjcf_round_trip() {
   </imu></sensor></gazebo>
 </robot>"#;
     let c = convert_urdf_str(Path::new("b.urdf"), urdf, &ConvertOptions::default()).unwrap();
-    let imu = &c.imus[0];
+    let imu = &c.meta.imus[0];
     let g = imu.gyro_bias;
     assert_eq!(
         (g.mean, g.stddev, g.dynamic_stddev, g.dynamic_correlation_time_secs, g.random_walk),

@@ -193,10 +193,10 @@ fn run_one(path: &Path) -> Result<Row, String> {
     if diverged {
         return Err(format!("{robot}: diverged under PD hold (max |qvel| {max_qvel:.3e})"));
     }
-    let movable = c.joints.iter().filter(|j| j.urdf_type != "fixed").count();
+    let movable = c.meta.joints.iter().filter(|j| j.urdf_type != "fixed").count();
     Ok(Row {
         robot,
-        links: c.joints.len() + 1,
+        links: c.meta.joints.len() + 1,
         movable,
         actuators: model.nu(),
         sensors: model.nsensor(),
@@ -291,12 +291,12 @@ fn talos_and_g1_arrive_drivable() {
     let m = Model::from_xml_str(&talos.mjcf).unwrap();
     assert!(m.nu() >= 28, "talos actuators: {}", m.nu());
     assert_eq!(m.neq(), 12, "talos mimic equalities");
-    assert!(talos.floating_base);
-    assert!(!talos.imus.is_empty());
-    m.require_id(ObjType::Sensor, &format!("{}_gyro", talos.imus[0].name)).unwrap();
+    assert!(talos.meta.floating_base);
+    assert!(!talos.meta.imus.is_empty());
+    m.require_id(ObjType::Sensor, &format!("{}_gyro", talos.meta.imus[0].name)).unwrap();
     // The torso and wrist differentials and the head's half differential: tendons and actuators.
-    assert_eq!(talos.differentials.len(), 4, "{:?}", talos.differentials);
-    for d in &talos.differentials {
+    assert_eq!(talos.meta.differentials.len(), 4, "{:?}", talos.meta.differentials);
+    for d in &talos.meta.differentials {
         for a in &d.actuators {
             m.require_id(ObjType::Actuator, a).unwrap();
         }

@@ -7,23 +7,14 @@
 
 use serde_json::Value as Json;
 use std::path::Path;
-use std::process::Command;
 use twin_core::log::*;
 
 const SCRIPT: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/log_interop.py");
 
 /// Runs the helper script with the tests' Python.
 fn python(args: &[&str]) -> Json {
-    let exe = crate::test_python::python();
-    let out = Command::new(&exe).arg(SCRIPT).args(args).output();
-    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
-    assert!(
-        out.status.success(),
-        "{} {SCRIPT} {args:?} failed:\n{}",
-        exe.display(),
-        String::from_utf8_lossy(&out.stderr)
-    );
-    serde_json::from_slice(&out.stdout).expect("script prints JSON")
+    let args: Vec<&std::ffi::OsStr> = args.iter().map(std::ffi::OsStr::new).collect();
+    crate::test_python::script_json(SCRIPT, &args)
 }
 
 fn humanoid_joint_names() -> Vec<String> {

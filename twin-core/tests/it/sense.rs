@@ -43,7 +43,7 @@ fn cup_is_found_within_a_centimetre_from_the_depth_points() {
         let mut data = Data::new(model.clone()).unwrap();
         data.forward().unwrap();
         let robot = model.id(ObjType::Body, "robot").unwrap();
-        let filter = RayFilter { exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
+        let filter = RayFilter { exclude_bodies: model.subtree(robot), ..RayFilter::default() };
         // Sensor noise of a good depth camera at ~1 m (1 mm); the estimate must still hold.
         let opts = DepthCameraOptions { filter, noise_std_m: 0.001, seed: k as u64, ..DepthCameraOptions::default() };
         let mut camera = DepthCamera::new(&model, "head", opts).unwrap();
@@ -73,7 +73,7 @@ fn no_cup_on_the_table_is_an_error_not_a_guess() {
     let mut data = Data::new(model.clone()).unwrap();
     data.forward().unwrap();
     let robot = model.id(ObjType::Body, "robot").unwrap();
-    let filter = RayFilter { exclude_bodies: RayFilter::subtree(&model, robot), ..RayFilter::default() };
+    let filter = RayFilter { exclude_bodies: model.subtree(robot), ..RayFilter::default() };
     let opts = DepthCameraOptions { filter, width: 160, height: 120, ..DepthCameraOptions::default() };
     let frame = DepthCamera::new(&model, "head", opts).unwrap().render(&model, &data).unwrap();
     let err = detect_cup(&frame.points_world(), &CupDetectOptions::default()).unwrap_err().to_string();

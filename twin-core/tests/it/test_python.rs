@@ -37,6 +37,21 @@ pub fn python() -> PathBuf {
     }
 }
 
+/// Runs `script` with `args` on [`python`] and parses what it prints as JSON; a run that fails
+/// fails the test with the script's stderr.
+pub fn script_json(script: &str, args: &[&std::ffi::OsStr]) -> serde_json::Value {
+    let exe = python();
+    let out = Command::new(&exe).arg(script).args(args).output();
+    let out = out.unwrap_or_else(|e| panic!("cannot run {}: {e}", exe.display()));
+    assert!(
+        out.status.success(),
+        "{} {script} {args:?} failed:\n{}",
+        exe.display(),
+        String::from_utf8_lossy(&out.stderr)
+    );
+    serde_json::from_slice(&out.stdout).expect("script prints JSON")
+}
+
 /// An executable installed next to [`python()`] by a requirement (`rerun` of rerun-sdk); panics
 /// naming the requirement when it is not there.
 pub fn python_tool(name: &str, requirement: &str) -> PathBuf {
