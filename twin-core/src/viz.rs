@@ -151,12 +151,12 @@ impl Recorder {
                             .with_fill_mode(solid),
                     )
                 }
-                sys::mjtGeom_mjGEOM_SPHERE => Box::new(
-                    rerun::Ellipsoids3D::from_radii([s[0] as f32]).with_colors([color]).with_fill_mode(solid),
-                ),
-                sys::mjtGeom_mjGEOM_ELLIPSOID => Box::new(
-                    rerun::Ellipsoids3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid),
-                ),
+                sys::mjtGeom_mjGEOM_SPHERE => {
+                    Box::new(rerun::Ellipsoids3D::from_radii([s[0] as f32]).with_colors([color]).with_fill_mode(solid))
+                }
+                sys::mjtGeom_mjGEOM_ELLIPSOID => {
+                    Box::new(rerun::Ellipsoids3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid))
+                }
                 sys::mjtGeom_mjGEOM_BOX => {
                     Box::new(rerun::Boxes3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid))
                 }

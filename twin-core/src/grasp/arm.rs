@@ -70,7 +70,6 @@ fn ancestors(model: &Model, mut b: usize) -> Vec<usize> {
     out
 }
 
-
 /// The command loop of 1-DOF joint `joint`, with the PD gain rule's gains at
 /// `saturation_error`.
 fn joint_loop(model: &Model, joint: usize, saturation_error: f64) -> Result<Loop> {

@@ -53,7 +53,6 @@ impl RayFilter {
         }
         self.groups[model.geom_group()[g].clamp(0, 5) as usize]
     }
-
 }
 
 /// Where a ray hit.
@@ -880,8 +879,7 @@ mod tests {
             }
         }
         let reference = data.multi_ray(origin, &dirs, None, true, Some(robot), 50.0).unwrap();
-        let filter =
-            RayFilter { groups: [true; 6], exclude_bodies: model.subtree(robot), ..RayFilter::default() };
+        let filter = RayFilter { groups: [true; 6], exclude_bodies: model.subtree(robot), ..RayFilter::default() };
         let scene = RayScene::new(&data, &filter);
         let mut out = vec![None; dirs.len()];
         scene.cast_bundles(origin, &IDENTITY, &dirs, 16, 50.0, &[], true, &mut out).unwrap();

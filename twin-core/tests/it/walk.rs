@@ -764,9 +764,9 @@ fn down_ramp(edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Option<f64>) {
 /// Blind down a 5° ramp (`walk_slope.toml`): with the ground under each foot read in mid stance
 /// (`stance_ground_read`) and landing heights carried along the footholds' slope
 /// (`ground_slope_gain`), the walker goes up, across and down the hill at its commanded pace:
-/// 0.38 m/s commanded, measured 0.36 m/s down the ramp, past its foot (6 m) without a fall. With
+/// 0.38 m/s commanded, measured 0.377 m/s down the ramp, past its foot (6 m) without a fall. With
 /// the touchdown's sole height alone (before), feet that land late on the down ramp read the
-/// ground too high, each swing aims higher, and the walker ran down at 0.7 m/s and fell at its
+/// ground too high, each swing aims higher, and the walker ran down at 0.65 m/s and fell at its
 /// foot.
 #[test]
 fn walks_down_a_slope_at_its_commanded_pace() {
