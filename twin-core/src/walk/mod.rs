@@ -88,6 +88,34 @@ pub const GROUND_FOLLOW_SECS: f64 = 0.3;
 /// apart along the heading, m.
 pub const GROUND_SLOPE_MIN_BASE_M: f64 = 0.05;
 
+/// Part of a step's swing within which the stance foot's ground is read, once, at the first
+/// solve where its sole is level and at rest (`follow_ground`): in mid stance the weight is on
+/// a foot that lies flat, after a late or early landing has settled and before the heel lifts
+/// (read on every solve, a heel lifting late in the stance read as rising ground, and the
+/// walker climbed it).
+pub const GROUND_READ_PHASE: [f64; 2] = [0.3, 0.7];
+
+/// A stance sole moving faster than this (up or down) gives no ground read, m/s: it is not
+/// resting on the ground (still landing, bouncing, or lifted by a body falling onto the other
+/// foot).
+pub const GROUND_READ_MAX_SPEED_MPS: f64 = 0.05;
+
+/// How long a stance sole must have moved no faster than [`GROUND_READ_MAX_SPEED_MPS`] before
+/// its height is read as the ground, s (a foot bouncing off an edge is still at its apex).
+pub const GROUND_READ_STILL_SECS: f64 = 0.03;
+
+/// A stance sole tilted more than this from level gives no ground read (`follow_ground`), rad:
+/// it stands on an edge, a heel or a toe (a 5° ramp tilts it by 0.09).
+pub const GROUND_READ_MAX_TILT_RAD: f64 = 0.2;
+
+/// Two steps' slopes are one slope ([`WalkOptions::ground_slope_gain`]) when they differ by at
+/// most this part of the steeper: on a ramp the footholds' rises vary by a few millimetres per
+/// step; a single step up gives one rise and then none.
+pub const GROUND_SLOPE_AGREEMENT: f64 = 0.5;
+
+/// Steepest ground slope the walker carries a landing height on by, rise per metre (tan 19°).
+pub const MAX_GROUND_SLOPE: f64 = 0.35;
+
 /// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
 /// ([`crate::convert::ConvertOptions::armature`]) unless a scenario sets another: without it the
 /// light distal links (feet) of a URDF make stiff explicit PD unstable (`kd·dt/I` too large),
@@ -259,6 +287,26 @@ pub struct WalkOptions {
     /// How far below the stance foot's ground a swinging foot reaches at touchdown, m: steps
     /// down a slope or a step land instead of ending in the air (default: 0.0).
     pub step_down_reach: f64,
+    /// Fraction of the ground's slope along the path by which a swinging foot's landing height
+    /// is carried on past the stance foot's ground (`follow_ground`): the ground ahead is taken
+    /// to rise or fall as it did under the last footholds, when the last two steps rose (or
+    /// fell) alike ([`GROUND_SLOPE_AGREEMENT`]), the footholds' heights being the mid-stance reads
+    /// of `stance_ground_read` (without it there are none, and no slope); a single step up or
+    /// down, or rough ground, is no slope, and the landing height is then the stance foot's
+    /// ground (default: 0.0, off).
+    /// Blind on a ramp without it, every step lands a step's rise early going up (the foot
+    /// pushed into the ground) and late going down.
+    pub ground_slope_gain: f64,
+    /// With `follow_ground`, the ground under the stance foot is read again in mid stance
+    /// ([`GROUND_READ_PHASE`]), once its sole is level and at rest, replacing the height its
+    /// sole had at the planned touchdown (default: false: the touchdown's height alone). The
+    /// soft swing leg lags its trajectory, so a foot is often a centimetre in the air at the
+    /// planned touchdown, and a foot that lands late on a down ramp reads the ground too high:
+    /// the next swing then aims higher still and the walker ran down the ramp; read in mid
+    /// stance the estimate is the loaded sole's. On `walk_steps.toml` (a 3-cm step) it turns a
+    /// nominal pass into a fall: there a foot lands on the step's edge either way, and whether
+    /// the walker survives it depends on where the feet happen to land.
+    pub stance_ground_read: bool,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
     /// fore-aft gap, at most `max_step_adjust` (default: 0.0, from where it landed; 1: from the
@@ -320,6 +368,8 @@ impl Default for WalkOptions {
             follow_ground: false,
             ground_pitch_gain: 0.0,
             step_down_reach: 0.0,
+            ground_slope_gain: 0.0,
+            stance_ground_read: false,
             progress_hold_gain: 0.0,
         }
     }
@@ -374,8 +424,9 @@ impl WalkOptions {
                 return Err((name, format!("must be a positive number (got {v})")));
             }
         }
-        let non_negative: [(&'static str, f64); 20] = [
+        let non_negative: [(&'static str, f64); 21] = [
             ("ground_pitch_gain", self.ground_pitch_gain),
+            ("ground_slope_gain", self.ground_slope_gain),
             ("step_down_reach", self.step_down_reach),
             ("zmp_inward", self.zmp_inward),
             ("line_hold_gain", self.line_hold_gain),
@@ -584,6 +635,15 @@ pub struct Walker {
     /// How far the pelvis reference is raised with the ground under the feet, m (their mean
     /// ground height above `sole_z`, low-passed over [`GROUND_FOLLOW_SECS`]).
     ground_ref: f64,
+    /// The last three ground reads of the stance feet (`follow_ground`), oldest first: where
+    /// (sole centre, world x y, m) and the ground's height there, m; `None` until read.
+    ground_reads: [Option<(Vector2<f64>, f64)>; 3],
+    /// Whether this step's stance foot has been read ([`GROUND_READ_PHASE`]).
+    ground_read_done: bool,
+    /// Each sole's height at the last solve, m (its speed for [`GROUND_READ_MAX_SPEED_MPS`]).
+    sole_prev_z: [f64; 2],
+    /// How long each sole has been at rest ([`GROUND_READ_STILL_SECS`]), s.
+    sole_still_secs: [f64; 2],
     state: WalkerState,
     /// Where the feet were planted (at the start and each touchdown): the standing feet's
     /// targets, so that an unloaded foot is held where it stands, not where it drifted.
@@ -771,6 +831,10 @@ impl Walker {
             sole_z: 0.0,
             ground_z: [0.0; 2],
             ground_ref: 0.0,
+            ground_reads: [None; 3],
+            ground_read_done: false,
+            sole_prev_z: [0.0; 2],
+            sole_still_secs: [0.0; 2],
             state: WalkerState::default(),
             planted: [Foothold { side: Side::Left, pos: Vector2::zeros(), yaw: 0.0 }; 2],
             recovering: false,
@@ -1463,6 +1527,26 @@ impl Walker {
     }
 }
 
+impl Walker {
+    /// The ground's slope along `along` (a unit vector) under the last three ground reads,
+    /// rise per metre: the mean of the last two steps' slopes when they agree in sign and
+    /// within [`GROUND_SLOPE_AGREEMENT`] of the steeper, each step at least
+    /// [`GROUND_SLOPE_MIN_BASE_M`] long; 0 otherwise (a single step up, rough ground, flat).
+    fn ground_slope(&self, along: Vector2<f64>) -> f64 {
+        let [Some((p0, z0)), Some((p1, z1)), Some((p2, z2))] = self.ground_reads else { return 0.0 };
+        let (d0, d1) = ((p1 - p0).dot(&along), (p2 - p1).dot(&along));
+        if d0.abs() < GROUND_SLOPE_MIN_BASE_M || d1.abs() < GROUND_SLOPE_MIN_BASE_M {
+            return 0.0;
+        }
+        let (s0, s1) = ((z1 - z0) / d0, (z2 - z1) / d1);
+        let steeper = s0.abs().max(s1.abs());
+        if s0 * s1 <= 0.0 || (s1 - s0).abs() > GROUND_SLOPE_AGREEMENT * steeper {
+            return 0.0;
+        }
+        ((s0 + s1) / 2.0).clamp(-MAX_GROUND_SLOPE, MAX_GROUND_SLOPE)
+    }
+}
+
 /// Smoothstep on [0, 1].
 fn smooth(a: f64) -> f64 {
     let a = a.clamp(0.0, 1.0);
@@ -1500,6 +1584,8 @@ impl Controller for Walker {
         self.pelvis_z = start_ground + self.options.com_height + (pelvis.z - com.z);
         self.ground_z = [self.sole_z; 2];
         self.ground_ref = 0.0;
+        self.ground_reads = [None; 3];
+        self.sole_prev_z = [self.sole_world(&self.frames, 0).z, self.sole_world(&self.frames, 1).z];
         for ik in &self.ik {
             for k in 0..ik.len() {
                 let a = ik.qpos_adr(k);
@@ -1722,6 +1808,7 @@ impl Controller for Walker {
         let mut swinging: Option<usize> = None;
         if let Some(step) = swing {
             foot_targets[step.stance.side.index()] = (step.stance, 0.0);
+            let s_before = self.swing_s;
             let ss_start = step.start + step.ds;
             if t <= ss_start {
                 self.swing_s = 0.0;
@@ -1733,6 +1820,31 @@ impl Controller for Walker {
             }
             self.swing_t = t;
             let s = self.swing_s;
+            if s_before < GROUND_READ_PHASE[0] {
+                self.ground_read_done = false;
+            }
+            if o.follow_ground
+                && o.stance_ground_read
+                && !self.ground_read_done
+                && (GROUND_READ_PHASE[0]..GROUND_READ_PHASE[1]).contains(&s)
+            {
+                // In single support the weight is on the stance foot, so it is on the ground:
+                // its sole's height is the ground under it (re-read on every solve, so that a
+                // foot that landed in the air, or before its ground, is corrected once loaded).
+                // A sole tilted beyond any slope the walker follows stands on an edge or a heel:
+                // its height is no ground (the landing's read stays).
+                let stance = step.stance.side.index();
+                let l = &self.body.legs[stance];
+                let sole_up = self.frames.xrot[l.foot] * l.foot_rot_home.inverse() * Vector3::z();
+                let z = self.sole_world(&self.frames, stance).z;
+                let still = self.sole_still_secs[stance] >= GROUND_READ_STILL_SECS;
+                if sole_up.z >= GROUND_READ_MAX_TILT_RAD.cos() && still {
+                    self.ground_read_done = true;
+                    self.ground_z[stance] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
+                    foot_ground[stance] = self.ground_z[stance];
+                    self.ground_reads = [self.ground_reads[1], self.ground_reads[2], Some((feet[stance].pos, z))];
+                }
+            }
             let (mut blend, lift) = swing_profile(s);
             if self.recovering {
                 // A recovery step's foot gets over its landing spot early, then comes down.
@@ -1743,7 +1855,12 @@ impl Controller for Walker {
             let pos = from.pos + (to.pos - from.pos) * blend;
             let yaw = from.yaw + wrap(to.yaw - from.yaw) * blend;
             foot_targets[to.side.index()] = (Foothold { side: to.side, pos, yaw }, lift * o.foot_clearance);
-            let (own, other) = (self.ground_z[to.side.index()], self.ground_z[step.stance.side.index()]);
+            let (own, mut other) = (self.ground_z[to.side.index()], self.ground_z[step.stance.side.index()]);
+            if o.ground_slope_gain != 0.0 {
+                // The ground ahead goes on rising or falling as under the last footholds.
+                let along = Vector2::new(step.stance.yaw.cos(), step.stance.yaw.sin());
+                other += o.ground_slope_gain * self.ground_slope(along) * (to.pos - step.stance.pos).dot(&along);
+            }
             foot_ground[to.side.index()] = own + (other - own) * blend;
             if o.step_down_reach > 0.0 {
                 // Late in the swing the foot keeps going down past the stance foot's ground.
@@ -1751,6 +1868,14 @@ impl Controller for Walker {
             }
             if s > 0.0 && s < 1.0 {
                 swinging = Some(to.side.index());
+            }
+        }
+        if o.follow_ground {
+            for leg in 0..2 {
+                let z = self.sole_world(&self.frames, leg).z;
+                let moved = (z - self.sole_prev_z[leg]).abs() > GROUND_READ_MAX_SPEED_MPS * self.dt;
+                self.sole_still_secs[leg] = if moved { 0.0 } else { self.sole_still_secs[leg] + self.dt };
+                self.sole_prev_z[leg] = z;
             }
         }
         let yaw_l = foot_targets[0].0.yaw;
