@@ -15,6 +15,8 @@
 # pays for the client's CPU (the scheduler shares the cores): the process CPU column separates
 # what the server costs from that.
 #   benches/foxglove_stream.sh [DURATION=10] [REPEAT=5]
+# PIN=1: twin (all its threads) on CPU 0 and the client on CPU 1 (`taskset`), so that the client's
+# decoding does not share the simulation's core; a, b and c alike. Unset: the scheduler places them.
 # TWIN: binary (default target/release/twin); FOXGLOVE_NODE_MODULES: node_modules with the
 # client's packages (default: the test's, target/tmp/foxglove-node/node_modules; installed there
 # with npm when missing).
@@ -37,6 +39,8 @@ cleanup() {
   rm -rf "$work"
 }
 trap cleanup EXIT
+pin_twin=() pin_client=()
+if [[ "${PIN:-}" == 1 ]]; then pin_twin=(taskset -c 0) pin_client=(taskset -c 1); fi
 args=(sim models/humanoid.urdf --controller walk --duration "$duration" --seed 1 --rtf max)
 
 # µs per step (wall, CPU) from twin sim's report.
@@ -48,7 +52,7 @@ per_step() {
 
 run_c() {
   local out=$1 client=$2
-  /usr/bin/time -f '%U %S' -o "$out.cpu" "$twin" "${args[@]}" --foxglove 0 --wait-for-subscriber 60 >"$out" 2>"$out.err" &
+  /usr/bin/time -f '%U %S' -o "$out.cpu" "${pin_twin[@]}" "$twin" "${args[@]}" --foxglove 0 --wait-for-subscriber 60 >"$out" 2>"$out.err" &
   local sim=$!
   pids+=("$sim")
   local url="" i
@@ -59,7 +63,7 @@ run_c() {
     sleep 0.1
   done
   [[ -n "$url" ]] || { echo "twin sim never said where the Foxglove server listens:" >&2; cat "$out" "$out.err" >&2; exit 1; }
-  NODE_PATH="$modules" /usr/bin/time -f '%U %S' -o "$client.cpu" node benches/foxglove_subscribe_all.js "$url" >"$client" &
+  NODE_PATH="$modules" /usr/bin/time -f '%U %S' -o "$client.cpu" "${pin_client[@]}" node benches/foxglove_subscribe_all.js "$url" >"$client" &
   local node=$!
   pids+=("$node")
   wait "$sim" || { echo "twin sim failed:" >&2; cat "$out.err" >&2; exit 1; }
@@ -68,11 +72,12 @@ run_c() {
 
 # User + sys seconds of a GNU time -o file, in µs per step of run $2.
 cpu_per_step() { awk -v n="$(sed -n 's/^simulated .*(\([0-9]*\) steps of.*/\1/p' "$2")" '{ printf "%.3f\n", ($1 + $2) * 1e6 / n }' "$1"; }
+load0=$(cut -d' ' -f1-3 /proc/loadavg)
 declare -A wall=() cpu=() proc=()
 node_cpu=""
 for r in $(seq "$repeat"); do
-  /usr/bin/time -f '%U %S' -o "$work/a.$r.cpu" "$twin" "${args[@]}" >"$work/a.$r" 2>&1
-  /usr/bin/time -f '%U %S' -o "$work/b.$r.cpu" "$twin" "${args[@]}" --foxglove 0 >"$work/b.$r" 2>&1
+  /usr/bin/time -f '%U %S' -o "$work/a.$r.cpu" "${pin_twin[@]}" "$twin" "${args[@]}" >"$work/a.$r" 2>&1
+  /usr/bin/time -f '%U %S' -o "$work/b.$r.cpu" "${pin_twin[@]}" "$twin" "${args[@]}" --foxglove 0 >"$work/b.$r" 2>&1
   run_c "$work/c.$r" "$work/client.$r"
   for row in a b c; do
     read -r w c < <(per_step "$work/$row.$r")
@@ -82,6 +87,8 @@ for r in $(seq "$repeat"); do
   done
   node_cpu+="$(cpu_per_step "$work/client.$r.cpu" "$work/c.$r") "
 done
+echo "$(date -u '+%F %H:%M UTC'), $(nproc) CPUs, load before: $load0; after: $(cut -d' ' -f1-3 /proc/loadavg)"
+echo "cores: $(if [[ "${PIN:-}" == 1 ]]; then echo 'PIN=1: twin on CPU 0, client on CPU 1 (taskset)'; else echo 'unpinned (scheduler)'; fi)"
 echo "twin ${args[*]}  ($repeat repetitions, interleaved; medians)"
 grep -m1 '^simulated' "$work/a.1"
 printf '%-44s %12s %12s %13s %9s %9s\n' row "wall µs/step" "loop CPU µs" "process CPU µs" "vs a" "vs b"
