@@ -986,13 +986,7 @@ impl Walker {
     /// times its gear). Walking needs more (a whole leg's share in single support, the ankles'
     /// ZMP work); a robot that can't hold the crouch falls before its first step.
     fn check_strength(&self, model: &Model) -> Result<()> {
-        let home = self.nominal.clone();
-        let mut frames = self.tree.frames();
-        self.tree.forward(&home, &mut frames);
-        let pelvis = self.body.pelvis;
-        let com = frames.com();
-        let pelvis_pos = frames.xpos[pelvis];
-        let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
+        let (home, frames, _, pelvis_pos, pelvis_z) = self.home_crouch();
         let mut q = home.clone();
         for (leg, ik) in self.ik.iter().enumerate() {
             let sole = self.sole_world(&frames, leg);
@@ -1036,17 +1030,23 @@ impl Walker {
         Ok(())
     }
 
+    /// The home pose, its frames, its CoM and pelvis position, and the pelvis height that puts
+    /// the CoM at `com_height` (what the strength and reach checks start from).
+    fn home_crouch(&self) -> (Vec<f64>, Frames, Vector3<f64>, Vector3<f64>, f64) {
+        let home = self.nominal.clone();
+        let mut frames = self.tree.frames();
+        self.tree.forward(&home, &mut frames);
+        let com = frames.com();
+        let pelvis_pos = frames.xpos[self.body.pelvis];
+        let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
+        (home, frames, com, pelvis_pos, pelvis_z)
+    }
+
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
     /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
     /// wide), both legs' IK must converge.
     fn check_reach(&self) -> Result<()> {
-        let home = self.nominal.clone();
-        let mut frames = self.tree.frames();
-        self.tree.forward(&home, &mut frames);
-        let pelvis = self.body.pelvis;
-        let com = frames.com();
-        let pelvis_pos = frames.xpos[pelvis];
-        let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
+        let (home, frames, com, pelvis_pos, pelvis_z) = self.home_crouch();
         let sole_z = self.sole_world(&frames, 0).z;
         let o = &self.options;
         let half_len = o.max_step_length / 2.0;
