@@ -113,6 +113,26 @@ fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
     r.map(|l| l.split(',').nth(k).unwrap_or("")).collect()
 }
 
+/// Every controller log a batch in `out` wrote (`out/controller_logs/*`), concatenated.
+fn controller_logs(out: &Path) -> String {
+    std::fs::read_dir(out.join("controller_logs"))
+        .unwrap()
+        .flatten()
+        .map(|e| std::fs::read_to_string(e.path()).unwrap())
+        .collect()
+}
+
+/// Asserts the batch in `out` failed all its `episodes` with one failure `kind`, in
+/// `summary.json` and in the printed summary (`stdout`).
+fn assert_all_failed_as(out: &Path, stdout: &str, kind: &str, episodes: u32) {
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let failures = &summary["summary"]["failures"];
+    assert_eq!(failures[0]["kind"], kind, "{summary}");
+    assert_eq!(failures[0]["episodes"], episodes, "{summary}");
+    assert!(stdout.contains(&format!("failed checks: {kind} ×{episodes}")), "{kind}: {stdout}");
+}
+
 #[test]
 fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
     let python = python();
@@ -132,11 +152,7 @@ fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
     assert_eq!(column(&csv1, "metric:controller.commands"), vec!["29"; 4], "{csv1}");
     assert_eq!(column(&csv1, "metric:controller.periods"), vec!["29"; 4], "{csv1}");
     // Four processes each time, one per episode: their starts are in the workers' logs.
-    let logs: String = std::fs::read_dir(dir.path().join("t2/controller_logs"))
-        .unwrap()
-        .flatten()
-        .map(|e| std::fs::read_to_string(e.path()).unwrap())
-        .collect();
+    let logs = controller_logs(&dir.path().join("t2"));
     assert_eq!(logs.matches("--- twin: run ").count(), 4, "{logs}");
     assert_eq!(logs.matches("it ended after SIGINT").count(), 4, "{logs}");
     assert_none_left(&tag);
@@ -165,11 +181,7 @@ fn a_kept_timer_driven_rclpy_node_runs_every_episode_and_the_same_on_1_and_2_thr
         assert_eq!(column(&csv, "metric:controller.commands"), vec!["29"; 8], "{name}: {csv}");
         if name != "f2" {
             // Fewer processes than episodes: the others ran under a kept process.
-            let logs: String = std::fs::read_dir(dir.path().join(name).join("controller_logs"))
-                .unwrap()
-                .flatten()
-                .map(|e| std::fs::read_to_string(e.path()).unwrap())
-                .collect();
+            let logs = controller_logs(&dir.path().join(name));
             let started = logs.matches(" on domain ").count();
             let kept = logs.matches("the same process, the simulation reset under it").count();
             assert_eq!(started + kept, 8, "{name}: {logs}");
@@ -206,12 +218,7 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
         for line in csv.lines().skip(1) {
             assert!(line.contains(&kind.to_string()) && line.contains(why), "{mode}: {line}");
         }
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-        let failures = &summary["summary"]["failures"];
-        assert_eq!(failures[0]["kind"], kind, "{mode}: {summary}");
-        assert_eq!(failures[0]["episodes"], 2, "{mode}: {summary}");
-        assert!(stdout.contains(&format!("failed checks: {kind} ×2")), "{mode}: {stdout}");
+        assert_all_failed_as(&out, &stdout, kind, 2);
         assert_none_left(&tag);
     }
     // A node that ignores SIGINT and SIGTERM is killed (SIGKILL) at the end of its episode.
@@ -271,17 +278,8 @@ fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
         let t = number_before(line, " s, most on");
         assert!(t > 0.1 && t < 3.0, "{t}: {line}");
     }
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    let failures = &summary["summary"]["failures"];
-    assert_eq!(failures[0]["kind"], "controller: flood", "{summary}");
-    assert_eq!(failures[0]["episodes"], 2, "{summary}");
-    assert!(stdout.contains("failed checks: controller: flood ×2"), "{stdout}");
-    let logs: String = std::fs::read_dir(out.join("controller_logs"))
-        .unwrap()
-        .flatten()
-        .map(|e| std::fs::read_to_string(e.path()).unwrap())
-        .collect();
+    assert_all_failed_as(&out, &stdout, "controller: flood", 2);
+    let logs = controller_logs(&out);
     assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 2, "{logs}");
     assert_none_left(&tag);
 }
