@@ -23,7 +23,7 @@ use common::{median, time_camera, with_camera};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
-use twin_core::mj::{Data, ObjType};
+use twin_core::mj::{Data, GeomType, ObjType};
 use twin_core::sense::{DepthCamera, DepthCameraOptions};
 
 fn default_talos() -> String {
@@ -60,7 +60,7 @@ fn main() {
     let mut data = Data::new(model.clone()).unwrap();
     twin_core::control::reset_to_home(&mut data).unwrap();
     data.forward().unwrap();
-    let meshes = (0..model.ngeom()).filter(|&g| model.geom_type()[g] == mujoco_sys::mjtGeom_mjGEOM_MESH as i32).count();
+    let meshes = (0..model.ngeom()).filter(|&g| model.geom_kind(g) == GeomType::Mesh).count();
     println!(
         "Talos ({urdf}): {} geoms ({meshes} meshes), {} bodies; {} threads",
         model.ngeom(),

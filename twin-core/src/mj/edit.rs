@@ -1,5 +1,5 @@
 use super::model::raw_slice_mut;
-use super::{Model, ffi, guarded};
+use super::{Integrator, Model, ffi, guarded};
 use crate::error::{Error, Result};
 use std::ptr::NonNull;
 
@@ -293,9 +293,9 @@ impl ModelEdit {
         Ok(self)
     }
 
-    /// Sets the integrator (`mjtIntegrator`: 0 Euler, 1 RK4, 2 implicit, 3 implicitfast).
-    pub fn set_integrator(&mut self, integrator: i32) -> &mut Self {
-        self.raw_mut().opt.integrator = integrator;
+    /// Sets the integrator.
+    pub fn set_integrator(&mut self, integrator: Integrator) -> &mut Self {
+        self.raw_mut().opt.integrator = integrator.raw();
         self
     }
 

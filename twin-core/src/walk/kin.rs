@@ -8,7 +8,7 @@
 //! a few microseconds per tick.
 
 use crate::error::{Error, Result};
-use crate::mj::{JointType, Model, ObjType};
+use crate::mj::{GeomType, JointType, Model, ObjType};
 use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 use std::cell::Cell;
 
@@ -834,7 +834,7 @@ impl Body {
                 let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
                 for &k in &soles {
                     // A sphere touches at the point under its centre.
-                    let sphere = model.geom_type()[k] as u32 == mujoco_sys::mjtGeom_mjGEOM_SPHERE;
+                    let sphere = model.geom_kind(k) == GeomType::Sphere;
                     let h = if sphere { [0.0; 2] } else { geom_bottom(model, &frames, k).1 };
                     let c = frames.geom_center(model, k);
                     for a in 0..2 {
@@ -902,9 +902,9 @@ fn geom_bottom(model: &Model, frames: &Frames, g: usize) -> (f64, [f64; 2]) {
     let size = model.geom_size()[g];
     let m: Matrix3<f64> = rot.to_rotation_matrix().into_inner();
     let extent = |row: usize, s: [f64; 3]| (0..3).map(|k| (m[(row, k)] * s[k]).abs()).sum::<f64>();
-    match model.geom_type()[g] as u32 {
-        mujoco_sys::mjtGeom_mjGEOM_BOX => (centre.z - extent(2, size), [extent(0, size), extent(1, size)]),
-        mujoco_sys::mjtGeom_mjGEOM_SPHERE => (centre.z - size[0], [size[0], size[0]]),
+    match model.geom_kind(g) {
+        GeomType::Box => (centre.z - extent(2, size), [extent(0, size), extent(1, size)]),
+        GeomType::Sphere => (centre.z - size[0], [size[0], size[0]]),
         _ => {
             let r = model.geom_rbound()[g];
             (centre.z - r, [r * 0.5, r * 0.5])
