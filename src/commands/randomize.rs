@@ -71,7 +71,7 @@ pub struct Args {
     /// torque) or walk (stand and balance; with a scenario, walk as it says) [default:
     /// pd-hold, or the scenario's].
     #[arg(long)]
-    pub controller: Option<String>,
+    pub controller: Option<super::ControllerName>,
 
     /// A fall: base below this fraction of its initial height.
     #[arg(long, default_value_t = 0.6)]
@@ -243,7 +243,7 @@ fn run_one(
     };
     let model = robot.model.clone();
     let controller =
-        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+        args.controller.map(|c| c.name().to_string()).or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
     // The walker's options for this robot, derived once from the nominal model (every episode's
     // walker gets the same): a scenario's, or with none the defaults.
     let scenario = match scenario {
