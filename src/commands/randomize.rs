@@ -392,9 +392,9 @@ fn run_one(
     print!("{}", report.summary.to_text(report.requested));
     eprintln!(
         "\n{} episodes in {:.1} s ({:.1} episodes/s, {:.0} steps/s){}",
-        report.summary.episodes,
+        report.summary.outcomes.episodes,
         secs,
-        report.summary.episodes as f64 / secs.max(1e-9),
+        report.summary.outcomes.episodes as f64 / secs.max(1e-9),
         report.simulated_steps as f64 / secs.max(1e-9),
         shard.map_or_else(String::new, |s| format!(", shard {s}"))
     );
@@ -421,7 +421,7 @@ fn run_one(
             return Ok(None);
         }
         return Err(
-            super::Interrupted(format!("{} of {} episodes finished", report.summary.episodes, requested)).into()
+            super::Interrupted(format!("{} of {} episodes finished", report.summary.outcomes.episodes, requested)).into()
         );
     }
     Ok(Some(report.summary))
