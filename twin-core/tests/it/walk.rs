@@ -494,6 +494,14 @@ fn stand_scenario_recovery_steps_reach_their_spot_early() {
 /// walks on; with the defaults of `step_adjust_until` and `swing_from_measured_pelvis` the
 /// walker falls to both (the lab: 11 of 64 single kicks of 0.45/0.6 m/s fell, 21 before).
 /// Steps of 0.5 s ([`half_second_steps`]).
+/// Asserts a walk caught the kick `what` said: it did not fall, walked on more than 2 m and
+/// stayed within 0.3 m of its line.
+fn assert_walked_on(s: &GaitSummary, what: &str) {
+    assert!(!s.fell, "{what}: fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m > 2.0, "{what}: walked on {} m", s.forward_m);
+    assert!(s.lateral_m.abs() < 0.3, "{what}: {} m off the line", s.lateral_m);
+}
+
 #[test]
 fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
     // 0.45 m/s × 35.7 kg in 0.05 s on the pelvis.
@@ -508,9 +516,7 @@ fn walk_scenario_steps_out_after_late_and_stance_side_kicks() {
     let defaults = WalkOptions::default();
     for (time, force_y) in [(4.68, 321.3), (4.4, -321.3)] {
         let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force_y));
-        assert!(!s.fell, "kick {force_y} N at {time} s: fell at {:?}", s.fall_time_secs);
-        assert!(s.forward_m > 2.0, "kick {force_y} N at {time} s: walked on {} m", s.forward_m);
-        assert!(s.lateral_m.abs() < 0.3, "kick {force_y} N at {time} s: {} m off the line", s.lateral_m);
+        assert_walked_on(&s, &format!("kick {force_y} N at {time} s"));
         let (s, _, _) = run_scenario(shipped.clone(), |sc| {
             kick(sc, time, force_y);
             sc.walk.step_adjust_until = defaults.step_adjust_until;
@@ -566,9 +572,7 @@ fn walk_scenario_quick_steps_catch_kicks_the_half_second_gait_falls_to() {
     assert!(shipped.walk.step_period < 0.4, "{}", shipped.walk.step_period);
     for (time, force) in [(4.25, [0.0, -357.0, 0.0]), (4.15, [-357.0, 0.0, 0.0])] {
         let (s, _, _) = run_scenario(shipped.clone(), |sc| kick(sc, time, force));
-        assert!(!s.fell, "kick {force:?} at {time} s: fell at {:?}", s.fall_time_secs);
-        assert!(s.forward_m > 2.0, "kick {force:?} at {time} s: walked on {} m", s.forward_m);
-        assert!(s.lateral_m.abs() < 0.3, "kick {force:?} at {time} s: {} m off the line", s.lateral_m);
+        assert_walked_on(&s, &format!("kick {force:?} at {time} s"));
         let (s, _, _) = run_scenario(shipped.clone(), |sc| {
             kick(sc, time, force);
             half_second_steps(sc);
