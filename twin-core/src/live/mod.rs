@@ -812,15 +812,26 @@ impl LiveController {
         match (verdict, decoded) {
             (Ok(()), Ok(m)) => {
                 self.commander.set_direct(&m);
+                self.settle(Ok(()), |b| b.command_topic.clone(), t_nanos)
+            }
+            (Err(why), _) => self.settle(Err(why), |b| b.command_topic.clone(), t_nanos),
+            (Ok(()), Err(_)) => false,
+        }
+    }
+
+    /// Counts a command as applied (and the bridge as fed now), or rejects it with the reason on
+    /// the topic `topic` names (called only then); returns whether it was applied.
+    fn settle(&mut self, verdict: std::result::Result<(), String>, topic: impl FnOnce(&Self) -> String, t_nanos: u64) -> bool {
+        match verdict {
+            Ok(()) => {
                 self.stats.commands_applied += 1;
                 self.last_good = Instant::now();
                 true
             }
-            (Err(why), _) => {
-                self.reject(&self.command_topic.clone(), t_nanos, &why);
+            Err(why) => {
+                self.reject(&topic(self), t_nanos, &why);
                 false
             }
-            (Ok(()), Err(_)) => false,
         }
     }
 
@@ -832,13 +843,7 @@ impl LiveController {
             Ok(t) => self.commander.set_trajectory(&t, now, &self.qpos),
             Err(e) => Err(format!("not a JointTrajectory: {}", e.message)),
         };
-        match verdict {
-            Ok(()) => {
-                self.stats.commands_applied += 1;
-                self.last_good = Instant::now();
-            }
-            Err(why) => self.reject(&self.trajectory_topic.clone(), t_nanos, &why),
-        }
+        self.settle(verdict, |b| b.trajectory_topic.clone(), t_nanos);
     }
 
     fn reject(&mut self, topic: &str, t_nanos: u64, why: &str) {
@@ -861,13 +866,7 @@ impl LiveController {
             Ok(m) => self.commander.set_by_name(&m, &self.qpos),
             Err(e) => Err(format!("not a JointState: {}", e.message)),
         };
-        match verdict {
-            Ok(()) => {
-                self.stats.commands_applied += 1;
-                self.last_good = Instant::now();
-            }
-            Err(why) => self.reject(&self.by_name_topic.clone(), t_nanos, &why),
-        }
+        self.settle(verdict, |b| b.by_name_topic.clone(), t_nanos);
     }
 
     /// Applies one received `Twist` to the walker (or rejects it).
