@@ -203,7 +203,7 @@ pub struct LiveSink {
     node: Arc<Node>,
     writers: HashMap<String, Arc<RawWriter>>,
     /// Writer of each topic id.
-    by_id: Vec<Option<String>>,
+    by_id: crate::topics::ById<String>,
     /// Topics the bridge exchanges itself (`/clock`, its command inputs): recorded, never
     /// published again.
     own: Vec<String>,
@@ -234,15 +234,12 @@ impl Sink for LiveSink {
             }
             self.writers.insert(topic.name.clone(), w);
         }
-        if self.by_id.len() <= id {
-            self.by_id.resize(id + 1, None);
-        }
-        self.by_id[id] = Some(topic.name.clone());
+        self.by_id.set(id, topic.name.clone());
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        if let Some(Some(name)) = self.by_id.get(id)
+        if let Some(name) = self.by_id.get(id)
             && let Some(w) = self.writers.get(name)
             && w.write(RawCdr(message.to_cdr(&mut self.cdr).to_vec()), None).is_err()
         {
@@ -428,7 +425,7 @@ pub fn start(
     let mut sink = LiveSink {
         node: node.clone(),
         writers: HashMap::new(),
-        by_id: Vec::new(),
+        by_id: Default::default(),
         own: vec![
             "/clock".into(),
             command_topic.clone(),

@@ -175,7 +175,7 @@ pub struct McapSink {
     writer: Option<LogWriter>,
     path: PathBuf,
     /// Channel of each topic id.
-    channels: Vec<Option<u16>>,
+    channels: crate::topics::ById<u16>,
     cdr: CdrWriter,
     summary: Option<WriteSummary>,
 }
@@ -190,7 +190,7 @@ impl McapSink {
         Ok(McapSink {
             writer: Some(writer),
             path: path.to_path_buf(),
-            channels: Vec::new(),
+            channels: Default::default(),
             cdr: CdrWriter::new(),
             summary: None,
         })
@@ -210,15 +210,12 @@ impl Sink for McapSink {
     fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         let Some(writer) = self.writer.as_mut() else { return Err(self.closed()) };
         let channel = writer.add_topic_of_type(&topic.name, topic.type_name)?;
-        if self.channels.len() <= id {
-            self.channels.resize(id + 1, None);
-        }
-        self.channels[id] = Some(channel);
+        self.channels.set(id, channel);
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        let (Some(writer), Some(&Some(channel))) = (self.writer.as_mut(), self.channels.get(id)) else {
+        let (Some(writer), Some(&channel)) = (self.writer.as_mut(), self.channels.get(id)) else {
             return Ok(());
         };
         writer.write_encoded(channel, log_time_nanos, message.to_cdr(&mut self.cdr))

@@ -327,29 +327,26 @@ fn serve(mut stream: TcpStream, shared: &Arc<Shared>) {
 /// client subscribes to its topic.
 pub struct UnitySink {
     server: Arc<Server>,
-    names: Vec<Option<String>>,
+    names: crate::topics::ById<String>,
     cdr: crate::log::cdr::CdrWriter,
 }
 
 impl UnitySink {
     /// A sink for `server`.
     pub fn new(server: Arc<Server>) -> UnitySink {
-        UnitySink { server, names: Vec::new(), cdr: crate::log::cdr::CdrWriter::new() }
+        UnitySink { server, names: Default::default(), cdr: crate::log::cdr::CdrWriter::new() }
     }
 }
 
 impl Sink for UnitySink {
     fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         self.server.add_topic(&topic.name, topic.type_name);
-        if self.names.len() <= id {
-            self.names.resize(id + 1, None);
-        }
-        self.names[id] = Some(topic.name.clone());
+        self.names.set(id, topic.name.clone());
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        if let Some(Some(name)) = self.names.get(id)
+        if let Some(name) = self.names.get(id)
             && self.server.is_subscribed(name)
         {
             let bytes = message.to_cdr(&mut self.cdr);
