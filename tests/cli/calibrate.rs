@@ -393,23 +393,28 @@ fn independent_sweep(dir: &Path, nspeeds: usize, stribeck: bool) -> serde_json::
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-/// `twin sysid friction` on the independent sweep: every joint's report.
-fn friction_of_sweep(d: &Path) -> (String, serde_json::Value) {
+/// `twin sysid friction` on an [`independent_sweep`] of `nspeeds` speeds: (the script's truth,
+/// twin's stdout, its report's joints).
+fn friction_of_sweep(nspeeds: usize, stribeck: bool) -> (serde_json::Value, String, Vec<serde_json::Value>) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = independent_sweep(d, nspeeds, stribeck);
     let out = twin(d, &["sysid", "friction", "--log", "sweep", "--report", "f.json"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let report = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
-    (String::from_utf8_lossy(&out.stdout).into_owned(), report)
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
+    (truth, String::from_utf8_lossy(&out.stdout).into_owned(), report["joints"].as_array().unwrap().clone())
+}
+
+/// The line `twin sysid friction` printed for joint `name` (its segments and model).
+fn segments_line<'a>(stdout: &'a str, name: &str) -> &'a str {
+    stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint")
 }
 
 #[test]
 fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let truth = independent_sweep(d, 8, true);
-    let (stdout, report) = friction_of_sweep(d);
-    let joints = report["joints"].as_array().unwrap();
+    let (truth, stdout, joints) = friction_of_sweep(8, true);
     assert_eq!(joints.len(), 3, "{stdout}");
-    for j in joints {
+    for j in &joints {
         let name = j["joint"].as_str().unwrap();
         let t = &truth["joints"][name];
         let points = j["points"].as_array().unwrap();
@@ -420,7 +425,7 @@ fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck()
             assert!((got / want - 1.0).abs() < 0.02, "{name}: speed {got} vs {want}");
         }
         assert_eq!(j["model"], "stribeck", "{name}\n{stdout}");
-        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        let line = segments_line(&stdout, name);
         assert!(line.ends_with("segment(s), 8 paired speed(s) → Stribeck"), "{line}");
         let fit = &j["fit"];
         for (what, tol) in [("coulomb", 0.1), ("viscous", 0.1), ("breakaway", 0.15)] {
@@ -434,16 +439,13 @@ fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck()
 
 #[test]
 fn sysid_friction_with_4_speeds_fits_coulomb_and_viscous_and_says_so() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let truth = independent_sweep(d, 4, false);
-    let (stdout, report) = friction_of_sweep(d);
-    for j in report["joints"].as_array().unwrap() {
+    let (truth, stdout, joints) = friction_of_sweep(4, false);
+    for j in &joints {
         let name = j["joint"].as_str().unwrap();
         let t = &truth["joints"][name];
         assert_eq!(j["points"].as_array().unwrap().len(), 4, "{name}\n{stdout}");
         assert_eq!(j["model"], "coulomb_viscous", "{name}\n{stdout}");
-        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        let line = segments_line(&stdout, name);
         assert!(line.contains("segment(s), 4 paired speed(s) → Coulomb + viscous ("), "{line}");
         let fit = &j["fit"];
         for what in ["coulomb", "viscous"] {
