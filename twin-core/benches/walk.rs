@@ -22,6 +22,7 @@
 //! in K: its cost is given per physics step (every `compute` call) and per control tick (all
 //! its time over the solves, the joint PD of the steps between them included).
 
+mod flags;
 mod walk_common;
 
 use std::sync::Arc;
@@ -29,19 +30,13 @@ use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, reset_to_home};
 use twin_core::mj::{Data, Model};
 use twin_core::walk::{WALK_ARMATURE, WalkOptions, Walker};
-use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step, value};
+use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step};
 
 fn main() {
-    let (mut steps, mut reps, mut plan_every) = (5_000u64, 7usize, 1u64);
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--steps" => steps = value(&mut args, "--steps N"),
-            "--reps" => reps = value(&mut args, "--reps R"),
-            "--plan-every" => plan_every = value(&mut args, "--plan-every K"),
-            _ => {}
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (steps, reps, plan_every) = (flags.get("--steps", 5_000u64), flags.get("--reps", 7usize), flags.get("--plan-every", 1u64));
+    let unknown = flags.rest();
+    assert!(unknown.is_empty(), "unknown arguments {unknown:?} (options: --steps N --reps R --plan-every K)");
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf");
     let loaded = Model::from_file(path).unwrap_or_else(|e| panic!("{e}"));
     let model = Arc::new(twin_core::scenario::prepare_model(&loaded, WALK_ARMATURE, None).unwrap());

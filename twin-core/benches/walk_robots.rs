@@ -20,6 +20,7 @@
 //!
 //! One Markdown row per robot, medians over the repetitions.
 
+mod flags;
 mod walk_common;
 
 use std::sync::Arc;
@@ -28,21 +29,12 @@ use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptio
 use twin_core::convert::ActuatorMode;
 use twin_core::mj::Data;
 use twin_core::walk::{WALK_ARMATURE, WalkOptions, Walker};
-use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step, value};
+use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step};
 
 fn main() {
-    let (mut steps, mut reps, mut vx) = (5_000u64, 5usize, 0.0f64);
-    let mut urdfs = Vec::new();
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--steps" => steps = value(&mut args, "--steps N"),
-            "--reps" => reps = value(&mut args, "--reps R"),
-            "--vx" => vx = value(&mut args, "--vx V"),
-            "--bench" => {}
-            other => urdfs.push(other.to_string()),
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (steps, reps, vx) = (flags.get("--steps", 5_000u64), flags.get("--reps", 5usize), flags.get("--vx", 0.0f64));
+    let urdfs = flags.rest();
     println!(
         "| robot | nv | nu | steps × reps | vx (m/s) | walk fell at step | C loop, zero ctrl (µs) | \
          C replay of the walk, mj_step (µs) | pd-hold loop (µs/step) | walking loop (µs/step) | \

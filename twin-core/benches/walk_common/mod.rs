@@ -1,4 +1,4 @@
-//! What the walker benches (`walk`, `walk_robots`) share: flag values, a median, one step of
+//! What the walker benches (`walk`, `walk_robots`) share: a median, one step of
 //! twin's loop (plain and timed), and the two plain C loops the walk is set against (a replay
 //! of its recorded `ctrl`, checked bit for bit, and zero control).
 
@@ -10,11 +10,6 @@ use twin_core::mj::{Data, Model, bench_c_replay_loop, bench_c_step_loop};
 pub fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
-}
-
-/// The next argument parsed as a flag's value; `usage` (`"--steps N"`) is the panic otherwise.
-pub fn value<T: std::str::FromStr>(args: &mut impl Iterator<Item = String>, usage: &str) -> T {
-    args.next().and_then(|v| v.parse().ok()).unwrap_or_else(|| panic!("{usage}"))
 }
 
 /// One step of twin's loop: `mj_step1`, the controller's command applied, `mj_step2`.
