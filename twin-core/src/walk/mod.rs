@@ -1064,7 +1064,7 @@ impl Walker {
                 self.ik[leg].bend_knee(&mut q, 0.5);
                 let r = self.ik[leg].solve(target, &mut q, 200, 1e-3);
                 if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
-                    return Err(Error::Walk {
+                    return Err(Error::WalkReach {
                         message: format!(
                             "the {} leg can't reach a step of max_step_length {} m (width {} m) with the CoM at \
                              com_height {} m: its foot stays {:.3} m and {:.3} rad from the target; shorten \
