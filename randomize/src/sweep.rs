@@ -212,11 +212,7 @@ impl LevelRow {
     /// The row of a level from its batch summary.
     pub fn new(level: f64, s: &Summary) -> LevelRow {
         let median = |m: &str| s.quantiles.iter().find(|q| q.metric == m).map_or(f64::NAN, |q| q.p50);
-        LevelRow {
-            level,
-            outcomes: s.outcomes,
-            medians: KEY_METRICS.iter().map(|m| median(m)).collect(),
-        }
+        LevelRow { level, outcomes: s.outcomes, medians: KEY_METRICS.iter().map(|m| median(m)).collect() }
     }
 }
 
@@ -296,7 +292,10 @@ pub fn to_text(name: &str, rows: &[LevelRow], threshold: f64) -> String {
 pub fn to_svg(name: &str, rows: &[LevelRow], threshold: f64) -> String {
     use twin_core::plot::{COLORS, Plot, stack_svg};
     let mut p = Plot::new(&format!("Success against {name}"), name, "success rate");
-    p.band(rows.iter().map(|r| (r.level, r.outcomes.success_rate_ci95[0], r.outcomes.success_rate_ci95[1])).collect(), COLORS[0]);
+    p.band(
+        rows.iter().map(|r| (r.level, r.outcomes.success_rate_ci95[0], r.outcomes.success_rate_ci95[1])).collect(),
+        COLORS[0],
+    );
     let xy: Vec<(f64, f64)> = rows.iter().map(|r| (r.level, r.outcomes.success_rate)).collect();
     p.line("success", xy.clone(), COLORS[0]);
     p.points("", xy, COLORS[0]);

@@ -242,8 +242,11 @@ fn run_one(
         None => Robot::load(&model_path)?,
     };
     let model = robot.model.clone();
-    let controller =
-        args.controller.map(|c| c.name().to_string()).or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    let controller = args
+        .controller
+        .map(|c| c.name().to_string())
+        .or_else(|| scenario.as_ref().map(|s| s.controller.clone()))
+        .unwrap_or("pd-hold".into());
     // The walker's options for this robot, derived once from the nominal model (every episode's
     // walker gets the same): a scenario's, or with none the defaults.
     let scenario = match scenario {
@@ -420,9 +423,11 @@ fn run_one(
         if level.is_some() {
             return Ok(None);
         }
-        return Err(
-            super::Interrupted(format!("{} of {} episodes finished", report.summary.outcomes.episodes, requested)).into()
-        );
+        return Err(super::Interrupted(format!(
+            "{} of {} episodes finished",
+            report.summary.outcomes.episodes, requested
+        ))
+        .into());
     }
     Ok(Some(report.summary))
 }

@@ -186,7 +186,8 @@ fn test_scenario(s: &Scenario, args: &Args, stop: &std::sync::atomic::AtomicBool
         let threshold = s.test.min_success_lower_95.unwrap_or(0.5);
         let lower = sum.success_rate_ci95[0];
         let passed = lower >= threshold && sum.episodes == report.requested;
-        let kinds: Vec<String> = report.summary.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();
+        let kinds: Vec<String> =
+            report.summary.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();
         let mut message = format!(
             "success {}/{} = {:.1} %, 95 % lower bound {:.3} {} {threshold}; fell {}, unstable {}",
             sum.succeeded,

@@ -354,8 +354,9 @@ fn twin_test(scenarios: &[&Path], junit: &Path, threads: u32) -> (bool, String, 
 /// each suite `s` of the JUnit file `junit`, as junitparser reads it.
 fn junitparser_prints(python: &str, body: &str, junit: &Path) -> String {
     let body: String = body.lines().map(|l| format!("        {}\n", l.trim())).collect();
-    let script =
-        format!("import sys, junitparser\nfor s in junitparser.JUnitXml.fromfile(sys.argv[1]):\n    for c in s:\n{body}");
+    let script = format!(
+        "import sys, junitparser\nfor s in junitparser.JUnitXml.fromfile(sys.argv[1]):\n    for c in s:\n{body}"
+    );
     let read = Command::new(python).arg("-c").arg(script).arg(junit).output().unwrap();
     assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
     String::from_utf8_lossy(&read.stdout).into_owned()
@@ -427,7 +428,8 @@ fn twin_test_fails_on_a_tracking_threshold_and_junit_names_it() {
     let (ok, stdout, stderr) = twin_test(&[&tight, &loose], &junit, 1);
     assert!(!ok, "a failed tracking threshold must fail: {stdout}\n{stderr}");
     assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
-    let text = junitparser_prints(&python, "print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))", &junit);
+    let text =
+        junitparser_prints(&python, "print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))", &junit);
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 4, "{text}");
     // tight: nominal fails naming the key, with the measured RMS of the worst joint.

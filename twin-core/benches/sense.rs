@@ -79,7 +79,8 @@ impl Observer for CameraTicks {
 
 fn main() {
     let flags = flags::Flags::from_env();
-    let (frames, secs, reps) = (flags.get("--frames", 200usize), flags.opt::<f64>("--secs"), flags.get("--reps", 3usize));
+    let (frames, secs, reps) =
+        (flags.get("--frames", 200usize), flags.opt::<f64>("--secs"), flags.get("--reps", 3usize));
     let unknown = flags.rest();
     assert!(unknown.is_empty(), "unknown arguments {unknown:?} (options: --frames N --secs S --reps R)");
     let model = grasp_scene();

@@ -34,7 +34,8 @@ use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step};
 
 fn main() {
     let flags = flags::Flags::from_env();
-    let (steps, reps, plan_every) = (flags.get("--steps", 5_000u64), flags.get("--reps", 7usize), flags.get("--plan-every", 1u64));
+    let (steps, reps, plan_every) =
+        (flags.get("--steps", 5_000u64), flags.get("--reps", 7usize), flags.get("--plan-every", 1u64));
     let unknown = flags.rest();
     assert!(unknown.is_empty(), "unknown arguments {unknown:?} (options: --steps N --reps R --plan-every K)");
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf");

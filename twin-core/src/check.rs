@@ -468,7 +468,7 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
                     expected.z
                 ));
             }
-            SensorType::FrameQuat if model.sensor_object(s) == Some(ObjType::Site) =>             {
+            SensorType::FrameQuat if model.sensor_object(s) == Some(ObjType::Site) => {
                 let r = Matrix3::from_row_slice(&data.site_xmat()[obj]);
                 let site = UnitQuaternion::from_matrix(&r);
                 let got = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(

@@ -122,9 +122,7 @@ fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
             GeomType::Sphere => p.z - s[0],
             GeomType::Capsule => p.z - rz.z.abs() * s[1] - s[0],
             GeomType::Cylinder => p.z - rz.z.abs() * s[1] - s[0] * (1.0 - rz.z * rz.z).max(0.0).sqrt(),
-            GeomType::Ellipsoid => {
-                p.z - ((s[0] * rz.x).powi(2) + (s[1] * rz.y).powi(2) + (s[2] * rz.z).powi(2)).sqrt()
-            }
+            GeomType::Ellipsoid => p.z - ((s[0] * rz.x).powi(2) + (s[1] * rz.y).powi(2) + (s[2] * rz.z).powi(2)).sqrt(),
             GeomType::Box => p.z - (s[0] * rz.x.abs() + s[1] * rz.y.abs() + s[2] * rz.z.abs()),
             GeomType::Mesh => {
                 let id = m.geom_dataid()[g];

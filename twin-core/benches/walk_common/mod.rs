@@ -13,7 +13,13 @@ pub fn median(mut v: Vec<f64>) -> f64 {
 }
 
 /// One step of twin's loop: `mj_step1`, the controller's command applied, `mj_step2`.
-pub fn step(model: &Model, data: &mut Data, controller: &mut dyn Controller, actuation: Actuation, command: &mut [f64]) {
+pub fn step(
+    model: &Model,
+    data: &mut Data,
+    controller: &mut dyn Controller,
+    actuation: Actuation,
+    command: &mut [f64],
+) {
     data.step1().unwrap();
     controller.compute(model, &Observation::of(data), command);
     actuation.apply(data, command);

@@ -818,7 +818,12 @@ impl LiveController {
 
     /// Counts a command as applied (and the bridge as fed now), or rejects it with the reason on
     /// the topic `topic` names (called only then); returns whether it was applied.
-    fn settle(&mut self, verdict: std::result::Result<(), String>, topic: impl FnOnce(&Self) -> String, t_nanos: u64) -> bool {
+    fn settle(
+        &mut self,
+        verdict: std::result::Result<(), String>,
+        topic: impl FnOnce(&Self) -> String,
+        t_nanos: u64,
+    ) -> bool {
         match verdict {
             Ok(()) => {
                 self.stats.commands_applied += 1;

@@ -45,7 +45,13 @@ impl ModelEdit {
     ///
     /// # Safety
     /// `pick` must return one of the model's arrays, null or with at least `rows` rows of `T`.
-    unsafe fn set_row<T>(&mut self, rows: usize, id: usize, value: T, pick: impl FnOnce(&mujoco_sys::mjModel) -> *mut T) {
+    unsafe fn set_row<T>(
+        &mut self,
+        rows: usize,
+        id: usize,
+        value: T,
+        pick: impl FnOnce(&mujoco_sys::mjModel) -> *mut T,
+    ) {
         let ptr = pick(self.raw_mut());
         // SAFETY: guaranteed by the caller; exclusive access through &mut self.
         let all = unsafe { raw_slice_mut(ptr, rows) };
