@@ -47,7 +47,7 @@
 //! | robot | mass | stands 10 s, pd-hold | stands 10 s, walker | walks (`--vx 0.25`, 30 s) | speed | falls | turns 90° in place |
 //! |---|---|---|---|---|---|---|---|
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 92.9° |
-//! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 8.44 m, drift 0.23 m, heading 3.5° | 0.29 m/s | no | falls (5.5 s) |
+//! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 8.44 m, drift 0.23 m, heading 3.5° | 0.28 m/s | no | falls (5.5 s) |
 //! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.1° |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
 //! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s) | 0.17 m | – | at 3.6 s | falls (4.1 s) |
