@@ -256,17 +256,13 @@ impl Server {
     /// Sends a message of channel `id`, stamped `time_nanos`, to its subscribers (kept for new
     /// subscribers when latched). Never blocks: a client whose queue is full misses it.
     pub fn publish(&self, id: u32, time_nanos: u64, payload: &[u8]) {
-        let latched = {
-            let st = lock(&self.shared.state);
-            st.channels.get(id as usize - 1).is_some_and(|c| c.latched)
-        };
-        if latched {
-            lock(&self.shared.state).latched.insert(id, (time_nanos, payload.to_vec()));
+        let mut st = lock(&self.shared.state);
+        if st.channels.get(id as usize - 1).is_some_and(|c| c.latched) {
+            st.latched.insert(id, (time_nanos, payload.to_vec()));
         }
         if self.shared.subscribed.load(Ordering::Relaxed) == 0 {
             return;
         }
-        let st = lock(&self.shared.state);
         for c in &st.clients {
             let sub = lock(&c.subscriptions).get(&id).copied();
             if let Some(sub) = sub {
