@@ -123,18 +123,19 @@ pub const GROUND_RISE_M: f64 = GROUND_DEADBAND_M;
 pub const MAX_GROUND_SLOPE: f64 = 0.35;
 
 /// The soles' pitch ([`WalkOptions::ground_pitch_gain`]) is re-estimated from the planted feet
-/// only when they are at least this far apart along the heading, m; closer, it holds its last
-/// value. Two feet's ground heights differ by their reads' errors too (a few millimetres: a
-/// foot landing tilted or late), and over a short base that error is a steep slope: feet
-/// nearly side by side after a push (stepping in place, 5–6 cm apart) gave pitches of 8–14°
-/// on a 5° ramp and alternated with 0 step by step, and the walker fell. At 0.1 m a 5-mm error
-/// is 2.9°; a walking step is longer (0.13 m at `walk_slope.toml`'s 0.38 m/s × 0.35 s).
-pub const GROUND_PITCH_MIN_BASE_M: f64 = 0.05;
+/// only when they are at least this far apart along the heading, m (as the footholds' slope,
+/// [`GROUND_SLOPE_MIN_BASE_M`]); closer, it holds its last value. (It dropped to level there
+/// before: after a push on a 5° ramp, stepping nearly in place, the pitch alternated between
+/// 0 and 8–14° step by step.) A longer base (0.1 m) rejects more of the reads' error, but steps
+/// up a 5° ramp are often shorter: the pitch stayed level from the flat, the climb slowed and
+/// the nominal `walk_slope.toml` run fell short (6.09 m of 6.5).
+pub const GROUND_PITCH_MIN_BASE_M: f64 = GROUND_SLOPE_MIN_BASE_M;
 
 /// Time constant of the soles' pitch following its estimate from the planted feet, s (as the
 /// pelvis follows the ground, [`GROUND_FOLLOW_SECS`]): a new estimate at each touchdown turns
 /// the loaded stance sole gradually instead of in one solve (a jump of several degrees under
-/// the body's weight moves the centre of pressure to a heel or a toe at once).
+/// the body's weight moves the centre of pressure to a heel or a toe at once), and a single
+/// step's error (the 8–14° above, over a 5–9-cm base) moves it by a fraction.
 pub const GROUND_PITCH_FOLLOW_SECS: f64 = GROUND_FOLLOW_SECS;
 
 /// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
