@@ -49,7 +49,7 @@ fn engine(spec: &Spec, controller: &str, episodes: u64, secs: f64, threads: usiz
     let t = Instant::now();
     let report = run_batch(&batch, info, &run, &AtomicBool::new(false), &|| {}).expect("run");
     let elapsed = t.elapsed().as_secs_f64();
-    assert_eq!(report.summary.episodes, episodes);
+    assert_eq!(report.summary.outcomes.episodes, episodes);
     if same_work {
         assert_eq!(report.simulated_steps, episodes * batch.steps_per_episode());
     }

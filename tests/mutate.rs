@@ -25,18 +25,15 @@ fn repo(p: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join(p)
 }
 
-/// SplitMix64: the mutations depend only on the case number.
-struct Rng(u64);
+/// The mutations depend only on the case number (the workspace's one generator, ChaCha8).
+struct Rng(rand_chacha::ChaCha8Rng);
 impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 = self.0.wrapping_add(0x9E37_79B9_7F4A_7C15);
-        let mut z = self.0;
-        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
-        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
-        z ^ (z >> 31)
+    fn new(seed: u64) -> Rng {
+        Rng(rand::SeedableRng::seed_from_u64(seed))
     }
+    /// Uniform in `0..n` (0 when `n` is 0).
     fn below(&mut self, n: usize) -> usize {
-        if n == 0 { 0 } else { (self.next() % n as u64) as usize }
+        if n == 0 { 0 } else { rand::Rng::random_range(&mut self.0, 0..n) }
     }
 }
 
@@ -82,7 +79,7 @@ fn numbers(text: &[u8]) -> Vec<(usize, usize)> {
 
 /// One deterministic mutation of `valid` for case `case`; returns it and its name.
 fn mutate(valid: &[u8], case: u64, text_like: bool) -> (Vec<u8>, &'static str) {
-    let mut rng = Rng(case.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ valid.len() as u64);
+    let mut rng = Rng::new(case.wrapping_mul(0x2545_F491_4F6C_DD1D) ^ valid.len() as u64);
     let mut v = valid.to_vec();
     let kinds = if text_like { 10 } else { 5 };
     match rng.below(kinds) {

@@ -270,6 +270,22 @@ impl<'a, 'i> Ctx<'a, 'i> {
         }
     }
 
+    /// The `name` of a `<link>` or `<joint>` (`node`), and its line, recorded in `seen` (name →
+    /// line); an element without a name, or with one already in `seen`, is an error naming both
+    /// lines.
+    pub fn unique_name(&self, node: Node<'_, '_>, seen: &mut HashMap<String, u32>) -> Result<(String, u32)> {
+        let tag = node.tag_name().name();
+        let name = node
+            .attribute("name")
+            .ok_or_else(|| self.err(node, format!("<{tag}> without name: every {tag} needs a unique name")))?
+            .to_string();
+        let line = self.line(node);
+        if let Some(prev) = seen.insert(name.clone(), line) {
+            return Err(self.err(node, format!("duplicate {tag} name \"{name}\" (first at line {prev}): rename one")));
+        }
+        Ok((name, line))
+    }
+
     /// A finite number attribute, or `default` when absent.
     pub fn num(&self, node: Node<'_, '_>, attr: &str, default: Option<f64>) -> Result<f64> {
         match node.attribute(attr) {
@@ -429,14 +445,7 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
     let mut links = Vec::new();
     let mut seen_links: HashMap<String, u32> = HashMap::new();
     for l in children(root, "link") {
-        let name = l
-            .attribute("name")
-            .ok_or_else(|| ctx.err(l, "<link> without name: every link needs a unique name"))?
-            .to_string();
-        let line = ctx.line(l);
-        if let Some(prev) = seen_links.insert(name.clone(), line) {
-            return Err(ctx.err(l, format!("duplicate link name \"{name}\" (first at line {prev}): rename one")));
-        }
+        let (name, line) = ctx.unique_name(l, &mut seen_links)?;
         let inertial = match child(l, "inertial") {
             None => None,
             Some(i) => {
@@ -494,14 +503,7 @@ pub(crate) fn parse_robot(ctx: &Ctx<'_, '_>) -> Result<RobotIr> {
     let mut joints = Vec::new();
     let mut seen_joints: HashMap<String, u32> = HashMap::new();
     for j in children(root, "joint") {
-        let name = j
-            .attribute("name")
-            .ok_or_else(|| ctx.err(j, "<joint> without name: every joint needs a unique name"))?
-            .to_string();
-        let line = ctx.line(j);
-        if let Some(prev) = seen_joints.insert(name.clone(), line) {
-            return Err(ctx.err(j, format!("duplicate joint name \"{name}\" (first at line {prev}): rename one")));
-        }
+        let (name, line) = ctx.unique_name(j, &mut seen_joints)?;
         let ty = j.attribute("type").unwrap_or("");
         let kind = match ty {
             "revolute" => JointKind::Revolute,

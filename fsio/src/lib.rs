@@ -23,6 +23,11 @@
 //!   file meanwhile, the write is refused instead of silently losing the other result.
 //! - **Several outputs** of one command are staged in a [`Transaction`] and renamed only when
 //!   every one was written, so a failing second output leaves the first untouched.
+//! - **Streamed outputs** (rows written as a long run finishes them, such as randomize's
+//!   `episodes.csv`) go through a [`StreamingFile`]: the rows go to a named partial file beside
+//!   the target (readable while it grows, kept if the run dies, so its progress can be
+//!   counted), and [`StreamingFile::commit`] fsyncs it and renames it into place like any other
+//!   output (checks, backup, permissions, folder lock).
 //! - **Temp files** (`.NAME.twin-PID-XXXXXX`) are removed on drop, on Ctrl-C/SIGTERM/SIGHUP
 //!   ([`install_signal_handler`]), and, for a process killed with SIGKILL, by the next twin
 //!   writing the same file (temps whose process is gone are swept).
@@ -426,6 +431,8 @@ fn sweep_stale_temps(target: &Path) {
 struct Temp {
     path: PathBuf,
     file: Option<File>,
+    /// Left in place on drop (a [`StreamingFile`]'s partial file when the stream is abandoned).
+    keep: bool,
 }
 
 impl Temp {
@@ -440,13 +447,16 @@ impl Temp {
         if let Ok(mut t) = LIVE_TEMPS.lock() {
             t.push(path.clone());
         }
-        Ok(Self { path, file: Some(file) })
+        Ok(Self { path, file: Some(file), keep: false })
     }
 }
 
 impl Drop for Temp {
     fn drop(&mut self) {
         self.file = None;
+        if self.keep {
+            return;
+        }
         let _ = std::fs::remove_file(&self.path);
         forget_temp(&self.path);
     }
@@ -641,6 +651,79 @@ impl Transaction {
             written.push(Written { path: s.target.requested.clone(), backup });
         }
         Ok(written)
+    }
+}
+
+/// One output written as a stream (rows appended as a long run finishes them), then put in place
+/// atomically. The bytes go, buffered, to `partial`, a file the caller names beside the target
+/// (others may read it while it grows: how far a run got); [`StreamingFile::commit`] flushes and
+/// fsyncs it and renames it over the target exactly as [`Transaction::commit`] does (backup,
+/// permissions, hard links, folder lock). Dropped uncommitted (an error, a killed run), the
+/// target is untouched and the partial file stays, holding what was written.
+#[derive(Debug)]
+pub struct StreamingFile {
+    target: OutputTarget,
+    backup: Backup,
+    /// `None` once committed.
+    temp: Option<Temp>,
+    writer: std::io::BufWriter<File>,
+}
+
+impl StreamingFile {
+    /// Checks `path` ([`check_output`] with no inputs) and creates (or truncates) `partial`.
+    ///
+    /// # Errors
+    /// As [`check_output`]; [`Error::BadPath`] when `partial` is not beside `path` or is `path`;
+    /// [`Error::Io`] when `partial` cannot be created.
+    pub fn create(path: &Path, partial: &Path, backup: Backup) -> Result<Self> {
+        let target = check_output(path, &[])?;
+        if parent_dir(partial) != parent_dir(path) || partial.file_name() == path.file_name() {
+            return Err(bad(partial, "a streamed output's partial file must be another file in the target's folder"));
+        }
+        let file = File::create(partial).map_err(|source| Error::Io { path: partial.to_path_buf(), source })?;
+        let writer = std::io::BufWriter::new(
+            file.try_clone().map_err(|source| Error::Io { path: partial.to_path_buf(), source })?,
+        );
+        let temp = Temp { path: partial.to_path_buf(), file: Some(file), keep: false };
+        Ok(Self { target, backup, temp: Some(temp), writer })
+    }
+
+    /// The partial file the bytes go to until [`StreamingFile::commit`].
+    pub fn partial_path(&self) -> &Path {
+        self.temp.as_ref().map_or(Path::new(""), |t| t.path.as_path())
+    }
+
+    /// Flushes, fsyncs and renames the partial file over the target (backup first, as
+    /// `backup` says); returns the backup's path when one was made.
+    ///
+    /// # Errors
+    /// [`Error::Io`] from the flush or the sync; as [`Transaction::commit`].
+    pub fn commit(mut self) -> Result<Option<PathBuf>> {
+        let partial = self.partial_path().to_path_buf();
+        let io = |source| Error::Io { path: partial.clone(), source };
+        self.writer.flush().map_err(io)?;
+        self.writer.get_ref().sync_all().map_err(io)?;
+        let temp = self.temp.take().expect("a streaming file is committed once");
+        let staged = Staged { target: self.target.clone(), temp, backup: self.backup, expect: None };
+        Ok(Transaction { staged: vec![staged] }.commit()?.pop().and_then(|w| w.backup))
+    }
+}
+
+impl Write for StreamingFile {
+    fn write(&mut self, buf: &[u8]) -> std::io::Result<usize> {
+        self.writer.write(buf)
+    }
+    fn flush(&mut self) -> std::io::Result<()> {
+        self.writer.flush()
+    }
+}
+
+impl Drop for StreamingFile {
+    fn drop(&mut self) {
+        if let Some(t) = self.temp.as_mut() {
+            // Abandoned: what was written stays readable (the writer flushes it as it drops).
+            t.keep = true;
+        }
     }
 }
 
@@ -852,6 +935,35 @@ mod tests {
         assert!(started.elapsed() < std::time::Duration::from_secs(2));
         let msg = e.to_string();
         assert!(msg.contains(&key.display().to_string()) && msg.contains("write lock"), "{msg}");
+    }
+
+    #[test]
+    fn a_streamed_output_is_renamed_into_place_with_a_backup_or_left_partial() {
+        let dir = tempfile::tempdir().unwrap();
+        let out = dir.path().join("rows.csv");
+        let partial = dir.path().join(".rows.csv.tmp");
+        std::fs::write(&out, "old\n").unwrap();
+        let mut s = StreamingFile::create(&out, &partial, Backup::Numbered).unwrap();
+        s.write_all(b"a\n").unwrap();
+        s.flush().unwrap();
+        // Readable while it streams; the target is untouched until the commit.
+        assert_eq!(std::fs::read(&partial).unwrap(), b"a\n");
+        assert_eq!(std::fs::read(&out).unwrap(), b"old\n");
+        s.write_all(b"b\n").unwrap();
+        assert_eq!(s.commit().unwrap(), Some(dir.path().join("rows.csv.bak")));
+        assert_eq!(std::fs::read(&out).unwrap(), b"a\nb\n");
+        assert_eq!(std::fs::read(dir.path().join("rows.csv.bak")).unwrap(), b"old\n");
+        assert_eq!(names(dir.path()), ["rows.csv", "rows.csv.bak"]);
+        // Abandoned (an error, a killed run): the target stays, the rows written stay readable.
+        let mut s = StreamingFile::create(&out, &partial, Backup::Numbered).unwrap();
+        s.write_all(b"c\n").unwrap();
+        drop(s);
+        assert_eq!(std::fs::read(&out).unwrap(), b"a\nb\n");
+        assert_eq!(std::fs::read(&partial).unwrap(), b"c\n");
+        // The partial file must be another file beside the target.
+        let e = StreamingFile::create(&out, &std::env::temp_dir().join(".rows.csv.tmp"), Backup::None).unwrap_err();
+        assert!(e.to_string().contains("partial file"), "{e}");
+        assert!(StreamingFile::create(dir.path(), &partial, Backup::None).is_err());
     }
 
     #[test]

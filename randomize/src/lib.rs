@@ -58,7 +58,7 @@ pub use error::{Error, Result};
 pub use merge::{Merged, ShardManifest, ShardStart, merge};
 pub use run::{Report, RunInfo, RunOptions, Shard, run_batch};
 pub use spec::{Mode, Spec, Term};
-pub use summary::Summary;
+pub use summary::{Outcomes, Summary};
 
 /// The identity of a batch as written into `summary.json`.
 pub fn run_info(batch: &Batch, model: &str, spec: &Spec, episodes: u64, shard: Option<Shard>) -> RunInfo {

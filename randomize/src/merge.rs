@@ -152,7 +152,7 @@ pub fn start_shard(dir: &Path, manifest: &ShardManifest) -> Result<ShardStart> {
         && dir.join("summary.json").is_file()
     {
         let done = read_summary(dir)?;
-        if done.run == manifest.run && done.summary.episodes == manifest.shard_episodes {
+        if done.run == manifest.run && done.summary.outcomes.episodes == manifest.shard_episodes {
             return Ok(ShardStart::AlreadyDone(Box::new(done)));
         }
     }
@@ -355,7 +355,7 @@ fn progress(found: &Found<'_>) -> Result<Vec<ShardProgress>> {
         };
         let finished = if dir.join("episodes.csv").is_file() && dir.join("summary.json").is_file() {
             let s = read_summary(dir)?;
-            (s.run == m.run).then_some(s.summary.episodes)
+            (s.run == m.run).then_some(s.summary.outcomes.episodes)
         } else {
             None
         };

@@ -184,13 +184,19 @@ pub fn run_batch(
     let mut builder = SummaryBuilder::new(params);
     let mut worst: Vec<EpisodeResult> = Vec::new();
 
+    // episodes.csv streams through fsio's one atomic writer: rows reach `PARTIAL_CSV` chunk by
+    // chunk, and the file is renamed into place (an existing one kept as a backup) at the end.
     let mut csv_writer = None;
     let tmp_csv;
     if let Some(dir) = &options.out_dir {
         std::fs::create_dir_all(dir).map_err(|source| Error::Io { path: dir.clone(), source })?;
         tmp_csv = dir.join(PARTIAL_CSV);
-        let file = std::fs::File::create(&tmp_csv).map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
-        let mut w = csv::Writer::from_writer(std::io::BufWriter::new(file));
+        let file = twin_core::fsio::StreamingFile::create(
+            &dir.join("episodes.csv"),
+            &tmp_csv,
+            twin_core::fsio::Backup::Numbered,
+        )?;
+        let mut w = csv::Writer::from_writer(file);
         let checks = batch.check_verdicts()?;
         let check_metrics = crate::summary::check_metric_names(&checks);
         w.write_record(crate::summary::csv_header(params, !checks.is_empty(), &check_metrics))
@@ -260,16 +266,10 @@ pub fn run_batch(
     let summary = builder.finish();
 
     if let (Some(dir), Some(w)) = (&options.out_dir, csv_writer) {
-        let mut inner = w
+        let file = w
             .into_inner()
             .map_err(|e| Error::Io { path: tmp_csv.clone(), source: std::io::Error::other(e.to_string()) })?;
-        inner.flush().map_err(|source| Error::Io { path: tmp_csv.clone(), source })?;
-        let csv_path = dir.join("episodes.csv");
-        twin_core::fsio::check_output(&csv_path, &[])?;
-        if csv_path.is_file() {
-            twin_core::fsio::backup_numbered(&csv_path)?;
-        }
-        std::fs::rename(&tmp_csv, &csv_path).map_err(|source| Error::Io { path: csv_path.clone(), source })?;
+        file.commit()?;
         write_summary(dir, &run, &summary)?;
         let spec_path = dir.join("spec.toml");
         write_atomic(&spec_path, |f| {

@@ -298,9 +298,11 @@ pub struct Separation {
     pub smd: f64,
 }
 
-/// The batch summary.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Summary {
+/// How a batch's episodes ended: the counts, and the success rate with its interval. A batch's
+/// [`Summary`] and each level of a sweep ([`crate::sweep::LevelRow`]) carry one (flattened
+/// into their JSON).
+#[derive(Debug, Clone, Copy, PartialEq, Default, Serialize, Deserialize)]
+pub struct Outcomes {
     /// Episodes in the summary.
     pub episodes: u64,
     /// Episodes that neither fell nor diverged.
@@ -309,10 +311,27 @@ pub struct Summary {
     pub fell: u64,
     /// Episodes that diverged.
     pub unstable: u64,
-    /// succeeded / episodes.
+    /// succeeded / episodes (0 for no episode).
     pub success_rate: f64,
     /// 95 % Wilson score interval of the success rate.
     pub success_rate_ci95: [f64; 2],
+}
+
+impl Outcomes {
+    /// The outcomes of `episodes` of which `succeeded` succeeded, `fell` fell and `unstable`
+    /// diverged: the rate and its 95 % Wilson interval ([`wilson`]) follow.
+    pub fn of(episodes: u64, succeeded: u64, fell: u64, unstable: u64) -> Outcomes {
+        let success_rate = if episodes > 0 { succeeded as f64 / episodes as f64 } else { 0.0 };
+        Outcomes { episodes, succeeded, fell, unstable, success_rate, success_rate_ci95: wilson(succeeded, episodes) }
+    }
+}
+
+/// The batch summary.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Summary {
+    /// How the episodes ended.
+    #[serde(flatten)]
+    pub outcomes: Outcomes,
     /// Quantiles of each metric.
     pub quantiles: Vec<Quantiles>,
     /// Parameters ranked by |SMD|, largest first (empty unless both groups have ≥ 2 episodes).
@@ -426,8 +445,6 @@ impl SummaryBuilder {
 
     /// The summary so far.
     pub fn finish(&self) -> Summary {
-        let n = self.episodes;
-        let rate = if n > 0 { self.succeeded as f64 / n as f64 } else { 0.0 };
         let quantiles = QUANTILE_METRICS
             .iter()
             .map(|name| name.to_string())
@@ -462,12 +479,7 @@ impl SummaryBuilder {
             .collect();
         separation.sort_by(|a, b| b.smd.abs().total_cmp(&a.smd.abs()));
         Summary {
-            episodes: n,
-            succeeded: self.succeeded,
-            fell: self.fell,
-            unstable: self.unstable,
-            success_rate: rate,
-            success_rate_ci95: wilson(self.succeeded, n),
+            outcomes: Outcomes::of(self.episodes, self.succeeded, self.fell, self.unstable),
             quantiles,
             separation,
             failures: {
@@ -507,19 +519,19 @@ impl Summary {
         let _ = writeln!(
             s,
             "episodes: {} of {requested}{}",
-            self.episodes,
-            if self.episodes < requested { " (interrupted: summary of the finished episodes)" } else { "" }
+            self.outcomes.episodes,
+            if self.outcomes.episodes < requested { " (interrupted: summary of the finished episodes)" } else { "" }
         );
         let _ = writeln!(
             s,
             "success: {}/{} = {:.1} % (95 % CI {:.1}–{:.1} %); fell {}, unstable {}",
-            self.succeeded,
-            self.episodes,
-            100.0 * self.success_rate,
-            100.0 * self.success_rate_ci95[0],
-            100.0 * self.success_rate_ci95[1],
-            self.fell,
-            self.unstable
+            self.outcomes.succeeded,
+            self.outcomes.episodes,
+            100.0 * self.outcomes.success_rate,
+            100.0 * self.outcomes.success_rate_ci95[0],
+            100.0 * self.outcomes.success_rate_ci95[1],
+            self.outcomes.fell,
+            self.outcomes.unstable
         );
         if !self.failures.is_empty() {
             let kinds: Vec<String> = self.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();

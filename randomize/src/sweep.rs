@@ -20,7 +20,7 @@
 
 use crate::error::{Error, Result};
 use crate::spec::{Dist, Spec, Term};
-use crate::summary::Summary;
+use crate::summary::{Outcomes, Summary};
 use serde::{Deserialize, Serialize};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
@@ -196,18 +196,9 @@ pub fn scenario_text_at(text: &str, key: &str, level: f64) -> Result<String> {
 pub struct LevelRow {
     /// The parameter's value.
     pub level: f64,
-    /// Episodes run.
-    pub episodes: u64,
-    /// Episodes that succeeded.
-    pub succeeded: u64,
-    /// Episodes that fell.
-    pub fell: u64,
-    /// Episodes that diverged.
-    pub unstable: u64,
-    /// succeeded / episodes.
-    pub success_rate: f64,
-    /// 95 % Wilson interval of the success rate.
-    pub success_rate_ci95: [f64; 2],
+    /// How its episodes ended.
+    #[serde(flatten)]
+    pub outcomes: Outcomes,
     /// Medians of [`KEY_METRICS`] (NaN where the batch has no such metric).
     pub medians: Vec<f64>,
 }
@@ -221,22 +212,13 @@ impl LevelRow {
     /// The row of a level from its batch summary.
     pub fn new(level: f64, s: &Summary) -> LevelRow {
         let median = |m: &str| s.quantiles.iter().find(|q| q.metric == m).map_or(f64::NAN, |q| q.p50);
-        LevelRow {
-            level,
-            episodes: s.episodes,
-            succeeded: s.succeeded,
-            fell: s.fell,
-            unstable: s.unstable,
-            success_rate: s.success_rate,
-            success_rate_ci95: s.success_rate_ci95,
-            medians: KEY_METRICS.iter().map(|m| median(m)).collect(),
-        }
+        LevelRow { level, outcomes: s.outcomes, medians: KEY_METRICS.iter().map(|m| median(m)).collect() }
     }
 }
 
 /// The first level whose success rate is below `threshold`, if any.
 pub fn first_below(rows: &[LevelRow], threshold: f64) -> Option<f64> {
-    rows.iter().find(|r| r.success_rate < threshold).map(|r| r.level)
+    rows.iter().find(|r| r.outcomes.success_rate < threshold).map(|r| r.level)
 }
 
 fn fmt_num(v: f64) -> String {
@@ -255,13 +237,13 @@ pub fn to_csv(name: &str, rows: &[LevelRow]) -> String {
             s,
             "{},{},{},{},{},{},{},{}",
             r.level,
-            r.episodes,
-            r.succeeded,
-            r.fell,
-            r.unstable,
-            r.success_rate,
-            r.success_rate_ci95[0],
-            r.success_rate_ci95[1]
+            r.outcomes.episodes,
+            r.outcomes.succeeded,
+            r.outcomes.fell,
+            r.outcomes.unstable,
+            r.outcomes.success_rate,
+            r.outcomes.success_rate_ci95[0],
+            r.outcomes.success_rate_ci95[1]
         );
         for m in &r.medians {
             let _ = write!(s, ",{}", fmt_num(*m));
@@ -285,12 +267,12 @@ pub fn to_text(name: &str, rows: &[LevelRow], threshold: f64) -> String {
             s,
             "{:<w$} {:>9} {:>7.1}% {:>6.1}–{:>5.1} % {:>6} {:>9} {:>11.3} {:>11.3}",
             r.level,
-            r.episodes,
-            100.0 * r.success_rate,
-            100.0 * r.success_rate_ci95[0],
-            100.0 * r.success_rate_ci95[1],
-            r.fell,
-            r.unstable,
+            r.outcomes.episodes,
+            100.0 * r.outcomes.success_rate,
+            100.0 * r.outcomes.success_rate_ci95[0],
+            100.0 * r.outcomes.success_rate_ci95[1],
+            r.outcomes.fell,
+            r.outcomes.unstable,
             r.medians[0],
             r.medians[4]
         );
@@ -310,8 +292,11 @@ pub fn to_text(name: &str, rows: &[LevelRow], threshold: f64) -> String {
 pub fn to_svg(name: &str, rows: &[LevelRow], threshold: f64) -> String {
     use twin_core::plot::{COLORS, Plot, stack_svg};
     let mut p = Plot::new(&format!("Success against {name}"), name, "success rate");
-    p.band(rows.iter().map(|r| (r.level, r.success_rate_ci95[0], r.success_rate_ci95[1])).collect(), COLORS[0]);
-    let xy: Vec<(f64, f64)> = rows.iter().map(|r| (r.level, r.success_rate)).collect();
+    p.band(
+        rows.iter().map(|r| (r.level, r.outcomes.success_rate_ci95[0], r.outcomes.success_rate_ci95[1])).collect(),
+        COLORS[0],
+    );
+    let xy: Vec<(f64, f64)> = rows.iter().map(|r| (r.level, r.outcomes.success_rate)).collect();
     p.line("success", xy.clone(), COLORS[0]);
     p.points("", xy, COLORS[0]);
     if let (Some(a), Some(b)) = (rows.first(), rows.last()) {
@@ -469,12 +454,7 @@ mod tests {
     fn threshold_and_csv() {
         let row = |level: f64, rate: f64| LevelRow {
             level,
-            episodes: 10,
-            succeeded: (rate * 10.0) as u64,
-            fell: 10 - (rate * 10.0) as u64,
-            unstable: 0,
-            success_rate: rate,
-            success_rate_ci95: crate::summary::wilson((rate * 10.0) as u64, 10),
+            outcomes: Outcomes::of(10, (rate * 10.0) as u64, 10 - (rate * 10.0) as u64, 0),
             medians: vec![f64::NAN; KEY_METRICS.len()],
         };
         let rows = vec![row(0.0, 1.0), row(0.5, 0.8), row(1.0, 0.3)];

@@ -163,13 +163,13 @@ fn low_friction_makes_the_humanoid_slip_and_fall() {
     let b = batch(&spec, 2.5, 1);
     let dir = tempfile::tempdir().unwrap();
     let r = run(&b, &spec, 8, 0, dir.path());
-    assert!(r.summary.fell >= 6, "only {} of 8 fell at friction 0.05", r.summary.fell);
-    assert_eq!(r.summary.unstable, 0);
+    assert!(r.summary.outcomes.fell >= 6, "only {} of 8 fell at friction 0.05", r.summary.outcomes.fell);
+    assert_eq!(r.summary.outcomes.unstable, 0);
     // The same pushes on normal ground (friction 1.0) are harmless.
     let spec = Spec::from_toml_str(&text.replace("0.05", "1.0")).unwrap();
     let b = batch(&spec, 2.5, 1);
     let r = run(&b, &spec, 8, 0, dir.path());
-    assert_eq!(r.summary.fell, 0, "{:?}", r.summary);
+    assert_eq!(r.summary.outcomes.fell, 0, "{:?}", r.summary);
 }
 
 #[test]
@@ -188,7 +188,7 @@ fn summary_names_friction_as_what_separates_failures() {
     let dir = tempfile::tempdir().unwrap();
     let r = run(&b, &spec, 96, 0, dir.path());
     let s = &r.summary;
-    assert!(s.fell >= 8 && s.succeeded >= 8, "{s:?}");
+    assert!(s.outcomes.fell >= 8 && s.outcomes.succeeded >= 8, "{s:?}");
     let top = &s.separation[0];
     assert_eq!(top.parameter, "friction", "{:?}", &s.separation[..3]);
     assert!(top.smd < -1.0 && top.mean_failed < top.mean_succeeded, "{top:?}");
@@ -245,7 +245,7 @@ fn stop_request_keeps_finished_episodes() {
     let info = randomize::run_info(&b, "humanoid.xml", &spec, 10, None);
     let r = run_batch(&b, info, &RunOptions { episodes: 10, ..RunOptions::default() }, &stop, &|| {}).unwrap();
     assert!(r.interrupted);
-    assert_eq!(r.summary.episodes, 0);
+    assert_eq!(r.summary.outcomes.episodes, 0);
 }
 
 #[test]
@@ -287,7 +287,7 @@ fn a_stop_mid_batch_keeps_a_reproducible_prefix() {
     let b = batch(&spec, 0.2, 4);
     let dir = tempfile::tempdir().unwrap();
     let full = run(&b, &spec, 48, 4, &dir.path().join("full"));
-    assert_eq!(full.summary.episodes, 48);
+    assert_eq!(full.summary.outcomes.episodes, 48);
     let stop = AtomicBool::new(false);
     let finished = std::sync::atomic::AtomicUsize::new(0);
     let out = dir.path().join("cut");
@@ -305,7 +305,7 @@ fn a_stop_mid_batch_keeps_a_reproducible_prefix() {
     };
     let kept = rows(&out);
     assert!(kept.len() < 48, "{} episodes kept", kept.len());
-    assert_eq!(kept.len() as u64, r.summary.episodes);
+    assert_eq!(kept.len() as u64, r.summary.outcomes.episodes);
     let ids: Vec<u64> = kept.iter().map(|l| l.split(',').next().unwrap().parse().unwrap()).collect();
     assert_eq!(ids, (0..kept.len() as u64).collect::<Vec<_>>(), "a contiguous prefix");
     assert_eq!(kept[..], rows(&dir.path().join("full"))[..kept.len()], "the same rows as the full run");

@@ -93,7 +93,7 @@ fn pinned(case: &str, spec: &Spec, seed: u64, episodes: u64, duration_secs: f64)
 #[test]
 fn default_spec_outputs_for_seed_7_are_unchanged() {
     let s = pinned("default", &Spec::default_spec(), 7, 16, 3.0);
-    assert_eq!((s.episodes, s.succeeded), (16, 16));
+    assert_eq!((s.outcomes.episodes, s.outcomes.succeeded), (16, 16));
 }
 
 #[test]
@@ -105,5 +105,5 @@ fn harsh_spec_outputs_for_seed_3_are_unchanged() {
     let spec = Spec::from_toml_str(&text).expect("harsh spec parses");
     let s = pinned("harsh", &spec, 3, 12, 3.0);
     // The batch exercises more than standing: some episodes fall.
-    assert!(s.fell > 0 && s.succeeded > 0, "{s:?}");
+    assert!(s.outcomes.fell > 0 && s.outcomes.succeeded > 0, "{s:?}");
 }

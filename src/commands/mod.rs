@@ -74,3 +74,55 @@ pub fn write_output(path: &std::path::Path, text: &str, what: &str) -> anyhow::R
     eprintln!("{what} written to {}", path.display());
     Ok(())
 }
+
+/// `--controller` of `twin sim` and `twin randomize`: the names of the one controller registry
+/// ([`twin_core::registry::CONTROLLERS`]) and the scenario's own ROS 2 node. Parsed by clap, so an
+/// unknown name is refused with the list of these before anything is loaded.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
+pub enum ControllerName {
+    /// PD hold of the home pose (alias `hold`).
+    #[value(name = "pd-hold", alias = "hold")]
+    PdHold,
+    /// No torque.
+    Passive,
+    /// PD + velocity feed-forward tracking of `--trajectory`.
+    Replay,
+    /// The model-based walker (stands and balances at zero velocity).
+    Walk,
+    /// Reach, grasp and lift (its legs balance with the walker).
+    Grasp,
+    /// The scenario's own ROS 2 node (`controller = "ros"` and its `[ros]` table).
+    Ros,
+}
+
+impl ControllerName {
+    /// The name the registry and scenario files use.
+    pub fn name(self) -> &'static str {
+        match self {
+            ControllerName::PdHold => "pd-hold",
+            ControllerName::Passive => "passive",
+            ControllerName::Replay => "replay",
+            ControllerName::Walk => "walk",
+            ControllerName::Grasp => "grasp",
+            ControllerName::Ros => twin_core::scenario::EXTERNAL_CONTROLLER,
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::ControllerName;
+    use clap::ValueEnum;
+
+    #[test]
+    fn controller_names_are_the_registry_and_ros() {
+        let names: Vec<&str> = ControllerName::value_variants().iter().map(|c| c.name()).collect();
+        let mut expected = twin_core::registry::CONTROLLERS.to_vec();
+        expected.push("ros");
+        assert_eq!(names, expected);
+        for c in ControllerName::value_variants() {
+            assert_eq!(c.to_possible_value().unwrap().get_name(), c.name());
+        }
+        assert_eq!(ControllerName::from_str("hold", false), Ok(ControllerName::PdHold));
+    }
+}

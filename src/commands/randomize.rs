@@ -71,7 +71,7 @@ pub struct Args {
     /// torque) or walk (stand and balance; with a scenario, walk as it says) [default:
     /// pd-hold, or the scenario's].
     #[arg(long)]
-    pub controller: Option<String>,
+    pub controller: Option<super::ControllerName>,
 
     /// A fall: base below this fraction of its initial height.
     #[arg(long, default_value_t = 0.6)]
@@ -242,8 +242,11 @@ fn run_one(
         None => Robot::load(&model_path)?,
     };
     let model = robot.model.clone();
-    let controller =
-        args.controller.clone().or_else(|| scenario.as_ref().map(|s| s.controller.clone())).unwrap_or("pd-hold".into());
+    let controller = args
+        .controller
+        .map(|c| c.name().to_string())
+        .or_else(|| scenario.as_ref().map(|s| s.controller.clone()))
+        .unwrap_or("pd-hold".into());
     // The walker's options for this robot, derived once from the nominal model (every episode's
     // walker gets the same): a scenario's, or with none the defaults.
     let scenario = match scenario {
@@ -392,9 +395,9 @@ fn run_one(
     print!("{}", report.summary.to_text(report.requested));
     eprintln!(
         "\n{} episodes in {:.1} s ({:.1} episodes/s, {:.0} steps/s){}",
-        report.summary.episodes,
+        report.summary.outcomes.episodes,
         secs,
-        report.summary.episodes as f64 / secs.max(1e-9),
+        report.summary.outcomes.episodes as f64 / secs.max(1e-9),
         report.simulated_steps as f64 / secs.max(1e-9),
         shard.map_or_else(String::new, |s| format!(", shard {s}"))
     );
@@ -420,9 +423,11 @@ fn run_one(
         if level.is_some() {
             return Ok(None);
         }
-        return Err(
-            super::Interrupted(format!("{} of {} episodes finished", report.summary.episodes, requested)).into()
-        );
+        return Err(super::Interrupted(format!(
+            "{} of {} episodes finished",
+            report.summary.outcomes.episodes, requested
+        ))
+        .into());
     }
     Ok(Some(report.summary))
 }

@@ -45,7 +45,7 @@ pub struct Args {
     /// walking at --vx/--vy/--yaw-rate; stands and balances at zero velocity; prints gait
     /// metrics) [default: pd-hold, or the scenario's].
     #[arg(long)]
-    pub controller: Option<String>,
+    pub controller: Option<super::ControllerName>,
     /// Scenario file (TOML: model, physics options, controller and parameters, duration, pushes,
     /// checks); prints each check as PASS/FAIL and fails when one fails.
     #[arg(long, value_name = "SCENARIO.toml")]
@@ -307,7 +307,7 @@ impl Plan {
         let mut scenario = args.scenario.as_deref().map(Scenario::load).transpose()?;
         let controller = args
             .controller
-            .clone()
+            .map(|c| c.name().to_string())
             .or_else(|| scenario.as_ref().map(|s| s.controller.clone()))
             .unwrap_or("pd-hold".into());
         let duration_secs = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);

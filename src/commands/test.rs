@@ -182,11 +182,12 @@ fn test_scenario(s: &Scenario, args: &Args, stop: &std::sync::atomic::AtomicBool
         };
         let report = randomize::run_batch(&batch, run, &options, stop, &|| {})
             .with_context(|| format!("randomized episodes of {}", s.path.display()))?;
-        let sum = &report.summary;
+        let sum = &report.summary.outcomes;
         let threshold = s.test.min_success_lower_95.unwrap_or(0.5);
         let lower = sum.success_rate_ci95[0];
         let passed = lower >= threshold && sum.episodes == report.requested;
-        let kinds: Vec<String> = sum.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();
+        let kinds: Vec<String> =
+            report.summary.failures.iter().map(|f| format!("{} ×{}", f.kind, f.episodes)).collect();
         let mut message = format!(
             "success {}/{} = {:.1} %, 95 % lower bound {:.3} {} {threshold}; fell {}, unstable {}",
             sum.succeeded,

@@ -6,16 +6,7 @@ use crate::log::JointLog;
 use crate::model::RobotModel;
 use crate::regressor::BaseSample;
 use crate::signal::{Butterworth, derivative, median_step, resample};
-
-/// `a ⊗ b` of quaternions `w x y z`.
-fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-    [
-        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
-    ]
-}
+use nalgebra::Quaternion;
 
 /// Base samples on `grid` (seconds from the joint log's first sample, `t0_nanos`): the pose
 /// resampled (quaternion signs made continuous), filtered, the quaternion normalised; the
@@ -54,9 +45,9 @@ fn condition_base(
     let qdot: Vec<Vec<f64>> = (0..4).map(|i| derivative(&q.iter().map(|x| x[i]).collect::<Vec<_>>(), dt)).collect();
     let omega: Vec<[f64; 3]> = (0..m)
         .map(|k| {
-            let conj = [q[k][0], -q[k][1], -q[k][2], -q[k][3]];
-            let p = quat_mul(conj, [qdot[0][k], qdot[1][k], qdot[2][k], qdot[3][k]]);
-            [2.0 * p[1], 2.0 * p[2], 2.0 * p[3]]
+            let conj = Quaternion::new(q[k][0], -q[k][1], -q[k][2], -q[k][3]);
+            let p = conj * Quaternion::new(qdot[0][k], qdot[1][k], qdot[2][k], qdot[3][k]);
+            [2.0 * p.i, 2.0 * p.j, 2.0 * p.k]
         })
         .collect();
     let mut vel: Vec<Vec<f64>> = pos.iter().map(|p| derivative(p, dt)).collect();

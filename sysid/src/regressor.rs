@@ -18,6 +18,7 @@
 
 use crate::error::Result;
 use crate::model::{LINK_PARAMS, RobotModel};
+use nalgebra::Vector3;
 use twin_core::mj::Data;
 
 /// Friction columns of each joint.
@@ -109,16 +110,8 @@ pub struct Regressor<'a> {
     qpos0: Vec<f64>,
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
-}
-
-fn dot(a: [f64; 3], b: [f64; 3]) -> f64 {
-    a[0] * b[0] + a[1] * b[1] + a[2] * b[2]
-}
-
 /// `L(v)ᵀ·w` for the inertia columns `[Ixx, Ixy, Iyy, Ixz, Iyz, Izz]`, where `Ī·v = L(v)·π_I`.
-fn inertia_cols(v: [f64; 3], w: [f64; 3]) -> [f64; 6] {
+fn inertia_cols(v: &Vector3<f64>, w: &Vector3<f64>) -> [f64; 6] {
     [
         v[0] * w[0],
         v[1] * w[0] + v[0] * w[1],
@@ -235,12 +228,12 @@ impl<'a> Regressor<'a> {
             )?;
             let xmat = self.data.xmat()[link.body];
             // world_from_link is row-major; link-frame coordinates are its transpose times world.
-            let to_link = |v: [f64; 3]| -> [f64; 3] {
-                [
+            let to_link = |v: [f64; 3]| -> Vector3<f64> {
+                Vector3::new(
                     xmat[0] * v[0] + xmat[3] * v[1] + xmat[6] * v[2],
                     xmat[1] * v[0] + xmat[4] * v[1] + xmat[7] * v[2],
                     xmat[2] * v[0] + xmat[5] * v[1] + xmat[8] * v[2],
-                ]
+                )
             };
             let (mut w, mut al, mut acc) = ([0.0; 3], [0.0; 3], [-g[0], -g[1], -g[2]]);
             for &(d, _, v, a) in &dofs {
@@ -252,23 +245,23 @@ impl<'a> Regressor<'a> {
                 }
             }
             let (w, al, acc) = (to_link(w), to_link(al), to_link(acc));
-            let w2 = dot(w, w);
+            let w2 = w.dot(&w);
             let col = self.layout.link_col(l);
             for &(d, row_idx, _, _) in &dofs {
                 let u = to_link([self.jacp[d], self.jacp[nv + d], self.jacp[2 * nv + d]]);
                 let v = to_link([self.jacr[d], self.jacr[nv + d], self.jacr[2 * nv + d]]);
                 let row = &mut rows[row_idx * ncols + col..row_idx * ncols + col + LINK_PARAMS];
-                row[0] += dot(u, acc);
+                row[0] += u.dot(&acc);
                 // h columns: −α×u + ω(ω·u) − |ω|²u + a×v
-                let au = cross(al, u);
-                let av = cross(acc, v);
-                let wu = dot(w, u);
+                let au = al.cross(&u);
+                let av = acc.cross(&v);
+                let wu = w.dot(&u);
                 for k in 0..3 {
                     row[1 + k] += -au[k] + w[k] * wu - w2 * u[k] + av[k];
                 }
                 // inertia columns: L(α)ᵀv − L(ω)ᵀ(ω×v)
-                let a_cols = inertia_cols(al, v);
-                let w_cols = inertia_cols(w, cross(w, v));
+                let a_cols = inertia_cols(&al, &v);
+                let w_cols = inertia_cols(&w, &w.cross(&v));
                 for k in 0..6 {
                     row[4 + k] += a_cols[k] - w_cols[k];
                 }

@@ -20,6 +20,15 @@ fn root() -> &'static Path {
 
 /// A still humanoid IMU (frame `imu_link`, the URDF's) at 200 Hz: gyro N = 1.5e-4, accel
 /// N = 6e-3, nothing else.
+/// A temporary folder holding a copy of `models/<name>`, and the copy's bytes (what a refused
+/// or dry run must leave untouched).
+fn copy_of(name: &str) -> (tempfile::TempDir, Vec<u8>) {
+    let dir = tempfile::tempdir().unwrap();
+    std::fs::copy(root().join("models").join(name), dir.path().join(name)).unwrap();
+    let original = std::fs::read(dir.path().join(name)).unwrap();
+    (dir, original)
+}
+
 fn write_still_bag(path: &Path, seconds: f64, moved_at: Option<f64>) {
     let t =
         |off: f64, n: f64| AxisTruth { offset: off, white_density: n, bias_instability: 0.0, bias_random_walk: 0.0 };
@@ -47,10 +56,9 @@ fn write_still_bag(path: &Path, seconds: f64, moved_at: Option<f64>) {
 
 #[test]
 fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, original) = copy_of("humanoid.urdf");
     let d = dir.path();
-    std::fs::copy(root().join("models/humanoid.urdf"), d.join("humanoid.urdf")).unwrap();
-    let original = std::fs::read_to_string(d.join("humanoid.urdf")).unwrap();
+    let original = String::from_utf8(original).unwrap();
     write_still_bag(&d.join("still.mcap"), 300.0, None);
     let out = twin(
         d,
@@ -102,10 +110,8 @@ fn calibrate_noise_writes_the_imu_noise_into_the_urdf_plot_and_spec() {
 
 #[test]
 fn calibrate_noise_refuses_a_moving_robot_and_a_short_log_leaving_the_urdf_untouched() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, original) = copy_of("humanoid.urdf");
     let d = dir.path();
-    std::fs::copy(root().join("models/humanoid.urdf"), d.join("humanoid.urdf")).unwrap();
-    let original = std::fs::read(d.join("humanoid.urdf")).unwrap();
     write_still_bag(&d.join("moved.mcap"), 200.0, Some(50.0));
     let out = twin(d, &["calibrate", "noise", "--log", "moved.mcap", "--update", "humanoid.urdf"]);
     let err = stderr(&out);
@@ -123,11 +129,10 @@ fn calibrate_noise_refuses_a_moving_robot_and_a_short_log_leaving_the_urdf_untou
 #[test]
 fn sysid_friction_fits_sweeps_and_writes_the_dynamics() {
     use sysid::friction::{Stribeck, SweepOptions, synth_sweep};
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, original) = copy_of("arm6.urdf");
     let d = dir.path();
+    let original = String::from_utf8(original).unwrap();
     let arm = root().join("models/arm6.urdf");
-    std::fs::copy(&arm, d.join("arm6.urdf")).unwrap();
-    let original = std::fs::read_to_string(d.join("arm6.urdf")).unwrap();
     let truth: Vec<Stribeck> = (0..6)
         .map(|j| Stribeck {
             coulomb: 2.0 / (1.0 + j as f64),
@@ -182,11 +187,9 @@ fn sysid_friction_fits_sweeps_and_writes_the_dynamics() {
 
 #[test]
 fn sysid_friction_refuses_a_log_without_constant_velocity_and_leaves_the_urdf_untouched() {
-    let dir = tempfile::tempdir().unwrap();
+    let (dir, original) = copy_of("arm6.urdf");
     let d = dir.path();
     let arm = root().join("models/arm6.urdf");
-    std::fs::copy(&arm, d.join("arm6.urdf")).unwrap();
-    let original = std::fs::read(d.join("arm6.urdf")).unwrap();
     let log =
         sysid::synth::simulate(&arm, &sysid::synth::SynthOptions { duration_secs: 6.0, ..Default::default() }).unwrap();
     log.write_mcap(d.join("sines.mcap"), "/joint_states").unwrap();
@@ -390,23 +393,28 @@ fn independent_sweep(dir: &Path, nspeeds: usize, stribeck: bool) -> serde_json::
     serde_json::from_slice(&out.stdout).unwrap()
 }
 
-/// `twin sysid friction` on the independent sweep: every joint's report.
-fn friction_of_sweep(d: &Path) -> (String, serde_json::Value) {
+/// `twin sysid friction` on an [`independent_sweep`] of `nspeeds` speeds: (the script's truth,
+/// twin's stdout, its report's joints).
+fn friction_of_sweep(nspeeds: usize, stribeck: bool) -> (serde_json::Value, String, Vec<serde_json::Value>) {
+    let dir = tempfile::tempdir().unwrap();
+    let d = dir.path();
+    let truth = independent_sweep(d, nspeeds, stribeck);
     let out = twin(d, &["sysid", "friction", "--log", "sweep", "--report", "f.json"]);
     assert!(out.status.success(), "{}", stderr(&out));
-    let report = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
-    (String::from_utf8_lossy(&out.stdout).into_owned(), report)
+    let report: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(d.join("f.json")).unwrap()).unwrap();
+    (truth, String::from_utf8_lossy(&out.stdout).into_owned(), report["joints"].as_array().unwrap().clone())
+}
+
+/// The line `twin sysid friction` printed for joint `name` (its segments and model).
+fn segments_line<'a>(stdout: &'a str, name: &str) -> &'a str {
+    stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint")
 }
 
 #[test]
 fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let truth = independent_sweep(d, 8, true);
-    let (stdout, report) = friction_of_sweep(d);
-    let joints = report["joints"].as_array().unwrap();
+    let (truth, stdout, joints) = friction_of_sweep(8, true);
     assert_eq!(joints.len(), 3, "{stdout}");
-    for j in joints {
+    for j in &joints {
         let name = j["joint"].as_str().unwrap();
         let t = &truth["joints"][name];
         let points = j["points"].as_array().unwrap();
@@ -417,7 +425,7 @@ fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck()
             assert!((got / want - 1.0).abs() < 0.02, "{name}: speed {got} vs {want}");
         }
         assert_eq!(j["model"], "stribeck", "{name}\n{stdout}");
-        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        let line = segments_line(&stdout, name);
         assert!(line.ends_with("segment(s), 8 paired speed(s) → Stribeck"), "{line}");
         let fit = &j["fit"];
         for (what, tol) in [("coulomb", 0.1), ("viscous", 0.1), ("breakaway", 0.15)] {
@@ -431,16 +439,13 @@ fn sysid_friction_pairs_all_8_speeds_of_an_independent_sweep_and_fits_stribeck()
 
 #[test]
 fn sysid_friction_with_4_speeds_fits_coulomb_and_viscous_and_says_so() {
-    let dir = tempfile::tempdir().unwrap();
-    let d = dir.path();
-    let truth = independent_sweep(d, 4, false);
-    let (stdout, report) = friction_of_sweep(d);
-    for j in report["joints"].as_array().unwrap() {
+    let (truth, stdout, joints) = friction_of_sweep(4, false);
+    for j in &joints {
         let name = j["joint"].as_str().unwrap();
         let t = &truth["joints"][name];
         assert_eq!(j["points"].as_array().unwrap().len(), 4, "{name}\n{stdout}");
         assert_eq!(j["model"], "coulomb_viscous", "{name}\n{stdout}");
-        let line = stdout.lines().find(|l| l.starts_with(&format!("{name}: "))).expect("a segments line per joint");
+        let line = segments_line(&stdout, name);
         assert!(line.contains("segment(s), 4 paired speed(s) → Coulomb + viscous ("), "{line}");
         let fit = &j["fit"];
         for what in ["coulomb", "viscous"] {

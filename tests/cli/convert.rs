@@ -39,17 +39,20 @@ fn convert_writes_mjcf_next_to_the_urdf_with_summary_and_backup() {
     assert!(!info.contains(" free "), "fixed base has no free joint: {info}");
 }
 
-#[test]
-fn convert_with_table_cup_world() {
+/// `twin convert models/humanoid.urdf --world WORLD` (paths from the repo root): its output
+/// (asserted successful) and the MJCF it wrote.
+fn convert_with_world(world: &str) -> (String, String) {
     let dir = tempfile::tempdir().unwrap();
     let out = dir.path().join("scene.xml");
-    let o = twin(
-        &["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap(), "--world", "models/table_cup.world"],
-        &repo(),
-    );
+    let o = twin(&["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap(), "--world", world], &repo());
     assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("total mass 35.910 kg"), "{}", text(&o));
-    let xml = std::fs::read_to_string(&out).unwrap();
+    (text(&o), std::fs::read_to_string(&out).unwrap())
+}
+
+#[test]
+fn convert_with_table_cup_world() {
+    let (said, xml) = convert_with_world("models/table_cup.world");
+    assert!(said.contains("total mass 35.910 kg"), "{said}");
     assert!(xml.contains("<body name=\"cup\""));
     assert!(xml.contains("name=\"table_top_collision\""));
 }
@@ -59,15 +62,8 @@ fn convert_with_table_cup_world() {
 /// with its line.
 #[test]
 fn convert_with_heightmap_world() {
-    let dir = tempfile::tempdir().unwrap();
-    let out = dir.path().join("hills.xml");
-    let o = twin(
-        &["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap(), "--world", "models/hills.world"],
-        &repo(),
-    );
-    assert!(o.status.success(), "{}", text(&o));
-    assert!(text(&o).contains("models/hills.world:30: <heightmap><texture> not converted"), "{}", text(&o));
-    let xml = std::fs::read_to_string(&out).unwrap();
+    let (said, xml) = convert_with_world("models/hills.world");
+    assert!(said.contains("models/hills.world:30: <heightmap><texture> not converted"), "{said}");
     let doc = roxmltree::Document::parse(&xml).unwrap();
     let hfield = doc.descendants().find(|n| n.has_tag_name("hfield")).unwrap();
     assert_eq!((hfield.attribute("nrow"), hfield.attribute("ncol")), (Some("65"), Some("65")));

@@ -172,5 +172,5 @@ fn outside_controller_and_check_run_batched_deterministically() {
         passed > 0 && failed > 0,
         "{passed} passed, {failed} failed: the threshold should split the batch: {ratios:?}"
     );
-    assert_eq!(r1.summary.succeeded, succeeded);
+    assert_eq!(r1.summary.outcomes.succeeded, succeeded);
 }

@@ -32,6 +32,12 @@ fn tag(what: &str) -> String {
     format!("twin_test_{what}_{}_{}", std::process::id(), Instant::now().elapsed().as_nanos() % 1000)
 }
 
+/// What a test starts from: the Python with rclpy, a temporary folder, and a tag for its
+/// processes ([`tag`]).
+fn setup(what: &str) -> (String, tempfile::TempDir, String) {
+    (python(), tempfile::tempdir().unwrap(), tag(what))
+}
+
 /// Processes whose command line contains `tag`.
 fn processes_with(tag: &str) -> Vec<String> {
     let mut found = Vec::new();
@@ -113,11 +119,29 @@ fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
     r.map(|l| l.split(',').nth(k).unwrap_or("")).collect()
 }
 
+/// Every controller log a batch in `out` wrote (`out/controller_logs/*`), concatenated.
+fn controller_logs(out: &Path) -> String {
+    std::fs::read_dir(out.join("controller_logs"))
+        .unwrap()
+        .flatten()
+        .map(|e| std::fs::read_to_string(e.path()).unwrap())
+        .collect()
+}
+
+/// Asserts the batch in `out` failed all its `episodes` with one failure `kind`, in
+/// `summary.json` and in the printed summary (`stdout`).
+fn assert_all_failed_as(out: &Path, stdout: &str, kind: &str, episodes: u32) {
+    let summary: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
+    let failures = &summary["summary"]["failures"];
+    assert_eq!(failures[0]["kind"], kind, "{summary}");
+    assert_eq!(failures[0]["episodes"], episodes, "{summary}");
+    assert!(stdout.contains(&format!("failed checks: {kind} ×{episodes}")), "{kind}: {stdout}");
+}
+
 #[test]
 fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
-    let python = python();
-    let dir = tempfile::tempdir().unwrap();
-    let tag = tag("hold");
+    let (python, dir, tag) = setup("hold");
     // 0.3 s: 30 control periods of 10 ms; the first holds the start pose while /joint_states
     // goes out, the 29 others take one command each from the node.
     let s = scenario(dir.path(), "hold.toml", 0.3, &hold_pose(&python, &tag), "join_timeout_secs = 30.0");
@@ -132,11 +156,7 @@ fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
     assert_eq!(column(&csv1, "metric:controller.commands"), vec!["29"; 4], "{csv1}");
     assert_eq!(column(&csv1, "metric:controller.periods"), vec!["29"; 4], "{csv1}");
     // Four processes each time, one per episode: their starts are in the workers' logs.
-    let logs: String = std::fs::read_dir(dir.path().join("t2/controller_logs"))
-        .unwrap()
-        .flatten()
-        .map(|e| std::fs::read_to_string(e.path()).unwrap())
-        .collect();
+    let logs = controller_logs(&dir.path().join("t2"));
     assert_eq!(logs.matches("--- twin: run ").count(), 4, "{logs}");
     assert_eq!(logs.matches("it ended after SIGINT").count(), 4, "{logs}");
     assert_none_left(&tag);
@@ -150,9 +170,7 @@ fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
 /// `episodes.csv` is the same at 1 and 2 threads and the same as with a process per episode.
 #[test]
 fn a_kept_timer_driven_rclpy_node_runs_every_episode_and_the_same_on_1_and_2_threads() {
-    let python = python();
-    let dir = tempfile::tempdir().unwrap();
-    let tag = tag("kept");
+    let (python, dir, tag) = setup("kept");
     let command = hold_pose(&python, &tag);
     let kept = scenario(dir.path(), "kept.toml", 0.3, &command, "join_timeout_secs = 30.0\nrestart = \"never\"");
     let fresh = scenario(dir.path(), "fresh.toml", 0.3, &command, "join_timeout_secs = 30.0");
@@ -165,11 +183,7 @@ fn a_kept_timer_driven_rclpy_node_runs_every_episode_and_the_same_on_1_and_2_thr
         assert_eq!(column(&csv, "metric:controller.commands"), vec!["29"; 8], "{name}: {csv}");
         if name != "f2" {
             // Fewer processes than episodes: the others ran under a kept process.
-            let logs: String = std::fs::read_dir(dir.path().join(name).join("controller_logs"))
-                .unwrap()
-                .flatten()
-                .map(|e| std::fs::read_to_string(e.path()).unwrap())
-                .collect();
+            let logs = controller_logs(&dir.path().join(name));
             let started = logs.matches(" on domain ").count();
             let kept = logs.matches("the same process, the simulation reset under it").count();
             assert_eq!(started + kept, 8, "{name}: {logs}");
@@ -206,12 +220,7 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
         for line in csv.lines().skip(1) {
             assert!(line.contains(&kind.to_string()) && line.contains(why), "{mode}: {line}");
         }
-        let summary: serde_json::Value =
-            serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-        let failures = &summary["summary"]["failures"];
-        assert_eq!(failures[0]["kind"], kind, "{mode}: {summary}");
-        assert_eq!(failures[0]["episodes"], 2, "{mode}: {summary}");
-        assert!(stdout.contains(&format!("failed checks: {kind} ×2")), "{mode}: {stdout}");
+        assert_all_failed_as(&out, &stdout, kind, 2);
         assert_none_left(&tag);
     }
     // A node that ignores SIGINT and SIGTERM is killed (SIGKILL) at the end of its episode.
@@ -241,9 +250,7 @@ fn number_before(text: &str, what: &str) -> f64 {
 /// the batch ends, and no process is left.
 #[test]
 fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
-    let python = python();
-    let dir = tempfile::tempdir().unwrap();
-    let tag = tag("flood");
+    let (python, dir, tag) = setup("flood");
     // A limit below the default (10): the Python flooder's rate per period depends on how
     // fast the bridge turns periods over (11–18 per period measured here with the default).
     let bounds = "join_timeout_secs = 30.0\nperiod_timeout_secs = 2.0\nstop_timeout_secs = 0.5\n\
@@ -271,26 +278,15 @@ fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
         let t = number_before(line, " s, most on");
         assert!(t > 0.1 && t < 3.0, "{t}: {line}");
     }
-    let summary: serde_json::Value =
-        serde_json::from_str(&std::fs::read_to_string(out.join("summary.json")).unwrap()).unwrap();
-    let failures = &summary["summary"]["failures"];
-    assert_eq!(failures[0]["kind"], "controller: flood", "{summary}");
-    assert_eq!(failures[0]["episodes"], 2, "{summary}");
-    assert!(stdout.contains("failed checks: controller: flood ×2"), "{stdout}");
-    let logs: String = std::fs::read_dir(out.join("controller_logs"))
-        .unwrap()
-        .flatten()
-        .map(|e| std::fs::read_to_string(e.path()).unwrap())
-        .collect();
+    assert_all_failed_as(&out, &stdout, "controller: flood", 2);
+    let logs = controller_logs(&out);
     assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 2, "{logs}");
     assert_none_left(&tag);
 }
 
 #[test]
 fn ctrl_c_ends_a_batch_with_its_controllers() {
-    let python = python();
-    let dir = tempfile::tempdir().unwrap();
-    let tag = tag("ctrlc");
+    let (python, dir, tag) = setup("ctrlc");
     let s = scenario(dir.path(), "long.toml", 600.0, &hold_pose(&python, &tag), "stop_timeout_secs = 1.0");
     // No pushes (the default spec's would end episodes early by a fall): the episodes are still
     // running when Ctrl-C comes.
@@ -334,9 +330,7 @@ fn ctrl_c_ends_a_batch_with_its_controllers() {
 
 #[test]
 fn twin_sim_runs_a_scenario_with_an_rclpy_controller_and_keeps_its_log() {
-    let python = python();
-    let dir = tempfile::tempdir().unwrap();
-    let tag = tag("sim");
+    let (python, dir, tag) = setup("sim");
     let s = scenario(dir.path(), "hold.toml", 0.2, &hold_pose(&python, &tag), "");
     let record = dir.path().join("run.mcap");
     let o = twin().args(["sim", "--scenario"]).arg(&s).arg("--record").arg(&record).output().unwrap();
@@ -347,6 +341,25 @@ fn twin_sim_runs_a_scenario_with_an_rclpy_controller_and_keeps_its_log() {
     let log = std::fs::read_to_string(dir.path().join("run.controller.log")).unwrap();
     assert!(log.contains("--- twin: run 1 on domain ") && log.contains("it ended after SIGINT"), "{log}");
     assert_none_left(&tag);
+}
+
+/// `twin test SCENARIO... --junit JUNIT --threads N`: (ok, stdout, stderr).
+fn twin_test(scenarios: &[&Path], junit: &Path, threads: u32) -> (bool, String, String) {
+    let mut cmd = twin();
+    cmd.arg("test").args(scenarios).arg("--junit").arg(junit).args(["--threads", &threads.to_string()]);
+    output_of(cmd.output().unwrap())
+}
+
+/// What `python` prints running `body` (Python, one statement a line) for each test case `c` of
+/// each suite `s` of the JUnit file `junit`, as junitparser reads it.
+fn junitparser_prints(python: &str, body: &str, junit: &Path) -> String {
+    let body: String = body.lines().map(|l| format!("        {}\n", l.trim())).collect();
+    let script = format!(
+        "import sys, junitparser\nfor s in junitparser.JUnitXml.fromfile(sys.argv[1]):\n    for c in s:\n{body}"
+    );
+    let read = Command::new(python).arg("-c").arg(script).arg(junit).output().unwrap();
+    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    String::from_utf8_lossy(&read.stdout).into_owned()
 }
 
 #[test]
@@ -365,28 +378,17 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
     let pass = write(dir.path(), "pass.toml", &body(0.5));
     let fail = write(dir.path(), "fail.toml", &body(0.6));
     let junit = dir.path().join("report.xml");
-    let o =
-        twin().arg("test").arg(&pass).arg(&fail).arg("--junit").arg(&junit).args(["--threads", "2"]).output().unwrap();
-    let (ok, stdout, stderr) = output_of(o);
+    let (ok, stdout, stderr) = twin_test(&[&pass, &fail], &junit, 2);
     assert!(!ok, "a failed threshold must fail: {stdout}\n{stderr}");
     assert!(stdout.contains("PASS 4/4 lower95 0.510 (min 0.5)"), "{stdout}");
     assert!(stdout.contains("FAIL 4/4 lower95 0.510 (min 0.6)"), "{stdout}");
     assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
-    let read = Command::new(&python)
-        .arg("-c")
-        .arg(
-            "import sys, junitparser\n\
-             x = junitparser.JUnitXml.fromfile(sys.argv[1])\n\
-             for s in x:\n\
-             \x20   for c in s:\n\
-             \x20       r = [type(r).__name__ + ':' + (r.message or '') for r in c.result]\n\
-             \x20       print(s.name.split('/')[-1], s.tests, s.failures, c.classname, c.name, r)\n",
-        )
-        .arg(&junit)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&read.stdout);
-    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let text = junitparser_prints(
+        &python,
+        "r = [type(r).__name__ + ':' + (r.message or '') for r in c.result]\n\
+         print(s.name.split('/')[-1], s.tests, s.failures, c.classname, c.name, r)",
+        &junit,
+    );
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 4, "{text}");
     assert_eq!(lines[0], "pass.toml 2 0 pass nominal []");
@@ -423,31 +425,11 @@ fn twin_test_fails_on_a_tracking_threshold_and_junit_names_it() {
     let tight = write(dir.path(), "tight.toml", &body(0.01));
     let loose = write(dir.path(), "loose.toml", &body(0.5));
     let junit = dir.path().join("report.xml");
-    let o = twin()
-        .arg("test")
-        .arg(&tight)
-        .arg(&loose)
-        .arg("--junit")
-        .arg(&junit)
-        .args(["--threads", "1"])
-        .output()
-        .unwrap();
-    let (ok, stdout, stderr) = output_of(o);
+    let (ok, stdout, stderr) = twin_test(&[&tight, &loose], &junit, 1);
     assert!(!ok, "a failed tracking threshold must fail: {stdout}\n{stderr}");
     assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
-    let read = Command::new(&python)
-        .arg("-c")
-        .arg(
-            "import sys, junitparser\n\
-             for s in junitparser.JUnitXml.fromfile(sys.argv[1]):\n\
-             \x20   for c in s:\n\
-             \x20       print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))\n",
-        )
-        .arg(&junit)
-        .output()
-        .unwrap();
-    let text = String::from_utf8_lossy(&read.stdout);
-    assert!(read.status.success(), "{}", String::from_utf8_lossy(&read.stderr));
+    let text =
+        junitparser_prints(&python, "print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))", &junit);
     let lines: Vec<&str> = text.lines().collect();
     assert_eq!(lines.len(), 4, "{text}");
     // tight: nominal fails naming the key, with the measured RMS of the worst joint.

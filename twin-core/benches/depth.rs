@@ -18,12 +18,13 @@
 //! on frame (1) (`mj_multiRay` has no near clip: in (2) it sees the inside of the head).
 
 mod common;
+mod flags;
 
 use common::{median, time_camera, with_camera};
 use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
-use twin_core::mj::{Data, ObjType};
+use twin_core::mj::{Data, GeomType, ObjType};
 use twin_core::sense::{DepthCamera, DepthCameraOptions};
 
 fn default_talos() -> String {
@@ -33,16 +34,9 @@ fn default_talos() -> String {
 }
 
 fn main() {
-    let (mut frames, mut mj_frames, mut urdf) = (20usize, 1usize, default_talos());
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--frames" => frames = args.next().and_then(|v| v.parse().ok()).expect("--frames N"),
-            "--mj-frames" => mj_frames = args.next().and_then(|v| v.parse().ok()).expect("--mj-frames M"),
-            "--bench" => {}
-            other => urdf = other.to_string(),
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (frames, mj_frames) = (flags.get("--frames", 20usize), flags.get("--mj-frames", 1usize));
+    let urdf = flags.rest().pop().unwrap_or_else(default_talos);
     if !std::path::Path::new(&urdf).is_file() {
         panic!(
             "{urdf} not found: run `cargo test --release -p twin-core --test it example_robot_data` once (it fetches \
@@ -60,7 +54,7 @@ fn main() {
     let mut data = Data::new(model.clone()).unwrap();
     twin_core::control::reset_to_home(&mut data).unwrap();
     data.forward().unwrap();
-    let meshes = (0..model.ngeom()).filter(|&g| model.geom_type()[g] == mujoco_sys::mjtGeom_mjGEOM_MESH as i32).count();
+    let meshes = (0..model.ngeom()).filter(|&g| model.geom_kind(g) == GeomType::Mesh).count();
     println!(
         "Talos ({urdf}): {} geoms ({meshes} meshes), {} bodies; {} threads",
         model.ngeom(),

@@ -16,6 +16,7 @@
 //!    `twin sim --record` does), alternated R times.
 
 mod common;
+mod flags;
 
 use common::{median, time_camera, with_camera};
 use nalgebra::Vector3;
@@ -77,16 +78,11 @@ impl Observer for CameraTicks {
 }
 
 fn main() {
-    let (mut frames, mut secs, mut reps) = (200usize, None::<f64>, 3usize);
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--frames" => frames = args.next().and_then(|v| v.parse().ok()).expect("--frames N"),
-            "--secs" => secs = Some(args.next().and_then(|v| v.parse().ok()).expect("--secs S")),
-            "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
-            _ => {}
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (frames, secs, reps) =
+        (flags.get("--frames", 200usize), flags.opt::<f64>("--secs"), flags.get("--reps", 3usize));
+    let unknown = flags.rest();
+    assert!(unknown.is_empty(), "unknown arguments {unknown:?} (options: --frames N --secs S --reps R)");
     let model = grasp_scene();
     let mut data = Data::new(model.clone()).unwrap();
     twin_core::control::reset_to_home(&mut data).unwrap();

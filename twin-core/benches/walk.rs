@@ -22,28 +22,22 @@
 //! in K: its cost is given per physics step (every `compute` call) and per control tick (all
 //! its time over the solves, the joint PD of the steps between them included).
 
+mod flags;
+mod walk_common;
+
 use std::sync::Arc;
 use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, reset_to_home};
-use twin_core::mj::{Data, Model, bench_c_replay_loop, bench_c_step_loop};
+use twin_core::mj::{Data, Model};
 use twin_core::walk::{WALK_ARMATURE, WalkOptions, Walker};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step};
 
 fn main() {
-    let (mut steps, mut reps, mut plan_every) = (5_000u64, 7usize, 1u64);
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--steps" => steps = args.next().and_then(|v| v.parse().ok()).expect("--steps N"),
-            "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
-            "--plan-every" => plan_every = args.next().and_then(|v| v.parse().ok()).expect("--plan-every K"),
-            _ => {}
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (steps, reps, plan_every) =
+        (flags.get("--steps", 5_000u64), flags.get("--reps", 7usize), flags.get("--plan-every", 1u64));
+    let unknown = flags.rest();
+    assert!(unknown.is_empty(), "unknown arguments {unknown:?} (options: --steps N --reps R --plan-every K)");
     let path = concat!(env!("CARGO_MANIFEST_DIR"), "/../models/humanoid.urdf");
     let loaded = Model::from_file(path).unwrap_or_else(|e| panic!("{e}"));
     let model = Arc::new(twin_core::scenario::prepare_model(&loaded, WALK_ARMATURE, None).unwrap());
@@ -58,10 +52,7 @@ fn main() {
     let [collapsing, passive, walking, replay, ctrl, phys] = &mut rows;
     for _ in 0..reps {
         // 1.
-        reset_to_home(&mut data).unwrap();
-        let t = Instant::now();
-        bench_c_step_loop(&mut data, steps);
-        collapsing.push(t.elapsed().as_secs_f64() / steps as f64);
+        collapsing.push(time_c_zero(&mut data, steps));
 
         // 2.
         reset_to_home(&mut data).unwrap();
@@ -78,41 +69,27 @@ fn main() {
         commands.clear();
         let t = Instant::now();
         for _ in 0..steps {
-            data.step1().unwrap();
-            walker.compute(&model, &Observation::of(&data), &mut command);
-            actuation.apply(&mut data, &command);
-            data.step2().unwrap();
+            step(&model, &mut data, &mut walker, actuation, &mut command);
             // Capacity reserved up front: a copy of 25 numbers, no allocation.
             commands.extend_from_slice(&command);
         }
         walking.push(t.elapsed().as_secs_f64() / steps as f64);
         assert!(data.qpos()[2] > 0.5, "the humanoid fell during the benchmark");
-        let walked = [data.qpos().to_vec(), data.qvel().to_vec()];
+        let walked = state(&data);
 
         // 4.
-        reset_to_home(&mut data).unwrap();
-        let t = Instant::now();
-        bench_c_replay_loop(&mut data, into_qfrc, &commands).unwrap();
-        replay.push(t.elapsed().as_secs_f64() / steps as f64);
-        assert_eq!([data.qpos(), data.qvel()], [&walked[0][..], &walked[1][..]], "the C replay left the walk");
+        replay.push(time_c_replay(&mut data, into_qfrc, &commands, steps, &walked));
 
         // 5.
         reset_to_home(&mut data).unwrap();
         walker.reset(&model, &Observation::of(&data)).unwrap();
         let (mut c, mut p) = (0.0, 0.0);
         for _ in 0..steps {
-            let t0 = Instant::now();
-            data.step1().unwrap();
-            let t1 = Instant::now();
-            walker.compute(&model, &Observation::of(&data), &mut command);
-            let t2 = Instant::now();
-            actuation.apply(&mut data, &command);
-            data.step2().unwrap();
-            let t3 = Instant::now();
-            c += (t2 - t1).as_secs_f64();
-            p += (t1 - t0).as_secs_f64() + (t3 - t2).as_secs_f64();
+            let (compute, whole) = timed_step(&model, &mut data, &mut walker, actuation, &mut command);
+            c += compute;
+            p += whole - compute;
         }
-        assert_eq!([data.qpos(), data.qvel()], [&walked[0][..], &walked[1][..]], "the timed walk left the walk");
+        assert_eq!(state(&data), walked, "the timed walk left the walk");
         ctrl.push(c / steps as f64);
         phys.push(p / steps as f64);
     }

@@ -20,31 +20,21 @@
 //!
 //! One Markdown row per robot, medians over the repetitions.
 
+mod flags;
+mod walk_common;
+
 use std::sync::Arc;
 use std::time::Instant;
 use twin_core::control::{Actuation, Controller, Observation, PdHold, PdHoldOptions, reset_to_home};
 use twin_core::convert::ActuatorMode;
-use twin_core::mj::{Data, bench_c_replay_loop, bench_c_step_loop};
+use twin_core::mj::Data;
 use twin_core::walk::{WALK_ARMATURE, WalkOptions, Walker};
-
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
+use walk_common::{median, state, step, time_c_replay, time_c_zero, timed_step};
 
 fn main() {
-    let (mut steps, mut reps, mut vx) = (5_000u64, 5usize, 0.0f64);
-    let mut urdfs = Vec::new();
-    let mut args = std::env::args().skip(1);
-    while let Some(a) = args.next() {
-        match a.as_str() {
-            "--steps" => steps = args.next().and_then(|v| v.parse().ok()).expect("--steps N"),
-            "--reps" => reps = args.next().and_then(|v| v.parse().ok()).expect("--reps R"),
-            "--vx" => vx = args.next().and_then(|v| v.parse().ok()).expect("--vx V"),
-            "--bench" => {}
-            other => urdfs.push(other.to_string()),
-        }
-    }
+    let flags = flags::Flags::from_env();
+    let (steps, reps, vx) = (flags.get("--steps", 5_000u64), flags.get("--reps", 5usize), flags.get("--vx", 0.0f64));
+    let urdfs = flags.rest();
     println!(
         "| robot | nv | nu | steps × reps | vx (m/s) | walk fell at step | C loop, zero ctrl (µs) | \
          C replay of the walk, mj_step (µs) | pd-hold loop (µs/step) | walking loop (µs/step) | \
@@ -87,10 +77,7 @@ fn main() {
             hold.reset(&model, &Observation::of(&data)).unwrap();
             let t = Instant::now();
             for _ in 0..steps {
-                data.step1().unwrap();
-                hold.compute(&model, &Observation::of(&data), &mut command);
-                actuation.apply(&mut data, &command);
-                data.step2().unwrap();
+                step(&model, &mut data, &mut hold, actuation, &mut command);
             }
             held.push(t.elapsed().as_secs_f64() / steps as f64);
 
@@ -102,15 +89,9 @@ fn main() {
             let (mut c, mut total) = (0.0, 0.0);
             fell_at = None;
             for i in 0..steps {
-                let t0 = Instant::now();
-                data.step1().unwrap();
-                let t1 = Instant::now();
-                walker.compute(&model, &Observation::of(&data), &mut command);
-                let t2 = Instant::now();
-                actuation.apply(&mut data, &command);
-                data.step2().unwrap();
-                total += t0.elapsed().as_secs_f64();
-                c += (t2 - t1).as_secs_f64();
+                let (compute, whole) = timed_step(&model, &mut data, &mut walker, actuation, &mut command);
+                total += whole;
+                c += compute;
                 commands.extend_from_slice(&command);
                 if fell_at.is_none() && data.qpos()[2] < 0.5 * z0 {
                     fell_at = Some(i);
@@ -118,20 +99,13 @@ fn main() {
             }
             walking.push(total / steps as f64);
             ctrl.push(c / steps as f64);
-            let walked = [data.qpos().to_vec(), data.qvel().to_vec()];
+            let walked = state(&data);
 
             // 3.
-            reset_to_home(&mut data).unwrap();
-            let t = Instant::now();
-            bench_c_replay_loop(&mut data, into_qfrc, &commands).unwrap();
-            replay.push(t.elapsed().as_secs_f64() / steps as f64);
-            assert_eq!([data.qpos(), data.qvel()], [&walked[0][..], &walked[1][..]], "the C replay left the walk");
+            replay.push(time_c_replay(&mut data, into_qfrc, &commands, steps, &walked));
 
             // 4.
-            reset_to_home(&mut data).unwrap();
-            let t = Instant::now();
-            bench_c_step_loop(&mut data, steps);
-            zero.push(t.elapsed().as_secs_f64() / steps as f64);
+            zero.push(time_c_zero(&mut data, steps));
         }
         let [zero, replay, held, walking, c] = rows.map(|v| median(v) * 1e6);
         let fell = fell_at.map_or("no".to_string(), |i| format!("{i} ({:.2} s)", i as f64 * model.timestep_secs()));

@@ -26,7 +26,7 @@ use crate::engine::{
     Disturbance, Engine, Episode, Flow, Measurement, Observer, StepView, Verdict, observers::Divergence,
 };
 use crate::error::Result;
-use crate::mj::{Data, FreeJoint, Model, ObjType};
+use crate::mj::{Data, FreeJoint, Integrator, Model, ObjType, SensorType};
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use rand::SeedableRng;
 use rand_chacha::ChaCha8Rng;
@@ -131,7 +131,7 @@ fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)
         edit.set_actuator_servo(a, kp_joint / g2, kv_joint / g2)?;
         servos.push((a, j, gear));
     }
-    edit.set_integrator(mujoco_sys::mjtIntegrator_mjINT_IMPLICITFAST as i32);
+    edit.set_integrator(Integrator::ImplicitFast);
     Ok((edit.finish()?, servos))
 }
 
@@ -449,9 +449,8 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
     for s in 0..model.nsensor() {
         let adr = model.sensor_adr()[s] as usize;
         let obj = model.sensor_objid()[s].max(0) as usize;
-        let ty = model.sensor_type()[s] as u32;
-        match ty {
-            mujoco_sys::mjtSensor_mjSENS_ACCELEROMETER => {
+        match model.sensor_kind(s) {
+            SensorType::Accelerometer => {
                 let r = Matrix3::from_row_slice(&data.site_xmat()[obj]);
                 let expected = r.transpose() * (-g);
                 let got = Vector3::new(sd[adr], sd[adr + 1], sd[adr + 2]);
@@ -469,9 +468,7 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
                     expected.z
                 ));
             }
-            mujoco_sys::mjtSensor_mjSENS_FRAMEQUAT
-                if model.sensor_objtype()[s] as u32 == mujoco_sys::mjtObj_mjOBJ_SITE =>
-            {
+            SensorType::FrameQuat if model.sensor_object(s) == Some(ObjType::Site) => {
                 let r = Matrix3::from_row_slice(&data.site_xmat()[obj]);
                 let site = UnitQuaternion::from_matrix(&r);
                 let got = UnitQuaternion::from_quaternion(nalgebra::Quaternion::new(
@@ -482,12 +479,12 @@ fn sensors_step(data: &mut Data) -> Result<StepReport> {
                 ));
                 worst_quat = worst_quat.max((site.inverse() * got).angle());
             }
-            mujoco_sys::mjtSensor_mjSENS_JOINTPOS => {
+            SensorType::JointPos => {
                 let q = data.qpos()[model.jnt_qposadr()[obj] as usize];
                 worst_joint = worst_joint.max((sd[adr] - q).abs());
                 n_joint += 1;
             }
-            mujoco_sys::mjtSensor_mjSENS_JOINTVEL => {
+            SensorType::JointVel => {
                 let v = data.qvel()[model.jnt_dofadr()[obj] as usize];
                 worst_joint = worst_joint.max((sd[adr] - v).abs());
             }

@@ -20,7 +20,7 @@ pub use twin_convert::{
 };
 
 use crate::error::{Error, Result};
-use crate::mj::{Data, JointType, Model, ObjType};
+use crate::mj::{Data, GeomType, JointType, Model, ObjType, Transmission};
 use nalgebra::{Matrix3, Vector3};
 use std::path::Path;
 use std::sync::Arc;
@@ -117,16 +117,14 @@ fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
         let s = m.geom_size()[g];
         // Row 2 of R: how each geom axis maps onto world z.
         let rz = Vector3::new(r[(2, 0)], r[(2, 1)], r[(2, 2)]);
-        let z = match m.geom_type()[g] as u32 {
-            mujoco_sys::mjtGeom_mjGEOM_PLANE => continue,
-            mujoco_sys::mjtGeom_mjGEOM_SPHERE => p.z - s[0],
-            mujoco_sys::mjtGeom_mjGEOM_CAPSULE => p.z - rz.z.abs() * s[1] - s[0],
-            mujoco_sys::mjtGeom_mjGEOM_CYLINDER => p.z - rz.z.abs() * s[1] - s[0] * (1.0 - rz.z * rz.z).max(0.0).sqrt(),
-            mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => {
-                p.z - ((s[0] * rz.x).powi(2) + (s[1] * rz.y).powi(2) + (s[2] * rz.z).powi(2)).sqrt()
-            }
-            mujoco_sys::mjtGeom_mjGEOM_BOX => p.z - (s[0] * rz.x.abs() + s[1] * rz.y.abs() + s[2] * rz.z.abs()),
-            mujoco_sys::mjtGeom_mjGEOM_MESH => {
+        let z = match m.geom_kind(g) {
+            GeomType::Plane => continue,
+            GeomType::Sphere => p.z - s[0],
+            GeomType::Capsule => p.z - rz.z.abs() * s[1] - s[0],
+            GeomType::Cylinder => p.z - rz.z.abs() * s[1] - s[0] * (1.0 - rz.z * rz.z).max(0.0).sqrt(),
+            GeomType::Ellipsoid => p.z - ((s[0] * rz.x).powi(2) + (s[1] * rz.y).powi(2) + (s[2] * rz.z).powi(2)).sqrt(),
+            GeomType::Box => p.z - (s[0] * rz.x.abs() + s[1] * rz.y.abs() + s[2] * rz.z.abs()),
+            GeomType::Mesh => {
                 let id = m.geom_dataid()[g];
                 if id < 0 {
                     continue;
@@ -153,7 +151,7 @@ fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
 pub fn actuated_joints(model: &Model) -> Vec<(usize, usize)> {
     let mut out = Vec::new();
     for a in 0..model.nu() {
-        if model.actuator_trntype()[a] as u32 != mujoco_sys::mjtTrn_mjTRN_JOINT {
+        if model.actuator_transmission(a) != Transmission::Joint {
             continue;
         }
         let j = model.actuator_trnid()[a][0];

@@ -203,6 +203,15 @@ pub enum Error {
         message: String,
     },
 
+    /// The walker's legs can't reach its longest step with these options (a leg's IK misses the
+    /// step's foot pose): an [`Error::Walk`] of its own, so that a search over the crouch
+    /// ([`crate::walk::WalkOptions::for_robot`]) tells it from the other refusals.
+    #[error("walking controller: {message}")]
+    WalkReach {
+        /// Which leg, by how much, and what to do.
+        message: String,
+    },
+
     /// The grasping controller can't drive this model with these options (no gripper or
     /// camera found, an option out of range).
     #[error("grasping controller: {message}")]

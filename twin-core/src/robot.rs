@@ -21,7 +21,7 @@
 
 use crate::convert::{ConvertOptions, ImuMeta, Interface, JointMeta, RobotMeta, SensorMeta};
 use crate::error::Result;
-use crate::mj::{Data, FreeJoint, JointType, Model, ObjType};
+use crate::mj::{BiasType, Data, FreeJoint, GeomType, JointType, Model, ObjType, SensorType, Transmission};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 
@@ -273,7 +273,7 @@ impl Robot {
 pub fn actuators_of(model: &Model, meta_joints: &[JointMeta]) -> Vec<Actuator> {
     (0..model.nu())
         .map(|a| {
-            let joint = (model.actuator_trntype()[a] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT)
+            let joint = (model.actuator_transmission(a) == Transmission::Joint)
                 .then(|| model.actuator_trnid()[a][0])
                 .filter(|&j| j >= 0)
                 .map(|j| j as usize)
@@ -295,7 +295,7 @@ pub fn actuators_of(model: &Model, meta_joints: &[JointMeta]) -> Vec<Actuator> {
 }
 
 fn interface_of(model: &Model, a: usize) -> Interface {
-    let affine = model.actuator_biastype()[a] as u32 == mujoco_sys::mjtBias_mjBIAS_AFFINE;
+    let affine = model.actuator_bias(a) == BiasType::Affine;
     let bias = model.actuator_biasprm()[a];
     if affine && bias[1] != 0.0 {
         Interface::Position
@@ -321,7 +321,7 @@ fn find_imus(model: &Model, robot_name: &str, meta: &[ImuMeta]) -> Vec<Imu> {
     for s in 0..model.nsensor() {
         let sname = model.name(ObjType::Sensor, s);
         let Some(base) = sname.strip_suffix("_gyro") else { continue };
-        if model.sensor_type()[s] as u32 != mujoco_sys::mjtSensor_mjSENS_GYRO {
+        if model.sensor_kind(s) != SensorType::Gyro {
             continue;
         }
         let Some(accel) = sensor(&format!("{base}_accel")) else { continue };
@@ -529,13 +529,13 @@ pub fn geom_lowest_z(model: &Model, data: &Data, g: usize) -> Option<f64> {
     let m = data.geom_xmat()[g];
     // Row z of the geom's world rotation: the world z component of each of its local axes.
     let r = [m[6], m[7], m[8]];
-    let extent = match model.geom_type()[g] as u32 {
-        mujoco_sys::mjtGeom_mjGEOM_SPHERE => size[0],
-        mujoco_sys::mjtGeom_mjGEOM_CAPSULE => size[0] + size[1] * r[2].abs(),
-        mujoco_sys::mjtGeom_mjGEOM_CYLINDER => size[0] * (1.0 - r[2] * r[2]).max(0.0).sqrt() + size[1] * r[2].abs(),
-        mujoco_sys::mjtGeom_mjGEOM_BOX => (0..3).map(|k| size[k] * r[k].abs()).sum(),
-        mujoco_sys::mjtGeom_mjGEOM_ELLIPSOID => (0..3).map(|k| (size[k] * r[k]).powi(2)).sum::<f64>().sqrt(),
-        mujoco_sys::mjtGeom_mjGEOM_PLANE => return None,
+    let extent = match model.geom_kind(g) {
+        GeomType::Sphere => size[0],
+        GeomType::Capsule => size[0] + size[1] * r[2].abs(),
+        GeomType::Cylinder => size[0] * (1.0 - r[2] * r[2]).max(0.0).sqrt() + size[1] * r[2].abs(),
+        GeomType::Box => (0..3).map(|k| size[k] * r[k].abs()).sum(),
+        GeomType::Ellipsoid => (0..3).map(|k| (size[k] * r[k]).powi(2)).sum::<f64>().sqrt(),
+        GeomType::Plane => return None,
         _ => model.geom_rbound()[g],
     };
     Some(z - extent)

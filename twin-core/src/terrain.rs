@@ -25,7 +25,7 @@
 //!
 //! Every kind's keys, with defaults, are on [`TerrainOptions`]'s fields.
 
-use crate::mj::{Data, Model, ObjType};
+use crate::mj::{Data, GeomType, Model, ObjType};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use std::fmt::Write as _;
@@ -751,7 +751,7 @@ impl Collisions {
     pub fn new(model: &Model) -> Collisions {
         let terrain = terrain_geoms(model)
             .into_iter()
-            .filter(|&g| model.geom_type()[g] as u32 == mujoco_sys::mjtGeom_mjGEOM_BOX)
+            .filter(|&g| model.geom_kind(g) == GeomType::Box)
             .map(|g| (g, model.geom_pos()[g][2] + model.geom_size()[g][2]))
             .collect();
         Collisions { terrain, first: None }

@@ -318,6 +318,32 @@ impl TypedMessage<'_> {
     }
 }
 
+/// What a [`Sink`] keeps of each topic it took, by the topic's `id`: set in
+/// [`Sink::add_topic`], read in [`Sink::write`]; nothing for an id it did not take.
+#[derive(Debug, Clone)]
+pub struct ById<T>(Vec<Option<T>>);
+
+impl<T> Default for ById<T> {
+    fn default() -> Self {
+        ById(Vec::new())
+    }
+}
+
+impl<T> ById<T> {
+    /// Keeps `value` for topic `id`.
+    pub fn set(&mut self, id: usize, value: T) {
+        if self.0.len() <= id {
+            self.0.resize_with(id + 1, || None);
+        }
+        self.0[id] = Some(value);
+    }
+
+    /// What is kept for topic `id`, if any.
+    pub fn get(&self, id: usize) -> Option<&T> {
+        self.0.get(id)?.as_ref()
+    }
+}
+
 /// Where a recording's messages go: the MCAP file, the rerun recording, the live DDS bridge, a
 /// test's buffer. Topics are offered once each, before their first message, with an `id` (their
 /// index among the recording's topics: the [`TopicTable`]'s, then the controller's own, see

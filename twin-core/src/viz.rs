@@ -15,8 +15,7 @@
 //! and a random number (its SDK has no way to set them).
 
 use crate::error::{Error, Result};
-use crate::mj::{Data, Model, ObjType};
-use mujoco_sys as sys;
+use crate::mj::{Data, GeomType, JointType, Model, ObjType};
 use std::path::{Path, PathBuf};
 
 /// The rerun names twin uses, as the `rerun` umbrella crate re-exports them (twin depends on the
@@ -140,8 +139,8 @@ impl Recorder {
                 rerun::Transform3D::from_translation_rotation(vec3(model.geom_pos()[g]), quat(model.geom_quat()[g]));
             let s = model.geom_size()[g];
             let solid = rerun::FillMode::Solid;
-            let shape: Box<dyn rerun::AsComponents> = match model.geom_type()[g] as u32 {
-                sys::mjtGeom_mjGEOM_PLANE => {
+            let shape: Box<dyn rerun::AsComponents> = match model.geom_kind(g) {
+                GeomType::Plane => {
                     // An infinite plane (size 0) is drawn as a 10 m square.
                     let hx = if s[0] > 0.0 { s[0] } else { 5.0 };
                     let hy = if s[1] > 0.0 { s[1] } else { 5.0 };
@@ -151,27 +150,27 @@ impl Recorder {
                             .with_fill_mode(solid),
                     )
                 }
-                sys::mjtGeom_mjGEOM_SPHERE => {
+                GeomType::Sphere => {
                     Box::new(rerun::Ellipsoids3D::from_radii([s[0] as f32]).with_colors([color]).with_fill_mode(solid))
                 }
-                sys::mjtGeom_mjGEOM_ELLIPSOID => {
+                GeomType::Ellipsoid => {
                     Box::new(rerun::Ellipsoids3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid))
                 }
-                sys::mjtGeom_mjGEOM_BOX => {
+                GeomType::Box => {
                     Box::new(rerun::Boxes3D::from_half_sizes([vec3(s)]).with_colors([color]).with_fill_mode(solid))
                 }
-                sys::mjtGeom_mjGEOM_CYLINDER => Box::new(
+                GeomType::Cylinder => Box::new(
                     rerun::Cylinders3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
                         .with_colors([color])
                         .with_fill_mode(solid),
                 ),
                 // rerun's capsule runs from the origin along +Z; MuJoCo's is centred.
-                sys::mjtGeom_mjGEOM_CAPSULE => Box::new(
+                GeomType::Capsule => Box::new(
                     rerun::Capsules3D::from_lengths_and_radii([2.0 * s[1] as f32], [s[0] as f32])
                         .with_translations([[0.0, 0.0, -s[1] as f32]])
                         .with_colors([color]),
                 ),
-                sys::mjtGeom_mjGEOM_MESH if model.geom_dataid()[g] >= 0 => {
+                GeomType::Mesh if model.geom_dataid()[g] >= 0 => {
                     let mesh = model.geom_dataid()[g] as usize;
                     let (v0, nv) = (model.mesh_vertadr()[mesh] as usize, model.mesh_vertnum()[mesh] as usize);
                     let (f0, nf) = (model.mesh_faceadr()[mesh] as usize, model.mesh_facenum()[mesh] as usize);
@@ -437,7 +436,7 @@ pub fn record_log(
             return Ok(summary);
         }
         match model.id(ObjType::Joint, &j.name) {
-            Some(id) if model.jnt_type()[id] as u32 != sys::mjtJoint_mjJNT_FREE => {
+            Some(id) if model.joint_type(id) != JointType::Free => {
                 summary.joints_matched.push(j.name.clone());
                 animated.push((model.jnt_qposadr()[id] as usize, j));
             }

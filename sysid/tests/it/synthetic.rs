@@ -258,6 +258,18 @@ fn identify_with_one_glitch(field: fn(&mut JointLog) -> &mut Vec<Vec<f64>>, part
 }
 
 impl GlitchOutcome {
+    /// Asserts the `what` glitch moved no identifiable parameter by `sigmas` standard
+    /// deviations or more (and prints by how much it did).
+    fn assert_moved_less_than(&self, sigmas: f64, what: &str) {
+        eprintln!("{what}: worst shift of an identifiable parameter {:.2}σ", self.worst_shift_sigma);
+        assert!(self.worst_shift_sigma < sigmas, "{what} moved a parameter by {:.1}σ", self.worst_shift_sigma);
+    }
+
+    /// Asserts the clean log's fit warned of nothing that contains `kind`.
+    fn assert_clean_warns_of_no(&self, kind: &str) {
+        assert!(!self.clean_warnings.iter().any(|w| w.contains(kind)), "{:?}", self.clean_warnings);
+    }
+
     /// The elbow's warning that contains `kind`, after checking it names the glitch's time.
     fn warning_at_the_glitch(&self, kind: &str) -> &str {
         let warning = self.warnings.iter().find(|w| w.contains("elbow_joint") && w.contains(kind));
@@ -279,12 +291,11 @@ fn number_after(warning: &str, key: &str) -> f64 {
 #[test]
 fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
     let o = identify_with_one_glitch(|l| &mut l.position, 2, 0.125);
-    eprintln!("glitch: worst shift of an identifiable parameter {:.2}σ", o.worst_shift_sigma);
-    assert!(o.worst_shift_sigma < 3.0, "one glitched sample moved a parameter by {:.1}σ", o.worst_shift_sigma);
+    o.assert_moved_less_than(3.0, "one glitched position sample");
     // The glitched sample itself, by how much it was off its neighbours.
     let warning = o.warning_at_the_glitch("Hampel");
     assert!(warning.contains("+0.12"), "{warning}");
-    assert!(!o.clean_warnings.iter().any(|w| w.contains("Hampel")), "{:?}", o.clean_warnings);
+    o.assert_clean_warns_of_no("Hampel");
 }
 
 /// Issue 15: one glitched torque reading (a bit flip in the effort field: +200 N·m for one
@@ -294,12 +305,11 @@ fn one_glitched_position_sample_is_reported_and_does_not_move_the_fit() {
 #[test]
 fn one_glitched_torque_sample_is_reported_and_does_not_move_the_fit() {
     let o = identify_with_one_glitch(|l| &mut l.effort, 3, 200.0);
-    eprintln!("torque glitch: worst shift of an identifiable parameter {:.2}σ", o.worst_shift_sigma);
-    assert!(o.worst_shift_sigma < 1.0, "one glitched torque sample moved a parameter by {:.1}σ", o.worst_shift_sigma);
+    o.assert_moved_less_than(1.0, "one glitched torque sample");
     let warning = o.warning_at_the_glitch("effort");
     assert!(warning.contains("1 effort sample(s)"), "{warning}");
     // By how much it was off its neighbours: the glitch, up to the torque's change over 3 ms.
     let off = number_after(warning, "worst ");
     assert!((off - 200.0).abs() < 1.0, "{warning}");
-    assert!(!o.clean_warnings.iter().any(|w| w.contains("effort sample")), "{:?}", o.clean_warnings);
+    o.assert_clean_warns_of_no("effort sample");
 }

@@ -415,7 +415,7 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     for (t, msgs) in &contacts_raw {
         data.contacts.push(Signal::new(
             format!("{t} |F|"),
-            msgs.iter().map(|(s, m)| (secs(*s, origin), norm3(m.force))).collect(),
+            msgs.iter().map(|(s, m)| (secs(*s, origin), nalgebra::Vector3::from(m.force).norm())).collect(),
         ));
         data.contact_ratios.push(Signal::new(
             format!("{t} tangential/normal"),
@@ -557,10 +557,6 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
 
 fn none_if_empty(v: &[String]) -> String {
     if v.is_empty() { "none".into() } else { v.join(", ") }
-}
-
-fn norm3(v: [f64; 3]) -> f64 {
-    (v[0] * v[0] + v[1] * v[1] + v[2] * v[2]).sqrt()
 }
 
 /// `stamp ≈ a + b · log_time` (ns) over the JointState messages, by least squares; `None` when

@@ -12,7 +12,7 @@
 use super::fall::Fall;
 use super::signal::{Signal, quantile};
 use crate::error::Result;
-use crate::mj::{Data, Model};
+use crate::mj::{Data, GeomType, Model};
 use crate::robot::Robot;
 use serde::Serialize;
 use std::sync::Arc;
@@ -106,22 +106,22 @@ fn bottom_points(model: &Model, data: &Data, g: usize, out: &mut Vec<[f64; 3]>) 
     let at = |l: [f64; 3]| -> [f64; 3] {
         std::array::from_fn(|i| c[i] + m[3 * i] * l[0] + m[3 * i + 1] * l[1] + m[3 * i + 2] * l[2])
     };
-    match model.geom_type()[g] as u32 {
-        mujoco_sys::mjtGeom_mjGEOM_BOX => {
+    match model.geom_kind(g) {
+        GeomType::Box => {
             for k in 0..8 {
                 let sign = |b: usize| if k & (1 << b) == 0 { -1.0 } else { 1.0 };
                 let p = at([sign(0) * s[0], sign(1) * s[1], sign(2) * s[2]]);
                 out.push(p);
             }
         }
-        mujoco_sys::mjtGeom_mjGEOM_CAPSULE | mujoco_sys::mjtGeom_mjGEOM_CYLINDER => {
+        GeomType::Capsule | GeomType::Cylinder => {
             let r = s[0];
             for sign in [-1.0, 1.0] {
                 let p = at([0.0, 0.0, sign * s[1]]);
                 out.push([p[0], p[1], p[2] - r]);
             }
         }
-        mujoco_sys::mjtGeom_mjGEOM_SPHERE => out.push([c[0], c[1], c[2] - s[0]]),
+        GeomType::Sphere => out.push([c[0], c[1], c[2] - s[0]]),
         _ => {
             if let Some(z) = crate::robot::geom_lowest_z(model, data, g) {
                 out.push([c[0], c[1], z]);

@@ -53,7 +53,7 @@ pub use crate::control::{Actuation, Controller, Observation};
 pub use crate::convert::ImuBias as BiasModel;
 
 use crate::error::{Error, Result};
-use crate::mj::{Data, Model};
+use crate::mj::{Data, Integrator, Model};
 use rand::Rng;
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
@@ -437,7 +437,7 @@ impl Engine {
         }
 
         // RK4 can't be split into mj_step1/mj_step2 (mj_step2 would integrate with Euler).
-        let split = model.raw().opt.integrator != mujoco_sys::mjtIntegrator_mjINT_RK4 as i32;
+        let split = model.integrator() != Integrator::Rk4;
         let mut outcome = Outcome { steps: 0, sim_secs: 0.0, ended_by: None, physics_error: None };
         let mut oldest = 0usize;
         for step in 0..episode.steps {

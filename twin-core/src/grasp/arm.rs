@@ -3,7 +3,7 @@
 
 use crate::control::{Actuation, PdHoldOptions, pd_gains};
 use crate::error::{Error, Result};
-use crate::mj::{Data, JointType, Model, ObjType};
+use crate::mj::{Data, JointType, Model, ObjType, Transmission};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// Left or right.
@@ -79,7 +79,7 @@ fn joint_loop(model: &Model, joint: usize, saturation_error: f64) -> Result<Loop
     let (command, gear) = match actuation {
         Actuation::Ctrl => (0..model.nu())
             .find(|&u| {
-                model.actuator_trntype()[u] as u32 == mujoco_sys::mjtTrn_mjTRN_JOINT
+                model.actuator_transmission(u) == Transmission::Joint
                     && model.actuator_trnid()[u][0] as usize == joint
                     && model.actuator_gear()[u][0] != 0.0
             })

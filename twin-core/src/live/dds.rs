@@ -264,15 +264,20 @@ impl Node {
         self.dds_reader(&dds_topic(ros_topic), &dds_type(ros_type), depth, ros_topic)
     }
 
+    /// The DDS topic `topic` of DDS type `type_name`, keyless, with `policies` (`what` names it
+    /// in errors): what a writer and a reader of it are made on.
+    fn topic(&self, topic: &str, type_name: &str, policies: &QosPolicies, what: &str) -> Result<rustdds::Topic> {
+        self.participant
+            .create_topic(topic.into(), type_name.into(), policies, TopicKind::NoKey)
+            .map_err(|e| dds_err(format!("creating DDS topic for {what}"), e))
+    }
+
     /// A writer of the DDS topic `topic` of DDS type `type_name` (`what` names it in errors).
     ///
     /// # Errors
     /// [`Error::Live`] from rustdds.
     pub fn dds_writer(&self, topic: &str, type_name: &str, policies: QosPolicies, what: &str) -> Result<RawWriter> {
-        let topic = self
-            .participant
-            .create_topic(topic.into(), type_name.into(), &policies, TopicKind::NoKey)
-            .map_err(|e| dds_err(format!("creating DDS topic for {what}"), e))?;
+        let topic = self.topic(topic, type_name, &policies, what)?;
         let w = self
             .publisher
             .create_datawriter_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))
@@ -292,10 +297,7 @@ impl Node {
             .durability(Durability::Volatile)
             .history(History::KeepLast { depth })
             .build();
-        let topic = self
-            .participant
-            .create_topic(topic.into(), type_name.into(), &policies, TopicKind::NoKey)
-            .map_err(|e| dds_err(format!("creating DDS topic for {what}"), e))?;
+        let topic = self.topic(topic, type_name, &policies, what)?;
         let r = self
             .subscriber
             .create_datareader_no_key::<RawCdr, RawAdapter>(&topic, Some(policies))

@@ -203,7 +203,7 @@ pub struct LiveSink {
     node: Arc<Node>,
     writers: HashMap<String, Arc<RawWriter>>,
     /// Writer of each topic id.
-    by_id: Vec<Option<String>>,
+    by_id: crate::topics::ById<String>,
     /// Topics the bridge exchanges itself (`/clock`, its command inputs): recorded, never
     /// published again.
     own: Vec<String>,
@@ -234,15 +234,12 @@ impl Sink for LiveSink {
             }
             self.writers.insert(topic.name.clone(), w);
         }
-        if self.by_id.len() <= id {
-            self.by_id.resize(id + 1, None);
-        }
-        self.by_id[id] = Some(topic.name.clone());
+        self.by_id.set(id, topic.name.clone());
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        if let Some(Some(name)) = self.by_id.get(id)
+        if let Some(name) = self.by_id.get(id)
             && let Some(w) = self.writers.get(name)
             && w.write(RawCdr(message.to_cdr(&mut self.cdr).to_vec()), None).is_err()
         {
@@ -428,7 +425,7 @@ pub fn start(
     let mut sink = LiveSink {
         node: node.clone(),
         writers: HashMap::new(),
-        by_id: Vec::new(),
+        by_id: Default::default(),
         own: vec![
             "/clock".into(),
             command_topic.clone(),
@@ -812,15 +809,31 @@ impl LiveController {
         match (verdict, decoded) {
             (Ok(()), Ok(m)) => {
                 self.commander.set_direct(&m);
+                self.settle(Ok(()), |b| b.command_topic.clone(), t_nanos)
+            }
+            (Err(why), _) => self.settle(Err(why), |b| b.command_topic.clone(), t_nanos),
+            (Ok(()), Err(_)) => false,
+        }
+    }
+
+    /// Counts a command as applied (and the bridge as fed now), or rejects it with the reason on
+    /// the topic `topic` names (called only then); returns whether it was applied.
+    fn settle(
+        &mut self,
+        verdict: std::result::Result<(), String>,
+        topic: impl FnOnce(&Self) -> String,
+        t_nanos: u64,
+    ) -> bool {
+        match verdict {
+            Ok(()) => {
                 self.stats.commands_applied += 1;
                 self.last_good = Instant::now();
                 true
             }
-            (Err(why), _) => {
-                self.reject(&self.command_topic.clone(), t_nanos, &why);
+            Err(why) => {
+                self.reject(&topic(self), t_nanos, &why);
                 false
             }
-            (Ok(()), Err(_)) => false,
         }
     }
 
@@ -832,13 +845,7 @@ impl LiveController {
             Ok(t) => self.commander.set_trajectory(&t, now, &self.qpos),
             Err(e) => Err(format!("not a JointTrajectory: {}", e.message)),
         };
-        match verdict {
-            Ok(()) => {
-                self.stats.commands_applied += 1;
-                self.last_good = Instant::now();
-            }
-            Err(why) => self.reject(&self.trajectory_topic.clone(), t_nanos, &why),
-        }
+        self.settle(verdict, |b| b.trajectory_topic.clone(), t_nanos);
     }
 
     fn reject(&mut self, topic: &str, t_nanos: u64, why: &str) {
@@ -861,13 +868,7 @@ impl LiveController {
             Ok(m) => self.commander.set_by_name(&m, &self.qpos),
             Err(e) => Err(format!("not a JointState: {}", e.message)),
         };
-        match verdict {
-            Ok(()) => {
-                self.stats.commands_applied += 1;
-                self.last_good = Instant::now();
-            }
-            Err(why) => self.reject(&self.by_name_topic.clone(), t_nanos, &why),
-        }
+        self.settle(verdict, |b| b.by_name_topic.clone(), t_nanos);
     }
 
     /// Applies one received `Twist` to the walker (or rejects it).

@@ -26,16 +26,38 @@ pub struct CdrReader<'a> {
     little_endian: bool,
 }
 
-macro_rules! read_prim {
-    ($name:ident, $t:ty, $n:expr) => {
-        /// Reads one aligned value.
-        #[inline]
-        pub fn $name(&mut self) -> CdrResult<$t> {
-            let b = self.take_aligned($n, $n)?;
-            let arr: [u8; $n] = b.try_into().expect("take_aligned returns exactly n bytes");
-            Ok(if self.little_endian { <$t>::from_le_bytes(arr) } else { <$t>::from_be_bytes(arr) })
+/// The aligned primitives, by size in bytes: `CdrReader::u32` reads one (in the message's
+/// byte order), `CdrWriter::u32` writes one (little-endian), for every type named here.
+macro_rules! primitives {
+    ($($n:literal => $($t:ident),+;)+) => {
+        impl CdrReader<'_> {
+            $($(
+                /// Reads one aligned value.
+                #[inline]
+                pub fn $t(&mut self) -> CdrResult<$t> {
+                    let b = self.take_aligned($n, $n)?;
+                    let arr: [u8; $n] = b.try_into().expect("take_aligned returns exactly n bytes");
+                    Ok(if self.little_endian { <$t>::from_le_bytes(arr) } else { <$t>::from_be_bytes(arr) })
+                }
+            )+)+
+        }
+
+        impl CdrWriter {
+            $($(
+                /// Writes one value, aligned, little-endian.
+                pub fn $t(&mut self, v: $t) {
+                    self.align($n);
+                    self.buf.extend_from_slice(&v.to_le_bytes());
+                }
+            )+)+
         }
     };
+}
+
+primitives! {
+    2 => u16, i16;
+    4 => u32, i32, f32;
+    8 => u64, i64, f64;
 }
 
 impl<'a> CdrReader<'a> {
@@ -104,15 +126,6 @@ impl<'a> CdrReader<'a> {
             ),
         }
     }
-
-    read_prim!(u16, u16, 2);
-    read_prim!(i16, i16, 2);
-    read_prim!(u32, u32, 4);
-    read_prim!(i32, i32, 4);
-    read_prim!(f32, f32, 4);
-    read_prim!(u64, u64, 8);
-    read_prim!(i64, i64, 8);
-    read_prim!(f64, f64, 8);
 
     /// One byte.
     #[inline]
@@ -235,39 +248,9 @@ impl CdrWriter {
     pub fn u8(&mut self, v: u8) {
         self.buf.push(v);
     }
-    /// u32.
-    pub fn u32(&mut self, v: u32) {
-        self.align(4);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-    /// i32.
-    pub fn i32(&mut self, v: i32) {
-        self.align(4);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-    /// u64.
-    pub fn u64(&mut self, v: u64) {
-        self.align(8);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-    /// i64.
-    pub fn i64(&mut self, v: i64) {
-        self.align(8);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
     /// A fixed `uint8[N]` (no count).
     pub fn u8_fixed(&mut self, v: &[u8]) {
         self.buf.extend_from_slice(v);
-    }
-    /// f64.
-    pub fn f64(&mut self, v: f64) {
-        self.align(8);
-        self.buf.extend_from_slice(&v.to_le_bytes());
-    }
-    /// f32.
-    pub fn f32(&mut self, v: f32) {
-        self.align(4);
-        self.buf.extend_from_slice(&v.to_le_bytes());
     }
     /// A `uint8[]` (count, then the bytes).
     pub fn u8_seq(&mut self, v: &[u8]) {

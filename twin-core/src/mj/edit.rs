@@ -1,5 +1,5 @@
 use super::model::raw_slice_mut;
-use super::{Model, ffi, guarded};
+use super::{GeomType, Integrator, Model, ffi, guarded};
 use crate::error::{Error, Result};
 use std::ptr::NonNull;
 
@@ -39,6 +39,25 @@ impl ModelEdit {
         unsafe { &mut *self.model.as_mut_ptr() }
     }
 
+    /// Writes `value` into row `id` of the model array `pick` returns (`rows` rows of `T`):
+    /// the one write of every single-array setter below. Panics if `id ≥ rows` (the setters
+    /// check ids first, with an error).
+    ///
+    /// # Safety
+    /// `pick` must return one of the model's arrays, null or with at least `rows` rows of `T`.
+    unsafe fn set_row<T>(
+        &mut self,
+        rows: usize,
+        id: usize,
+        value: T,
+        pick: impl FnOnce(&mujoco_sys::mjModel) -> *mut T,
+    ) {
+        let ptr = pick(self.raw_mut());
+        // SAFETY: guaranteed by the caller; exclusive access through &mut self.
+        let all = unsafe { raw_slice_mut(ptr, rows) };
+        all[id] = value;
+    }
+
     /// Sets body `body`'s mass in kg, keeping its inertia tensor as is.
     ///
     /// # Errors
@@ -51,11 +70,8 @@ impl ModelEdit {
                 self.model.name(super::ObjType::Body, body)
             )));
         }
-        let n = self.model.nbody();
-        let m = self.raw_mut();
-        // SAFETY: body_mass has nbody entries; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.body_mass, n) };
-        rows[body] = mass_kg;
+        // SAFETY: body_mass has nbody entries.
+        unsafe { self.set_row(self.model.nbody(), body, mass_kg, |m| m.body_mass) };
         Ok(self)
     }
 
@@ -88,11 +104,8 @@ impl ModelEdit {
                 self.model.name(super::ObjType::Body, body)
             )));
         }
-        let n = self.model.nbody();
-        let m = self.raw_mut();
-        // SAFETY: body_inertia has nbody rows of 3; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.body_inertia.cast::<[f64; 3]>(), n) };
-        rows[body] = inertia;
+        // SAFETY: body_inertia has nbody rows of 3.
+        unsafe { self.set_row(self.model.nbody(), body, inertia, |m| m.body_inertia.cast()) };
         Ok(self)
     }
 
@@ -103,11 +116,8 @@ impl ModelEdit {
     pub fn set_body_com(&mut self, body: usize, com_body: [f64; 3]) -> Result<&mut Self> {
         check("body id", body, self.model.nbody())?;
         finite("centre of mass", &com_body)?;
-        let n = self.model.nbody();
-        let m = self.raw_mut();
-        // SAFETY: body_ipos has nbody rows of 3; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.body_ipos.cast::<[f64; 3]>(), n) };
-        rows[body] = com_body;
+        // SAFETY: body_ipos has nbody rows of 3.
+        unsafe { self.set_row(self.model.nbody(), body, com_body, |m| m.body_ipos.cast()) };
         Ok(self)
     }
 
@@ -121,11 +131,8 @@ impl ModelEdit {
         if friction.iter().any(|&f| f < 0.0) {
             return Err(Error::InvalidEdit(format!("geom {geom}: friction {friction:?} must not be negative")));
         }
-        let n = self.model.ngeom();
-        let m = self.raw_mut();
-        // SAFETY: geom_friction has ngeom rows of 3; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.geom_friction.cast::<[f64; 3]>(), n) };
-        rows[geom] = friction;
+        // SAFETY: geom_friction has ngeom rows of 3.
+        unsafe { self.set_row(self.model.ngeom(), geom, friction, |m| m.geom_friction.cast()) };
         Ok(self)
     }
 
@@ -136,11 +143,8 @@ impl ModelEdit {
     /// [`Error::Size`] for a bad id.
     pub fn set_geom_priority(&mut self, geom: usize, priority: i32) -> Result<&mut Self> {
         check("geom id", geom, self.model.ngeom())?;
-        let n = self.model.ngeom();
-        let m = self.raw_mut();
-        // SAFETY: geom_priority has ngeom entries; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.geom_priority, n) };
-        rows[geom] = priority;
+        // SAFETY: geom_priority has ngeom entries.
+        unsafe { self.set_row(self.model.ngeom(), geom, priority, |m| m.geom_priority) };
         Ok(self)
     }
 
@@ -153,7 +157,7 @@ impl ModelEdit {
     pub fn set_geom_box(&mut self, geom: usize, pos: [f64; 3], quat: [f64; 4], half: [f64; 3]) -> Result<&mut Self> {
         check("geom id", geom, self.model.ngeom())?;
         finite("geom pose", &[pos[0], pos[1], pos[2], quat[0], quat[1], quat[2], quat[3]])?;
-        if self.model.geom_type()[geom] as u32 != mujoco_sys::mjtGeom_mjGEOM_BOX {
+        if self.model.geom_kind(geom) != GeomType::Box {
             return Err(Error::InvalidEdit(format!("geom {geom} is not a box")));
         }
         if !half.iter().all(|h| *h > 0.0 && h.is_finite()) {
@@ -180,10 +184,8 @@ impl ModelEdit {
     pub fn set_geom_pos(&mut self, geom: usize, pos: [f64; 3]) -> Result<&mut Self> {
         check("geom id", geom, self.model.ngeom())?;
         finite("geom position", &pos)?;
-        let n = self.model.ngeom();
-        let m = self.raw_mut();
-        // SAFETY: geom_pos has ngeom rows of 3; id checked; exclusive access.
-        unsafe { raw_slice_mut(m.geom_pos.cast::<[f64; 3]>(), n)[geom] = pos };
+        // SAFETY: geom_pos has ngeom rows of 3.
+        unsafe { self.set_row(self.model.ngeom(), geom, pos, |m| m.geom_pos.cast()) };
         Ok(self)
     }
 
@@ -229,11 +231,8 @@ impl ModelEdit {
         if !(value >= 0.0 && value.is_finite()) {
             return Err(Error::InvalidEdit(format!("dof {dof}: {what} must be finite and ≥ 0, got {value}")));
         }
-        let n = self.model.nv();
-        let ptr = pick(self.raw_mut());
-        // SAFETY: every dof_* array picked here has nv entries; exclusive access.
-        let rows = unsafe { raw_slice_mut(ptr, n) };
-        rows[dof] = value;
+        // SAFETY: every dof_* array picked here has nv entries.
+        unsafe { self.set_row(self.model.nv(), dof, value, pick) };
         Ok(self)
     }
 
@@ -293,9 +292,9 @@ impl ModelEdit {
         Ok(self)
     }
 
-    /// Sets the integrator (`mjtIntegrator`: 0 Euler, 1 RK4, 2 implicit, 3 implicitfast).
-    pub fn set_integrator(&mut self, integrator: i32) -> &mut Self {
-        self.raw_mut().opt.integrator = integrator;
+    /// Sets the integrator.
+    pub fn set_integrator(&mut self, integrator: Integrator) -> &mut Self {
+        self.raw_mut().opt.integrator = integrator.raw();
         self
     }
 
@@ -306,11 +305,8 @@ impl ModelEdit {
     pub fn set_actuator_gear(&mut self, actuator: usize, gear: [f64; 6]) -> Result<&mut Self> {
         check("actuator id", actuator, self.model.nu())?;
         finite("gear", &gear)?;
-        let n = self.model.nu();
-        let m = self.raw_mut();
-        // SAFETY: actuator_gear has nu rows of 6; exclusive access.
-        let rows = unsafe { raw_slice_mut(m.actuator_gear.cast::<[f64; 6]>(), n) };
-        rows[actuator] = gear;
+        // SAFETY: actuator_gear has nu rows of 6.
+        unsafe { self.set_row(self.model.nu(), actuator, gear, |m| m.actuator_gear.cast()) };
         Ok(self)
     }
 

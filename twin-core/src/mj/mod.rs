@@ -7,12 +7,14 @@
 
 mod data;
 mod edit;
+mod kinds;
 mod model;
 mod ray;
 mod ray_shape;
 
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
+pub use kinds::{BiasType, GeomType, Integrator, SensorType, Transmission};
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 pub use ray::{RayFilter, RayHit, RayScene, RayStats};
 

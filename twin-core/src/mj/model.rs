@@ -1,4 +1,4 @@
-use super::{buf_to_string, ffi, guarded, init};
+use super::{BiasType, GeomType, Integrator, SensorType, Transmission, buf_to_string, ffi, guarded, init};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
 use std::ffi::{CStr, CString, c_char, c_int};
@@ -70,6 +70,24 @@ pub enum ObjType {
 }
 
 impl ObjType {
+    const ALL: [ObjType; 10] = [
+        ObjType::Body,
+        ObjType::Joint,
+        ObjType::Geom,
+        ObjType::Site,
+        ObjType::Camera,
+        ObjType::Actuator,
+        ObjType::Sensor,
+        ObjType::Key,
+        ObjType::Equality,
+        ObjType::Mesh,
+    ];
+
+    /// The kind of MuJoCo's integer `raw` (`mjtObj`), when this wrapper names it.
+    pub fn from_raw(raw: i32) -> Option<ObjType> {
+        ObjType::ALL.into_iter().find(|o| o.raw() as i32 == raw)
+    }
+
     fn raw(self) -> sys::mjtObj {
         match self {
             ObjType::Body => sys::mjtObj_mjOBJ_BODY,
@@ -1000,8 +1018,37 @@ impl Model {
 
     /// Whether sensor `id` is an inertial one of an IMU (gyro or accelerometer).
     pub fn sensor_is_imu(&self, id: usize) -> bool {
-        let ty = self.sensor_type()[id] as u32;
-        ty == sys::mjtSensor_mjSENS_GYRO || ty == sys::mjtSensor_mjSENS_ACCELEROMETER
+        matches!(self.sensor_kind(id), SensorType::Gyro | SensorType::Accelerometer)
+    }
+
+    /// Geometric type of geom `id`.
+    pub fn geom_kind(&self, id: usize) -> GeomType {
+        GeomType::from_raw(self.geom_type()[id])
+    }
+
+    /// What sensor `id` measures.
+    pub fn sensor_kind(&self, id: usize) -> SensorType {
+        SensorType::from_raw(self.sensor_type()[id])
+    }
+
+    /// The kind of object sensor `id` is attached to, when it is one [`ObjType`] names.
+    pub fn sensor_object(&self, id: usize) -> Option<ObjType> {
+        ObjType::from_raw(self.sensor_objtype()[id])
+    }
+
+    /// How actuator `id` transmits its force.
+    pub fn actuator_transmission(&self, id: usize) -> Transmission {
+        Transmission::from_raw(self.actuator_trntype()[id])
+    }
+
+    /// Actuator `id`'s bias force type.
+    pub fn actuator_bias(&self, id: usize) -> BiasType {
+        BiasType::from_raw(self.actuator_biastype()[id])
+    }
+
+    /// The numerical integrator.
+    pub fn integrator(&self) -> Integrator {
+        Integrator::from_raw(self.raw().opt.integrator)
     }
 
     /// Custom text elements (`<custom><text name="…" data="…"/>`), `(name, data)` in model

@@ -106,11 +106,7 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                         noise_std_m: s.noise_std,
                         ..DepthCameraOptions::default()
                     };
-                    if let Some([near, far]) = s.range_m {
-                        options.min_range_m = near;
-                        options.max_range_m = far;
-                    }
-                    options.rate_hz = s.update_rate_hz.unwrap_or(options.rate_hz);
+                    from_file(s, [&mut options.min_range_m, &mut options.max_range_m, &mut options.rate_hz]);
                     let prefix = prefix_of(&if s.mujoco.len() == 1 { s.topic.clone() } else { None }, &name);
                     out.push(RaySensor {
                         frame_id: s.frame_id.clone().unwrap_or_else(|| format!("{name}_optical_frame")),
@@ -133,11 +129,7 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                     noise_std_m: s.noise_std,
                     ..LidarOptions::default()
                 };
-                if let Some([lo, hi]) = s.range_m {
-                    options.min_range_m = lo;
-                    options.max_range_m = hi;
-                }
-                options.rate_hz = s.update_rate_hz.unwrap_or(options.rate_hz);
+                from_file(s, [&mut options.min_range_m, &mut options.max_range_m, &mut options.rate_hz]);
                 let stream = if scan.vertical.0 <= 1 { SensorStream::Scan } else { SensorStream::Points };
                 let topic = s.topic.clone().unwrap_or_else(|| {
                     let leaf = if stream == SensorStream::Scan { "scan" } else { "points" };
@@ -176,6 +168,15 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
 }
 
 /// Whether a Gazebo sensor type is a colour camera (not rendered by twin).
+/// What the robot file says of sensor `s` over a camera's or LiDAR's defaults, in place: its
+/// range limits (`[min, max]`, metres) and its rate (Hz), each where the file gives it.
+fn from_file(s: &crate::convert::SensorMeta, [min_range_m, max_range_m, rate_hz]: [&mut f64; 3]) {
+    if let Some([lo, hi]) = s.range_m {
+        (*min_range_m, *max_range_m) = (lo, hi);
+    }
+    *rate_hz = s.update_rate_hz.unwrap_or(*rate_hz);
+}
+
 fn is_colour_camera(kind: &str) -> bool {
     matches!(kind, "camera" | "wideanglecamera" | "multicamera")
 }

@@ -51,6 +51,7 @@ use crate::log::{
 };
 use crate::mj::{Data, ObjType};
 use crate::topics::{Sink, TopicInfo, TopicKind, TopicRates, TopicTable, TypedMessage, body_frame};
+use nalgebra::{Quaternion, Vector3};
 use std::path::PathBuf;
 
 /// What to record and how often.
@@ -175,7 +176,7 @@ pub struct McapSink {
     writer: Option<LogWriter>,
     path: PathBuf,
     /// Channel of each topic id.
-    channels: Vec<Option<u16>>,
+    channels: crate::topics::ById<u16>,
     cdr: CdrWriter,
     summary: Option<WriteSummary>,
 }
@@ -190,7 +191,7 @@ impl McapSink {
         Ok(McapSink {
             writer: Some(writer),
             path: path.to_path_buf(),
-            channels: Vec::new(),
+            channels: Default::default(),
             cdr: CdrWriter::new(),
             summary: None,
         })
@@ -210,15 +211,12 @@ impl Sink for McapSink {
     fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         let Some(writer) = self.writer.as_mut() else { return Err(self.closed()) };
         let channel = writer.add_topic_of_type(&topic.name, topic.type_name)?;
-        if self.channels.len() <= id {
-            self.channels.resize(id + 1, None);
-        }
-        self.channels[id] = Some(channel);
+        self.channels.set(id, channel);
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        let (Some(writer), Some(&Some(channel))) = (self.writer.as_mut(), self.channels.get(id)) else {
+        let (Some(writer), Some(&channel)) = (self.writer.as_mut(), self.channels.get(id)) else {
             return Ok(());
         };
         writer.write_encoded(channel, log_time_nanos, message.to_cdr(&mut self.cdr))
@@ -327,7 +325,7 @@ impl Sink for RerunSink {
                 let (pp, pq) = (self.xpos[p], self.xquat[p]);
                 let r = quat_rotate(pq, t.translation);
                 self.xpos[b] = [pp[0] + r[0], pp[1] + r[1], pp[2] + r[2]];
-                self.xquat[b] = quat_mul(pq, q);
+                self.xquat[b] = wxyz(quat(pq) * quat(q));
             }
         }
         self.points.clear();
@@ -863,7 +861,7 @@ impl Recording {
             }
             let q = match imu.quat_adr {
                 Some(a) => [s[a], s[a + 1], s[a + 2], s[a + 3]],
-                None => quat_mul(data.xquat()[imu.body], imu.body_from_imu.1),
+                None => wxyz(quat(data.xquat()[imu.body]) * quat(imu.body_from_imu.1)),
             };
             msg.header.stamp_nanos = stamp;
             msg.orientation_xyzw = xyzw(q);
@@ -919,7 +917,7 @@ impl Recording {
                 }
                 let f = c.force_n.map(|x| sign * x);
                 let r = [c.position[0] - xpos[body][0], c.position[1] - xpos[body][1], c.position[2] - xpos[body][2]];
-                let rxf = cross(r, f);
+                let rxf = Vector3::from(r).cross(&Vector3::from(f));
                 let w = &mut self.wrench[body];
                 for i in 0..3 {
                     w[i] += f[i];
@@ -1028,31 +1026,27 @@ fn rotate_t(m: &[f64; 9], v: [f64; 3]) -> [f64; 3] {
     ]
 }
 
-fn cross(a: [f64; 3], b: [f64; 3]) -> [f64; 3] {
-    [a[1] * b[2] - a[2] * b[1], a[2] * b[0] - a[0] * b[2], a[0] * b[1] - a[1] * b[0]]
+/// MuJoCo's `w x y z` array as a nalgebra quaternion.
+fn quat(q: [f64; 4]) -> Quaternion<f64> {
+    Quaternion::new(q[0], q[1], q[2], q[3])
 }
 
-/// Hamilton product of w x y z quaternions.
-fn quat_mul(a: [f64; 4], b: [f64; 4]) -> [f64; 4] {
-    [
-        a[0] * b[0] - a[1] * b[1] - a[2] * b[2] - a[3] * b[3],
-        a[0] * b[1] + a[1] * b[0] + a[2] * b[3] - a[3] * b[2],
-        a[0] * b[2] - a[1] * b[3] + a[2] * b[0] + a[3] * b[1],
-        a[0] * b[3] + a[1] * b[2] - a[2] * b[1] + a[3] * b[0],
-    ]
+/// A nalgebra quaternion as MuJoCo's `w x y z` array.
+fn wxyz(q: Quaternion<f64>) -> [f64; 4] {
+    [q.w, q.i, q.j, q.k]
 }
 
-/// Rotates `v` by the unit quaternion `q` (w x y z).
+/// Rotates `v` by the unit quaternion `q` (w x y z): `q ⊗ (0, v) ⊗ q*`.
 fn quat_rotate(q: [f64; 4], v: [f64; 3]) -> [f64; 3] {
-    let p = quat_mul(quat_mul(q, [0.0, v[0], v[1], v[2]]), [q[0], -q[1], -q[2], -q[3]]);
-    [p[1], p[2], p[3]]
+    let q = quat(q);
+    (q * Quaternion::from_imag(Vector3::from(v)) * q.conjugate()).imag().into()
 }
 
 /// `parent_from_child` from two world poses: translation in the parent frame and rotation.
 fn relative(p_pos: [f64; 3], p_quat: [f64; 4], c_pos: [f64; 3], c_quat: [f64; 4]) -> ([f64; 3], [f64; 4]) {
     let inv = [p_quat[0], -p_quat[1], -p_quat[2], -p_quat[3]];
     let d = [c_pos[0] - p_pos[0], c_pos[1] - p_pos[1], c_pos[2] - p_pos[2]];
-    (quat_rotate(inv, d), quat_mul(inv, c_quat))
+    (quat_rotate(inv, d), wxyz(quat(inv) * quat(c_quat)))
 }
 
 #[cfg(test)]

@@ -256,17 +256,13 @@ impl Server {
     /// Sends a message of channel `id`, stamped `time_nanos`, to its subscribers (kept for new
     /// subscribers when latched). Never blocks: a client whose queue is full misses it.
     pub fn publish(&self, id: u32, time_nanos: u64, payload: &[u8]) {
-        let latched = {
-            let st = lock(&self.shared.state);
-            st.channels.get(id as usize - 1).is_some_and(|c| c.latched)
-        };
-        if latched {
-            lock(&self.shared.state).latched.insert(id, (time_nanos, payload.to_vec()));
+        let mut st = lock(&self.shared.state);
+        if st.channels.get(id as usize - 1).is_some_and(|c| c.latched) {
+            st.latched.insert(id, (time_nanos, payload.to_vec()));
         }
         if self.shared.subscribed.load(Ordering::Relaxed) == 0 {
             return;
         }
-        let st = lock(&self.shared.state);
         for c in &st.clients {
             let sub = lock(&c.subscriptions).get(&id).copied();
             if let Some(sub) = sub {
@@ -665,7 +661,7 @@ fn handle_binary(
 pub struct FoxgloveSink {
     server: Arc<Server>,
     /// Channel of each topic id, and whether it is latched.
-    by_id: Vec<Option<(u32, bool)>>,
+    by_id: crate::topics::ById<(u32, bool)>,
     cdr: crate::log::cdr::CdrWriter,
     last_time: u64,
 }
@@ -673,7 +669,7 @@ pub struct FoxgloveSink {
 impl FoxgloveSink {
     /// A sink streaming to `server`.
     pub fn new(server: Arc<Server>) -> FoxgloveSink {
-        FoxgloveSink { server, by_id: Vec::new(), cdr: crate::log::cdr::CdrWriter::new(), last_time: u64::MAX }
+        FoxgloveSink { server, by_id: Default::default(), cdr: crate::log::cdr::CdrWriter::new(), last_time: u64::MAX }
     }
 }
 
@@ -682,10 +678,7 @@ impl Sink for FoxgloveSink {
         let Some(schema) = crate::log::typed::schema_text(topic.type_name) else { return Ok(false) };
         let latched = topic.qos.durability == Durability::TransientLocal;
         let chan = self.server.add_channel(&topic.name, topic.type_name, &schema, latched);
-        if self.by_id.len() <= id {
-            self.by_id.resize(id + 1, None);
-        }
-        self.by_id[id] = Some((chan, latched));
+        self.by_id.set(id, (chan, latched));
         Ok(true)
     }
 
@@ -695,7 +688,7 @@ impl Sink for FoxgloveSink {
             self.server.broadcast_time(log_time_nanos);
         }
         // Encoded only for a subscriber, or to keep a latched topic's last message.
-        if let Some(Some((chan, latched))) = self.by_id.get(id)
+        if let Some((chan, latched)) = self.by_id.get(id)
             && (*latched || self.server.is_subscribed(*chan))
         {
             let bytes = message.to_cdr(&mut self.cdr);

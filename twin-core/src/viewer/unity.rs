@@ -243,24 +243,20 @@ fn serve(mut stream: TcpStream, shared: &Arc<Shared>) {
     let error = |text: String| {
         let _ = tx.try_send(command("__error", &json!({"text": text})));
     };
-    while let Ok(Some(dlen)) = read_u32(&mut stream, &shared.stop) {
-        if dlen > MAX_DESTINATION {
-            error(format!("destination of {dlen} bytes (at most {MAX_DESTINATION}): not a ROS-TCP-Connector frame"));
-            break;
+    // A frame: the destination, then the payload, each a u32 length and its bytes; `None` ends
+    // the connection (closed, stopped, or a length over `max`, said to the client).
+    // `what` names the field and `beyond` says what a longer one means.
+    let field = |stream: &mut TcpStream, max: u32, what: &str, beyond: &str| -> Option<Vec<u8>> {
+        let len = read_u32(stream, &shared.stop).ok()??;
+        if len > max {
+            error(format!("{what} of {len} bytes (at most {max}){beyond}"));
+            return None;
         }
-        let mut dest = vec![0u8; dlen as usize];
-        if !matches!(read_full(&mut stream, &mut dest, &shared.stop), Ok(true)) {
-            break;
-        }
-        let Ok(Some(plen)) = read_u32(&mut stream, &shared.stop) else { break };
-        if plen > MAX_PAYLOAD {
-            error(format!("payload of {plen} bytes (at most {MAX_PAYLOAD})"));
-            break;
-        }
-        let mut payload = vec![0u8; plen as usize];
-        if !matches!(read_full(&mut stream, &mut payload, &shared.stop), Ok(true)) {
-            break;
-        }
+        let mut bytes = vec![0u8; len as usize];
+        matches!(read_full(stream, &mut bytes, &shared.stop), Ok(true)).then_some(bytes)
+    };
+    while let Some(dest) = field(&mut stream, MAX_DESTINATION, "destination", ": not a ROS-TCP-Connector frame") {
+        let Some(payload) = field(&mut stream, MAX_PAYLOAD, "payload", "") else { break };
         let dest = String::from_utf8_lossy(&dest).trim_end_matches('\0').to_string();
         if dest.is_empty() {
             continue; // keepalive
@@ -331,29 +327,26 @@ fn serve(mut stream: TcpStream, shared: &Arc<Shared>) {
 /// client subscribes to its topic.
 pub struct UnitySink {
     server: Arc<Server>,
-    names: Vec<Option<String>>,
+    names: crate::topics::ById<String>,
     cdr: crate::log::cdr::CdrWriter,
 }
 
 impl UnitySink {
     /// A sink for `server`.
     pub fn new(server: Arc<Server>) -> UnitySink {
-        UnitySink { server, names: Vec::new(), cdr: crate::log::cdr::CdrWriter::new() }
+        UnitySink { server, names: Default::default(), cdr: crate::log::cdr::CdrWriter::new() }
     }
 }
 
 impl Sink for UnitySink {
     fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
         self.server.add_topic(&topic.name, topic.type_name);
-        if self.names.len() <= id {
-            self.names.resize(id + 1, None);
-        }
-        self.names[id] = Some(topic.name.clone());
+        self.names.set(id, topic.name.clone());
         Ok(true)
     }
 
     fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
-        if let Some(Some(name)) = self.names.get(id)
+        if let Some(name) = self.names.get(id)
             && self.server.is_subscribed(name)
         {
             let bytes = message.to_cdr(&mut self.cdr);

@@ -105,9 +105,6 @@ pub const DERIVED: &[&str] = &[
     "preview_horizon",
 ];
 
-/// What [`Walker::new`]'s reach check says when the legs can't reach the longest step.
-const REACH_REFUSAL: &str = "can't reach a step";
-
 /// How far the reach check may lower the walking CoM below the scaled crouch, in steps of
 /// [`CROUCH_STEP`] of the leg length.
 const CROUCH_STEPS: usize = 8;
@@ -157,7 +154,7 @@ impl WalkOptions {
                     Ok(_) => break,
                     // Lower only while the steps are out of reach (a lower crouch needs more
                     // torque, not less, of actuators too weak to hold it).
-                    Err(Error::Walk { message }) if k < CROUCH_STEPS && message.contains(REACH_REFUSAL) => continue,
+                    Err(Error::WalkReach { .. }) if k < CROUCH_STEPS => continue,
                     Err(e) => return Err(e),
                 }
             }

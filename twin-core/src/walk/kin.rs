@@ -6,9 +6,15 @@
 //! Doing this in the controller, on its own small arrays, keeps it independent of the
 //! simulation's `mjData` (the controller sees only an [`crate::control::Observation`]) and costs
 //! a few microseconds per tick.
+//!
+//! Its sines, cosines and arctangents are the `libm` crate's (musl's port of fdlibm, pure Rust):
+//! glibc's `sincos`/`atan2` set and restore the rounding mode on every call, which was a third of
+//! the whole-tree pass and half of the closed-form IK (BENCHMARKS.md, "Walking controller cost
+//! per tick"). The headings' `sin_cos` stays std's, bit for bit, behind a small memo
+//! ([`kept_sin_cos`]; why, with figures, in the same section).
 
 use crate::error::{Error, Result};
-use crate::mj::{JointType, Model, ObjType};
+use crate::mj::{GeomType, JointType, Model, ObjType};
 use nalgebra::{Matrix3, Matrix6, UnitQuaternion, Vector3, Vector6};
 use std::cell::Cell;
 
@@ -62,8 +68,10 @@ thread_local! {
 }
 
 /// `angle.sin_cos()` bit for bit, the last few angles' kept: the walker takes the sine and
-/// cosine of the same few headings (the footholds', the pelvis's) many times a tick, and the
-/// library's were 2 000 instructions a physics step.
+/// cosine of the same few headings (the footholds', the pelvis's) many times a tick. A kept
+/// angle costs 1.4 ns where std's `sin_cos` costs 16 ns and `libm::sincos` 8 ns (BENCHMARKS.md,
+/// "libm for the walker's trigonometry"); `libm::sincos` would also change the walk's last bits
+/// (it differs from glibc's in 6 % of angles).
 pub fn kept_sin_cos(angle: f64) -> (f64, f64) {
     if !angle.is_finite() {
         return angle.sin_cos();
@@ -101,135 +109,8 @@ pub fn yaw_of(q: &UnitQuaternion<f64>) -> f64 {
 /// `UnitQuaternion::from_scaled_axis` also takes a norm and normalizes (MuJoCo's joint axes are
 /// unit vectors already).
 fn hinge_rotation(axis: &Vector3<f64>, angle: f64) -> UnitQuaternion<f64> {
-    let (s, c) = sin_cos(0.5 * angle);
+    let (s, c) = libm::sincos(0.5 * angle);
     UnitQuaternion::new_unchecked(nalgebra::Quaternion::new(c, axis.x * s, axis.y * s, axis.z * s))
-}
-
-// The polynomial coefficients of `sin_cos` and `atan` below are those of FreeBSD's msun
-// (`k_sin.c`, `k_cos.c`, `s_atan.c`), which carry Sun's fdlibm notice:
-//   Copyright (C) 1993 by Sun Microsystems, Inc. All rights reserved.
-//   Developed at SunPro, a Sun Microsystems, Inc. business.
-//   Permission to use, copy, modify, and distribute this software is freely granted,
-//   provided that this notice is preserved.
-
-/// `(sin x, cos x)` for joint angles, within 1 ulp or so of `f64::sin_cos`: one reduction by
-/// π/2 and the minimax polynomials of FreeBSD's `k_sin.c`/`k_cos.c` (|r| ≤ π/4). The library's
-/// `sin_cos` (rounding-mode guards, large-argument paths) was a third of the whole-tree pass;
-/// arguments beyond ±10⁵ rad (never joint angles) and NaN go to it.
-#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
-fn sin_cos(x: f64) -> (f64, f64) {
-    // π/2 as a 33-bit head (k·head exact for |k| < 2²⁰) and the tail.
-    const PIO2_HEAD: f64 = 1.570_796_326_734_125_614_17e+00;
-    const PIO2_TAIL: f64 = 6.077_100_506_506_192_249_32e-11;
-    const S: [f64; 6] = [
-        -1.666_666_666_666_663_243_48e-01,
-        8.333_333_333_322_489_461_24e-03,
-        -1.984_126_982_985_794_931_34e-04,
-        2.755_731_370_707_006_767_89e-06,
-        -2.505_076_025_340_686_341_95e-08,
-        1.589_690_995_211_550_102_21e-10,
-    ];
-    const C: [f64; 6] = [
-        4.166_666_666_666_660_190_37e-02,
-        -1.388_888_888_887_410_957_49e-03,
-        2.480_158_728_947_672_941_78e-05,
-        -2.755_731_435_139_066_330_35e-07,
-        2.087_572_321_298_174_827_90e-09,
-        -1.135_964_755_778_819_482_65e-11,
-    ];
-    if x.is_nan() || x.abs() > 1e5 {
-        return x.sin_cos();
-    }
-    // Nearest multiple of π/2 (a cast, where `round` is a library call without SSE4.1).
-    let k = (x * std::f64::consts::FRAC_2_PI + 0.5f64.copysign(x)) as i64;
-    let kf = k as f64;
-    let r = (x - kf * PIO2_HEAD) - kf * PIO2_TAIL;
-    let z = r * r;
-    let w = z * z;
-    let sr = S[1] + z * (S[2] + z * S[3]) + z * w * (S[4] + z * S[5]);
-    let sin_r = r + z * r * (S[0] + z * sr);
-    let cr = z * (C[0] + z * (C[1] + z * C[2])) + w * w * (C[3] + z * (C[4] + z * C[5]));
-    let hz = 0.5 * z;
-    let one_minus = 1.0 - hz;
-    let cos_r = one_minus + (((1.0 - one_minus) - hz) + z * cr);
-    match k & 3 {
-        0 => (sin_r, cos_r),
-        1 => (cos_r, -sin_r),
-        2 => (-sin_r, -cos_r),
-        _ => (-cos_r, sin_r),
-    }
-}
-
-/// `atan2(y, x)` within an ulp or two of `f64::atan2`, for the leg IK's angles: FreeBSD's
-/// `s_atan.c` (argument reduction by a table of atan(½), atan(1), atan(3/2), the odd minimax
-/// polynomial) with the quadrant fixed as `e_atan2.c` does. The library's (rounding-mode
-/// guards) took half of the closed-form IK; NaN, zeros and infinities go to it.
-#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
-fn atan2(y: f64, x: f64) -> f64 {
-    use std::f64::consts::PI;
-    const PI_LO: f64 = 1.224_646_799_147_353_207_2e-16;
-    if !(y.is_finite() && x.is_finite()) || x == 0.0 || y == 0.0 {
-        return y.atan2(x);
-    }
-    let t = atan((y / x).abs());
-    match (x > 0.0, y > 0.0) {
-        (true, true) => t,
-        (true, false) => -t,
-        (false, true) => PI - (t - PI_LO),
-        (false, false) => (t - PI_LO) - PI,
-    }
-}
-
-/// `atan(x)` for finite `x ≥ 0` (FreeBSD's `s_atan.c`).
-#[allow(clippy::excessive_precision)] // FreeBSD's constants as published
-fn atan(x: f64) -> f64 {
-    use std::f64::consts::{FRAC_PI_2, FRAC_PI_4};
-    // atan(½), atan(1), atan(3/2), atan(∞): heads and tails.
-    const HI: [f64; 4] = [4.636_476_090_008_060_935_15e-01, FRAC_PI_4, 9.827_937_232_473_290_540_82e-01, FRAC_PI_2];
-    const LO: [f64; 4] = [
-        2.269_877_745_296_168_709_24e-17,
-        3.061_616_997_868_383_017_93e-17,
-        1.390_331_103_123_099_845_16e-17,
-        6.123_233_995_736_766_035_87e-17,
-    ];
-    const AT: [f64; 11] = [
-        3.333_333_333_333_293_180_27e-01,
-        -1.999_999_999_987_648_324_76e-01,
-        1.428_571_427_250_346_637_11e-01,
-        -1.111_111_040_546_235_578_80e-01,
-        9.090_887_133_436_506_561_96e-02,
-        -7.691_876_205_044_829_994_95e-02,
-        6.661_073_137_387_531_206_69e-02,
-        -5.833_570_133_790_573_486_45e-02,
-        4.976_877_994_615_932_360_17e-02,
-        -3.653_157_274_421_691_552_70e-02,
-        1.628_582_011_536_578_236_23e-02,
-    ];
-    if x >= 7.378_697_629_483_820_646_4e19 {
-        return HI[3] + LO[3];
-    }
-    let (id, x) = if x < 0.4375 {
-        if x < 7.450_580_596_923_828_125e-9 {
-            return x;
-        }
-        (None, x)
-    } else if x < 0.6875 {
-        (Some(0), (2.0 * x - 1.0) / (2.0 + x))
-    } else if x < 1.1875 {
-        (Some(1), (x - 1.0) / (x + 1.0))
-    } else if x < 2.4375 {
-        (Some(2), (x - 1.5) / (1.0 + 1.5 * x))
-    } else {
-        (Some(3), -1.0 / x)
-    };
-    let z = x * x;
-    let w = z * z;
-    let s1 = z * (AT[0] + w * (AT[2] + w * (AT[4] + w * (AT[6] + w * (AT[8] + w * AT[10])))));
-    let s2 = w * (AT[1] + w * (AT[3] + w * (AT[5] + w * (AT[7] + w * AT[9]))));
-    match id {
-        None => x - x * (s1 + s2),
-        Some(i) => HI[i] - ((x * (s1 + s2) - LO[i]) - x),
-    }
 }
 
 /// One joint as forward kinematics needs it.
@@ -433,7 +314,7 @@ impl Tree {
                             if JOINTS {
                                 out.axis[j] = rotated_frame_axis(&rot, i) * sign;
                             }
-                            let (s, c) = sin_cos(0.5 * (qpos[a] - jt.qpos0));
+                            let (s, c) = libm::sincos(0.5 * (qpos[a] - jt.qpos0));
                             rot = times_frame_rotation(&rot, i, sign * s, c);
                         } else {
                             if JOINTS {
@@ -834,7 +715,7 @@ impl Body {
                 let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
                 for &k in &soles {
                     // A sphere touches at the point under its centre.
-                    let sphere = model.geom_type()[k] as u32 == mujoco_sys::mjtGeom_mjGEOM_SPHERE;
+                    let sphere = model.geom_kind(k) == GeomType::Sphere;
                     let h = if sphere { [0.0; 2] } else { geom_bottom(model, &frames, k).1 };
                     let c = frames.geom_center(model, k);
                     for a in 0..2 {
@@ -902,9 +783,9 @@ fn geom_bottom(model: &Model, frames: &Frames, g: usize) -> (f64, [f64; 2]) {
     let size = model.geom_size()[g];
     let m: Matrix3<f64> = rot.to_rotation_matrix().into_inner();
     let extent = |row: usize, s: [f64; 3]| (0..3).map(|k| (m[(row, k)] * s[k]).abs()).sum::<f64>();
-    match model.geom_type()[g] as u32 {
-        mujoco_sys::mjtGeom_mjGEOM_BOX => (centre.z - extent(2, size), [extent(0, size), extent(1, size)]),
-        mujoco_sys::mjtGeom_mjGEOM_SPHERE => (centre.z - size[0], [size[0], size[0]]),
+    match model.geom_kind(g) {
+        GeomType::Box => (centre.z - extent(2, size), [extent(0, size), extent(1, size)]),
+        GeomType::Sphere => (centre.z - size[0], [size[0], size[0]]),
         _ => {
             let r = model.geom_rbound()[g];
             (centre.z - r, [r * 0.5, r * 0.5])
@@ -1286,7 +1167,7 @@ impl ClosedForm {
         let e = target.1.into_inner().conjugate() * rot;
         IkResult {
             position_error_m: (target.0 - pos).norm(),
-            rotation_error_rad: 2.0 * atan2(e.imag().norm(), e.w.abs()),
+            rotation_error_rad: 2.0 * libm::atan2(e.imag().norm(), e.w.abs()),
         }
     }
 }
@@ -1349,7 +1230,7 @@ fn subproblem1(axis: &Vector3<f64>, u: &Vector3<f64>, v: &Vector3<f64>) -> Angle
     let (up, vp) = (u - axis * axis.dot(u), v - axis * axis.dot(v));
     let (y, x) = (axis.dot(&up.cross(&vp)), up.dot(&vp));
     let r = (y * y + x * x).sqrt();
-    (atan2(y, x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
+    (libm::atan2(y, x), if r > 0.0 { (y / r, x / r) } else { (0.0, 1.0) })
 }
 
 /// Paden–Kahan subproblem 2 on directions: angles `θ₁`, `θ₂` (with sines and cosines) for
@@ -1374,7 +1255,7 @@ fn subproblem2(
     let gamma2 = (1.0 - alpha * alpha - beta * beta - 2.0 * alpha * beta * w) / n.norm_squared();
     // Rounding leaves a touching solution slightly negative.
     let exact = gamma2 >= -1e-12;
-    let side = if n.dot(&rotate(a2, sin_cos(warm2), &u)) < 0.0 { -1.0 } else { 1.0 };
+    let side = if n.dot(&rotate(a2, libm::sincos(warm2), &u)) < 0.0 { -1.0 } else { 1.0 };
     let z = a1 * alpha + a2 * beta + n * (side * gamma2.max(0.0).sqrt());
     ([subproblem1(a1, &z, &v), subproblem1(a2, &u, &z)], exact)
 }
@@ -1401,7 +1282,7 @@ fn subproblem3(
     let exact = c.abs() <= 1.0 + 1e-12;
     let c = c.clamp(-1.0, 1.0);
     let s = (1.0 - c * c).sqrt();
-    let phi = atan2(s, c);
+    let phi = libm::atan2(s, c);
     let (plus, minus) = (near(theta0 + phi, warm), near(theta0 - phi, warm));
     let solution = if (minus - warm).abs() < (plus - warm).abs() {
         (minus, (s0 * c - c0 * s, c0 * c + s0 * s))
@@ -1636,42 +1517,6 @@ mod tests {
             let sign = if s * ws + c * wc >= 0.0 { 1.0 } else { -1.0 };
             assert!((s - sign * ws).abs() <= 1e-15 && (c - sign * wc).abs() <= 1e-15, "{x}: {s} {c} / {ws} {wc}");
         }
-    }
-
-    #[test]
-    fn sin_cos_matches_the_library() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(9);
-        let quarter = std::f64::consts::FRAC_PI_4;
-        let edges = (-40..=40).flat_map(|k| [-1e-15, 0.0, 1e-15].map(|e| k as f64 * quarter + e));
-        let random = (0..100_000).map(|_| rng.random_range(-20.0..20.0));
-        for x in edges.chain(random).chain([0.0, -0.0, 1e-300, 3e-8, 12345.678, 1e6, -1e6]) {
-            let (s, c) = sin_cos(x);
-            let (ws, wc) = x.sin_cos();
-            assert!((s - ws).abs() <= 2.3e-16 && (c - wc).abs() <= 2.3e-16, "{x}: {s} {c} / {ws} {wc}");
-        }
-        let (s, c) = sin_cos(f64::NAN);
-        assert!(s.is_nan() && c.is_nan());
-    }
-
-    #[test]
-    fn atan2_matches_the_library() {
-        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(10);
-        let special =
-            [0.0, -0.0, 1e-300, -1e-300, 1e-9, 0.4375, 0.6875, 1.1875, 2.4375, 1.0, -1.0, 3.0, 1e20, f64::INFINITY];
-        let pairs =
-            special.iter().flat_map(|&y| special.iter().flat_map(move |&x| [(y, x), (-y, x), (y, -x), (-y, -x)]));
-        let random = (0..100_000).map(|_| {
-            let scale = 10f64.powf(rng.random_range(-3.0..3.0));
-            (rng.random_range(-1.0..1.0) * scale, rng.random_range(-1.0..1.0))
-        });
-        for (y, x) in pairs.chain(random) {
-            let (got, want) = (atan2(y, x), y.atan2(x));
-            assert!(
-                (got - want).abs() <= 4.5e-16 * want.abs().max(1e-300) || got == want,
-                "atan2({y}, {x}): {got} / {want}"
-            );
-        }
-        assert!(atan2(f64::NAN, 1.0).is_nan() && atan2(1.0, f64::NAN).is_nan());
     }
 
     #[test]

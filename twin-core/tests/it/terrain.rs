@@ -216,7 +216,7 @@ fn the_robot_stands_on_a_gazebo_heightmap_at_its_elevation() {
     let robot = twin_core::robot::Robot::load_with(humanoid(), &options).unwrap();
     let model = robot.model.clone();
     let terrain = model.require_id(ObjType::Geom, "terrain_collision").unwrap();
-    assert_eq!(model.geom_type()[terrain] as u32, 1, "an hfield geom"); // mjGEOM_HFIELD
+    assert_eq!(model.geom_kind(terrain), twin_core::mj::GeomType::Hfield, "an hfield geom");
     let mut data = Data::new(model.clone()).unwrap();
     twin_core::control::reset_to_home(&mut data).unwrap();
     let start_z = data.qpos()[2];
