@@ -131,8 +131,30 @@ pub const GROUND_READ_MAX_TILT_RAD: f64 = 0.2;
 /// step; a single step up gives one rise and then none.
 pub const GROUND_SLOPE_AGREEMENT: f64 = 0.5;
 
+/// The ground under the footholds is rising ([`WalkOptions::step_down_reach`]) when the stance
+/// foot's mid-stance read is above that foot's previous one (two reads back) by more than this,
+/// m: the same foot's two reads, so that a foot's own read bias cancels; as the flat ground's
+/// [`GROUND_DEADBAND_M`].
+pub const GROUND_RISE_M: f64 = GROUND_DEADBAND_M;
+
 /// Steepest ground slope the walker carries a landing height on by, rise per metre (tan 19°).
 pub const MAX_GROUND_SLOPE: f64 = 0.35;
+
+/// The soles' pitch ([`WalkOptions::ground_pitch_gain`]) is re-estimated from the planted feet
+/// only when they are at least this far apart along the heading, m (as the footholds' slope,
+/// [`GROUND_SLOPE_MIN_BASE_M`]); closer, it holds its last value. (It dropped to level there
+/// before: after a push on a 5° ramp, stepping nearly in place, the pitch alternated between
+/// 0 and 8–14° step by step.) A longer base (0.1 m) rejects more of the reads' error, but steps
+/// up a 5° ramp are often shorter: the pitch stayed level from the flat, the climb slowed and
+/// the nominal `walk_slope.toml` run fell short (6.09 m of 6.5).
+pub const GROUND_PITCH_MIN_BASE_M: f64 = GROUND_SLOPE_MIN_BASE_M;
+
+/// Time constant of the soles' pitch following its estimate from the planted feet, s (as the
+/// pelvis follows the ground, [`GROUND_FOLLOW_SECS`]): a new estimate at each touchdown turns
+/// the loaded stance sole gradually instead of in one solve (a jump of several degrees under
+/// the body's weight moves the centre of pressure to a heel or a toe at once), and a single
+/// step's error (the 8–14° above, over a 5–9-cm base) moves it by a fraction.
+pub const GROUND_PITCH_FOLLOW_SECS: f64 = GROUND_FOLLOW_SECS;
 
 /// Armature (reflected rotor inertia, kg·m²) the walker's models get on every joint
 /// ([`crate::convert::ConvertOptions::armature`]) unless a scenario sets another: without it the
@@ -309,7 +331,11 @@ pub struct WalkOptions {
     /// toe (default: 0.0, off: on rough ground the two feet's heights are no slope).
     pub ground_pitch_gain: f64,
     /// How far below the stance foot's ground a swinging foot reaches at touchdown, m: steps
-    /// down a slope or a step land instead of ending in the air (default: 0.0).
+    /// down a slope or a step land instead of ending in the air (default: 0.0). Not while the
+    /// ground under the footholds is rising (`stance_ground_read`'s reads,
+    /// [`GROUND_RISE_M`]): there the reach lands every step into the up slope, a leg pushed
+    /// down at touchdown brakes the climb, and the walker climbed a 5° ramp at 0.22 m/s against
+    /// 0.38 commanded, and fell under kicks it survives on the flat.
     pub step_down_reach: f64,
     /// Fraction of the ground's slope along the path by which a swinging foot's landing height
     /// is carried on past the stance foot's ground (`follow_ground`): the ground ahead is taken
@@ -659,6 +685,10 @@ pub struct Walker {
     /// How far the pelvis reference is raised with the ground under the feet, m (their mean
     /// ground height above `sole_z`, low-passed over [`GROUND_FOLLOW_SECS`]).
     ground_ref: f64,
+    /// The soles' pitch with the ground's slope (`ground_pitch_gain`), rad: follows its
+    /// estimate from the planted feet over [`GROUND_PITCH_FOLLOW_SECS`], held while they are
+    /// closer than [`GROUND_PITCH_MIN_BASE_M`] along the heading.
+    ground_pitch: f64,
     /// The last three ground reads of the stance feet (`follow_ground`), oldest first: where
     /// (sole centre, world x y, m) and the ground's height there, m; `None` until read.
     ground_reads: [Option<(Vector2<f64>, f64)>; 3],
@@ -855,6 +885,7 @@ impl Walker {
             sole_z: 0.0,
             ground_z: [0.0; 2],
             ground_ref: 0.0,
+            ground_pitch: 0.0,
             ground_reads: [None; 3],
             ground_read_done: false,
             sole_prev_z: [0.0; 2],
@@ -1556,6 +1587,12 @@ impl Walker {
     /// rise per metre: the mean of the last two steps' slopes when they agree in sign and
     /// within [`GROUND_SLOPE_AGREEMENT`] of the steeper, each step at least
     /// [`GROUND_SLOPE_MIN_BASE_M`] long; 0 otherwise (a single step up, rough ground, flat).
+    /// Whether the ground under the footholds rises: the stance foot's last mid-stance read is
+    /// more than [`GROUND_RISE_M`] above its previous one (false without reads).
+    fn ground_rising(&self) -> bool {
+        matches!(self.ground_reads, [Some((_, z0)), _, Some((_, z2))] if z2 - z0 > GROUND_RISE_M)
+    }
+
     fn ground_slope(&self, along: Vector2<f64>) -> f64 {
         let [Some((p0, z0)), Some((p1, z1)), Some((p2, z2))] = self.ground_reads else { return 0.0 };
         let (d0, d1) = ((p1 - p0).dot(&along), (p2 - p1).dot(&along));
@@ -1608,6 +1645,7 @@ impl Controller for Walker {
         self.pelvis_z = start_ground + self.options.com_height + (pelvis.z - com.z);
         self.ground_z = [self.sole_z; 2];
         self.ground_ref = 0.0;
+        self.ground_pitch = 0.0;
         self.ground_reads = [None; 3];
         self.sole_prev_z = [self.sole_world(&self.frames, 0).z, self.sole_world(&self.frames, 1).z];
         for ik in &self.ik {
@@ -1886,8 +1924,9 @@ impl Controller for Walker {
                 other += o.ground_slope_gain * self.ground_slope(along) * (to.pos - step.stance.pos).dot(&along);
             }
             foot_ground[to.side.index()] = own + (other - own) * blend;
-            if o.step_down_reach > 0.0 {
-                // Late in the swing the foot keeps going down past the stance foot's ground.
+            if o.step_down_reach > 0.0 && !self.ground_rising() {
+                // Late in the swing the foot keeps going down past the stance foot's ground
+                // (not on ground known to rise: there it would push the foot into the slope).
                 foot_ground[to.side.index()] -= o.step_down_reach * blend;
             }
             if s > 0.0 && s < 1.0 {
@@ -1921,17 +1960,19 @@ impl Controller for Walker {
         self.ground_ref += (ground - self.ground_ref) * (self.dt / (self.dt + GROUND_FOLLOW_SECS));
         let pelvis_pos = Vector3::new(com_cmd.x + off.x, com_cmd.y + off.y, pelvis_z + self.ground_ref);
         // The soles pitched with the ground's slope along the heading between the planted feet
-        // (ankles that follow a slope, not stand on a heel).
-        let ground_pitch = {
+        // (ankles that follow a slope, not stand on a heel), re-estimated only over a base long
+        // enough to tell a slope from the reads' errors, and followed gradually.
+        if o.ground_pitch_gain != 0.0 {
             let along = Vector2::new(heading.cos(), heading.sin());
             let (d, dz) =
                 ((self.planted[0].pos - self.planted[1].pos).dot(&along), self.ground_z[0] - self.ground_z[1]);
-            if o.ground_pitch_gain != 0.0 && d.abs() > GROUND_SLOPE_MIN_BASE_M && dz != 0.0 {
-                -o.ground_pitch_gain * (dz / d).atan().clamp(-0.35, 0.35)
-            } else {
-                0.0
+            if d.abs() >= GROUND_PITCH_MIN_BASE_M || dz == 0.0 {
+                let slope = if dz == 0.0 { 0.0 } else { (dz / d).clamp(-MAX_GROUND_SLOPE, MAX_GROUND_SLOPE) };
+                let wanted = -o.ground_pitch_gain * slope.atan();
+                self.ground_pitch += (wanted - self.ground_pitch) * (self.dt / (self.dt + GROUND_PITCH_FOLLOW_SECS));
             }
-        };
+        }
+        let ground_pitch = self.ground_pitch;
 
         // 6. Leg IK, both legs on every solve (the physics steps between solves,
         // `plan_every_ticks`, track the last solution). The measured-pelvis weights move on

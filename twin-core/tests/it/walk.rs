@@ -937,6 +937,13 @@ impl Observer for BaseX {
 /// `walk_slope.toml` nominal, its down ramp's mean forward speed (base from x = 4.2 m to 5.8 m)
 /// and the summary.
 fn down_ramp(edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Option<f64>) {
+    let (summary, speeds) = ramp_speeds(edit, &[(4.2, 5.8)]);
+    (summary, speeds[0])
+}
+
+/// `walk_slope.toml` nominal, the summary and the base's mean forward speed over each span
+/// (from x, to x; m), m/s (`None` where it never got to the span's end).
+fn ramp_speeds(edit: impl FnOnce(&mut Scenario), spans: &[(f64, f64)]) -> (GaitSummary, Vec<Option<f64>>) {
     let mut scenario = Scenario::load(scenarios().join("walk_slope.toml")).unwrap();
     edit(&mut scenario);
     let robot = scenario.robot(&humanoid()).unwrap();
@@ -947,8 +954,29 @@ fn down_ramp(edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Option<f64>) {
     sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut base])
         .unwrap();
     let at = |x: f64| base.0.iter().find(|p| p.1 >= x).map(|p| p.0);
-    let speed = at(4.2).zip(at(5.8)).map(|(a, b)| 1.6 / (b - a));
-    (check.metrics.summary(), speed)
+    let speeds = spans.iter().map(|&(a, b)| at(a).zip(at(b)).map(|(ta, tb)| (b - a) / (tb - ta))).collect();
+    (check.metrics.summary(), speeds)
+}
+
+/// Blind up a 5° ramp (`walk_slope.toml`, the up ramp from x = 1 m to 3 m): the swing foot's
+/// reach below the expected ground (`step_down_reach`, for the down ramp) is left out while the
+/// footholds' mid-stance reads rise (`GROUND_RISE_M`), so landings are not pushed 1.5 cm into
+/// the up slope. The base climbs from x = 1.2 m to 2.8 m at 0.42 m/s (0.38 commanded); with the
+/// reach on every step (before) it climbed at 0.33 m/s, and the walker's DCM stayed behind its
+/// feet (short steps) where kicks then felled it. Down the ramp the reach is still there: 0.40
+/// m/s.
+#[test]
+fn climbs_a_slope_without_reaching_into_it() {
+    let (summary, speeds) = ramp_speeds(|_| {}, &[(1.2, 2.8), (4.2, 5.8)]);
+    println!(
+        "{summary}
+up the ramp: {:?} m/s, down: {:?} m/s",
+        speeds[0], speeds[1]
+    );
+    assert!(!summary.fell && summary.forward_m > 6.5, "{summary}");
+    let (up, down) = (speeds[0].unwrap(), speeds[1].unwrap());
+    assert!((0.37..0.46).contains(&up), "up the ramp at {up} m/s, commanded 0.38 (0.33 reaching into it)");
+    assert!((0.3..0.46).contains(&down), "down the ramp at {down} m/s, commanded 0.38");
 }
 
 /// Blind down a 5° ramp (`walk_slope.toml`): with the ground under each foot read in mid stance
