@@ -550,7 +550,7 @@ impl<'a> Problem<'a> {
                 qd[f.index] = b;
                 qdd[f.index] = c;
             }
-            let tau = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            let tau = self.reg.torques(None, &q, &qd, &qdd, &self.cad, &mut rows)?;
             for (s, &j) in self.selected.iter().enumerate() {
                 let lim = &self.limits[s];
                 let name = &lim.name;
@@ -924,7 +924,7 @@ impl<'a> Problem<'a> {
             for f in &joints {
                 (q[f.index], qd[f.index], qdd[f.index]) = f.sample(omega, t);
             }
-            let tau0 = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            let tau0 = self.reg.torques(None, &q, &qd, &qdd, &self.cad, &mut rows)?;
             for (s, &j) in selected.iter().enumerate() {
                 for (b, rb) in r.iter_mut().enumerate() {
                     *rb = if masks[s][b] { rows[j * ncols + base_cols[b]] } else { 0.0 };
@@ -948,7 +948,7 @@ impl<'a> Problem<'a> {
                     };
                     let kept = *slot;
                     *slot += step;
-                    let tau1 = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows1)?;
+                    let tau1 = self.reg.torques(None, &q, &qd, &qdd, &self.cad, &mut rows1)?;
                     match kind {
                         0 => q[ji] = kept,
                         1 => qd[ji] = kept,
@@ -1061,7 +1061,7 @@ impl<'a> Problem<'a> {
                 let (a, b, c) = f.sample(omega, t);
                 (q[f.index], qd[f.index], qdd[f.index]) = (a, b, c);
             }
-            let tau = self.reg.torques(&q, &qd, &qdd, &self.cad, &mut rows)?;
+            let tau = self.reg.torques(None, &q, &qd, &qdd, &self.cad, &mut rows)?;
             for (s, &j) in self.selected.iter().enumerate() {
                 let lim = &self.limits[s];
                 let u = &mut out[s];

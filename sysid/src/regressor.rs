@@ -324,12 +324,14 @@ impl<'a> Regressor<'a> {
         Ok(())
     }
 
-    /// Generalized forces `Y·π` at one sample (one per row, as [`Regressor::nrows`]), for
-    /// parameters `params` in [`Layout`] order; `base` for a floating base.
+    /// Generalized forces `Y·π` at one sample, for parameters `params` in [`Layout`] order: one
+    /// per row, as [`Regressor::nrows`] (the joint torques first, in joint order, then a
+    /// floating base's 6). `base`: a floating base's state, `None` for the base at its default
+    /// pose, at rest (as [`Regressor::compute`]). `rows` is resized to hold the regressor.
     ///
     /// # Errors
     /// As [`Regressor::compute`].
-    pub fn torques_with(
+    pub fn torques(
         &mut self,
         base: Option<&BaseSample>,
         q: &[f64],
@@ -343,23 +345,5 @@ impl<'a> Regressor<'a> {
         rows.resize(nr * ncols, 0.0);
         self.compute_with(base, q, qd, qdd, rows)?;
         Ok((0..nr).map(|j| rows[j * ncols..(j + 1) * ncols].iter().zip(params).map(|(a, b)| a * b).sum()).collect())
-    }
-
-    /// Joint torques `Y·π` at one sample, for parameters `params` in [`Layout`] order.
-    ///
-    /// # Errors
-    /// As [`Regressor::compute`].
-    pub fn torques(
-        &mut self,
-        q: &[f64],
-        qd: &[f64],
-        qdd: &[f64],
-        params: &[f64],
-        rows: &mut Vec<f64>,
-    ) -> Result<Vec<f64>> {
-        let nj = self.robot.joints.len();
-        let mut t = self.torques_with(None, q, qd, qdd, params, rows)?;
-        t.truncate(nj);
-        Ok(t)
     }
 }

@@ -27,6 +27,7 @@
 
 #![deny(unsafe_code)]
 
+pub mod bounds;
 pub mod check;
 pub mod checks;
 pub mod control;

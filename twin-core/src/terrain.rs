@@ -251,7 +251,7 @@ impl TerrainOptions {
                 ));
             }
         }
-        let positive: [(&'static str, Option<f64>); 14] = [
+        crate::bounds::positive([
             ("width_m", self.width_m),
             ("length_m", self.length_m),
             ("cell_m", self.cell_m),
@@ -266,28 +266,14 @@ impl TerrainOptions {
             ("pit_depth_m", self.pit_depth_m),
             ("density_per_m", self.density_per_m.filter(|d| *d != 0.0)),
             ("height_m", self.height_m),
-        ];
-        for (key, v) in positive {
-            if let Some(v) = v
-                && !(v > 0.0 && v.is_finite())
-            {
-                return Err((key, format!("must be a positive number (got {v})")));
-            }
-        }
-        let non_negative: [(&'static str, Option<f64>); 5] = [
+        ])?;
+        crate::bounds::non_negative([
             ("start_m", self.start_m),
             ("amplitude_m", self.amplitude_m),
             ("rise_m", self.rise_m),
             ("gap_m", self.gap_m),
             ("plateau_m", self.plateau_m),
-        ];
-        for (key, v) in non_negative {
-            if let Some(v) = v
-                && !(v >= 0.0 && v.is_finite())
-            {
-                return Err((key, format!("must be a number ≥ 0 (got {v})")));
-            }
-        }
+        ])?;
         if let Some(d) = self.direction_deg
             && !d.is_finite()
         {

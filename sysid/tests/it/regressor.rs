@@ -72,7 +72,7 @@ fn check_against_inverse_dynamics(urdf: &Path) {
         let q: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 1.5).collect();
         let qd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 3.0).collect();
         let qdd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 10.0).collect();
-        let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
+        let tau = reg.torques(None, &q, &qd, &qdd, &params, &mut rows).unwrap();
         let inverse = joint_inverse_dynamics(&robot, &mut data, &q, &qd, &qdd);
         for (j, (joint, &expected)) in robot.joints.iter().zip(&inverse).enumerate() {
             let err = (tau[j] - expected).abs() / (1.0 + expected.abs());
@@ -122,7 +122,7 @@ fn regressor_on_a_free_base_model_matches_inverse_dynamics_of_the_joints() {
     let mut data = Data::new(model.clone()).unwrap();
     let (q, qd, qdd) = ([0.4, -1.1], [1.3, -0.7], [-2.0, 5.0]);
     let mut rows = Vec::new();
-    let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
+    let tau = reg.torques(None, &q, &qd, &qdd, &params, &mut rows).unwrap();
     let inverse = joint_inverse_dynamics(&robot, &mut data, &q, &qd, &qdd);
     for (j, (joint, &expected)) in robot.joints.iter().zip(&inverse).enumerate() {
         assert!((tau[j] - expected).abs() < 1e-9 * (1.0 + expected.abs()), "{}: {} vs {expected}", joint.name, tau[j]);
@@ -201,7 +201,7 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
         let qacc = data.qacc().to_vec();
         let qdd: Vec<f64> = robot.joints.iter().map(|j| qacc[j.dof]).collect();
         let sample = BaseSample { qpos: base_qpos, qvel: base_qvel, qacc: std::array::from_fn(|k| qacc[fb.dof + k]) };
-        let tau = reg.torques_with(Some(&sample), &q, &qd, &qdd, &params, &mut rows).unwrap();
+        let tau = reg.torques(Some(&sample), &q, &qd, &qdd, &params, &mut rows).unwrap();
         reg.external_forces(&wrenches, &mut ext).unwrap();
         data.inverse().unwrap();
         let dof_of_row = |r: usize| if r < nj { robot.joints[r].dof } else { fb.dof + r - nj };
@@ -260,7 +260,7 @@ fn synthetic_ur5_torques_are_the_inverse_dynamics_of_its_logged_motion() {
         let q: Vec<f64> = (0..nj).map(|j| log.position[j][k]).collect();
         let qd: Vec<f64> = (0..nj).map(|j| log.velocity[j][k]).collect();
         let qdd: Vec<f64> = (0..nj).map(|j| (log.velocity[j][k + 1] - log.velocity[j][k]) / dt).collect();
-        let tau = reg.torques(&q, &qd, &qdd, &params, &mut rows).unwrap();
+        let tau = reg.torques(None, &q, &qd, &qdd, &params, &mut rows).unwrap();
         for (t, effort) in tau.iter().zip(&log.effort) {
             worst = worst.max((t - effort[k]).abs());
             largest = largest.max(effort[k].abs());

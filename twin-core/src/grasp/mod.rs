@@ -150,7 +150,7 @@ impl GraspOptions {
         if !["auto", "left", "right"].contains(&self.arm.as_str()) {
             return Err(("arm", format!("must be auto, left or right (got \"{}\")", self.arm)));
         }
-        let positive: [(&'static str, f64); 13] = [
+        crate::bounds::positive([
             ("lift_height_m", self.lift_height_m),
             ("settle_secs", self.settle_secs),
             ("camera_rate_hz", self.camera_rate_hz),
@@ -164,24 +164,15 @@ impl GraspOptions {
             ("reach_tolerance_m", self.reach_tolerance_m),
             ("open_m", self.open_m),
             ("saturation_error", self.saturation_error),
-        ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err((name, format!("must be a positive number (got {v})")));
-            }
-        }
-        for (name, v) in [
+        ])?;
+        crate::bounds::non_negative([
             ("grip_force_n", self.grip_force_n),
             ("camera_noise_std_m", self.camera_noise_std_m),
             ("pregrasp_distance_m", self.pregrasp_distance_m),
             ("arms_out_rad", self.arms_out_rad),
             ("max_jaw_tilt_rad", self.max_jaw_tilt_rad),
             ("tuck_rad", self.tuck_rad),
-        ] {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err((name, format!("must be a non-negative number (got {v})")));
-            }
-        }
+        ])?;
         if self.detect_frames == 0 {
             return Err(("detect_frames", "must be at least 1".into()));
         }
