@@ -469,11 +469,7 @@ impl WalkOptions {
             ("preview_r", self.preview_r),
             ("damping_ratio", self.damping_ratio),
         ];
-        for (name, v) in positive {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err((name, format!("must be a positive number (got {v})")));
-            }
-        }
+        crate::bounds::positive(positive)?;
         let non_negative: [(&'static str, f64); 21] = [
             ("ground_pitch_gain", self.ground_pitch_gain),
             ("ground_slope_gain", self.ground_slope_gain),
@@ -497,11 +493,7 @@ impl WalkOptions {
             ("swing_stiffness", self.swing_stiffness),
             ("leg_saturation_error", self.leg_saturation_error),
         ];
-        for (name, v) in non_negative {
-            if !(v >= 0.0 && v.is_finite()) {
-                return Err((name, format!("must be a non-negative number (got {v})")));
-            }
-        }
+        crate::bounds::non_negative(non_negative)?;
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
         }
@@ -536,12 +528,10 @@ impl WalkOptions {
         if self.yaw_rate.abs() * self.step_period > self.max_step_yaw + 1e-12 {
             return Err(("yaw_rate", format!("needs turns per step beyond max_step_yaw {} rad", self.max_step_yaw)));
         }
-        for (name, v) in [("max_accel_mps2", self.max_accel_mps2), ("max_yaw_accel_radps2", self.max_yaw_accel_radps2)]
-        {
-            if !(v > 0.0 && v.is_finite()) {
-                return Err((name, format!("must be a positive number (got {v})")));
-            }
-        }
+        crate::bounds::positive([
+            ("max_accel_mps2", self.max_accel_mps2),
+            ("max_yaw_accel_radps2", self.max_yaw_accel_radps2),
+        ])?;
         steer::validate_schedule(&self.commands, &self.command_bounds()).map_err(|m| ("commands", m))?;
         if !(self.recovery_reach_fraction > 0.0 && self.recovery_reach_fraction <= 1.0) {
             return Err((
@@ -566,15 +556,11 @@ impl WalkOptions {
 
     /// The hip strategy's options ([`WalkOptions::validate`]).
     fn validate_hip(&self) -> std::result::Result<(), (&'static str, String)> {
-        if !(self.hip_gain >= 0.0 && self.hip_gain.is_finite()) {
-            return Err(("hip_gain", format!("must be a non-negative number (got {})", self.hip_gain)));
-        }
+        crate::bounds::non_negative([("hip_gain", self.hip_gain)])?;
         if !self.hip_max_lean_rad.iter().all(|m| (0.0..=1.0).contains(m)) {
             return Err(("hip_max_lean_rad", format!("must be in [0, 1] rad (got {:?})", self.hip_max_lean_rad)));
         }
-        if !(self.hip_return_secs > 0.0 && self.hip_return_secs.is_finite()) {
-            return Err(("hip_return_secs", format!("must be a positive number (got {})", self.hip_return_secs)));
-        }
+        crate::bounds::positive([("hip_return_secs", self.hip_return_secs)])?;
         Ok(())
     }
 }
