@@ -1569,16 +1569,16 @@ impl Walker {
 }
 
 impl Walker {
-    /// The ground's slope along `along` (a unit vector) under the last three ground reads,
-    /// rise per metre: the mean of the last two steps' slopes when they agree in sign and
-    /// within [`GROUND_SLOPE_AGREEMENT`] of the steeper, each step at least
-    /// [`GROUND_SLOPE_MIN_BASE_M`] long; 0 otherwise (a single step up, rough ground, flat).
     /// Whether the ground under the footholds rises: the stance foot's last mid-stance read is
     /// more than [`GROUND_RISE_M`] above its previous one (false without reads).
     fn ground_rising(&self) -> bool {
         matches!(self.ground_reads, [Some((_, z0)), _, Some((_, z2))] if z2 - z0 > GROUND_RISE_M)
     }
 
+    /// The ground's slope along `along` (a unit vector) under the last three ground reads,
+    /// rise per metre: the mean of the last two steps' slopes when they agree in sign and
+    /// within [`GROUND_SLOPE_AGREEMENT`] of the steeper, each step at least
+    /// [`GROUND_SLOPE_MIN_BASE_M`] long; 0 otherwise (a single step up, rough ground, flat).
     fn ground_slope(&self, along: Vector2<f64>) -> f64 {
         let [Some((p0, z0)), Some((p1, z1)), Some((p2, z2))] = self.ground_reads else { return 0.0 };
         let (d0, d1) = ((p1 - p0).dot(&along), (p2 - p1).dot(&along));
@@ -1633,6 +1633,8 @@ impl Controller for Walker {
         self.ground_ref = 0.0;
         self.ground_pitch = 0.0;
         self.ground_reads = [None; 3];
+        self.ground_read_done = false;
+        self.sole_still_secs = [0.0; 2];
         self.sole_prev_z = [self.sole_world(&self.frames, 0).z, self.sole_world(&self.frames, 1).z];
         for ik in &self.ik {
             for k in 0..ik.len() {
@@ -1877,8 +1879,9 @@ impl Controller for Walker {
                 && (GROUND_READ_PHASE[0]..GROUND_READ_PHASE[1]).contains(&s)
             {
                 // In single support the weight is on the stance foot, so it is on the ground:
-                // its sole's height is the ground under it (re-read on every solve, so that a
-                // foot that landed in the air, or before its ground, is corrected once loaded).
+                // its sole's height is the ground under it (read once a step, in mid stance, so
+                // that a foot that landed in the air, or before its ground, is corrected once
+                // loaded).
                 // A sole tilted beyond any slope the walker follows stands on an edge or a heel:
                 // its height is no ground (the landing's read stays).
                 let stance = step.stance.side.index();
