@@ -1000,3 +1000,116 @@ fn walks_down_a_slope_at_its_commanded_pace() {
     println!("touchdown reads alone: {before}\ndown the ramp: {speed:?} m/s");
     assert!(before.fell || speed.is_some_and(|v| v > 0.5), "{before}; {speed:?} m/s");
 }
+
+/// When each foot's contact with the ground (the world body) starts after at least 0.05 s off
+/// it, from MuJoCo's contacts: the landings as the physics has them, to hold the walker's
+/// (read from its sole's motion, no contact access) against.
+struct FootContacts {
+    /// Foot index per geom (−1: not a foot's).
+    geom_foot: Vec<i32>,
+    air_secs: [f64; 2],
+    /// (time, foot) of each contact start.
+    starts: Vec<(f64, usize)>,
+}
+
+impl FootContacts {
+    fn new(model: &twin_core::mj::Model, feet: [usize; 2]) -> FootContacts {
+        let geom_foot = (0..model.ngeom())
+            .map(|g| {
+                let body = model.geom_bodyid()[g] as usize;
+                feet.iter().position(|&f| model.in_subtree(f, body)).map_or(-1, |k| k as i32)
+            })
+            .collect();
+        FootContacts { geom_foot, air_secs: [0.0; 2], starts: Vec::new() }
+    }
+}
+
+impl Observer for FootContacts {
+    fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
+        let model = step.data.model();
+        let mut now = [false; 2];
+        for [g1, g2] in step.data.contact_geoms() {
+            for (a, b) in [(g1, g2), (g2, g1)] {
+                if a >= 0 && b >= 0 && self.geom_foot[a as usize] >= 0 && model.geom_bodyid()[b as usize] == 0 {
+                    now[self.geom_foot[a as usize] as usize] = true;
+                }
+            }
+        }
+        for k in 0..2 {
+            if now[k] {
+                if self.air_secs[k] >= 0.05 {
+                    self.starts.push((step.sim_secs, k));
+                }
+                self.air_secs[k] = 0.0;
+            } else {
+                self.air_secs[k] += step.dt_secs;
+            }
+        }
+        Ok(Flow::Continue)
+    }
+}
+
+/// `walk_steps.toml` with the robot seated on the 3-cm platform (`start_m = 0`), which ends
+/// 1.5 m ahead: a step down, 8 s, `touchdown_from_contact` as given, nominal. The summary, the
+/// walker's touch-downs and the feet's contact starts.
+fn step_down_touchdowns(from_contact: bool) -> (GaitSummary, Vec<twin_core::walk::TouchdownEvent>, Vec<(f64, usize)>) {
+    let mut scenario = Scenario::load(scenarios().join("walk_steps.toml")).unwrap();
+    scenario.walk.touchdown_from_contact = from_contact;
+    scenario.duration_secs = 8.0;
+    let terrain = scenario.terrain.as_mut().unwrap();
+    terrain.start_m = Some(0.0);
+    terrain.depth_m = Some(1.5);
+    let robot = scenario.robot(&humanoid()).unwrap();
+    let mut walker = Walker::new(&robot.model, scenario.walk.clone()).unwrap();
+    let mut check = scenario.check(&robot.model).unwrap();
+    let mut contacts = FootContacts::new(&robot.model, walker.feet().0);
+    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
+    sim::simulate_with(&robot, &mut walker, &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut contacts])
+        .unwrap();
+    (check.metrics.summary(), walker.state().touchdowns.clone(), contacts.starts)
+}
+
+/// Touch-down from contact, blind, on a step down (3 cm at x = 1.5 m, [`step_down_touchdowns`]): the
+/// first foot to land past the edge is late (the ground 3 cm below the platform the swing was
+/// planned from); the walker holds the step open and lowers the foot until it lands, read
+/// from the sole's motion. The landing the walker logs is within 30 ms after MuJoCo's contact
+/// start of that foot (the detector waits 10 ms of a still sole, solving every 6 ms), after
+/// the planned touch-down, and its height is the ground's (0) within 5 mm; landings on the
+/// platform are at its 3 cm within 5 mm. With touch-down at the planned time (before), that
+/// foot was still above the ground when its step ended.
+#[test]
+fn swing_ends_at_contact_on_a_step_down() {
+    let (summary, events, starts) = step_down_touchdowns(true);
+    println!("{summary}");
+    for e in &events {
+        println!("{e:?}");
+    }
+    assert!(!summary.fell && summary.forward_m > 2.0, "{summary}");
+    // The sole's half length and a margin: a foot wholly past the down edge (x = 1.5 m).
+    let past_edge = |e: &&twin_core::walk::TouchdownEvent| e.sole_world_m[0] > 1.5 + 0.15;
+    let down = *events.iter().find(past_edge).expect("a landing past the step down");
+    let contact = starts
+        .iter()
+        .filter(|&&(t, leg)| leg == down.leg && t <= down.time_secs + 0.002)
+        .map(|&(t, _)| t)
+        .next_back()
+        .expect("a contact start of that foot");
+    println!("step down: {down:?}; MuJoCo contact start {contact:.3} s");
+    assert!(down.from_contact, "{down:?}");
+    assert!(down.time_secs > down.planned_secs, "a late landing: {down:?}");
+    assert!(
+        (0.0..=0.03).contains(&(down.time_secs - contact)),
+        "ended {:.3} s after contact",
+        down.time_secs - contact
+    );
+    assert!(down.sole_world_m[2].abs() <= 0.005, "landed at z = {:.4} m on ground at 0", down.sole_world_m[2]);
+    let on_platform: Vec<_> = events.iter().filter(|e| (0.15..1.5 - 0.15).contains(&e.sole_world_m[0])).collect();
+    assert!(on_platform.len() >= 4, "{on_platform:?}");
+    for e in &on_platform {
+        assert!(e.from_contact && (e.sole_world_m[2] - 0.03).abs() <= 0.005, "on the 3-cm platform: {e:?}");
+    }
+    let (_, before, _) = step_down_touchdowns(false);
+    let down = *before.iter().find(past_edge).expect("a landing past the step down");
+    println!("planned touch-down: {down:?}");
+    assert!(down.sole_world_m[2] > 0.01, "at the planned time the foot was on the ground already: {down:?}");
+}
