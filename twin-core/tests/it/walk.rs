@@ -1069,14 +1069,15 @@ fn step_down_touchdowns(from_contact: bool) -> (GaitSummary, Vec<twin_core::walk
     (check.metrics.summary(), walker.state().touchdowns.clone(), contacts.starts)
 }
 
-/// Touch-down from contact, blind, on a step down (3 cm at x = 1.5 m, [`step_down_touchdowns`]): the
-/// first foot to land past the edge is late (the ground 3 cm below the platform the swing was
-/// planned from); the walker holds the step open and lowers the foot until it lands, read
-/// from the sole's motion. The landing the walker logs is within 30 ms after MuJoCo's contact
-/// start of that foot (the detector waits 10 ms of a still sole, solving every 6 ms), after
-/// the planned touch-down, and its height is the ground's (0) within 5 mm; landings on the
-/// platform are at its 3 cm within 5 mm. With touch-down at the planned time (before), that
-/// foot was still above the ground when its step ended.
+/// Touch-down from contact, blind, on a step down (3 cm at x = 1.5 m, [`step_down_touchdowns`]):
+/// the first foot to land past the edge is late (the ground 3 cm below the platform its swing
+/// was planned on); its step ends on time and its target goes on down through the next double
+/// support until the foot lands, read from the sole's motion (no contact access). The landing
+/// the walker logs is within 30 ms after MuJoCo's contact start of that foot (the detector
+/// waits 10 ms of a still sole, solving every 6 ms), after the planned touch-down, and at the
+/// ground's height (0) within 5 mm; landings on the platform are at its 3 cm within 5 mm.
+/// With touch-down at the planned time (before), that foot was more than 1 cm above the ground
+/// when its step ended, and that height was taken as the ground under it.
 #[test]
 fn swing_ends_at_contact_on_a_step_down() {
     let (summary, events, starts) = step_down_touchdowns(true);
