@@ -133,7 +133,8 @@ fn main() {
         // Compare where neither is clipped by the near plane (mj_multiRay has none).
         let mut differ = 0;
         for (i, h) in hits.iter().enumerate() {
-            let mj = h.map(|h| h.dist_m * scale[i]).filter(|z| *z >= opts.ray.min_range_m && *z <= opts.ray.max_range_m);
+            let mj =
+                h.map(|h| h.dist_m * scale[i]).filter(|z| *z >= opts.ray.min_range_m && *z <= opts.ray.max_range_m);
             let ours = frame.depth_m[i];
             let same = match mj {
                 Some(z) => (f64::from(ours) - z).abs() < 1e-4,
@@ -142,8 +143,11 @@ fn main() {
             differ += usize::from(!same);
         }
         // mj_multiRay has no near clip: from inside the head it sees the head.
-        let differ =
-            if opts.ray.min_range_m > 0.1 { "n/a (no near clip in mj_multiRay)".to_string() } else { differ.to_string() };
+        let differ = if opts.ray.min_range_m > 0.1 {
+            "n/a (no near clip in mj_multiRay)".to_string()
+        } else {
+            differ.to_string()
+        };
         let st = one.last_ray_stats();
         println!(
             "| {label} | {wall1:.2} / {cpu1:.2} | {wall_all:.2} | {valid} of {} | {:.1} ({mj_frames}) | {differ} | {:.2} / {:.2} |",
