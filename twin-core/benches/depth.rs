@@ -79,20 +79,13 @@ fn main() {
             },
         ),
     ] {
-        let mut one = DepthCamera::new(
-            &model,
-            cam,
-            DepthCameraOptions { ray: RayOptions { threads: 1, ..opts.ray.clone() }, ..opts.clone() },
-        )
-        .unwrap();
+        let on_threads = |threads| {
+            let ray = RayOptions { threads, ..opts.ray.clone() };
+            DepthCamera::new(&model, cam, DepthCameraOptions { ray, ..opts.clone() }).unwrap()
+        };
+        let mut one = on_threads(1);
         let (wall1, cpu1, valid) = time_camera(&model, &data, &mut one, frames);
-        let mut all = DepthCamera::new(
-            &model,
-            cam,
-            DepthCameraOptions { ray: RayOptions { threads: 0, ..opts.ray.clone() }, ..opts.clone() },
-        )
-        .unwrap();
-        let (wall_all, _, _) = time_camera(&model, &data, &mut all, frames);
+        let (wall_all, _, _) = time_camera(&model, &data, &mut on_threads(0), frames);
 
         // The same rays through mj_multiRay: unit directions in the world from the frame's
         // optical pose; depth = distance × the ray's optical z.

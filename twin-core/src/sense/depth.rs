@@ -545,27 +545,15 @@ mod tests {
     fn range_limits_noise_and_threads() {
         let (model, data) = setup(BOX_SCENE);
         let base = DepthCameraOptions { width: 32, height: 24, ..DepthCameraOptions::default() };
+        // The base image with other ray options.
+        let camera = |ray: RayOptions| DepthCamera::new(&model, "down", DepthCameraOptions { ray, ..base.clone() });
         // Beyond max range: NaN.
-        let far = DepthCamera::new(
-            &model,
-            "down",
-            DepthCameraOptions { ray: RayOptions { max_range_m: 0.9, ..base.ray.clone() }, ..base.clone() },
-        )
-        .unwrap()
-        .render(&model, &data)
-        .unwrap();
+        let far = camera(RayOptions { max_range_m: 0.9, ..base.ray.clone() }).unwrap().render(&model, &data).unwrap();
         assert!(far.depth_at(0, 0).is_nan());
         assert!((far.depth_at(16, 12) - 0.8).abs() < 1e-6);
         // Nearer than the near clip: the cube's top (depth 0.8) is clipped, the floor behind it
         // seen.
-        let near = DepthCamera::new(
-            &model,
-            "down",
-            DepthCameraOptions { ray: RayOptions { min_range_m: 0.9, ..base.ray.clone() }, ..base.clone() },
-        )
-        .unwrap()
-        .render(&model, &data)
-        .unwrap();
+        let near = camera(RayOptions { min_range_m: 0.9, ..base.ray.clone() }).unwrap().render(&model, &data).unwrap();
         assert!((near.depth_at(16, 12) - 1.0).abs() < 1e-6 && (near.depth_at(0, 0) - 1.0).abs() < 1e-6);
         // Noise: seeded, about the asked deviation, independent of the thread count.
         let noisy = |threads| {
@@ -600,12 +588,7 @@ mod tests {
         let std = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len() as f64).sqrt();
         assert!((std - 0.01).abs() < 0.0005, "noise std {std}");
         // Bad options are refused with the camera's name.
-        let err = DepthCamera::new(
-            &model,
-            "down",
-            DepthCameraOptions { ray: RayOptions { min_range_m: 20.0, ..base.ray.clone() }, ..base.clone() },
-        )
-        .unwrap_err();
+        let err = camera(RayOptions { min_range_m: 20.0, ..base.ray.clone() }).unwrap_err();
         assert!(err.to_string().contains("\"down\""), "{err}");
         assert!(DepthCamera::new(&model, "nope", base).unwrap_err().to_string().contains("camera named \"nope\""));
     }
