@@ -750,6 +750,21 @@ struct Held {
     pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
 }
 
+/// The home pose and the crouch from it that the strength and reach checks start from
+/// ([`Walker::home_crouch`]).
+struct HomeCrouch {
+    /// The home pose, `qpos`.
+    qpos: Vec<f64>,
+    /// Its frames.
+    frames: Frames,
+    /// Its CoM, world, m.
+    com: Vector3<f64>,
+    /// Its pelvis position, world, m.
+    pelvis_pos: Vector3<f64>,
+    /// The pelvis height that puts the CoM at `com_height`, world z, m.
+    pelvis_z: f64,
+}
+
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
 /// end DCM ([`Step::dcm`]), fixed when the step starts from the nominal plan of then
 /// ([`Schedule::first_end_dcm`]). Landing-spot corrections during the step do not move it, so
@@ -1027,16 +1042,12 @@ impl Walker {
     /// times its gear). Walking needs more (a whole leg's share in single support, the ankles'
     /// ZMP work); a robot that can't hold the crouch falls before its first step.
     fn check_strength(&self, model: &Model) -> Result<()> {
-        let (home, frames, _, pelvis_pos, pelvis_z) = self.home_crouch();
+        let HomeCrouch { qpos: home, frames, pelvis_pos, pelvis_z, .. } = self.home_crouch();
         let mut q = home.clone();
         for (leg, ik) in self.ik.iter().enumerate() {
             let sole = self.sole_world(&frames, leg);
-            let rot = self.body.legs[leg].foot_rot_home;
-            let foot = sole - rot * self.body.legs[leg].sole_in_foot;
-            let target = (foot - Vector3::new(pelvis_pos.x, pelvis_pos.y, pelvis_z), rot);
-            let mut ql: Vec<f64> = (0..ik.len()).map(|k| home[ik.qpos_adr(k)]).collect();
-            ik.bend_knee(&mut ql, 0.5);
-            ik.solve(target, &mut ql, 200, 1e-3);
+            let pelvis = Vector3::new(pelvis_pos.x, pelvis_pos.y, pelvis_z);
+            let (ql, _) = self.crouched_leg(leg, &home, sole, pelvis);
             for (k, v) in ql.iter().enumerate() {
                 q[ik.qpos_adr(k)] = *v;
             }
@@ -1071,23 +1082,42 @@ impl Walker {
         Ok(())
     }
 
-    /// The home pose, its frames, its CoM and pelvis position, and the pelvis height that puts
-    /// the CoM at `com_height` (what the strength and reach checks start from).
-    fn home_crouch(&self) -> (Vec<f64>, Frames, Vector3<f64>, Vector3<f64>, f64) {
-        let home = self.nominal.clone();
+    /// The home pose and the pelvis height that puts the CoM at `com_height` (what the
+    /// strength and reach checks start from).
+    fn home_crouch(&self) -> HomeCrouch {
+        let qpos = self.nominal.clone();
         let mut frames = self.tree.frames();
-        self.tree.forward(&home, &mut frames);
+        self.tree.forward(&qpos, &mut frames);
         let com = frames.com();
         let pelvis_pos = frames.xpos[self.body.pelvis];
         let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
-        (home, frames, com, pelvis_pos, pelvis_z)
+        HomeCrouch { qpos, frames, com, pelvis_pos, pelvis_z }
+    }
+
+    /// Leg `leg`'s angles (from the home pose `home`, knee bent) that put its sole centre at
+    /// `sole` (world, m) in the home foot orientation with the pelvis at `pelvis` (world, m,
+    /// home orientation), and the IK's remaining error.
+    fn crouched_leg(
+        &self,
+        leg: usize,
+        home: &[f64],
+        sole: Vector3<f64>,
+        pelvis: Vector3<f64>,
+    ) -> (Vec<f64>, kin::IkResult) {
+        let ik = &self.ik[leg];
+        let rot = self.body.legs[leg].foot_rot_home;
+        let foot = sole - rot * self.body.legs[leg].sole_in_foot;
+        let mut q: Vec<f64> = (0..ik.len()).map(|k| home[ik.qpos_adr(k)]).collect();
+        ik.bend_knee(&mut q, 0.5);
+        let error = ik.solve((foot - pelvis, rot), &mut q, 200, 1e-3);
+        (q, error)
     }
 
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
     /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
     /// wide), both legs' IK must converge.
     fn check_reach(&self) -> Result<()> {
-        let (home, frames, com, pelvis_pos, pelvis_z) = self.home_crouch();
+        let HomeCrouch { qpos: home, frames, com, pelvis_pos, pelvis_z } = self.home_crouch();
         let sole_z = self.sole_world(&frames, 0).z;
         let o = &self.options;
         let half_len = o.max_step_length / 2.0;
@@ -1098,12 +1128,7 @@ impl Walker {
                 let x = if leg == front { half_len } else { -half_len };
                 let y = self.body.legs[leg].side.sign() * half_width;
                 let sole = Vector3::new(com.x + x, com.y + y, sole_z);
-                let rot = self.body.legs[leg].foot_rot_home;
-                let foot = sole - rot * self.body.legs[leg].sole_in_foot;
-                let target = (foot - Vector3::new(com.x + offset_x, com.y, pelvis_z), rot);
-                let mut q: Vec<f64> = (0..self.ik[leg].len()).map(|k| home[self.ik[leg].qpos_adr(k)]).collect();
-                self.ik[leg].bend_knee(&mut q, 0.5);
-                let r = self.ik[leg].solve(target, &mut q, 200, 1e-3);
+                let (_, r) = self.crouched_leg(leg, &home, sole, Vector3::new(com.x + offset_x, com.y, pelvis_z));
                 if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
                     return Err(Error::WalkReach {
                         message: format!(
