@@ -271,18 +271,15 @@ pub struct WalkOptions {
     pub swing_stiffness: f64,
     /// Damped-least-squares iterations of the leg IK per tick, warm-started from the last
     /// tick's solution (default: 1: the targets move by millimetres per tick and the residual
-    /// is taken up at the next one; randomized `stand.toml`/`walk.toml` on 2 × 200 episodes
-    /// each: 352 and 124 successes with 1, 353 and 121 with 2).
+    /// is taken up at the next one; measurements in BENCHMARKS.md, "Walker option choices").
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
     pub bodies: BodyNames,
     /// Part of a recovery step's swing by which the foot is over its landing spot (it comes
     /// down there for the rest); the spot follows the predicted capture point for the first
-    /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move came
-    /// in its middle, fast enough to saturate the hip roll, and sideways steps landed 0.2 to
-    /// 0.3 m short; randomized `stand.toml`, 2 × 200 episodes (seeds 0 and 11): 183 + 182
-    /// successes with 1.0 (adjusted until 0.7), 190 + 190 with 0.6, 191 + 186 with 0.7,
-    /// 187 + 178 with 0.5.
+    /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move comes
+    /// in its middle, fast enough to saturate the hip roll, and sideways steps land short
+    /// (measurements in BENCHMARKS.md, "Walker option choices").
     pub recovery_reach_fraction: f64,
     /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
     /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
@@ -293,11 +290,8 @@ pub struct WalkOptions {
     /// the commanded pelvis, the stance leg's give (its joints' PD error, a stance foot
     /// turning on its contacts) moves the landing spot with the body: a body tilted by a push
     /// carries the swing foot into the ground short of its spot, and on a robot with compliant
-    /// legs every landing lands off by the stance leg's error. The lab, `twin sim ROBOT
-    /// --controller walk --vx 0.25 --duration 30`: Unitree G1 (example-robot-data) fell at
-    /// 3.4 s after 0.56 m from the commanded pelvis, walked 8.4 m without a fall from the
-    /// measured one; the shipped humanoid 8.16 m and 8.64 m. `stand.toml`'s recovery steps keep
-    /// `false` (its randomized results were tuned with it).
+    /// legs every landing lands off by the stance leg's error (measurements in BENCHMARKS.md,
+    /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     pub swing_from_measured_pelvis: bool,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
@@ -314,9 +308,8 @@ pub struct WalkOptions {
     /// runs on every step toward the last solve's targets, with its feed-forward and gains,
     /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
     /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`])
-    /// (default: 1, every step; at 2 the walker costs a third less: the randomized `walk.toml`
-    /// passed 182 and 188 of 200 on seeds 0 and 11 against 186 and 187 solving every step,
-    /// and 163 on seed 0 with the targets held between solves).
+    /// (default: 1, every step; at 2 the walker costs a third less: measurements in
+    /// BENCHMARKS.md, "Walker option choices").
     pub plan_every_ticks: u64,
     /// Blind walking on uneven ground: each landed sole's height is the ground under that foot
     /// (unless within [`GROUND_DEADBAND_M`] of the start, flat ground), a swinging foot goes
