@@ -75,7 +75,6 @@ fn main() {
                 height: 480,
                 hfov_rad: Some(std::f64::consts::FRAC_PI_3),
                 ray: RayOptions { min_range_m: near, max_range_m: far, ..DepthCameraOptions::default().ray },
-                ..Default::default()
             },
         ),
     ] {
