@@ -139,10 +139,10 @@ impl ContactSensing {
     /// Tracks each sole's motion: call once per solve with the soles' heights (m) and the
     /// solve period `dt_secs`.
     pub fn update(&mut self, sole_z: [f64; 2], dt_secs: f64) {
-        for leg in 0..2 {
-            let moved = self.prev_z[leg].is_none_or(|p| (sole_z[leg] - p).abs() > TOUCHDOWN_STILL_MPS * dt_secs);
-            self.still_secs[leg] = if moved { 0.0 } else { self.still_secs[leg] + dt_secs };
-            self.prev_z[leg] = Some(sole_z[leg]);
+        for ((z, prev), still) in sole_z.iter().zip(&mut self.prev_z).zip(&mut self.still_secs) {
+            let moved = prev.is_none_or(|p| (z - p).abs() > TOUCHDOWN_STILL_MPS * dt_secs);
+            *still = if moved { 0.0 } else { *still + dt_secs };
+            *prev = Some(*z);
         }
     }
 

@@ -1035,14 +1035,14 @@ impl Observer for FootContacts {
                 }
             }
         }
-        for k in 0..2 {
-            if now[k] {
-                if self.air_secs[k] >= 0.05 {
+        for (k, (&on, air)) in now.iter().zip(&mut self.air_secs).enumerate() {
+            if on {
+                if *air >= 0.05 {
                     self.starts.push((step.sim_secs, k));
                 }
-                self.air_secs[k] = 0.0;
+                *air = 0.0;
             } else {
-                self.air_secs[k] += step.dt_secs;
+                *air += step.dt_secs;
             }
         }
         Ok(Flow::Continue)
