@@ -37,7 +37,7 @@ pub const KINDS: [&str; 7] = ["flat", "rough", "slope", "steps", "stairs", "obst
 #[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize, smart_default::SmartDefault)]
 #[serde(deny_unknown_fields)]
 pub struct TerrainOptions {
-    /// One of [`KINDS`].
+    /// One of [`KINDS`]; a scenario's table must name it (`TerrainOptions::default()`: `flat`).
     #[default("flat")]
     pub kind: String,
     /// From flat (0) to the parameters as written (1) (default: 1).
