@@ -568,6 +568,26 @@ pub struct Body {
     pub imu: Option<Imu>,
 }
 
+impl Leg {
+    /// Height of the sole's lowest corner for the foot at `foot_pos`, `foot_rot` in the pelvis
+    /// frame, in a frame whose rotation from the pelvis frame's is `world_from_pelvis`'s
+    /// inverse `pelvis_from_world`: world height up to the pelvis's height, m.
+    pub fn lowest_sole_corner(
+        &self,
+        foot_pos: &Vector3<f64>,
+        foot_rot: &UnitQuaternion<f64>,
+        pelvis_from_world: UnitQuaternion<f64>,
+    ) -> f64 {
+        let world_from_pelvis = pelvis_from_world.inverse();
+        let mut lowest = f64::INFINITY;
+        for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
+            let corner = self.sole_in_foot + Vector3::new(sx * self.sole_half[0], sy * self.sole_half[1], 0.0);
+            lowest = lowest.min((world_from_pelvis * (foot_pos + foot_rot * corner)).z);
+        }
+        lowest
+    }
+}
+
 /// IMU sensors the walker reads.
 #[derive(Debug, Clone)]
 pub struct Imu {
@@ -577,7 +597,8 @@ pub struct Imu {
     pub quat_adr: Option<usize>,
     /// Address of the angular velocity (site frame, rad/s) in `sensordata`.
     pub gyro_adr: usize,
-    /// Orientation of the IMU site in the frame of the body it is on.
+    /// Orientation of the IMU site in the pelvis frame, home pose (the site's own orientation
+    /// in the body it is on, turned by that body's orientation relative to the pelvis).
     pub site_rot: UnitQuaternion<f64>,
 }
 
@@ -755,7 +776,9 @@ impl Body {
             name: format!("{}_gyro", i.meta.name),
             quat_adr: i.quat_adr,
             gyro_adr: i.gyro_adr,
-            site_rot: quat(i.body_from_imu.1),
+            // The site's orientation in the pelvis frame at home: an IMU on a child body
+            // of the pelvis (Talos's `imu_link`, turned half a turn) reads that body's turn too.
+            site_rot: pelvis_rot.inverse() * frames.xrot[i.body] * quat(i.body_from_imu.1),
         });
         Ok(Body {
             pelvis,
