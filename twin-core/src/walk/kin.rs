@@ -568,26 +568,6 @@ pub struct Body {
     pub imu: Option<Imu>,
 }
 
-impl Leg {
-    /// Height of the sole's lowest corner for the foot at `foot_pos`, `foot_rot` in the pelvis
-    /// frame, in a frame whose rotation from the pelvis frame's is `world_from_pelvis`'s
-    /// inverse `pelvis_from_world`: world height up to the pelvis's height, m.
-    pub fn lowest_sole_corner(
-        &self,
-        foot_pos: &Vector3<f64>,
-        foot_rot: &UnitQuaternion<f64>,
-        pelvis_from_world: UnitQuaternion<f64>,
-    ) -> f64 {
-        let world_from_pelvis = pelvis_from_world.inverse();
-        let mut lowest = f64::INFINITY;
-        for (sx, sy) in [(1.0, 1.0), (1.0, -1.0), (-1.0, 1.0), (-1.0, -1.0)] {
-            let corner = self.sole_in_foot + Vector3::new(sx * self.sole_half[0], sy * self.sole_half[1], 0.0);
-            lowest = lowest.min((world_from_pelvis * (foot_pos + foot_rot * corner)).z);
-        }
-        lowest
-    }
-}
-
 /// IMU sensors the walker reads.
 #[derive(Debug, Clone)]
 pub struct Imu {
