@@ -62,11 +62,18 @@ fn run(wrench_links: &[&str], train_secs: f64) -> Outcome {
         wrench_links: wrench_links.iter().map(|s| s.to_string()).collect(),
         ..Default::default()
     };
-    let train =
-        simulate_floating(&truth, &SynthOptions { duration_secs: train_secs, seed: train_seed, ..Default::default() }, &fopts)
-            .unwrap();
-    let held_out =
-        simulate_floating(&truth, &SynthOptions { duration_secs: 8.0, seed: held_out_seed, ..Default::default() }, &fopts).unwrap();
+    let train = simulate_floating(
+        &truth,
+        &SynthOptions { duration_secs: train_secs, seed: train_seed, ..Default::default() },
+        &fopts,
+    )
+    .unwrap();
+    let held_out = simulate_floating(
+        &truth,
+        &SynthOptions { duration_secs: 8.0, seed: held_out_seed, ..Default::default() },
+        &fopts,
+    )
+    .unwrap();
     // The base really moves: momentum conservation (and the wrenches) swing the pelvis.
     let base = train.base.as_ref().unwrap();
     let travel = base.position.iter().map(|p| (p[0].powi(2) + p[1].powi(2) + p[2].powi(2)).sqrt()).fold(0.0, f64::max);
