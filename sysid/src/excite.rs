@@ -1252,9 +1252,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     if opts.samples < 10 || opts.random_candidates == 0 {
         return Err(option_error("samples", "at least 10 grid samples and 1 random candidate".into()));
     }
-    let twin = crate::model::load_urdf_robot(urdf, opts.self_collision)?;
+    let source = crate::model::UrdfSource::read(urdf)?;
+    let twin = source.robot("", false, opts.self_collision)?;
     let model: Arc<twin_core::mj::Model> = twin.model.clone();
-    let robot = RobotModel::from_model(urdf, model.clone())?;
+    let robot = RobotModel::of_urdf(&source, model.clone(), false)?;
     let nj = robot.joints.len();
     let selected: Vec<usize> = if opts.joints.is_empty() {
         (0..nj).collect()

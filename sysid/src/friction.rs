@@ -913,8 +913,9 @@ impl Default for SweepOptions {
 pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptions) -> Result<JointLog> {
     use crate::rng::Rng;
     use std::f64::consts::PI;
-    let model = std::sync::Arc::new(crate::model::load_urdf_in_mujoco(urdf, "")?);
-    let robot = crate::model::RobotModel::from_model(urdf, model.clone())?;
+    let source = crate::model::UrdfSource::read(urdf)?;
+    let model = std::sync::Arc::new(source.model("", false)?);
+    let robot = crate::model::RobotModel::of_urdf(&source, model.clone(), false)?;
     let nj = robot.joints.len();
     let mut data = twin_core::mj::Data::new(model.clone())?;
     let ranges: Vec<(f64, f64)> = robot

@@ -150,8 +150,9 @@ pub fn measure_gap(urdf: &std::path::Path, log: &JointLog, opts: &GapOptions) ->
     }
     let t: Vec<f64> = log.t_nanos.iter().map(|&x| (x - log.t_nanos[0]) as f64 * 1e-9).collect();
     let dt = median_step(&t).ok_or_else(|| log.bad("all timestamps are equal".into()))?;
-    let model = crate::synth::simulation_model(urdf, dt, opts.armature)?;
-    let robot = RobotModel::from_model(urdf, model.clone())?;
+    let source = crate::model::UrdfSource::read(urdf)?;
+    let model = crate::synth::simulation_model_of(&source, dt, opts.armature)?;
+    let robot = RobotModel::of_urdf(&source, model.clone(), false)?;
     let (map, _) = crate::condition::match_joints(log, &robot)?;
     let nj = robot.joints.len();
     for (joint, &i) in robot.joints.iter().zip(&map) {

@@ -231,20 +231,30 @@ fn carries_inertia(model: &Model, b: usize) -> bool {
     model.body_dofnum()[b] > 0 || model.body_mass()[b] > 0.0
 }
 
-/// Each URDF link's own `<inertial>` as standard parameters in its link frame (links without
-/// one, or with no mass, are absent). A model compiled from something else than a readable
-/// URDF (an MJCF given to [`RobotModel::from_model`]) has no URDF links to split its bodies
-/// into: empty.
+/// The links' own inertials ([`urdf_own_params`]) of the file at `path` when it is a readable
+/// URDF; a model compiled from something else (an MJCF given to [`RobotModel::from_model`]) has
+/// no URDF links to split its bodies into: empty.
 ///
 /// # Errors
 /// [`Error::Urdf`] for a URDF that is not well-formed XML.
-fn urdf_own_params(path: &Path) -> Result<std::collections::HashMap<String, LinkParams>> {
-    let mut own = std::collections::HashMap::new();
-    let Ok(text) = twin_core::fsio::read_to_string(path) else { return Ok(own) };
-    if !twin_core::urdf::is_urdf(&text) {
+fn file_own_params(path: &Path) -> Result<OwnParams> {
+    match twin_core::fsio::read_to_string(path) {
+        Ok(text) => urdf_own_params(path, &text),
+        Err(_) => Ok(OwnParams::new()),
+    }
+}
+
+/// Each link's own `<inertial>` in URDF `text` (of `path`), as standard parameters in its link
+/// frame (links without one, or with no mass, are absent); empty when `text` is not a URDF.
+///
+/// # Errors
+/// [`Error::Urdf`] for a URDF that is not well-formed XML.
+fn urdf_own_params(path: &Path, text: &str) -> Result<OwnParams> {
+    let mut own = OwnParams::new();
+    if !twin_core::urdf::is_urdf(text) {
         return Ok(own);
     }
-    let doc = roxmltree::Document::parse(&text)
+    let doc = roxmltree::Document::parse(text)
         .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
     let triplet = |s: Option<&str>| -> [f64; 3] {
         let mut out = [0.0; 3];
@@ -287,12 +297,79 @@ fn urdf_own_params(path: &Path) -> Result<std::collections::HashMap<String, Link
 /// links: `cad` less the link's own URDF inertial. Zero when the masses agree (nothing was
 /// lumped; the difference is then the MJCF's rounding or a converter repair, which belongs to
 /// the link).
-fn welded_params(own: &std::collections::HashMap<String, LinkParams>, name: &str, cad: &LinkParams) -> LinkParams {
+fn welded_params(own: &OwnParams, name: &str, cad: &LinkParams) -> LinkParams {
     let own = own.get(name).copied().unwrap_or([0.0; LINK_PARAMS]);
     if (cad[0] - own[0]).abs() <= 1e-9 * cad[0].abs().max(1e-12) {
         return [0.0; LINK_PARAMS];
     }
     std::array::from_fn(|i| cad[i] - own[i])
+}
+
+/// Each URDF link's own inertial parameters, by link name ([`urdf_own_params`]).
+type OwnParams = std::collections::HashMap<String, LinkParams>;
+
+/// A URDF as sysid reads it: its path and its text, read once. The model twin runs is
+/// converted from this text ([`twin_core::robot::Robot::load_str_with_extra`], the one path
+/// from a robot file to a robot), and the checks sysid makes of the file (its root link, no
+/// `<mujoco>` block of its own) and the links' own inertials ([`RobotModel::of_urdf`]) read the
+/// same text.
+#[derive(Debug, Clone)]
+pub struct UrdfSource {
+    /// The file.
+    pub path: PathBuf,
+    /// Its text.
+    pub text: String,
+}
+
+impl UrdfSource {
+    /// Reads the URDF at `path`.
+    ///
+    /// # Errors
+    /// [`Error::Core`] when the file can't be read.
+    pub fn read(path: &Path) -> Result<UrdfSource> {
+        Ok(UrdfSource { path: path.to_path_buf(), text: twin_core::fsio::read_to_string(path)? })
+    }
+
+    /// The model as [`load_urdf_in_mujoco`] (`floating` false) or
+    /// [`load_urdf_in_mujoco_floating`] (true) compile it.
+    ///
+    /// # Errors
+    /// As those.
+    pub fn model(&self, extra_mujoco: &str, floating: bool) -> Result<Model> {
+        let robot = self.robot(extra_mujoco, floating, false)?;
+        Ok(Arc::try_unwrap(robot.model).unwrap_or_else(|shared| (*shared).clone()))
+    }
+
+    /// Converts the text and compiles it with `extra_mujoco` appended inside `<mujoco>`, fixed
+    /// base unless `floating` (then the root link must not be `world`), with self-collision
+    /// when `self_collision`; twin's [`twin_core::robot::Robot`] view of it.
+    ///
+    /// # Errors
+    /// [`Error::Urdf`] for malformed XML, a `<mujoco>` block of the URDF's own, or (floating) a
+    /// root link named `world`; the converter's and MuJoCo's errors.
+    pub fn robot(&self, extra_mujoco: &str, floating: bool, self_collision: bool) -> Result<twin_core::robot::Robot> {
+        let path = self.path.as_path();
+        let doc = roxmltree::Document::parse(&self.text)
+            .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
+        if doc.root_element().children().any(|n| n.has_tag_name("mujoco")) {
+            return Err(Error::Urdf {
+                path: path.to_path_buf(),
+                message: "the URDF has its own <mujoco> block; remove it for `twin sysid` (it may fuse links and hide their inertias)".into(),
+            });
+        }
+        if floating {
+            root_link(path, &self.text)?;
+        }
+        let options = twin_core::convert::ConvertOptions {
+            fixed_base: !floating,
+            floor: false,
+            visuals: false,
+            joint_sensors: false,
+            self_collision,
+            ..twin_core::convert::ConvertOptions::default()
+        };
+        Ok(twin_core::robot::Robot::load_str_with_extra(path, &self.text, &options, extra_mujoco)?)
+    }
 }
 
 /// As [`load_urdf_in_mujoco`], with a free joint between the world and the URDF's root link
@@ -301,9 +378,7 @@ fn welded_params(own: &std::collections::HashMap<String, LinkParams>, name: &str
 /// # Errors
 /// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] when the root link is `world`.
 pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<Model> {
-    let text = twin_core::fsio::read_to_string(path)?;
-    root_link(path, &text)?;
-    load_urdf_text(path, &text, extra_mujoco, true)
+    UrdfSource::read(path)?.model(extra_mujoco, true)
 }
 
 /// Compiles a URDF the way the twin runs it: through twin's converter
@@ -316,8 +391,7 @@ pub fn load_urdf_in_mujoco_floating(path: &Path, extra_mujoco: &str) -> Result<M
 /// [`Error::Core`]; the converter's errors (naming the file, line and element); MuJoCo's load
 /// error.
 pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
-    let text = twin_core::fsio::read_to_string(path)?;
-    load_urdf_text(path, &text, extra_mujoco, false)
+    UrdfSource::read(path)?.model(extra_mujoco, false)
 }
 
 /// As [`load_urdf_in_mujoco`] (fixed base), with the robot's links colliding with each other
@@ -328,41 +402,7 @@ pub fn load_urdf_in_mujoco(path: &Path, extra_mujoco: &str) -> Result<Model> {
 /// # Errors
 /// As [`load_urdf_in_mujoco`].
 pub fn load_urdf_robot(path: &Path, self_collision: bool) -> Result<twin_core::robot::Robot> {
-    let text = twin_core::fsio::read_to_string(path)?;
-    load_urdf_robot_text(path, &text, "", false, self_collision)
-}
-
-/// Converts URDF `text` (of `path`) and compiles it with `extra_mujoco` appended inside
-/// `<mujoco>`.
-fn load_urdf_text(path: &Path, text: &str, extra_mujoco: &str, floating: bool) -> Result<Model> {
-    let robot = load_urdf_robot_text(path, text, extra_mujoco, floating, false)?;
-    Ok(Arc::try_unwrap(robot.model).unwrap_or_else(|shared| (*shared).clone()))
-}
-
-fn load_urdf_robot_text(
-    path: &Path,
-    text: &str,
-    extra_mujoco: &str,
-    floating: bool,
-    self_collision: bool,
-) -> Result<twin_core::robot::Robot> {
-    let doc = roxmltree::Document::parse(text)
-        .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
-    if doc.root_element().children().any(|n| n.has_tag_name("mujoco")) {
-        return Err(Error::Urdf {
-            path: path.to_path_buf(),
-            message: "the URDF has its own <mujoco> block; remove it for `twin sysid` (it may fuse links and hide their inertias)".into(),
-        });
-    }
-    let options = twin_core::convert::ConvertOptions {
-        fixed_base: !floating,
-        floor: false,
-        visuals: false,
-        joint_sensors: false,
-        self_collision,
-        ..twin_core::convert::ConvertOptions::default()
-    };
-    Ok(twin_core::robot::Robot::load_with_extra(path, &options, extra_mujoco)?)
+    UrdfSource::read(path)?.robot("", false, self_collision)
 }
 
 impl RobotModel {
@@ -371,9 +411,9 @@ impl RobotModel {
     /// # Errors
     /// As [`load_urdf_in_mujoco`]; [`Error::Urdf`] if the robot has no 1-DOF joint.
     pub fn from_urdf(urdf: impl AsRef<Path>) -> Result<RobotModel> {
-        let path = urdf.as_ref();
-        let model = load_urdf_in_mujoco(path, "")?;
-        RobotModel::from_model(path, Arc::new(model))
+        let source = UrdfSource::read(urdf.as_ref())?;
+        let model = source.model("", false)?;
+        RobotModel::of_urdf(&source, Arc::new(model), false)
     }
 
     /// Loads `urdf` with a floating base: a free joint ([`FLOATING_JOINT`]) between the world
@@ -383,9 +423,20 @@ impl RobotModel {
     /// # Errors
     /// As [`RobotModel::from_urdf`]; [`Error::Urdf`] when the root link is `world` (fixed).
     pub fn from_urdf_floating(urdf: impl AsRef<Path>) -> Result<RobotModel> {
-        let path = urdf.as_ref();
-        let model = load_urdf_in_mujoco_floating(path, "")?;
-        RobotModel::from_model_floating(path, Arc::new(model))
+        let source = UrdfSource::read(urdf.as_ref())?;
+        let model = source.model("", true)?;
+        RobotModel::of_urdf(&source, Arc::new(model), true)
+    }
+
+    /// Wraps a model compiled from `source` (as [`UrdfSource::model`] compiles it, possibly
+    /// edited), the links' own inertials read from the same text; `floating` as
+    /// [`RobotModel::from_model_floating`].
+    ///
+    /// # Errors
+    /// As [`RobotModel::from_model`] and [`RobotModel::from_model_floating`].
+    pub fn of_urdf(source: &UrdfSource, model: Arc<Model>, floating: bool) -> Result<RobotModel> {
+        let own = urdf_own_params(&source.path, &source.text)?;
+        RobotModel::with_own_params(&source.path, model, &own, floating)
     }
 
     /// Wraps a compiled model whose base link hangs from the world by a free joint: the free
@@ -394,8 +445,16 @@ impl RobotModel {
     /// # Errors
     /// [`Error::Urdf`] if the model has no free joint or no 1-DOF joint.
     pub fn from_model_floating(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
-        let mut robot = RobotModel::from_model(urdf_path, model.clone())?;
-        let own = urdf_own_params(urdf_path)?;
+        RobotModel::with_own_params(urdf_path, model, &file_own_params(urdf_path)?, true)
+    }
+
+    /// [`RobotModel::fixed`] of `model`, and with `floating` the free joint's subtree as a
+    /// floating base; `own`: the links' own URDF inertials.
+    fn with_own_params(urdf_path: &Path, model: Arc<Model>, own: &OwnParams, floating: bool) -> Result<RobotModel> {
+        let mut robot = RobotModel::fixed(urdf_path, model.clone(), own)?;
+        if !floating {
+            return Ok(robot);
+        }
         let free = model.free_joint().ok_or_else(|| Error::Urdf {
             path: urdf_path.to_path_buf(),
             message: "the model has no free joint for a floating base".into(),
@@ -414,7 +473,7 @@ impl RobotModel {
                 None if floating && carries_inertia(&model, b) => {
                     let name = model.name(ObjType::Body, b).to_string();
                     let cad = cad_params_of_body(&model, b);
-                    let welded = welded_params(&own, &name, &cad);
+                    let welded = welded_params(own, &name, &cad);
                     links.push(LinkInfo { name, body: b, ancestor_joints: Vec::new(), cad, welded, floating: true });
                 }
                 None => {}
@@ -435,7 +494,12 @@ impl RobotModel {
     /// # Errors
     /// [`Error::Urdf`] if the robot has no 1-DOF joint.
     pub fn from_model(urdf_path: &Path, model: Arc<Model>) -> Result<RobotModel> {
-        let own = urdf_own_params(urdf_path)?;
+        RobotModel::with_own_params(urdf_path, model, &file_own_params(urdf_path)?, false)
+    }
+
+    /// The fixed-base view of `model`: its 1-DOF joints and the links they move; `own`: the
+    /// links' own URDF inertials.
+    fn fixed(urdf_path: &Path, model: Arc<Model>, own: &OwnParams) -> Result<RobotModel> {
         let mut joints = Vec::new();
         let mut joint_of_dof = vec![None; model.nv()];
         for j in 0..model.njnt() {
@@ -478,7 +542,7 @@ impl RobotModel {
             ancestor_joints.sort_unstable();
             let name = model.name(ObjType::Body, b).to_string();
             let cad = cad_params_of_body(&model, b);
-            let welded = welded_params(&own, &name, &cad);
+            let welded = welded_params(own, &name, &cad);
             links.push(LinkInfo { name, body: b, ancestor_joints, cad, welded, floating: false });
         }
         Ok(RobotModel { urdf_path: urdf_path.to_path_buf(), model, joints, links, floating: None })

@@ -10,7 +10,7 @@
 
 use crate::error::Result;
 use crate::log::JointLog;
-use crate::model::{RobotModel, load_urdf_in_mujoco};
+use crate::model::{RobotModel, UrdfSource};
 use crate::rng::Rng;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -149,16 +149,11 @@ fn simulate_impl(
     // actuators (position servos for a URDF's `PositionJointInterface`, as on the UR5) would add
     // forces that no log entry carries.
     let extra = format!(r#"<option timestep="{dt}"{gravity}><flag contact="disable" actuation="disable"/></option>"#);
-    let base = match floating {
-        Some(_) => crate::model::load_urdf_in_mujoco_floating(urdf, &extra)?,
-        None => load_urdf_in_mujoco(urdf, &extra)?,
-    };
+    let source = UrdfSource::read(urdf)?;
+    let base = source.model(&extra, floating.is_some())?;
     let free_dofs = if floating.is_some() { 6 } else { 0 };
     let model = stiff_friction(&base, free_dofs, dt, opts.armature)?;
-    let robot = match floating {
-        Some(_) => RobotModel::from_model_floating(urdf, model.clone())?,
-        None => RobotModel::from_model(urdf, model.clone())?,
-    };
+    let robot = RobotModel::of_urdf(&source, model.clone(), floating.is_some())?;
     let nj = robot.joints.len();
     let mut rng = Rng::new(opts.seed);
     // Known external wrenches: per link and component, 3 sines between 0.2 and 1.5 Hz.
@@ -380,8 +375,16 @@ fn stiff_friction(
 /// # Errors
 /// Loading errors of the URDF; [`crate::Error::Core`] if MuJoCo fails.
 pub fn simulation_model(urdf: &Path, dt_secs: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
+    simulation_model_of(&UrdfSource::read(urdf)?, dt_secs, armature)
+}
+
+/// [`simulation_model`] of a URDF already read.
+///
+/// # Errors
+/// As [`simulation_model`].
+pub fn simulation_model_of(source: &UrdfSource, dt_secs: f64, armature: f64) -> Result<Arc<twin_core::mj::Model>> {
     let extra = format!(r#"<option timestep="{dt_secs}"><flag contact="disable"/></option>"#);
-    stiff_friction(&load_urdf_in_mujoco(urdf, &extra)?, 0, dt_secs, armature)
+    stiff_friction(&source.model(&extra, false)?, 0, dt_secs, armature)
 }
 
 /// Writes to `dst` a copy of the URDF `src` whose link inertials and joint friction are off by

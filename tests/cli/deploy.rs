@@ -43,6 +43,18 @@ fn run_ok(cmd: &mut Command) -> String {
     stdout
 }
 
+/// Runs `twin randomize FIXTURE ARGS` on one machine (into `dir/single`) and asserts that the
+/// merge of the shards printed its summary (`merged` ends with it) and wrote the same files
+/// into `out/all`.
+fn same_as_one_machine(dir: &Path, args: &[&str], merged: &str, out: &Path) {
+    let (model, single) = (fixture(), dir.join("single"));
+    let single_arg = single.display().to_string();
+    let (success, whole, stderr) = run(&[&["randomize", model.as_str()], args, &["--out", &single_arg]].concat());
+    assert!(success, "{stderr}");
+    assert!(merged.ends_with(&whole), "merge prints the single-machine summary:\n{merged}\nvs\n{whole}");
+    same_outputs(&single, &out.join("all"));
+}
+
 fn same_outputs(single: &Path, merged: &Path) {
     for file in ["episodes.csv", "summary.json", "spec.toml"] {
         let (a, b) = (std::fs::read(single.join(file)).unwrap(), std::fs::read(merged.join(file)).unwrap());
@@ -117,22 +129,8 @@ fn kubernetes_manifests_are_valid_and_their_commands_reproduce_one_machine() {
     let (merge_script, _) = job_script(merge);
     let merged = run_ok(&mut sh(&merge_script));
     assert!(merged.contains("total: 9/9 episodes") && merged.contains("episodes: 9 of 9"), "{merged}");
-    let single = dir.path().join("single");
-    let (success, whole, stderr) = run(&[
-        "randomize",
-        &fixture(),
-        "--config",
-        &spec.display().to_string(),
-        "--episodes",
-        "9",
-        "--seed",
-        "11",
-        "--out",
-        &single.display().to_string(),
-    ]);
-    assert!(success, "{stderr}");
-    assert!(merged.ends_with(&whole), "merge prints the single-machine summary:\n{merged}\nvs\n{whole}");
-    same_outputs(&single, &out.join("all"));
+    let spec = spec.display().to_string();
+    same_as_one_machine(dir.path(), &["--config", &spec, "--episodes", "9", "--seed", "11"], &merged, &out);
 }
 
 #[test]
@@ -176,22 +174,7 @@ fn slurm_scripts_reproduce_one_machine_and_name_a_missing_shard() {
     assert!(success, "{stderr}");
     let (success, merged, stderr) = task("merge.sbatch", None);
     assert!(success, "{stderr}");
-    let single = dir.path().join("single");
-    let (success, whole, stderr) = run(&[
-        "randomize",
-        &fixture(),
-        "--episodes",
-        "8",
-        "--seed",
-        "4",
-        "--duration",
-        "0.3",
-        "--out",
-        &single.display().to_string(),
-    ]);
-    assert!(success, "{stderr}");
-    assert!(merged.ends_with(&whole), "{merged}\nvs\n{whole}");
-    same_outputs(&single, &out.join("all"));
+    same_as_one_machine(dir.path(), &["--episodes", "8", "--seed", "4", "--duration", "0.3"], &merged, &out);
 
     // Outside an array the script says how to submit it.
     let (success, _, stderr) = task("randomize.sbatch", None);

@@ -46,10 +46,6 @@ impl Controller for Crouch {
         "crouch"
     }
 
-    fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> twin_core::Result<()> {
-        Ok(())
-    }
-
     fn compute(&mut self, _model: &Model, o: &Observation<'_>, command: &mut [f64]) {
         for (u, &(adr, dof, kp, kd, target)) in self.loops.iter().enumerate() {
             command[u] = kp * (target - o.qpos[adr]) - kd * o.qvel[dof];

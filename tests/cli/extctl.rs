@@ -211,13 +211,9 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
         let b = if mode == "ignore" { bounds.replace("30.0", "6.0") } else { bounds.to_string() };
         let s = scenario(dir.path(), &format!("{mode}.toml"), 0.5, &bad(&python, mode, &tag), &b);
         let out = dir.path().join(mode);
-        let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 2);
         // The batch itself runs to its end; each episode fails with its reason.
-        assert!(ok, "{mode}: {stdout}\n{stderr}");
-        assert!(secs < 60.0, "{mode}: {secs} s");
-        let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
-        assert_eq!(column(&csv, "success"), vec!["0"; 2], "{mode}: {csv}");
-        for line in csv.lines().skip(1) {
+        let (rows, stdout) = every_episode_fails(&s, &out, 2, 60.0);
+        for line in &rows {
             assert!(line.contains(&kind.to_string()) && line.contains(why), "{mode}: {line}");
         }
         assert_all_failed_as(&out, &stdout, kind, 2);
@@ -234,6 +230,19 @@ fn crash_hang_never_joining_and_ignoring_sigint_fail_their_episode_and_leave_not
     let log = std::fs::read_to_string(out.join("controller_logs/worker-1.log")).unwrap();
     assert!(log.contains("it ended after SIGKILL"), "{log}");
     assert_none_left(&tag);
+}
+
+/// Runs two episodes of `scenario` into `out` on `threads` threads and asserts that the batch
+/// runs to its end within `limit_secs` and that both episodes fail: their rows of
+/// `episodes.csv`, and what the batch printed.
+fn every_episode_fails(scenario: &Path, out: &Path, threads: u32, limit_secs: f64) -> (Vec<String>, String) {
+    let (ok, stdout, stderr, secs) = randomize(scenario, out, 2, threads);
+    let what = scenario.display();
+    assert!(ok, "{what}: {stdout}\n{stderr}");
+    assert!(secs < limit_secs, "{what}: {secs} s");
+    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(column(&csv, "success"), vec!["0"; 2], "{what}: {csv}");
+    (csv.lines().skip(1).map(str::to_string).collect(), stdout)
 }
 
 /// The number just before `what` in `text` (`(42.1 per period` → 42.1).
@@ -257,12 +266,8 @@ fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
                   flood_commands_per_period = 4.0";
     let s = scenario(dir.path(), "flood.toml", 3.0, &bad(&python, "flood", &tag), bounds);
     let out = dir.path().join("flood");
-    let (ok, stdout, stderr, secs) = randomize(&s, &out, 2, 1);
-    assert!(ok, "{stdout}\n{stderr}");
-    assert!(secs < 90.0, "{secs} s");
-    let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
-    assert_eq!(column(&csv, "success"), vec!["0"; 2], "{csv}");
-    for line in csv.lines().skip(1) {
+    let (rows, stdout) = every_episode_fails(&s, &out, 1, 90.0);
+    for line in &rows {
         assert!(line.contains("controller: flood: "), "{line}");
         assert!(line.contains("most on /humanoid/joint_commands"), "{line}");
         assert!(line.contains("the limit is 4 per period averaged over 1 s (flood_commands_per_period)"), "{line}");
@@ -362,27 +367,35 @@ fn junitparser_prints(python: &str, body: &str, junit: &Path) -> String {
     String::from_utf8_lossy(&read.stdout).into_owned()
 }
 
+/// Writes `dir/name`: 0.5 s of the shipped humanoid under pd-hold, then the TOML `rest`.
+fn pd_hold_scenario(dir: &Path, name: &str, rest: &str) -> PathBuf {
+    let model = repo_root().join("models/humanoid.urdf");
+    write(dir, name, &format!("model = {model:?}\nduration = 0.5\ncontroller = \"pd-hold\"\n{rest}"))
+}
+
+/// `twin test` of two [`pd_hold_scenario`]s (`(name, rest)` each) on `threads` threads, its
+/// JUnit report in `dir/report.xml`: asserts that it fails, one of the two passing; its output
+/// and the report's path.
+fn twin_test_fails(dir: &Path, scenarios: [(&str, String); 2], threads: u32) -> (String, PathBuf) {
+    let paths = scenarios.map(|(name, rest)| pd_hold_scenario(dir, name, &rest));
+    let junit = dir.join("report.xml");
+    let (ok, stdout, stderr) = twin_test(&[&paths[0], &paths[1]], &junit, threads);
+    assert!(!ok, "a failed threshold must fail: {stdout}\n{stderr}");
+    assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
+    (stdout, junit)
+}
+
 #[test]
 fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
     let python = python();
     let dir = tempfile::tempdir().unwrap();
-    let model = repo_root().join("models/humanoid.urdf");
     // pd-hold stands 0.5 s in every episode of the default spec: 4 of 4, whose 95 % Wilson lower
     // bound is 4/(4 + 1.96²) = 0.510.
-    let body = |min: f64| {
-        format!(
-            "model = {model:?}\nduration = 0.5\ncontroller = \"pd-hold\"\n[checks]\nfalls = 0\n\
-             [test]\nepisodes = 4\nmin_success_lower_95 = {min}\nseed = 5\n"
-        )
-    };
-    let pass = write(dir.path(), "pass.toml", &body(0.5));
-    let fail = write(dir.path(), "fail.toml", &body(0.6));
-    let junit = dir.path().join("report.xml");
-    let (ok, stdout, stderr) = twin_test(&[&pass, &fail], &junit, 2);
-    assert!(!ok, "a failed threshold must fail: {stdout}\n{stderr}");
+    let body =
+        |min: f64| format!("[checks]\nfalls = 0\n[test]\nepisodes = 4\nmin_success_lower_95 = {min}\nseed = 5\n");
+    let (stdout, junit) = twin_test_fails(dir.path(), [("pass.toml", body(0.5)), ("fail.toml", body(0.6))], 2);
     assert!(stdout.contains("PASS 4/4 lower95 0.510 (min 0.5)"), "{stdout}");
     assert!(stdout.contains("FAIL 4/4 lower95 0.510 (min 0.6)"), "{stdout}");
-    assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
     let text = junitparser_prints(
         &python,
         "r = [type(r).__name__ + ':' + (r.message or '') for r in c.result]\n\
@@ -400,7 +413,7 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
         "{text}"
     );
     // All passing: exit 0.
-    let o = twin().arg("test").arg(&pass).output().unwrap();
+    let o = twin().arg("test").arg(dir.path().join("pass.toml")).output().unwrap();
     let (ok, stdout, stderr) = output_of(o);
     assert!(ok, "{stdout}\n{stderr}");
 }
@@ -414,20 +427,15 @@ fn twin_test_fails_on_a_threshold_and_its_junit_parses_with_junitparser() {
 fn twin_test_fails_on_a_tracking_threshold_and_junit_names_it() {
     let python = python();
     let dir = tempfile::tempdir().unwrap();
-    let model = repo_root().join("models/humanoid.urdf");
     let body = |rms: f64| {
         format!(
-            "model = {model:?}\nduration = 0.5\ncontroller = \"pd-hold\"\n[[push]]\ntime = 0.1\nduration = 0.1\n\
-             force = [60.0, 0.0, 0.0]\n[checks]\nfalls = 0\nmax_tracking_rms_rad = {rms}\nmax_tracking_error_rad = 0.5\n\
-             max_saturated_fraction = 0.5\n[test]\nepisodes = 2\nmin_success_lower_95 = 0.3\nseed = 5\n"
+            "[[push]]\ntime = 0.1\nduration = 0.1\nforce = [60.0, 0.0, 0.0]\n[checks]\nfalls = 0\n\
+             max_tracking_rms_rad = {rms}\nmax_tracking_error_rad = 0.5\nmax_saturated_fraction = 0.5\n\
+             [test]\nepisodes = 2\nmin_success_lower_95 = 0.3\nseed = 5\n"
         )
     };
-    let tight = write(dir.path(), "tight.toml", &body(0.01));
-    let loose = write(dir.path(), "loose.toml", &body(0.5));
-    let junit = dir.path().join("report.xml");
-    let (ok, stdout, stderr) = twin_test(&[&tight, &loose], &junit, 1);
-    assert!(!ok, "a failed tracking threshold must fail: {stdout}\n{stderr}");
-    assert!(stdout.contains("1 of 2 scenarios passed"), "{stdout}");
+    let (_, junit) = twin_test_fails(dir.path(), [("tight.toml", body(0.01)), ("loose.toml", body(0.5))], 1);
+    let loose = dir.path().join("loose.toml");
     let text =
         junitparser_prints(&python, "print(c.classname, c.name, '|'.join(r.message or '' for r in c.result))", &junit);
     let lines: Vec<&str> = text.lines().collect();

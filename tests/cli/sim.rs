@@ -449,3 +449,14 @@ fn sim_seed_sets_the_observed_imu_noise_and_through_the_walker_the_joint_states(
     assert!(js1.last().unwrap().position != js2.last().unwrap().position, "the walker's joints differ");
     assert!(record("1") == (imu1, js1), "the same seed, the same recording");
 }
+
+/// `--controller` takes only the registered names: anything else is clap's usage error (exit
+/// 2) listing them, before any model is loaded.
+#[test]
+fn an_unknown_controller_is_a_usage_error_listing_the_names() {
+    let out = super::common::twin().args(["sim", "--controller", "bogus"]).output().expect("twin runs");
+    assert_eq!(out.status.code(), Some(2), "{out:?}");
+    let stderr = String::from_utf8_lossy(&out.stderr);
+    assert!(stderr.contains("invalid value 'bogus' for '--controller <CONTROLLER>'"), "{stderr}");
+    assert!(stderr.contains("[possible values: pd-hold, passive, replay, walk, grasp, ros]"), "{stderr}");
+}

@@ -115,18 +115,20 @@ fn spawn_listening(args: &[&str], prefix: &str, marker: &str, limit: Duration, w
     }
 }
 
+/// [`spawn_listening`] for a Foxglove server (`twin sim|view … --foxglove`): its
+/// `foxglove: ws://ADDRESS` line, waited for at most `limit_secs` a line.
+fn spawn_foxglove(args: &[&str], limit_secs: u64) -> (Child, String) {
+    let what = format!("twin {} says where the server listens", args[0]);
+    spawn_listening(args, "foxglove: ", "ws://", Duration::from_secs(limit_secs), &what)
+}
+
 #[test]
 fn foxglove_client_subscribes_decodes_fetches_pauses_steps_and_commands() {
     let modules = node_modules();
     let dir = tempfile::tempdir().unwrap();
     let (urdf, mesh_bytes) = package(dir.path());
-    let (mut sim, address) = spawn_listening(
-        &["sim", urdf.to_str().unwrap(), "--duration", "120", "--foxglove", "0"],
-        "foxglove: ",
-        "ws://",
-        Duration::from_secs(120),
-        "twin sim says where the server listens",
-    );
+    let (mut sim, address) =
+        spawn_foxglove(&["sim", urdf.to_str().unwrap(), "--duration", "120", "--foxglove", "0"], 120);
     let url = format!("ws://{address}");
     assert!(url.starts_with("ws://127.0.0.1:"), "loopback by default: {url}");
 
@@ -234,13 +236,7 @@ fn foxglove_client_plays_a_recorded_log() {
     let mcap = dir.path().join("run.mcap");
     let (ok, out, err) = super::common::run(&["sim", "--duration", "1", "--record", mcap.to_str().unwrap()]);
     assert!(ok, "{out}\n{err}");
-    let (mut view, address) = spawn_listening(
-        &["view", mcap.to_str().unwrap(), "--foxglove", "0", "--wait", "60"],
-        "foxglove: ",
-        "ws://",
-        Duration::from_secs(60),
-        "twin view says where the server listens",
-    );
+    let (mut view, address) = spawn_foxglove(&["view", mcap.to_str().unwrap(), "--foxglove", "0", "--wait", "60"], 60);
     let a = client(&modules, &[&format!("ws://{address}"), "foxglove.websocket.v1", "watch"]);
     let status = view.wait().unwrap();
     assert!(status.success(), "{status:?}");

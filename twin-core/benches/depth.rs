@@ -25,7 +25,7 @@ use nalgebra::{Matrix3, Rotation3, Vector3};
 use std::time::Instant;
 use twin_core::convert::{ConvertOptions, convert_urdf};
 use twin_core::mj::{Data, GeomType, ObjType};
-use twin_core::sense::{DepthCamera, DepthCameraOptions};
+use twin_core::sense::{DepthCamera, DepthCameraOptions, RayOptions};
 
 fn default_talos() -> String {
     let cache = std::env::var("TWIN_URDF_CACHE")
@@ -74,16 +74,17 @@ fn main() {
                 width: 640,
                 height: 480,
                 hfov_rad: Some(std::f64::consts::FRAC_PI_3),
-                min_range_m: near,
-                max_range_m: far,
-                ..Default::default()
+                ray: RayOptions { min_range_m: near, max_range_m: far, ..DepthCameraOptions::default().ray },
             },
         ),
     ] {
-        let mut one = DepthCamera::new(&model, cam, DepthCameraOptions { threads: 1, ..opts.clone() }).unwrap();
+        let on_threads = |threads| {
+            let ray = RayOptions { threads, ..opts.ray.clone() };
+            DepthCamera::new(&model, cam, DepthCameraOptions { ray, ..opts.clone() }).unwrap()
+        };
+        let mut one = on_threads(1);
         let (wall1, cpu1, valid) = time_camera(&model, &data, &mut one, frames);
-        let mut all = DepthCamera::new(&model, cam, DepthCameraOptions { threads: 0, ..opts.clone() }).unwrap();
-        let (wall_all, _, _) = time_camera(&model, &data, &mut all, frames);
+        let (wall_all, _, _) = time_camera(&model, &data, &mut on_threads(0), frames);
 
         // The same rays through mj_multiRay: unit directions in the world from the frame's
         // optical pose; depth = distance × the ray's optical z.
@@ -113,10 +114,10 @@ fn main() {
                 .multi_ray(
                     [origin.x, origin.y, origin.z],
                     &dirs,
-                    Some(opts.filter.groups),
+                    Some(opts.ray.filter.groups),
                     true,
                     exclude,
-                    far.max(opts.max_range_m) * 2.0,
+                    far.max(opts.ray.max_range_m) * 2.0,
                 )
                 .unwrap();
             mj_times.push(t.elapsed().as_secs_f64() * 1e3);
@@ -124,7 +125,8 @@ fn main() {
         // Compare where neither is clipped by the near plane (mj_multiRay has none).
         let mut differ = 0;
         for (i, h) in hits.iter().enumerate() {
-            let mj = h.map(|h| h.dist_m * scale[i]).filter(|z| *z >= opts.min_range_m && *z <= opts.max_range_m);
+            let mj =
+                h.map(|h| h.dist_m * scale[i]).filter(|z| *z >= opts.ray.min_range_m && *z <= opts.ray.max_range_m);
             let ours = frame.depth_m[i];
             let same = match mj {
                 Some(z) => (f64::from(ours) - z).abs() < 1e-4,
@@ -133,8 +135,11 @@ fn main() {
             differ += usize::from(!same);
         }
         // mj_multiRay has no near clip: from inside the head it sees the head.
-        let differ =
-            if opts.min_range_m > 0.1 { "n/a (no near clip in mj_multiRay)".to_string() } else { differ.to_string() };
+        let differ = if opts.ray.min_range_m > 0.1 {
+            "n/a (no near clip in mj_multiRay)".to_string()
+        } else {
+            differ.to_string()
+        };
         let st = one.last_ray_stats();
         println!(
             "| {label} | {wall1:.2} / {cpu1:.2} | {wall_all:.2} | {valid} of {} | {:.1} ({mj_frames}) | {differ} | {:.2} / {:.2} |",

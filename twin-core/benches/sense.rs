@@ -26,7 +26,7 @@ use twin_core::engine::{Flow, Observer, StepView};
 use twin_core::grasp::Grasper;
 use twin_core::mj::{Data, Model, RayFilter};
 use twin_core::scenario::Scenario;
-use twin_core::sense::{DepthCamera, DepthCameraOptions, Device, Pipelined, Reading};
+use twin_core::sense::{DepthCamera, DepthCameraOptions, Device, Pipelined, RayOptions, Reading};
 use twin_core::sim::{self, SimOptions};
 
 /// The repository: `TWIN_ROOT` when the binary runs elsewhere (another machine).
@@ -93,7 +93,10 @@ fn main() {
     );
     println!("|---|---|---|---|---|---|---|");
     for threads in [1usize, 0] {
-        let opts = DepthCameraOptions { threads, ..DepthCameraOptions::default() };
+        let opts = DepthCameraOptions {
+            ray: RayOptions { threads, ..DepthCameraOptions::default().ray },
+            ..DepthCameraOptions::default()
+        };
         let mut camera = DepthCamera::new(&model, "bench_head", opts).unwrap();
         let (wall_ms, cpu_ms, valid) = time_camera(&model, &data, &mut camera, frames);
         let (label, cpu) = if threads == 1 {
@@ -122,8 +125,11 @@ fn main() {
         let body = gmodel.cam_bodyid()[cam] as usize;
         let exclude_bodies = vec![body, gmodel.body_parentid()[body] as usize];
         DepthCameraOptions {
-            threads,
-            filter: RayFilter { exclude_bodies, ..RayFilter::default() },
+            ray: RayOptions {
+                threads,
+                filter: RayFilter { exclude_bodies, ..RayFilter::default() },
+                ..DepthCameraOptions::default().ray
+            },
             ..Default::default()
         }
     };

@@ -184,12 +184,22 @@ pub struct Loaded {
 /// [`Error::File`] if the file can't be read, [`Error::Convert`] for an invalid
 /// URDF, [`Error::Load`] naming the file with MuJoCo's message if MuJoCo refuses it.
 pub fn load(path: &Path, options: &ConvertOptions, extra_mjcf: &str) -> Result<Loaded> {
-    crate::mj::init()?;
     let text = crate::fsio::read_to_string(path)?;
-    if !urdf::is_urdf(&text) {
+    load_str(path, &text, options, extra_mjcf)
+}
+
+/// [`load`] of a file whose text the caller has already read (`text`, the contents of `path`;
+/// an MJCF is still compiled from `path`, for its includes and assets), so that a caller that
+/// reads the URDF itself (sysid's inertials) reads it once.
+///
+/// # Errors
+/// As [`load`].
+pub fn load_str(path: &Path, text: &str, options: &ConvertOptions, extra_mjcf: &str) -> Result<Loaded> {
+    crate::mj::init()?;
+    if !urdf::is_urdf(text) {
         return Ok(Loaded { model: Model::from_mujoco_file(path)?, converted: None });
     }
-    let converted = convert_urdf_str(path, &text, options)?;
+    let converted = convert_urdf_str(path, text, options)?;
     let model = match converted.mjcf.rfind("</mujoco>") {
         Some(end) if !extra_mjcf.is_empty() => {
             Model::from_xml_str(&format!("{}{extra_mjcf}\n{}", &converted.mjcf[..end], &converted.mjcf[end..]))

@@ -156,7 +156,20 @@ impl Robot {
     /// As [`Robot::load`].
     pub fn load_with_extra(path: impl AsRef<Path>, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
         let path = path.as_ref();
-        let loaded = crate::convert::load(path, options, extra_mjcf)?;
+        Robot::from_loaded(path, crate::convert::load(path, options, extra_mjcf)?)
+    }
+
+    /// [`Robot::load_with_extra`] of a file whose text the caller has already read (`text`,
+    /// the contents of `path`): [`crate::convert::load_str`].
+    ///
+    /// # Errors
+    /// As [`Robot::load`].
+    pub fn load_str_with_extra(path: &Path, text: &str, options: &ConvertOptions, extra_mjcf: &str) -> Result<Robot> {
+        Robot::from_loaded(path, crate::convert::load_str(path, text, options, extra_mjcf)?)
+    }
+
+    /// The robot of a loaded file: the model with the metadata its file gives.
+    fn from_loaded(path: &Path, loaded: crate::convert::Loaded) -> Result<Robot> {
         // A URDF's metadata from its conversion; an MJCF's from the `<custom>` texts that
         // `twin convert` writes (other MJCFs carry none beyond the model itself: sensor noise,
         // `actuatorfrcrange`, which `from_parts` reads).

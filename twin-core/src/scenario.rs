@@ -741,18 +741,20 @@ mod tests {
         Scenario::parse(Path::new("s.toml"), text)
     }
 
+    /// Asserts that `text` is refused with a message that starts with `start` (the file, the
+    /// line and the key) and contains `contains`.
+    fn assert_refused(text: &str, start: &str, contains: &str) {
+        let e = parse(text).unwrap_err().to_string();
+        assert!(e.starts_with(start) && e.contains(contains), "{text:?}: {e}");
+    }
+
     #[test]
     fn errors_name_the_file_line_and_key() {
-        let e = parse("duration = 5.0\ncontroler = \"walk\"\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:2: `controler`") && e.contains("unknown field"), "{e}");
-        let e = parse("duration = 5.0\n[walk]\nvx = \"fast\"\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `vx`"), "{e}");
-        let e = parse("duration = 5.0\n[walk]\nstep_period = -0.5\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `walk.step_period`") && e.contains("positive"), "{e}");
-        let e = parse("\nduration = 0\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:2: `duration`"), "{e}");
-        let e = parse("duration = 1\n[checks]\nmin_speed = 0.3\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `min_speed`"), "{e}");
+        assert_refused("duration = 5.0\ncontroler = \"walk\"\n", "s.toml:2: `controler`", "unknown field");
+        assert_refused("duration = 5.0\n[walk]\nvx = \"fast\"\n", "s.toml:3: `vx`", "");
+        assert_refused("duration = 5.0\n[walk]\nstep_period = -0.5\n", "s.toml:3: `walk.step_period`", "positive");
+        assert_refused("\nduration = 0\n", "s.toml:2: `duration`", "");
+        assert_refused("duration = 1\n[checks]\nmin_speed = 0.3\n", "s.toml:3: `min_speed`", "");
         let s = parse("duration = 2\nmodel = \"robot.urdf\"\n[[push]]\ntime = 1\nforce = [0, 50, 0]\n").unwrap();
         assert_eq!(s.model.as_deref(), Some(Path::new("robot.urdf")));
         assert_eq!(s.pushes[0].duration, 0.1);
@@ -771,14 +773,14 @@ mod tests {
         assert_eq!(s.cup.as_ref().map(|c| (c.body.as_str(), c.position)), Some(("cup", [0.3, -0.1])));
         assert_eq!(s.grasp.grip_force_n, 6.0);
         assert!(s.checks.has_grasp());
-        let e = parse("duration = 5\n[grasp]\n\ngrip_force_n = -1.0\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:4: `grasp.grip_force_n`") && e.contains("non-negative"), "{e}");
-        let e = parse("duration = 5\n[grasp]\ngrip = 1.0\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `grip`") && e.contains("unknown field"), "{e}");
-        let e = parse("duration = 5\nimpratio = 0\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:2: `impratio`"), "{e}");
-        let e = parse("duration = 5\n[cup]\nposition = [0.3]\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `position`"), "{e}");
+        assert_refused(
+            "duration = 5\n[grasp]\n\ngrip_force_n = -1.0\n",
+            "s.toml:4: `grasp.grip_force_n`",
+            "non-negative",
+        );
+        assert_refused("duration = 5\n[grasp]\ngrip = 1.0\n", "s.toml:3: `grip`", "unknown field");
+        assert_refused("duration = 5\nimpratio = 0\n", "s.toml:2: `impratio`", "");
+        assert_refused("duration = 5\n[cup]\nposition = [0.3]\n", "s.toml:3: `position`", "");
     }
 
     #[test]
@@ -795,10 +797,16 @@ mod tests {
 
     #[test]
     fn tracking_thresholds_are_range_checked_and_fail_without_targets() {
-        let e = parse("duration = 1\n[checks]\nfalls = 0\nmax_saturated_fraction = 1.5\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:4: `checks.max_saturated_fraction`") && e.contains("0..=1"), "{e}");
-        let e = parse("duration = 1\n[checks]\nmax_tracking_rms_rad = -0.1\n").unwrap_err().to_string();
-        assert!(e.starts_with("s.toml:3: `checks.max_tracking_rms_rad`") && e.contains("non-negative"), "{e}");
+        assert_refused(
+            "duration = 1\n[checks]\nfalls = 0\nmax_saturated_fraction = 1.5\n",
+            "s.toml:4: `checks.max_saturated_fraction`",
+            "0..=1",
+        );
+        assert_refused(
+            "duration = 1\n[checks]\nmax_tracking_rms_rad = -0.1\n",
+            "s.toml:3: `checks.max_tracking_rms_rad`",
+            "non-negative",
+        );
         let s = parse("duration = 1\n[checks]\nmax_tracking_rms_rad = 0.05\nmax_saturated_fraction = 0.1\n").unwrap();
         assert!(s.checks.has_tracking());
         let summary = crate::tracking::TrackingSummary {

@@ -75,11 +75,14 @@ pub trait Controller: Send {
     /// Short name, as selected on the command line (e.g. `pd-hold`).
     fn name(&self) -> &'static str;
 
-    /// Prepares for a new episode on `model`, starting from `observation`.
+    /// Prepares for a new episode on `model`, starting from `observation`. Default: nothing to
+    /// prepare (a controller that keeps no state between steps and drives any model).
     ///
     /// # Errors
     /// When the controller can't drive this model (e.g. a joint it needs is missing).
-    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()>;
+    fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
+        Ok(())
+    }
 
     /// Computes the command for the current step into `command` (len
     /// `Actuation::of(model).len(model)`, see [`Actuation`]).

@@ -1,7 +1,6 @@
 //! [`Passive`]: no command.
 
 use super::{Controller, Observation};
-use crate::error::Result;
 use crate::mj::Model;
 
 /// Applies no command at all: the passive model (a baseline: how the robot does unpowered).
@@ -11,10 +10,6 @@ pub struct Passive;
 impl Controller for Passive {
     fn name(&self) -> &'static str {
         "passive"
-    }
-
-    fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
-        Ok(())
     }
 
     fn compute(&mut self, _model: &Model, _observation: &Observation<'_>, command: &mut [f64]) {

@@ -279,9 +279,6 @@ mod tests {
         fn name(&self) -> &'static str {
             "velocity"
         }
-        fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
-            Ok(())
-        }
         fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
             let v = observation.qvel[0];
             command[0] = self.gain * (self.target - v);

@@ -567,9 +567,6 @@ mod tests {
         fn name(&self) -> &'static str {
             "recorder"
         }
-        fn reset(&mut self, _model: &Model, _observation: &Observation<'_>) -> Result<()> {
-            Ok(())
-        }
         fn compute(&mut self, _model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
             command.fill(0.0);
             self.seen.push((observation.qpos.to_vec(), observation.sensordata.to_vec()));

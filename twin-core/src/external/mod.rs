@@ -74,30 +74,25 @@ pub enum Interface {
 /// flood_window_secs = 1.0          #   this much simulated time, that fail the episode
 /// ```
 #[derive(Debug, Clone, PartialEq, serde::Deserialize)]
-#[serde(deny_unknown_fields)]
+#[serde(deny_unknown_fields, default)]
 pub struct RosOptions {
     /// The command line, run with `sh -c` in the scenario file's folder (so `$VARIABLES` and
-    /// relative paths work).
+    /// relative paths work). Required ([`RosOptions::validate`] refuses an empty one).
     pub command: String,
     /// Meaning of the `Float64MultiArray` commands on `/<robot>/joint_commands` (default:
     /// position).
-    #[serde(default = "default_interface")]
     pub command_interface: Interface,
     /// Control rate: `/clock` and command periods, Hz (default: 100).
-    #[serde(default = "default_rate", alias = "control_rate")]
+    #[serde(alias = "control_rate")]
     pub control_rate_hz: f64,
     /// Longest wait for the process to join the ROS graph, wall seconds (default: 30).
-    #[serde(default = "default_join")]
     pub join_timeout_secs: f64,
     /// Longest wait for one control period's command, wall seconds (default: 5).
-    #[serde(default = "default_period")]
     pub period_timeout_secs: f64,
     /// Wait after SIGINT and again after SIGTERM before the next signal, wall seconds
     /// (default: 2).
-    #[serde(default = "default_stop")]
     pub stop_timeout_secs: f64,
     /// When `twin randomize` starts a new process (default: every episode).
-    #[serde(default = "default_restart")]
     pub restart: Restart,
     /// Under a kept process (`restart = "never"`), how long twin says the jump back in time on
     /// `/clock` (again every 10 ms) before the first lockstep period, wall seconds (default:
@@ -105,53 +100,36 @@ pub struct RosOptions {
     /// 1, best effort): a node busy with the last episode's messages that gets the jump and
     /// the first period's time together keeps the second alone, reads it as the jump, and its
     /// sim-time timer waits one more period, so no command comes.
-    #[serde(default = "default_reset_settle")]
     pub reset_settle_secs: f64,
     /// Topics (besides `/clock`) the process must subscribe to before simulated time starts,
     /// so that it misses none of their messages (default: `["/joint_states"]`).
-    #[serde(default = "default_subscribes")]
     pub subscribes: Vec<String>,
     /// Commands beyond one per control period, averaged over `flood_window_secs`, above which
     /// the episode fails as a flood (default: 10). Twin takes one command per period; the
     /// others still queued when the next period opens are dropped and counted
     /// ([`crate::live::flood`]). A node with one command per `/clock` period sends none beyond;
     /// a timer at twice the control rate sends 1.
-    #[serde(default = "default_flood")]
     pub flood_commands_per_period: f64,
     /// The window of that average, simulated seconds (default: 1).
-    #[serde(default = "default_flood_window")]
     pub flood_window_secs: f64,
 }
 
-fn default_interface() -> Interface {
-    Interface::Position
-}
-fn default_rate() -> f64 {
-    100.0
-}
-fn default_join() -> f64 {
-    30.0
-}
-fn default_period() -> f64 {
-    5.0
-}
-fn default_stop() -> f64 {
-    2.0
-}
-fn default_restart() -> Restart {
-    Restart::Episode
-}
-fn default_reset_settle() -> f64 {
-    0.1
-}
-fn default_flood() -> f64 {
-    10.0
-}
-fn default_flood_window() -> f64 {
-    1.0
-}
-fn default_subscribes() -> Vec<String> {
-    vec!["/joint_states".into()]
+impl Default for RosOptions {
+    fn default() -> Self {
+        RosOptions {
+            command: String::new(),
+            command_interface: Interface::Position,
+            control_rate_hz: 100.0,
+            join_timeout_secs: 30.0,
+            period_timeout_secs: 5.0,
+            stop_timeout_secs: 2.0,
+            restart: Restart::Episode,
+            reset_settle_secs: 0.1,
+            subscribes: vec!["/joint_states".into()],
+            flood_commands_per_period: 10.0,
+            flood_window_secs: 1.0,
+        }
+    }
 }
 
 impl RosOptions {
@@ -163,25 +141,15 @@ impl RosOptions {
         if self.command.trim().is_empty() {
             return Err(("command", "must be a command line (e.g. \"python3 my_controller.py\")".into()));
         }
-        let positive = |key: &'static str, v: f64, unit: &str| {
-            if v > 0.0 && v.is_finite() {
-                Ok(())
-            } else {
-                Err((key, format!("must be a positive number of {unit} (got {v})")))
-            }
-        };
-        positive("control_rate_hz", self.control_rate_hz, "Hz")?;
-        positive("join_timeout_secs", self.join_timeout_secs, "seconds")?;
-        positive("period_timeout_secs", self.period_timeout_secs, "seconds")?;
-        positive("stop_timeout_secs", self.stop_timeout_secs, "seconds")?;
-        positive("reset_settle_secs", self.reset_settle_secs, "seconds")?;
-        positive("flood_window_secs", self.flood_window_secs, "seconds")?;
-        if !(self.flood_commands_per_period >= 0.0 && self.flood_commands_per_period.is_finite()) {
-            return Err((
-                "flood_commands_per_period",
-                format!("must be a number of commands per period ≥ 0 (got {})", self.flood_commands_per_period),
-            ));
-        }
+        crate::bounds::positive([
+            ("control_rate_hz", self.control_rate_hz),
+            ("join_timeout_secs", self.join_timeout_secs),
+            ("period_timeout_secs", self.period_timeout_secs),
+            ("stop_timeout_secs", self.stop_timeout_secs),
+            ("reset_settle_secs", self.reset_settle_secs),
+            ("flood_window_secs", self.flood_window_secs),
+        ])?;
+        crate::bounds::non_negative([("flood_commands_per_period", self.flood_commands_per_period)])?;
         if let Some(t) = self.subscribes.iter().find(|t| !t.starts_with('/')) {
             return Err(("subscribes", format!("topic {t:?} must start with `/`")));
         }

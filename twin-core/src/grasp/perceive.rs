@@ -3,7 +3,7 @@
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, Model, ObjType, RayFilter};
-use crate::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, detect_cup};
+use crate::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, RayOptions, detect_cup};
 use nalgebra::Vector3;
 
 /// Where the cup is, as perceived.
@@ -73,8 +73,9 @@ impl Eye {
         let filter =
             RayFilter { exclude_bodies: vec![body, model.body_parentid()[body] as usize], ..Default::default() };
         // One thread: randomized batches already run one episode per core.
-        let options =
-            DepthCameraOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, filter, ..Default::default() };
+        let defaults = DepthCameraOptions::default();
+        let ray = RayOptions { noise_std_m, seed, threads: 1, max_range_m: 3.0, filter, ..defaults.ray };
+        let options = DepthCameraOptions { ray, ..defaults };
         Ok(Eye { camera: DepthCamera::new(model, camera, options)?, detect: CupDetectOptions::default() })
     }
 

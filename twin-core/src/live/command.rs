@@ -338,9 +338,6 @@ mod tests {
         fn name(&self) -> &'static str {
             "hold-first-pose"
         }
-        fn reset(&mut self, _: &Model, _: &crate::control::Observation<'_>) -> crate::Result<()> {
-            Ok(())
-        }
         fn compute(&mut self, _: &Model, o: &crate::control::Observation<'_>, command: &mut [f64]) {
             if !self.set && o.time_secs >= self.start_secs {
                 let m = Float64MultiArray {

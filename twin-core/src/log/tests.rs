@@ -43,6 +43,27 @@ fn write_log(path: &Path, n: usize, chunk_size_bytes: u64) -> u64 {
     count
 }
 
+/// A log of 600 messages in 4 KiB chunks, written to `run.mcap` in `dir`, as the damage tests
+/// start from.
+struct ChunkedLog {
+    dir: tempfile::TempDir,
+    /// The file's bytes.
+    bytes: Vec<u8>,
+    /// Its chunks, as [`chunk_layout`] gives them.
+    chunks: Vec<(u64, u64, u64)>,
+    /// Messages written.
+    total: u64,
+}
+
+fn chunked_log() -> ChunkedLog {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("run.mcap");
+    let total = write_log(&path, 600, 4096);
+    let bytes = std::fs::read(&path).unwrap();
+    let chunks = chunk_layout(&bytes);
+    ChunkedLog { dir, bytes, chunks, total }
+}
+
 /// (start offset, end offset, message count) of every chunk, from the file's own summary.
 fn chunk_layout(bytes: &[u8]) -> Vec<(u64, u64, u64)> {
     let summary = mcap::Summary::read(bytes).unwrap().unwrap();
@@ -117,11 +138,7 @@ fn written_log_reads_back_with_same_values() {
 
 #[test]
 fn truncated_file_recovers_every_complete_chunk_exactly() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("run.mcap");
-    let total = write_log(&path, 600, 4096);
-    let bytes = std::fs::read(&path).unwrap();
-    let chunks = chunk_layout(&bytes);
+    let ChunkedLog { dir, bytes, chunks, total } = chunked_log();
     assert!(chunks.len() > 10, "{} chunks", chunks.len());
     assert_eq!(chunks.iter().map(|c| c.2).sum::<u64>(), total);
     let data_end = chunks.last().unwrap().1;
@@ -154,11 +171,7 @@ fn truncated_file_recovers_every_complete_chunk_exactly() {
 
 #[test]
 fn bit_flipped_chunk_is_skipped_with_its_offset_or_refused() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("run.mcap");
-    let total = write_log(&path, 600, 4096);
-    let mut bytes = std::fs::read(&path).unwrap();
-    let chunks = chunk_layout(&bytes);
+    let ChunkedLog { dir, mut bytes, chunks, total } = chunked_log();
     let k = chunks.len() / 2;
     let (start, end, lost) = chunks[k];
     // Flip a bit in the compressed data, well after the chunk header.

@@ -18,10 +18,10 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
-use super::fan::{RayFan, noise_rng};
+use super::fan::{RayFan, RayOptions, noise_rng};
 use crate::error::{Error, Result};
 use crate::log::{CameraInfo, Header, Image, PointCloud2, RegionOfInterest};
-use crate::mj::{Data, Model, ObjType, RayFilter, RayStats};
+use crate::mj::{Data, Model, ObjType, RayStats};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -212,27 +212,10 @@ pub struct DepthCameraOptions {
     /// Horizontal field of view, radians; `None`: the model camera's `fovy` (vertical) with
     /// square pixels. (default: `None`)
     pub hfov_rad: Option<f64>,
-    /// Near clip, metres of depth: geometry nearer than this is not seen, as with a renderer's
-    /// near plane (Gazebo's `<clip><near>`), and what lies behind it is measured: a camera
-    /// inside its own housing or head sees out of it. (default: 0.05)
-    pub min_range_m: f64,
-    /// Farthest depth measured, metres; farther returns read NaN. (default: 10.0)
-    pub max_range_m: f64,
-    /// Standard deviation of the Gaussian noise added to each valid depth, metres (0: none).
-    /// (default: 0.0)
-    pub noise_std_m: f64,
-    /// Seed of the noise; frame `k` draws from stream `k` of it, so a run is reproducible.
-    /// (default: 0)
-    pub seed: u64,
-    /// Frames per second when the camera is published on a schedule, Hz. (default: 15.0)
-    pub rate_hz: f64,
-    /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
-    /// builds a pool of that many for this camera. The image is the same for any count.
-    /// (default: 0)
-    pub threads: usize,
-    /// Which geoms the camera sees. (default: [`RayFilter::default`]: groups 0–2, i.e. MJCF
-    /// geoms and URDF visuals)
-    pub filter: RayFilter,
+    /// Range limits (in depth along the optical axis), noise, rate, threads and the geoms the
+    /// camera sees. (default: [`RayOptions::default`] with a near clip `min_range_m` of 0.05 and
+    /// a `rate_hz` of 15.0)
+    pub ray: RayOptions,
 }
 
 impl Default for DepthCameraOptions {
@@ -241,13 +224,7 @@ impl Default for DepthCameraOptions {
             width: 320,
             height: 240,
             hfov_rad: None,
-            min_range_m: 0.05,
-            max_range_m: 10.0,
-            noise_std_m: 0.0,
-            seed: 0,
-            rate_hz: 15.0,
-            threads: 0,
-            filter: RayFilter::default(),
+            ray: RayOptions { min_range_m: 0.05, rate_hz: 15.0, ..RayOptions::default() },
         }
     }
 }
@@ -319,21 +296,7 @@ impl DepthCamera {
                 ),
             });
         }
-        if !(opts.min_range_m >= 0.0 && opts.max_range_m > opts.min_range_m && opts.max_range_m.is_finite()) {
-            return Err(Error::OutOfRange {
-                what: what(),
-                message: format!(
-                    "range {} … {} m: give 0 ≤ min < max, both finite",
-                    opts.min_range_m, opts.max_range_m
-                ),
-            });
-        }
-        if !(opts.noise_std_m >= 0.0 && opts.noise_std_m.is_finite()) {
-            return Err(Error::OutOfRange {
-                what: what(),
-                message: format!("depth noise {} m: give a standard deviation ≥ 0", opts.noise_std_m),
-            });
-        }
+        opts.ray.check(&what())?;
         // Rays in tile order: TILE×TILE blocks (the caster's bundles), 4×4 of them in a
         // super-tile (its groups), row-major within and between blocks.
         let (w, h) = (opts.width, opts.height);
@@ -358,8 +321,8 @@ impl DepthCamera {
                 }
             }
         }
-        let fan = RayFan::new(rays_optical, (TILE * TILE) as usize, opts.threads, &what())?;
-        let clip_dist = depth_per_dist.iter().map(|s| opts.min_range_m / s).collect();
+        let fan = RayFan::new(rays_optical, (TILE * TILE) as usize, opts.ray.threads, &what())?;
+        let clip_dist = depth_per_dist.iter().map(|s| opts.ray.min_range_m / s).collect();
         Ok(DepthCamera {
             camera,
             name: camera_name.to_string(),
@@ -426,12 +389,12 @@ impl DepthCamera {
         }
         let world_from_optical = self.world_from_optical(data);
         let origin = world_from_optical.translation.vector;
-        let (min_z, max_z) = (self.options.min_range_m, self.options.max_range_m);
+        let (min_z, max_z) = (self.options.ray.min_range_m, self.options.ray.max_range_m);
         // The farthest distance along any ray that can still be within max depth.
         let max_dist = max_z / self.depth_per_dist.iter().copied().fold(1.0f64, f64::min);
         let rot = world_from_optical.rotation.to_rotation_matrix();
         let origin = [origin.x, origin.y, origin.z];
-        let hits = self.fan.cast(data, &self.options.filter, origin, &rot, max_dist, &self.clip_dist)?;
+        let hits = self.fan.cast(data, &self.options.ray.filter, origin, &rot, max_dist, &self.clip_dist)?;
         // Depth along the optical axis, in pixel order; NaN outside the range.
         let mut depth_m = vec![f32::NAN; self.intrinsics.len()];
         for ((hit, &k), &s) in hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
@@ -442,10 +405,10 @@ impl DepthCamera {
                 }
             }
         }
-        let noise = self.options.noise_std_m;
+        let noise = self.options.ray.noise_std_m;
         if noise > 0.0 {
             // Drawn in pixel order, so the noise of a pixel does not depend on the tiling.
-            let mut rng = noise_rng(self.options.seed, self.frames);
+            let mut rng = noise_rng(self.options.ray.seed, self.frames);
             for z in depth_m.iter_mut().filter(|z| z.is_finite()) {
                 *z = (f64::from(*z) + noise * rng.sample::<f64, _>(StandardNormal)) as f32;
             }
@@ -540,11 +503,16 @@ mod tests {
               <geom type="box" size="0.01 0.025 0.01"/>
               <camera name="eye" fovy="60"/></body></worldbody></mujoco>"#;
         let (model, data) = setup(xml);
-        let opts = DepthCameraOptions { width: 32, height: 24, min_range_m: 0.1, ..DepthCameraOptions::default() };
+        let opts = DepthCameraOptions {
+            width: 32,
+            height: 24,
+            ray: RayOptions { min_range_m: 0.1, ..DepthCameraOptions::default().ray },
+            ..DepthCameraOptions::default()
+        };
         let frame = DepthCamera::new(&model, "eye", opts.clone()).unwrap().render(&model, &data).unwrap();
         assert!(frame.depth_m.iter().all(|&z| (z - 1.0).abs() < 1e-6), "{:?}", &frame.depth_m[..8]);
         // A near clip of 5 mm: the housing (1 cm below the camera along its axis) is what it sees.
-        let opts = DepthCameraOptions { min_range_m: 0.005, ..opts };
+        let opts = DepthCameraOptions { ray: RayOptions { min_range_m: 0.005, ..opts.ray }, ..opts };
         let frame = DepthCamera::new(&model, "eye", opts).unwrap().render(&model, &data).unwrap();
         assert!((frame.depth_at(16, 12) - 0.01).abs() < 1e-6, "{}", frame.depth_at(16, 12));
     }
@@ -577,23 +545,24 @@ mod tests {
     fn range_limits_noise_and_threads() {
         let (model, data) = setup(BOX_SCENE);
         let base = DepthCameraOptions { width: 32, height: 24, ..DepthCameraOptions::default() };
+        // The base image with other ray options.
+        let camera = |ray: RayOptions| DepthCamera::new(&model, "down", DepthCameraOptions { ray, ..base.clone() });
         // Beyond max range: NaN.
-        let far = DepthCamera::new(&model, "down", DepthCameraOptions { max_range_m: 0.9, ..base.clone() })
-            .unwrap()
-            .render(&model, &data)
-            .unwrap();
+        let far = camera(RayOptions { max_range_m: 0.9, ..base.ray.clone() }).unwrap().render(&model, &data).unwrap();
         assert!(far.depth_at(0, 0).is_nan());
         assert!((far.depth_at(16, 12) - 0.8).abs() < 1e-6);
         // Nearer than the near clip: the cube's top (depth 0.8) is clipped, the floor behind it
         // seen.
-        let near = DepthCamera::new(&model, "down", DepthCameraOptions { min_range_m: 0.9, ..base.clone() })
-            .unwrap()
-            .render(&model, &data)
-            .unwrap();
+        let near = camera(RayOptions { min_range_m: 0.9, ..base.ray.clone() }).unwrap().render(&model, &data).unwrap();
         assert!((near.depth_at(16, 12) - 1.0).abs() < 1e-6 && (near.depth_at(0, 0) - 1.0).abs() < 1e-6);
         // Noise: seeded, about the asked deviation, independent of the thread count.
         let noisy = |threads| {
-            let o = DepthCameraOptions { noise_std_m: 0.01, seed: 7, threads, width: 160, height: 120, ..base.clone() };
+            let o = DepthCameraOptions {
+                width: 160,
+                height: 120,
+                ray: RayOptions { noise_std_m: 0.01, seed: 7, threads, ..base.ray.clone() },
+                ..base.clone()
+            };
             DepthCamera::new(&model, "down", o).unwrap().render(&model, &data).unwrap()
         };
         let (a, b, c) = (noisy(1), noisy(3), noisy(0));
@@ -619,8 +588,7 @@ mod tests {
         let std = (diffs.iter().map(|d| d * d).sum::<f64>() / diffs.len() as f64).sqrt();
         assert!((std - 0.01).abs() < 0.0005, "noise std {std}");
         // Bad options are refused with the camera's name.
-        let err =
-            DepthCamera::new(&model, "down", DepthCameraOptions { min_range_m: 20.0, ..base.clone() }).unwrap_err();
+        let err = camera(RayOptions { min_range_m: 20.0, ..base.ray.clone() }).unwrap_err();
         assert!(err.to_string().contains("\"down\""), "{err}");
         assert!(DepthCamera::new(&model, "nope", base).unwrap_err().to_string().contains("camera named \"nope\""));
     }

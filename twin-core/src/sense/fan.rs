@@ -1,12 +1,80 @@
 //! The ray setup depth cameras and LiDARs share: a fixed fan of unit rays in the sensor's
 //! frame, turned into the world at each reading (a group of rays at a time) and cast by bundles ([`RayScene`]) on the
 //! calling thread, rayon's global pool or a pool of its own; and the seeded noise stream of
-//! reading `k`.
+//! reading `k`; and the options both kinds take ([`RayOptions`]), checked once.
 
 use crate::error::{Error, Result};
 use crate::mj::{Data, RayFilter, RayHit, RayScene, RayStats};
 use nalgebra::{Rotation3, Vector3};
 use rand::SeedableRng;
+
+/// What every ray sensor (a [`super::DepthCamera`], a [`super::Lidar`]) is given besides its
+/// pattern of rays: range limits, noise, rate, threads and the geoms it sees. The defaults are a
+/// LiDAR's; [`super::DepthCameraOptions::default`] changes `min_range_m` and `rate_hz`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RayOptions {
+    /// Nearest range measured, metres: a LiDAR's minimum range along the beam (a nearer return
+    /// reads `−Inf`); a depth camera's near clip in depth, as a renderer's near plane (Gazebo's
+    /// `<clip><near>`): nearer geometry is not seen and what lies behind it is measured, so a
+    /// camera inside its own housing or head sees out of it. (default: 0.1)
+    pub min_range_m: f64,
+    /// Farthest range measured, metres; farther returns read `+Inf` in a scan, NaN in a depth
+    /// image. (default: 10.0)
+    pub max_range_m: f64,
+    /// Standard deviation of the Gaussian noise added to each valid return, metres (0: none).
+    /// (default: 0.0)
+    pub noise_std_m: f64,
+    /// Seed of the noise; reading `k` (frame or scan) draws from stream `k` of it, so a run is
+    /// reproducible. (default: 0)
+    pub seed: u64,
+    /// Readings per second when the sensor is published on a schedule, Hz. (default: 10.0)
+    pub rate_hz: f64,
+    /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
+    /// builds a pool of that many for this sensor. The reading is the same for any count.
+    /// (default: 0)
+    pub threads: usize,
+    /// Which geoms the rays see. (default: [`RayFilter::default`]: groups 0–2, i.e. MJCF geoms
+    /// and URDF visuals)
+    pub filter: RayFilter,
+}
+
+impl Default for RayOptions {
+    fn default() -> Self {
+        RayOptions {
+            min_range_m: 0.1,
+            max_range_m: 10.0,
+            noise_std_m: 0.0,
+            seed: 0,
+            rate_hz: 10.0,
+            threads: 0,
+            filter: RayFilter::default(),
+        }
+    }
+}
+
+impl RayOptions {
+    /// Checks the range limits and the noise of the sensor named in errors as `what`.
+    ///
+    /// # Errors
+    /// [`Error::OutOfRange`] for a range that is not 0 ≤ min < max (both finite) or a negative
+    /// or non-finite noise.
+    pub(crate) fn check(&self, what: &str) -> Result<()> {
+        let (lo, hi) = (self.min_range_m, self.max_range_m);
+        if !(lo >= 0.0 && hi > lo && hi.is_finite()) {
+            return Err(Error::OutOfRange {
+                what: what.to_string(),
+                message: format!("range {lo} … {hi} m: give 0 ≤ min < max, both finite"),
+            });
+        }
+        if !(self.noise_std_m >= 0.0 && self.noise_std_m.is_finite()) {
+            return Err(Error::OutOfRange {
+                what: what.to_string(),
+                message: format!("range noise {} m: give a standard deviation ≥ 0", self.noise_std_m),
+            });
+        }
+        Ok(())
+    }
+}
 
 /// A sensor's rays: unit directions in its frame, ordered so that each run of `bundle`
 /// consecutive rays is close in direction (an image tile, a stretch of a ring).

@@ -7,10 +7,10 @@
 //! `(cos v cos h, cos v sin h, sin v)`. Ranges are along the beam; REP 117: `+Inf` for no
 //! return within range, `−Inf` for a return nearer than the minimum range.
 
-use super::fan::{RayFan, noise_rng};
+use super::fan::{RayFan, RayOptions, noise_rng};
 use crate::error::{Error, Result};
 use crate::log::{Header, LaserScan, PointCloud2};
-use crate::mj::{Data, Model, ObjType, RayFilter, RayStats};
+use crate::mj::{Data, Model, ObjType, RayStats};
 use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
 use rand::Rng;
 use rand_distr::StandardNormal;
@@ -49,22 +49,9 @@ pub struct LidarOptions {
     pub horizontal: ScanAxis,
     /// Vertical beams (rings); one ring is a planar scan. (default: one ring at 0)
     pub vertical: ScanAxis,
-    /// Nearest range measured, metres. (default: 0.1)
-    pub min_range_m: f64,
-    /// Farthest range measured, metres. (default: 10.0)
-    pub max_range_m: f64,
-    /// Standard deviation of the Gaussian noise added to each return, metres. (default: 0.0)
-    pub noise_std_m: f64,
-    /// Seed of the noise; scan `k` draws from stream `k`. (default: 0)
-    pub seed: u64,
-    /// Scans per second when published on a schedule, Hz. (default: 10.0)
-    pub rate_hz: f64,
-    /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
-    /// builds a pool of that many for this scanner. The scan is the same for any count.
-    /// (default: 0)
-    pub threads: usize,
-    /// Which geoms the beams see. (default: [`RayFilter::default`])
-    pub filter: RayFilter,
+    /// Range limits, noise, rate, threads and the geoms the beams see. (default:
+    /// [`RayOptions::default`])
+    pub ray: RayOptions,
 }
 
 impl Default for LidarOptions {
@@ -76,13 +63,7 @@ impl Default for LidarOptions {
                 max_rad: std::f64::consts::PI * 179.0 / 180.0,
             },
             vertical: ScanAxis { samples: 1, min_rad: 0.0, max_rad: 0.0 },
-            min_range_m: 0.1,
-            max_range_m: 10.0,
-            noise_std_m: 0.0,
-            seed: 0,
-            rate_hz: 10.0,
-            threads: 0,
-            filter: RayFilter::default(),
+            ray: RayOptions::default(),
         }
     }
 }
@@ -198,26 +179,14 @@ impl Lidar {
                 ),
             });
         }
-        let (lo, hi) = (options.min_range_m, options.max_range_m);
-        if !(lo >= 0.0 && hi > lo && hi.is_finite()) {
-            return Err(Error::OutOfRange {
-                what: what(),
-                message: format!("range {lo} … {hi} m: give 0 ≤ min < max, both finite"),
-            });
-        }
-        if !(options.noise_std_m >= 0.0 && options.noise_std_m.is_finite()) {
-            return Err(Error::OutOfRange {
-                what: what(),
-                message: format!("range noise {} m: give a standard deviation ≥ 0", options.noise_std_m),
-            });
-        }
+        options.ray.check(&what())?;
         let mut dirs_sensor = Vec::with_capacity(options.horizontal.samples * options.vertical.samples);
         for v in 0..options.vertical.samples {
             for h in 0..options.horizontal.samples {
                 dirs_sensor.push(beam_direction(options.horizontal.angle(h), options.vertical.angle(v)));
             }
         }
-        let fan = RayFan::new(dirs_sensor, BUNDLE, options.threads, &what())?;
+        let fan = RayFan::new(dirs_sensor, BUNDLE, options.ray.threads, &what())?;
         Ok(Lidar { site, frame_id: site_name.to_string(), options, fan, scans: 0 })
     }
 
@@ -255,10 +224,10 @@ impl Lidar {
         let rot = Rotation3::from_matrix_unchecked(Matrix3::from_row_slice(&m));
         let world_from_sensor =
             Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), UnitQuaternion::from_rotation_matrix(&rot));
-        let (lo, hi) = (self.options.min_range_m, self.options.max_range_m);
-        let hits = self.fan.cast(data, &self.options.filter, p, &rot, hi, &[])?;
-        let mut rng = noise_rng(self.options.seed, self.scans);
-        let noise = self.options.noise_std_m;
+        let (lo, hi) = (self.options.ray.min_range_m, self.options.ray.max_range_m);
+        let hits = self.fan.cast(data, &self.options.ray.filter, p, &rot, hi, &[])?;
+        let mut rng = noise_rng(self.options.ray.seed, self.scans);
+        let noise = self.options.ray.noise_std_m;
         let ranges_m = hits
             .iter()
             .map(|h| match h {
@@ -286,6 +255,7 @@ impl Lidar {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::mj::RayFilter;
     use std::sync::Arc;
 
     /// A wall (a box face) 2 m in front of a scanner whose site is yawed 30° and lifted.
@@ -303,9 +273,11 @@ mod tests {
         let opts = LidarOptions {
             horizontal: ScanAxis { samples: 721, min_rad: -1.1, max_rad: 1.1 },
             vertical: ScanAxis { samples: 16, min_rad: -0.26, max_rad: 0.26 },
-            max_range_m: 30.0,
-            filter: RayFilter { exclude_bodies: vec![robot], ..RayFilter::default() },
-            ..LidarOptions::default()
+            ray: RayOptions {
+                max_range_m: 30.0,
+                filter: RayFilter { exclude_bodies: vec![robot], ..RayFilter::default() },
+                ..RayOptions::default()
+            },
         };
         let mut lidar = Lidar::new(&model, "laser", opts.clone()).unwrap();
         let scan = lidar.scan(&data).unwrap();
@@ -330,17 +302,27 @@ mod tests {
         let x0 = f32::from_le_bytes(cloud.data[0..4].try_into().unwrap());
         assert!((x0 - 2.0).abs() < 1e-4, "{x0}");
         // Beyond the maximum range: +Inf; the noise is seeded and about the asked size.
-        let short = Lidar::new(&model, "laser", LidarOptions { max_range_m: 2.1, ..opts.clone() })
-            .unwrap()
-            .scan(&data)
-            .unwrap();
+        let short = Lidar::new(
+            &model,
+            "laser",
+            LidarOptions { ray: RayOptions { max_range_m: 2.1, ..opts.ray.clone() }, ..opts.clone() },
+        )
+        .unwrap()
+        .scan(&data)
+        .unwrap();
         assert!(short.ranges_m[0].is_infinite() && short.ranges_m[0] > 0.0);
         assert!((f64::from(short.ranges_m[8 * 721 + 360]) - 2.0 / opts.vertical.angle(8).cos()).abs() < 1e-6);
-        let noisy =
-            Lidar::new(&model, "laser", LidarOptions { noise_std_m: 0.01, seed: 3, threads: 1, ..opts.clone() })
-                .unwrap()
-                .scan(&data)
-                .unwrap();
+        let noisy = Lidar::new(
+            &model,
+            "laser",
+            LidarOptions {
+                ray: RayOptions { noise_std_m: 0.01, seed: 3, threads: 1, ..opts.ray.clone() },
+                ..opts.clone()
+            },
+        )
+        .unwrap()
+        .scan(&data)
+        .unwrap();
         let d: Vec<f64> = noisy.ranges_m.iter().zip(&scan.ranges_m).map(|(a, b)| f64::from(a - b)).collect();
         let std = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
         assert!((std - 0.01).abs() < 0.0005, "noise std {std}");

@@ -10,6 +10,7 @@ pub mod rig;
 
 pub use cup::{CupDetectOptions, CupEstimate, detect_cup};
 pub use depth::{DepthCamera, DepthCameraOptions, DepthFrame, Intrinsics};
+pub use fan::RayOptions;
 pub use lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
 pub use rig::{
     Device, Pipelined, RaySensor, RaySensorKind, Reading, SensorMessage, SensorStream, ray_sensors, unrendered_cameras,

@@ -11,6 +11,7 @@
 //! else `/<robot>/<sensor>`.
 
 use super::depth::{DepthCamera, DepthCameraOptions, DepthFrame};
+use super::fan::RayOptions;
 use super::lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
 use crate::error::Result;
 use crate::log::cdr::CdrWriter;
@@ -100,17 +101,16 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                     covered.push(id);
                     let name = if s.mujoco.len() == 1 { s.name.clone() } else { format!("{}_{k}", s.name) };
                     let [w, h] = model.cam_resolution()[id];
-                    let mut options = DepthCameraOptions {
+                    let options = DepthCameraOptions {
                         width: w.max(1) as u32,
                         height: h.max(1) as u32,
-                        noise_std_m: s.noise_std,
+                        ray: from_file(s, DepthCameraOptions::default().ray),
                         ..DepthCameraOptions::default()
                     };
-                    from_file(s, [&mut options.min_range_m, &mut options.max_range_m, &mut options.rate_hz]);
                     let prefix = prefix_of(&if s.mujoco.len() == 1 { s.topic.clone() } else { None }, &name);
                     out.push(RaySensor {
                         frame_id: s.frame_id.clone().unwrap_or_else(|| format!("{name}_optical_frame")),
-                        rate_hz: options.rate_hz,
+                        rate_hz: options.ray.rate_hz,
                         kind: RaySensorKind::Depth { camera: cam.clone(), options },
                         topics: depth_topics(&prefix),
                         name,
@@ -123,13 +123,11 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                     continue;
                 }
                 let axis = |(samples, min_rad, max_rad): (usize, f64, f64)| ScanAxis { samples, min_rad, max_rad };
-                let mut options = LidarOptions {
+                let options = LidarOptions {
                     horizontal: axis(scan.horizontal),
                     vertical: axis(scan.vertical),
-                    noise_std_m: s.noise_std,
-                    ..LidarOptions::default()
+                    ray: from_file(s, LidarOptions::default().ray),
                 };
-                from_file(s, [&mut options.min_range_m, &mut options.max_range_m, &mut options.rate_hz]);
                 let stream = if scan.vertical.0 <= 1 { SensorStream::Scan } else { SensorStream::Points };
                 let topic = s.topic.clone().unwrap_or_else(|| {
                     let leaf = if stream == SensorStream::Scan { "scan" } else { "points" };
@@ -138,7 +136,7 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                 out.push(RaySensor {
                     name: s.name.clone(),
                     frame_id: s.frame_id.clone().unwrap_or_else(|| s.name.clone()),
-                    rate_hz: options.rate_hz,
+                    rate_hz: options.ray.rate_hz,
                     kind: RaySensorKind::Lidar { site: site.clone(), options },
                     topics: vec![(topic, stream)],
                 });
@@ -159,7 +157,7 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
         out.push(RaySensor {
             name: c.name.clone(),
             frame_id: format!("{}_optical_frame", c.name),
-            rate_hz: options.rate_hz,
+            rate_hz: options.ray.rate_hz,
             kind: RaySensorKind::Depth { camera: c.name.clone(), options },
             topics: depth_topics(&prefix_of(&None, &c.name)),
         });
@@ -167,16 +165,21 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
     out
 }
 
-/// Whether a Gazebo sensor type is a colour camera (not rendered by twin).
-/// What the robot file says of sensor `s` over a camera's or LiDAR's defaults, in place: its
-/// range limits (`[min, max]`, metres) and its rate (Hz), each where the file gives it.
-fn from_file(s: &crate::convert::SensorMeta, [min_range_m, max_range_m, rate_hz]: [&mut f64; 3]) {
-    if let Some([lo, hi]) = s.range_m {
-        (*min_range_m, *max_range_m) = (lo, hi);
+/// What the robot file says of sensor `s` over a camera's or LiDAR's `defaults`: its noise
+/// (standard deviation, metres), its range limits (`[min, max]`, metres) and its rate (Hz),
+/// the last two where the file gives them.
+fn from_file(s: &crate::convert::SensorMeta, defaults: RayOptions) -> RayOptions {
+    let [min_range_m, max_range_m] = s.range_m.unwrap_or([defaults.min_range_m, defaults.max_range_m]);
+    RayOptions {
+        min_range_m,
+        max_range_m,
+        noise_std_m: s.noise_std,
+        rate_hz: s.update_rate_hz.unwrap_or(defaults.rate_hz),
+        ..defaults
     }
-    *rate_hz = s.update_rate_hz.unwrap_or(*rate_hz);
 }
 
+/// Whether a Gazebo sensor type is a colour camera (not rendered by twin).
 fn is_colour_camera(kind: &str) -> bool {
     matches!(kind, "camera" | "wideanglecamera" | "multicamera")
 }

@@ -951,34 +951,11 @@ impl LegIk {
         iterations: usize,
         damping: f64,
     ) -> IkResult {
-        if let Some(cf) = &self.closed_form {
-            let mut warm = [0.0; 6];
-            for (k, w) in warm.iter_mut().enumerate() {
-                *w = q[k] - self.qpos0[k];
-            }
-            let (theta, sc, _) = cf.solve(&target, &warm);
-            let mut within = true;
-            for k in 0..6 {
-                let v = self.qpos0[k] + theta[k];
-                q[k] = v.clamp(self.range[k][0], self.range[k][1]);
-                within &= q[k] == v;
-            }
-            if within {
-                return cf.error(&target, &sc);
-            }
+        if let Some(exact) = self.solve_closed_form(&target, q) {
+            return exact;
         }
-        self.solve_dls(target, q, iterations, damping)
-    }
-
-    /// Damped-least-squares IK: `iterations` steps of `q` toward `target`; the error returned
-    /// is the one before the last step.
-    fn solve_dls(
-        &self,
-        target: (Vector3<f64>, UnitQuaternion<f64>),
-        q: &mut [f64],
-        iterations: usize,
-        damping: f64,
-    ) -> IkResult {
+        // Damped least squares: `iterations` steps of `q` toward `target`; the error returned
+        // is the one before the last step.
         let n = self.len();
         let mut anchors = [Vector3::zeros(); 12];
         let mut axes = [Vector3::zeros(); 12];
@@ -1001,6 +978,22 @@ impl LegIk {
             }
         }
         result
+    }
+
+    /// The closed-form step of [`LegIk::solve`]: `q` set to the closed-form solution nearest
+    /// it, clamped to the joint ranges; its error when no joint needed the clamp, `None` when
+    /// one did or the leg has no closed form (then damped least squares goes on from `q`).
+    fn solve_closed_form(&self, target: &(Vector3<f64>, UnitQuaternion<f64>), q: &mut [f64]) -> Option<IkResult> {
+        let cf = self.closed_form.as_ref()?;
+        let warm: [f64; 6] = std::array::from_fn(|k| q[k] - self.qpos0[k]);
+        let (theta, sc, _) = cf.solve(target, &warm);
+        let mut within = true;
+        for k in 0..6 {
+            let v = self.qpos0[k] + theta[k];
+            q[k] = v.clamp(self.range[k][0], self.range[k][1]);
+            within &= q[k] == v;
+        }
+        within.then(|| cf.error(target, &sc))
     }
 
     /// How the chain's angles follow a small motion of the pelvis (the IK's base) with the

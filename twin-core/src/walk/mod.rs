@@ -264,18 +264,15 @@ pub struct WalkOptions {
     pub swing_stiffness: f64,
     /// Damped-least-squares iterations of the leg IK per tick, warm-started from the last
     /// tick's solution (default: 1: the targets move by millimetres per tick and the residual
-    /// is taken up at the next one; randomized `stand.toml`/`walk.toml` on 2 × 200 episodes
-    /// each: 352 and 124 successes with 1, 353 and 121 with 2).
+    /// is taken up at the next one; measurements in BENCHMARKS.md, "Walker option choices").
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
     pub bodies: BodyNames,
     /// Part of a recovery step's swing by which the foot is over its landing spot (it comes
     /// down there for the rest); the spot follows the predicted capture point for the first
-    /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move came
-    /// in its middle, fast enough to saturate the hip roll, and sideways steps landed 0.2 to
-    /// 0.3 m short; randomized `stand.toml`, 2 × 200 episodes (seeds 0 and 11): 183 + 182
-    /// successes with 1.0 (adjusted until 0.7), 190 + 190 with 0.6, 191 + 186 with 0.7,
-    /// 187 + 178 with 0.5.
+    /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move comes
+    /// in its middle, fast enough to saturate the hip roll, and sideways steps land short
+    /// (measurements in BENCHMARKS.md, "Walker option choices").
     pub recovery_reach_fraction: f64,
     /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
     /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
@@ -286,11 +283,8 @@ pub struct WalkOptions {
     /// the commanded pelvis, the stance leg's give (its joints' PD error, a stance foot
     /// turning on its contacts) moves the landing spot with the body: a body tilted by a push
     /// carries the swing foot into the ground short of its spot, and on a robot with compliant
-    /// legs every landing lands off by the stance leg's error. The lab, `twin sim ROBOT
-    /// --controller walk --vx 0.25 --duration 30`: Unitree G1 (example-robot-data) fell at
-    /// 3.4 s after 0.56 m from the commanded pelvis, walked 8.4 m without a fall from the
-    /// measured one; the shipped humanoid 8.16 m and 8.64 m. `stand.toml`'s recovery steps keep
-    /// `false` (its randomized results were tuned with it).
+    /// legs every landing lands off by the stance leg's error (measurements in BENCHMARKS.md,
+    /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     pub swing_from_measured_pelvis: bool,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
@@ -307,9 +301,8 @@ pub struct WalkOptions {
     /// runs on every step toward the last solve's targets, with its feed-forward and gains,
     /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
     /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`])
-    /// (default: 1, every step; at 2 the walker costs a third less: the randomized `walk.toml`
-    /// passed 182 and 188 of 200 on seeds 0 and 11 against 186 and 187 solving every step,
-    /// and 163 on seed 0 with the targets held between solves).
+    /// (default: 1, every step; at 2 the walker costs a third less: measurements in
+    /// BENCHMARKS.md, "Walker option choices").
     pub plan_every_ticks: u64,
     /// Blind walking on uneven ground: each landed sole's height is the ground under that foot
     /// (unless within [`GROUND_DEADBAND_M`] of the start, flat ground), a swinging foot goes
@@ -743,6 +736,21 @@ struct Held {
     pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
 }
 
+/// The home pose and the crouch from it that the strength and reach checks start from
+/// ([`Walker::home_crouch`]).
+struct HomeCrouch {
+    /// The home pose, `qpos`.
+    qpos: Vec<f64>,
+    /// Its frames.
+    frames: Frames,
+    /// Its CoM, world, m.
+    com: Vector3<f64>,
+    /// Its pelvis position, world, m.
+    pelvis_pos: Vector3<f64>,
+    /// The pelvis height that puts the CoM at `com_height`, world z, m.
+    pelvis_z: f64,
+}
+
 /// Walking's DCM reference: within a step `ξ_ref(t)` runs from the stance foot to the step's
 /// end DCM ([`Step::dcm`]), fixed when the step starts from the nominal plan of then
 /// ([`Schedule::first_end_dcm`]). Landing-spot corrections during the step do not move it, so
@@ -1146,16 +1154,12 @@ impl Walker {
     /// times its gear). Walking needs more (a whole leg's share in single support, the ankles'
     /// ZMP work); a robot that can't hold the crouch falls before its first step.
     fn check_strength(&self, model: &Model) -> Result<()> {
-        let (home, frames, _, pelvis_pos, pelvis_z) = self.home_crouch();
+        let HomeCrouch { qpos: home, frames, pelvis_pos, pelvis_z, .. } = self.home_crouch();
         let mut q = home.clone();
         for (leg, ik) in self.ik.iter().enumerate() {
             let sole = self.sole_world(&frames, leg);
-            let rot = self.body.legs[leg].foot_rot_home;
-            let foot = sole - rot * self.body.legs[leg].sole_in_foot;
-            let target = (foot - Vector3::new(pelvis_pos.x, pelvis_pos.y, pelvis_z), rot);
-            let mut ql: Vec<f64> = (0..ik.len()).map(|k| home[ik.qpos_adr(k)]).collect();
-            ik.bend_knee(&mut ql, 0.5);
-            ik.solve(target, &mut ql, 200, 1e-3);
+            let pelvis = Vector3::new(pelvis_pos.x, pelvis_pos.y, pelvis_z);
+            let (ql, _) = self.crouched_leg(leg, &home, sole, pelvis);
             for (k, v) in ql.iter().enumerate() {
                 q[ik.qpos_adr(k)] = *v;
             }
@@ -1190,23 +1194,42 @@ impl Walker {
         Ok(())
     }
 
-    /// The home pose, its frames, its CoM and pelvis position, and the pelvis height that puts
-    /// the CoM at `com_height` (what the strength and reach checks start from).
-    fn home_crouch(&self) -> (Vec<f64>, Frames, Vector3<f64>, Vector3<f64>, f64) {
-        let home = self.nominal.clone();
+    /// The home pose and the pelvis height that puts the CoM at `com_height` (what the
+    /// strength and reach checks start from).
+    fn home_crouch(&self) -> HomeCrouch {
+        let qpos = self.nominal.clone();
         let mut frames = self.tree.frames();
-        self.tree.forward(&home, &mut frames);
+        self.tree.forward(&qpos, &mut frames);
         let com = frames.com();
         let pelvis_pos = frames.xpos[self.body.pelvis];
         let pelvis_z = self.options.com_height + (pelvis_pos.z - com.z);
-        (home, frames, com, pelvis_pos, pelvis_z)
+        HomeCrouch { qpos, frames, com, pelvis_pos, pelvis_z }
+    }
+
+    /// Leg `leg`'s angles (from the home pose `home`, knee bent) that put its sole centre at
+    /// `sole` (world, m) in the home foot orientation with the pelvis at `pelvis` (world, m,
+    /// home orientation), and the IK's remaining error.
+    fn crouched_leg(
+        &self,
+        leg: usize,
+        home: &[f64],
+        sole: Vector3<f64>,
+        pelvis: Vector3<f64>,
+    ) -> (Vec<f64>, kin::IkResult) {
+        let ik = &self.ik[leg];
+        let rot = self.body.legs[leg].foot_rot_home;
+        let foot = sole - rot * self.body.legs[leg].sole_in_foot;
+        let mut q: Vec<f64> = (0..ik.len()).map(|k| home[ik.qpos_adr(k)]).collect();
+        ik.bend_knee(&mut q, 0.5);
+        let error = ik.solve((foot - pelvis, rot), &mut q, 200, 1e-3);
+        (q, error)
     }
 
     /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
     /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
     /// wide), both legs' IK must converge.
     fn check_reach(&self) -> Result<()> {
-        let (home, frames, com, pelvis_pos, pelvis_z) = self.home_crouch();
+        let HomeCrouch { qpos: home, frames, com, pelvis_pos, pelvis_z } = self.home_crouch();
         let sole_z = self.sole_world(&frames, 0).z;
         let o = &self.options;
         let half_len = o.max_step_length / 2.0;
@@ -1217,12 +1240,7 @@ impl Walker {
                 let x = if leg == front { half_len } else { -half_len };
                 let y = self.body.legs[leg].side.sign() * half_width;
                 let sole = Vector3::new(com.x + x, com.y + y, sole_z);
-                let rot = self.body.legs[leg].foot_rot_home;
-                let foot = sole - rot * self.body.legs[leg].sole_in_foot;
-                let target = (foot - Vector3::new(com.x + offset_x, com.y, pelvis_z), rot);
-                let mut q: Vec<f64> = (0..self.ik[leg].len()).map(|k| home[self.ik[leg].qpos_adr(k)]).collect();
-                self.ik[leg].bend_knee(&mut q, 0.5);
-                let r = self.ik[leg].solve(target, &mut q, 200, 1e-3);
+                let (_, r) = self.crouched_leg(leg, &home, sole, Vector3::new(com.x + offset_x, com.y, pelvis_z));
                 if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
                     return Err(Error::WalkReach {
                         message: format!(

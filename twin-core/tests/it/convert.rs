@@ -18,15 +18,20 @@ fn inertia_tensor(m: &Model, b: usize) -> Matrix3<f64> {
     r.matrix() * d * r.matrix().transpose()
 }
 
+/// The humanoid's URDF text with the first `from` replaced by `to` (which must be there).
+fn humanoid_edited(from: &str, to: &str) -> String {
+    let text = std::fs::read_to_string(humanoid()).unwrap();
+    assert!(text.contains(from), "the humanoid no longer has {from:?}");
+    text.replacen(from, to, 1)
+}
+
 #[test]
 fn humanoid_matches_mujoco_own_import_and_adds_actuators_sensors_friction() {
     // MuJoCo's importer fuses fixed children into their parent (fusestatic); twin lumps their
     // mass the same way but keeps their bodies: the moving bodies must agree exactly.
-    let text = std::fs::read_to_string(humanoid()).unwrap();
-    let text = text.replacen(
+    let text = humanoid_edited(
         "<robot name=\"humanoid\">",
         "<robot name=\"humanoid\">\n<mujoco><compiler fusestatic=\"true\" discardvisual=\"false\"/></mujoco>",
-        1,
     );
     let dir = tempfile::tempdir().unwrap();
     let urdf = dir.path().join("humanoid.urdf");
@@ -565,13 +570,10 @@ fn humanoid_passes_check() {
 #[test]
 fn check_names_the_cause_when_a_robot_falls_forward() {
     // Move the torso's mass far forward: the CoM leaves the support polygon.
-    let text = std::fs::read_to_string(humanoid()).unwrap();
-    let text = text.replacen(
+    let text = humanoid_edited(
         "<origin xyz=\"0 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
         "<origin xyz=\"0.6 0 0.17\" rpy=\"0 0 0\"/>\n      <mass value=\"8\"/>",
-        1,
     );
-    assert!(text.contains("0.6 0 0.17"));
     let c = convert_urdf_str(&humanoid(), &text, &ConvertOptions::default()).unwrap();
     let m = Model::from_xml_str(&c.mjcf).unwrap();
     let opts = twin_core::check::CheckOptions { hold_secs: 2.0, ..Default::default() };

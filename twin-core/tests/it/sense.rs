@@ -4,7 +4,7 @@
 use nalgebra::{Point3, Vector3};
 use std::sync::Arc;
 use twin_core::mj::{Data, Model, ObjType, RayFilter};
-use twin_core::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, detect_cup};
+use twin_core::sense::{CupDetectOptions, DepthCamera, DepthCameraOptions, RayOptions, detect_cup};
 
 /// A floor, a 1.2 × 0.8 m table with its top at 0.75 m, a 4 cm-radius, 10 cm-high cup at
 /// `cup_xy`, an arm over the table that the camera is told not to see, and a camera on that
@@ -45,7 +45,10 @@ fn cup_is_found_within_a_centimetre_from_the_depth_points() {
         let robot = model.id(ObjType::Body, "robot").unwrap();
         let filter = RayFilter { exclude_bodies: model.subtree(robot), ..RayFilter::default() };
         // Sensor noise of a good depth camera at ~1 m (1 mm); the estimate must still hold.
-        let opts = DepthCameraOptions { filter, noise_std_m: 0.001, seed: k as u64, ..DepthCameraOptions::default() };
+        let opts = DepthCameraOptions {
+            ray: RayOptions { filter, noise_std_m: 0.001, seed: k as u64, ..DepthCameraOptions::default().ray },
+            ..DepthCameraOptions::default()
+        };
         let mut camera = DepthCamera::new(&model, "head", opts).unwrap();
         let frame = camera.render(&model, &data).unwrap();
         let points = frame.points_world();
@@ -74,7 +77,12 @@ fn no_cup_on_the_table_is_an_error_not_a_guess() {
     data.forward().unwrap();
     let robot = model.id(ObjType::Body, "robot").unwrap();
     let filter = RayFilter { exclude_bodies: model.subtree(robot), ..RayFilter::default() };
-    let opts = DepthCameraOptions { filter, width: 160, height: 120, ..DepthCameraOptions::default() };
+    let opts = DepthCameraOptions {
+        width: 160,
+        height: 120,
+        ray: RayOptions { filter, ..DepthCameraOptions::default().ray },
+        ..DepthCameraOptions::default()
+    };
     let frame = DepthCamera::new(&model, "head", opts).unwrap().render(&model, &data).unwrap();
     let err = detect_cup(&frame.points_world(), &CupDetectOptions::default()).unwrap_err().to_string();
     assert!(err.contains("nothing stands on the table"), "{err}");
