@@ -941,15 +941,17 @@ impl Walker {
     /// `S · tilt_rate_gain`, `S` the sum of those joints' `kp`. Within one step the pelvis turns
     /// on the inertia `I` that turns rigidly with it ([`Tree::rigid_axis_inertia`]); when the
     /// tilt is measured on a body that turns with it (the IMU's body, or the floating base when
-    /// there is no IMU), that damping is stable under the step while `D·dt/(2I)` stays below
-    /// [`TILT_LOOP_MARGIN`] (the Jury bound of [`PdHoldOptions::max_loop_margin`]). A tilt
+    /// there is no IMU), that damping is stable under the step while `D·dt/(2I)`, with the
+    /// joint loops' own margin on that turn, stays below [`TILT_LOOP_MARGIN`] (the Jury bound of [`PdHoldOptions::max_loop_margin`]). A tilt
     /// measured beyond a joint's spring (the shipped humanoid's IMU on its torso, over a waist
     /// pitch joint) closes no loop within a step, and keeps the option's gain.
     ///
     /// Example-robot-data's Unitree G1 (no IMU sensors: the base's orientation; a 3.8-kg pelvis
     /// under a torso on waist roll and pitch joints) at the default 0.05 s chattered at its hips'
     /// effort limits from the first step and fell within 0.7 s, standing; 0.03 s fell in 1.1 s,
-    /// 0.02 s stood; this bound gives it 0.018 s (pitch) and 0.011 s (roll).
+    /// 0.02 s stood; this bound alone gave it 0.018 s (pitch) and 0.011 s (roll). The joint
+    /// loops on the same turn use their share of the margin first
+    /// ([`Walker::cap_pelvis_damping`]): the G1's use all of it, and its rate gains are 0.
     fn stable_tilt_rate_gains(&self, model: &Model) -> [f64; 2] {
         let wanted = self.options.tilt_rate_gain;
         let mut frames = self.tree.frames();
