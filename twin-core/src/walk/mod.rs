@@ -50,7 +50,7 @@
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 94.9° |
 //! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.1° |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
-//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s) | 0.17 m | – | at 3.6 s | falls (4.1 s) |
+//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 0.5 m forward, then back: −0.57 m | – | at 4.7 s (heading −34°) | 100.3° |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
 //! turns and is steered over `/cmd_vel` since the damping of its hip and waist loops is capped
@@ -65,7 +65,29 @@
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change
 //!   the fall (3.28 s against 3.32 s), a higher `foot_clearance` (0.1 m) delays it to 4.8 s.
-//! - Talos (motors): it walks backward before it falls (−0.17 m).
+//! - Talos (motors): its IMU site is on `imu_link`, half a turn from the pelvis; until the
+//!   walker composed that turn ([`kin::Imu::site_rot`]) it read the torso upside down (roll
+//!   ±π), its first torques flipped sign at their limits on every physics step, the feet left
+//!   the ground at 0.04 s and landed 3–6 cm off, it stood leaning 6–11°, walked 0.17 m
+//!   backward and fell at 3.6 s, and fell turning at 4.1 s. Read right, it stands upright and
+//!   turns 90° in place; walking, it steps 0.5 m forward by 3.2 s, then the stance foot turns
+//!   on the ground (−5° to −13° in 0.25 s, as Romeo's), a step lands beside the stance foot
+//!   and the next ones go backward. With the swing foot placed from the commanded pelvis
+//!   (`swing_from_measured_pelvis = false`) it walks: 7.96 m in 30 s at `--vx 0.25` (0.27 m/s,
+//!   heading 7.3°, drift 0.01 m) and 7.19 m at 0.2 — the opposite of the G1, which falls at
+//!   3.4 s that way. A blend of the two pelvises for every robot fails one or the other
+//!   (weight 0.5: G1 falls at 3.7 s, Talos at 5.5 s; 0.25: G1 at 3.4 s, Talos walks 7.97 m
+//!   with 1.38 m drift), and the legs' static load (gravity torque / effort: humanoid 0.12,
+//!   G1 0.16, Romeo 0.24, Talos 0.14) does not tell them apart: which robots need the
+//!   measured pelvis is open.
+//! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
+//!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
+//!   and 47 N·m hip pitch saturate, so the swing foot lags its trajectory pitched 16–20°; its
+//!   toe touches down 0.22 m short. Lifting the swing target by the tipped sole's dip (from
+//!   the IK's clamped solution) gave 3.46 s; from the measured foot, 3.96 s but the G1 then
+//!   fell at 5.9 s; a slower step (`step_period` 0.8–0.9 at 0.22 m/s) 4.6 s. The stance
+//!   foot's turn is not its friction: sliding friction 2.0 (3.30 s), `impratio` 10 (3.21 s),
+//!   torsional friction 0.05 m with `condim` 6 (3.23 s; it still turns −2° to −7°).
 
 pub mod derive;
 pub mod hip;

@@ -905,6 +905,72 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     }
 }
 
+/// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
+/// --actuators motor`: the walker refuses its position servos) stands upright under the walker
+/// and turns 90° in place within 15°, no robot-specific option. Its IMU site is on `imu_link`,
+/// turned half a turn about the pelvis's x + y axis: read as the pelvis's own orientation, the
+/// walker saw the torso upside down (roll ±π), its tilt feedback flipped the pelvis ±0.2 rad
+/// from one physics step to the next, the legs' torques hit their limits with alternating
+/// signs, the feet left the ground at 0.04 s and landed 3 to 6 cm from where they stood, the
+/// pelvis leant 6–11° while standing (0.185 rad at 0.94 s), and the turn fell at 4.1 s. (In
+/// the lab: upright within 0.3°, turned 100.3°.)
+#[test]
+fn talos_on_motors_stands_upright_and_turns_in_place() {
+    use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
+    let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
+    let options = ConvertOptions { actuators: ActuatorMode::Motor, ..ConvertOptions::default() };
+    let converted = convert_urdf(&urdf, &options).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let talos = dir.path().join("talos_motors.xml");
+    std::fs::write(&talos, &converted.mjcf).unwrap();
+
+    /// The largest pelvis tilt (rad) before `until_secs`.
+    struct MaxTilt {
+        until_secs: f64,
+        tilt_rad: f64,
+    }
+    impl Observer for MaxTilt {
+        fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
+            if step.time_secs < self.until_secs {
+                let q = step.qpos;
+                let (w, x, y, z) = (q[3], q[4], q[5], q[6]);
+                let up_z = 1.0 - 2.0 * (x * x + y * y) / (w * w + x * x + y * y + z * z);
+                self.tilt_rad = self.tilt_rad.max(up_z.clamp(-1.0, 1.0).acos());
+            }
+            Ok(Flow::Continue)
+        }
+    }
+    // 0.3 rad/s for π/(2·0.3) s from 1 s: 90° to the left, then standing.
+    let text = format!(
+        "model = {talos:?}\nduration = 12.0\ncontroller = \"walk\"\n[walk]\n\
+         commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]\n"
+    );
+    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
+    let robot = s.robot(&talos).unwrap();
+    s.fit_walk(&robot.model).unwrap();
+    let mut controller = s.controller(&robot.model).unwrap();
+    let mut check = s.check(&robot.model).unwrap();
+    let mut standing = MaxTilt { until_secs: 1.0, tilt_rad: 0.0 };
+    let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
+    sim::simulate_with(
+        &robot,
+        controller.as_mut(),
+        &options,
+        None,
+        &mut |_| {},
+        &mut [],
+        &mut [&mut check, &mut standing],
+    )
+    .unwrap();
+    let summary = check.metrics.summary();
+    println!("Talos (motors), turning: {summary}; tilt standing {} rad", standing.tilt_rad);
+    assert!(standing.tilt_rad < 0.02, "pelvis tilted {} rad while standing", standing.tilt_rad);
+    assert!(!summary.fell, "turning: fell at {:?}", summary.fall_time_secs);
+    let deg = summary.yaw_change_rad.to_degrees();
+    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
+    assert!(summary.distance_m < 0.5, "turning in place moved {} m", summary.distance_m);
+}
+
 /// The walker refuses what it can't drive, saying what to change, instead of a fall: legs on
 /// position servos (Talos's transmissions), and actuators too weak to hold the crouch (the
 /// shipped humanoid with every effort limit cut to 10 N·m: its knees need 14.8 N·m at the
