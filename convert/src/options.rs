@@ -51,7 +51,7 @@ impl std::str::FromStr for ActuatorMode {
 }
 
 /// Options of the conversion. Every field documents its default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, smart_default::SmartDefault)]
 pub struct ConvertOptions {
     /// Weld the root link to the world instead of giving it a free joint (default: false).
     pub fixed_base: bool,
@@ -70,15 +70,19 @@ pub struct ConvertOptions {
     /// a light, see [`ConvertOptions::floor`]).
     pub world: Option<PathBuf>,
     /// Add a floor plane and a light when no world is given (default: true).
+    #[default(true)]
     pub floor: bool,
     /// Let robot links collide with each other (default: false, as in Gazebo).
     pub self_collision: bool,
     /// Keep visual geoms (group 2, no contacts) (default: true).
+    #[default(true)]
     pub visuals: bool,
     /// Add `jointpos`/`jointvel` sensors for every 1-DOF joint (default: true).
+    #[default(true)]
     pub joint_sensors: bool,
     /// Simulation timestep, seconds (default: 0.002, Gazebo's `max_step_size`; a world file's
     /// own step wins).
+    #[default(0.002)]
     pub timestep_secs: f64,
     /// Armature (reflected rotor inertia) added to every joint, kg·m² or kg (default: 0).
     pub armature: f64,
@@ -87,37 +91,18 @@ pub struct ConvertOptions {
     /// no place for it) (default: empty).
     pub joint_armature: std::collections::BTreeMap<String, f64>,
     /// Which joints get actuators, and of which kind (default: [`ActuatorMode::Auto`]).
+    #[default(ActuatorMode::Auto)]
     pub actuators: ActuatorMode,
     /// Stiffness of `position` actuators per N·m of effort limit, 1/rad: kp = this × effort
     /// (default: 20, full effort at 0.05 rad error; 100 N·m/rad when no effort is given).
+    #[default(20.0)]
     pub position_kp_per_effort: f64,
     /// Damping of `position` actuators as a fraction of kp, seconds: kv = this × kp
     /// (default: 0.05).
+    #[default(0.05)]
     pub position_kv_per_kp: f64,
     /// Gain of `velocity` actuators per N·m of effort limit, s/rad (default: 1; 10 when no
     /// effort is given).
+    #[default(1.0)]
     pub velocity_kv_per_effort: f64,
-}
-
-impl Default for ConvertOptions {
-    fn default() -> Self {
-        ConvertOptions {
-            fixed_base: false,
-            package_paths: Vec::new(),
-            strict_inertia: false,
-            mesh_dir: None,
-            world: None,
-            floor: true,
-            self_collision: false,
-            visuals: true,
-            joint_sensors: true,
-            timestep_secs: 0.002,
-            armature: 0.0,
-            joint_armature: std::collections::BTreeMap::new(),
-            actuators: ActuatorMode::Auto,
-            position_kp_per_effort: 20.0,
-            position_kv_per_kp: 0.05,
-            velocity_kv_per_effort: 1.0,
-        }
-    }
 }

@@ -32,30 +32,23 @@ pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>>
 pub type DriverFactory = dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
 
 /// How an episode runs and when it ends early.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct EpisodeOptions {
     /// Simulated time per episode, seconds. (default: 5.0)
+    #[default(5.0)]
     pub duration_secs: f64,
     /// The robot has fallen when its base is lower than this fraction of its initial height.
     /// (default: 0.6)
+    #[default(0.6)]
     pub fall_height_fraction: f64,
     /// The robot has fallen when its base tilts more than this from upright, radians.
     /// (default: 1.0, about 57°)
+    #[default(1.0)]
     pub fall_tilt_rad: f64,
     /// Controller name, one of `twin_core::registry::CONTROLLERS`, used unless the batch is
     /// given a controller factory ([`Batch::with_controller`]). (default: `pd-hold`)
+    #[default("pd-hold")]
     pub controller: String,
-}
-
-impl Default for EpisodeOptions {
-    fn default() -> Self {
-        EpisodeOptions {
-            duration_secs: 5.0,
-            fall_height_fraction: 0.6,
-            fall_tilt_rad: 1.0,
-            controller: "pd-hold".into(),
-        }
-    }
 }
 
 /// Everything fixed across the episodes of a batch.

@@ -54,9 +54,10 @@ impl Shard {
 }
 
 /// Options of a batch run.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct RunOptions {
     /// Number of episodes of the whole batch (all shards together). (default: 100)
+    #[default(100)]
     pub episodes: u64,
     /// Worker threads; 0 uses every core. (default: 0)
     pub threads: usize,
@@ -66,12 +67,6 @@ pub struct RunOptions {
     pub out_dir: Option<PathBuf>,
     /// Re-simulate the K worst episodes and write their trajectories to `worst/`. (default: 0)
     pub record_worst: usize,
-}
-
-impl Default for RunOptions {
-    fn default() -> Self {
-        RunOptions { episodes: 100, threads: 0, shard: None, out_dir: None, record_worst: 0 }
-    }
 }
 
 /// What identifies a batch: equal for all shards of one batch (except `shard`).

@@ -104,12 +104,13 @@ fn condition_wrench(
 }
 
 /// Signal-conditioning options.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct ConditionOptions {
     /// Low-pass cut-off, Hz (default: `None`: `min(rate / 25, 20 Hz)`, i.e. 20 Hz for 500 Hz
     /// logs and faster, 4 Hz for a 100 Hz log).
     pub cutoff_hz: Option<f64>,
     /// Butterworth order, applied forward and backward (default: 4).
+    #[default(4)]
     pub filter_order: usize,
     /// Rate at which regressor samples are taken from the filtered signals, Hz (default:
     /// `None`: 5 × the cut-off, at most the log's rate). After the low-pass the signals hold
@@ -117,13 +118,8 @@ pub struct ConditionOptions {
     pub regressor_rate_hz: Option<f64>,
     /// A time step larger than this many median steps splits the log into segments rather
     /// than being bridged (default: 5).
+    #[default(5.0)]
     pub gap_factor: f64,
-}
-
-impl Default for ConditionOptions {
-    fn default() -> Self {
-        ConditionOptions { cutoff_hz: None, filter_order: 4, regressor_rate_hz: None, gap_factor: 5.0 }
-    }
 }
 
 /// One contiguous, conditioned piece of the log. Series are `[joint][sample]`, joints in

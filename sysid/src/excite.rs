@@ -76,7 +76,7 @@ pub enum Criterion {
 }
 
 /// Options of [`design`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct ExciteOptions {
     /// Joints to excite, by name (default: empty: every revolute and prismatic joint). The
     /// others hold their rest position (0 clamped into their range).
@@ -84,80 +84,71 @@ pub struct ExciteOptions {
     /// Harmonics per joint of the designed trajectory (default: 15: up to 1.5 Hz at the default
     /// 10-s period; more harmonics let a joint's velocity rest near zero and then burst, which
     /// separates its viscous and Coulomb columns, at the cost of a faster trajectory to track).
+    #[default(15)]
     pub harmonics: usize,
     /// Harmonics per joint of the random trajectories the design is compared with and starts
     /// from (default: 5, Swevers's choice). At most [`ExciteOptions::harmonics`]: a random
     /// trajectory is a designed one whose higher harmonics are zero.
+    #[default(5)]
     pub baseline_harmonics: usize,
     /// Fundamental frequency `f₀`, Hz; the trajectory's period is `1/f₀` (default: 0.1: 10 s).
+    #[default(0.1)]
     pub base_frequency_hz: f64,
     /// Kept away from each end of a joint's range, rad or m (default: 0.05).
+    #[default(0.05)]
     pub position_margin: f64,
     /// Fraction of the URDF velocity limit used (default: 0.8).
+    #[default(0.8)]
     pub velocity_fraction: f64,
     /// Velocity limit of joints whose URDF gives none, rad/s or m/s (default: `None`: such a
     /// joint is an error naming it).
     pub default_velocity_limit: Option<f64>,
     /// Acceleration limit of every joint, rad/s² or m/s² (default: 10).
+    #[default(10.0)]
     pub max_acceleration: f64,
     /// Fraction of the URDF effort limit the inverse-dynamics torque may reach (default: 0.8).
     /// Joints without an effort limit are not torque-limited.
+    #[default(0.8)]
     pub effort_fraction: f64,
     /// Check self-collision with MuJoCo's contacts (default: true).
+    #[default(true)]
     pub self_collision: bool,
     /// What is minimized (default: [`Criterion::Condition`]).
+    #[default(Criterion::Condition)]
     pub criterion: Criterion,
     /// Random trajectories tried first; the best is the search's start and the comparison
     /// figure (default: 20).
+    #[default(20)]
     pub random_candidates: usize,
     /// Quasi-Newton iterations per stage (default: 150; with the semi-analytic gradient an
     /// iteration costs about 20 evaluations' worth of regressor rows).
+    #[default(150)]
     pub max_iterations: usize,
     /// Further random trajectories (rest anywhere in the range) drawn for the global stage
     /// (default: 1000: a draw costs one evaluation, and the search's outcome depends mostly on
     /// its start).
+    #[default(1000)]
     pub global_candidates: usize,
     /// Searches started from the best of all random trajectories, each scaled to touch its
     /// limits (default: 3).
+    #[default(3)]
     pub starts: usize,
     /// Sharpness of the smooth surrogates of `ln cond` each search goes through before the
     /// polish on `ln cond` itself (default: `[4, 16, 64, 256]`).
+    #[default(vec![4.0, 16.0, 64.0, 256.0])]
     pub smoothing: Vec<f64>,
     /// Grid points per period for the criterion and the penalty (default: 100; limits are
     /// checked at the end on a 4× finer grid).
+    #[default(100)]
     pub samples: usize,
     /// Seed of the random trajectories (default: 1).
+    #[default(1)]
     pub seed: u64,
     /// The Coulomb column is `tanh(q̇/ε)` with this `ε` in the design (rad/s): `twin sysid`'s
     /// `sign(q̇)` with its dead zone made smooth, so that the criterion has a gradient
     /// (default: 0.05, `twin sysid`'s dead zone).
+    #[default(0.05)]
     pub velocity_deadzone: f64,
-}
-
-impl Default for ExciteOptions {
-    fn default() -> Self {
-        ExciteOptions {
-            joints: Vec::new(),
-            harmonics: 15,
-            baseline_harmonics: 5,
-            base_frequency_hz: 0.1,
-            position_margin: 0.05,
-            velocity_fraction: 0.8,
-            default_velocity_limit: None,
-            max_acceleration: 10.0,
-            effort_fraction: 0.8,
-            self_collision: true,
-            criterion: Criterion::Condition,
-            random_candidates: 20,
-            max_iterations: 150,
-            global_candidates: 1000,
-            starts: 3,
-            smoothing: vec![4.0, 16.0, 64.0, 256.0],
-            samples: 100,
-            seed: 1,
-            velocity_deadzone: 0.05,
-        }
-    }
 }
 
 /// One joint's Fourier series.

@@ -40,40 +40,32 @@ use serde::Serialize;
 use std::fmt::Write as _;
 
 /// Options of the friction fit.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct FrictionOptions {
     /// Shortest constant-velocity segment, s (default: 0.5).
+    #[default(0.5)]
     pub min_segment_secs: f64,
     /// Velocity tolerance within a segment, fraction of its speed (default: 0.05).
+    #[default(0.05)]
     pub rel_tol: f64,
     /// Velocity tolerance floor, rad/s (default: 0.002).
+    #[default(0.002)]
     pub abs_tol: f64,
     /// Speeds below are the dead zone (stiction), rad/s (default: 0.001).
+    #[default(0.001)]
     pub dead_zone: f64,
     /// Velocity tolerance floor in multiples of the smoothed velocity's measured noise σ
     /// (default: 4).
+    #[default(4.0)]
     pub noise_sigmas: f64,
     /// Largest relative speed difference of a ±v pair (default: 0.1).
+    #[default(0.1)]
     pub pair_tol: f64,
     /// Moving-average window of the velocity (logged or differentiated), s (default: 0.05).
+    #[default(0.05)]
     pub smooth_secs: f64,
     /// Joints to fit (default: every joint with segments; empty = all).
     pub joints: Vec<String>,
-}
-
-impl Default for FrictionOptions {
-    fn default() -> Self {
-        FrictionOptions {
-            min_segment_secs: 0.5,
-            rel_tol: 0.05,
-            abs_tol: 0.002,
-            dead_zone: 0.001,
-            noise_sigmas: 4.0,
-            pair_tol: 0.1,
-            smooth_secs: 0.05,
-            joints: Vec::new(),
-        }
-    }
 }
 
 /// A constant-velocity segment: sample range and mean velocity.
@@ -867,40 +859,32 @@ impl FrictionReport {
 }
 
 /// Options of a synthetic sweep ([`synth_sweep`]).
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct SweepOptions {
     /// Speeds swept, rad/s (default: 14 log-spaced from 0.005 to 2).
+    #[default((0..14).map(|k| 0.005 * (400f64).powf(k as f64 / 13.0)).collect())]
     pub speeds: Vec<f64>,
     /// Log rate, Hz (default: 500).
+    #[default(500.0)]
     pub rate_hz: f64,
     /// Effort noise, N·m (default: 0.05).
+    #[default(0.05)]
     pub effort_noise: f64,
     /// Velocity noise of the drive's reported velocity, rad/s (default: 0.0005).
+    #[default(0.0005)]
     pub velocity_noise: f64,
     /// Encoder resolution in bits per turn (default: 17).
+    #[default(17)]
     pub encoder_bits: u32,
     /// Seed (default: 1).
+    #[default(1)]
     pub seed: u64,
     /// Longest time at one speed, s (default: 4): slow sweeps cover a shorter stroke.
+    #[default(4.0)]
     pub max_segment_secs: f64,
     /// Largest stroke, rad (default: 1.0, within the joint's range).
+    #[default(1.0)]
     pub max_stroke: f64,
-}
-
-impl Default for SweepOptions {
-    fn default() -> Self {
-        let speeds = (0..14).map(|k| 0.005 * (400f64).powf(k as f64 / 13.0)).collect();
-        SweepOptions {
-            speeds,
-            rate_hz: 500.0,
-            effort_noise: 0.05,
-            velocity_noise: 0.0005,
-            encoder_bits: 17,
-            seed: 1,
-            max_segment_secs: 4.0,
-            max_stroke: 1.0,
-        }
-    }
 }
 
 /// A synthetic sweep log of the robot of `urdf`: each joint in turn moves forth and back at

@@ -18,18 +18,13 @@ use crate::{SysidOptions, identify::cad_params, regressor::Layout};
 use twin_core::mj::Data;
 
 /// Options of [`measure_gap`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct GapOptions {
     /// The twin is reset to the logged state every this many seconds (default: 1.0).
+    #[default(1.0)]
     pub resync_secs: f64,
     /// Armature of every joint of the twin, kg·m² (default: 0: URDF has none).
     pub armature: f64,
-}
-
-impl Default for GapOptions {
-    fn default() -> Self {
-        GapOptions { resync_secs: 1.0, armature: 0.0 }
-    }
 }
 
 /// One joint's gap.

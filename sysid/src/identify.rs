@@ -26,7 +26,7 @@ pub enum Base {
 }
 
 /// Identification options.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct SysidOptions {
     /// Filtering, resampling and decimation (default: [`ConditionOptions::default`]).
     pub condition: ConditionOptions,
@@ -34,36 +34,26 @@ pub struct SysidOptions {
     pub friction: FrictionModel,
     /// Rows of a joint whose speed is below this (rad/s or m/s) are left out: Coulomb friction
     /// is undetermined there (default: 0.05).
+    #[default(0.05)]
     pub velocity_deadzone: f64,
     /// Relative standard deviation of the CAD (URDF) values in the prior that keeps directions
     /// the log cannot see at CAD (default: 1.0, i.e. CAD trusted to about ±100 %: a weak pull).
+    #[default(1.0)]
     pub prior_rel_std: f64,
     /// A joint whose range of motion is below this (rad or m) "barely moved" (default: 0.05).
+    #[default(0.05)]
     pub min_motion: f64,
     /// Condition numbers above this are reported as an under-exciting log (default: 1e4).
+    #[default(1e4)]
     pub max_condition: f64,
     /// Refuse (error) instead of warning when the diagnosis finds problems (default: false).
     pub strict: bool,
     /// Base of the robot (default: [`Base::Fixed`]).
+    #[default(Base::Fixed)]
     pub base: Base,
     /// Newton-step limit of the physically consistent fit (default: 200).
+    #[default(200)]
     pub max_iterations: usize,
-}
-
-impl Default for SysidOptions {
-    fn default() -> Self {
-        SysidOptions {
-            condition: ConditionOptions::default(),
-            friction: FrictionModel::default(),
-            velocity_deadzone: 0.05,
-            prior_rel_std: 1.0,
-            min_motion: 0.05,
-            max_condition: 1e4,
-            strict: false,
-            base: Base::Fixed,
-            max_iterations: 200,
-        }
-    }
 }
 
 /// The result of [`identify`].

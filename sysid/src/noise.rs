@@ -200,45 +200,37 @@ pub fn calibrate_noise(
 
 /// Options of the noise calibration. Defaults suit a MEMS IMU at 100–1000 Hz and 12–20-bit
 /// encoders.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct NoiseOptions {
     /// Largest averaging time of the Allan deviation, s (default: `None`, a quarter of the
     /// log). A log shorter than [`MIN_CLUSTERS`]·τ_max is refused.
     pub tau_max_secs: Option<f64>,
     /// Shortest usable log, s (default: 60): below, not even the white noise is measured well.
+    #[default(60.0)]
     pub min_duration_secs: f64,
     /// Allan deviation points per decade of τ (default: 10).
+    #[default(10)]
     pub points_per_decade: usize,
     /// Confidence level of the band (default: 0.95).
+    #[default(0.95)]
     pub confidence: f64,
     /// Window of the stillness check, s (default: 1).
+    #[default(1.0)]
     pub still_window_secs: f64,
     /// A gyro axis whose window mean departs from its median by more moved, rad/s
     /// (default: 0.02, about 1°/s).
+    #[default(0.02)]
     pub gyro_motion_rad_s: f64,
     /// Same for an accelerometer axis, m/s² (default: 0.1, a tilt of about 0.6°).
+    #[default(0.1)]
     pub accel_motion_mps2: f64,
     /// Same for a joint position, rad or m (default: 0.002).
+    #[default(0.002)]
     pub encoder_motion: f64,
 }
 
 /// A τ is only estimated from at least this many clusters' worth of log.
 pub const MIN_CLUSTERS: f64 = 4.0;
-
-impl Default for NoiseOptions {
-    fn default() -> Self {
-        NoiseOptions {
-            tau_max_secs: None,
-            min_duration_secs: 60.0,
-            points_per_decade: 10,
-            confidence: 0.95,
-            still_window_secs: 1.0,
-            gyro_motion_rad_s: 0.02,
-            accel_motion_mps2: 0.1,
-            encoder_motion: 0.002,
-        }
-    }
-}
 
 impl NoiseOptions {
     fn check(&self) -> Result<()> {

@@ -18,90 +18,75 @@ use std::sync::Arc;
 use twin_core::mj::Data;
 
 /// Options of a synthetic log.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct SynthOptions {
     /// Duration, seconds (default: 20).
+    #[default(20.0)]
     pub duration_secs: f64,
     /// Simulation and log rate, Hz (default: 1000).
+    #[default(1000.0)]
     pub rate_hz: f64,
     /// Seed of the trajectory phases and the noise (default: 1).
+    #[default(1)]
     pub seed: u64,
     /// Armature of every joint in the true model, kg·m² (default: 0.02).
+    #[default(0.02)]
     pub armature: f64,
     /// Encoder resolution in bits per turn; positions are quantised to `2π / 2^bits`
     /// (default: 17).
+    #[default(17)]
     pub encoder_bits: u32,
     /// Standard deviation of the velocity noise, rad/s (default: 0.01).
+    #[default(0.01)]
     pub velocity_noise: f64,
     /// Effort noise standard deviation as a fraction of each joint's RMS torque (default: 0.01).
+    #[default(0.01)]
     pub effort_noise_rel: f64,
     /// Largest amplitude of a joint's trajectory, rad (default: 1.0); at most 80 % of half its
     /// range.
+    #[default(1.0)]
     pub max_amplitude: f64,
     /// Lowest trajectory frequency, Hz (default: 0.12).
+    #[default(0.12)]
     pub base_frequency_hz: f64,
-}
-
-impl Default for SynthOptions {
-    fn default() -> Self {
-        SynthOptions {
-            duration_secs: 20.0,
-            rate_hz: 1000.0,
-            seed: 1,
-            armature: 0.02,
-            encoder_bits: 17,
-            velocity_noise: 0.01,
-            effort_noise_rel: 0.01,
-            max_amplitude: 1.0,
-            base_frequency_hz: 0.12,
-        }
-    }
 }
 
 /// A floating-base synthetic log: the robot's root link hangs from nothing (a free joint), and
 /// the log carries the base motion (`nav_msgs/msg/Odometry`) and the known external wrenches.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct FloatingSynthOptions {
     /// Gravity on (default: `true`: the robot is in free fall, which for its joints and base
     /// rows is the same as floating in zero gravity: momentum conservation makes the base move
     /// as the joints do. `false` simulates zero gravity, which the identification must then be
     /// told about: its model has the URDF's gravity).
+    #[default(true)]
     pub gravity: bool,
     /// Links that receive a known external wrench (a stand-in for measured contact wrenches),
     /// logged as `WrenchStamped` on `/contacts/<link>` with `header.frame_id = <link>`
     /// (default: none).
     pub wrench_links: Vec<String>,
     /// Amplitude of each force component, N (default: 20).
+    #[default(20.0)]
     pub wrench_force_n: f64,
     /// Amplitude of each torque component (about the link origin), N·m (default: 2).
+    #[default(2.0)]
     pub wrench_torque_nm: f64,
     /// Wrench noise standard deviation as a fraction of its amplitude (default: 0.01).
+    #[default(0.01)]
     pub wrench_noise_rel: f64,
     /// Standard deviation of the odometry position noise, m (default: 1e-4).
+    #[default(1e-4)]
     pub position_noise_m: f64,
     /// Standard deviation of the odometry orientation noise, rad (default: 1e-4).
+    #[default(1e-4)]
     pub orientation_noise_rad: f64,
     /// Standard deviation of the odometry twist noise, m/s and rad/s (default: 0.002; a state
     /// estimator fusing an IMU).
+    #[default(0.002)]
     pub twist_noise: f64,
     /// Odometry topic name (default: `/odom`).
+    #[default("/odom")]
     pub odom_topic: String,
-}
-
-impl Default for FloatingSynthOptions {
-    fn default() -> Self {
-        FloatingSynthOptions {
-            gravity: true,
-            wrench_links: Vec::new(),
-            wrench_force_n: 20.0,
-            wrench_torque_nm: 2.0,
-            wrench_noise_rel: 0.01,
-            position_noise_m: 1e-4,
-            orientation_noise_rad: 1e-4,
-            twist_noise: 0.002,
-            odom_topic: "/odom".into(),
-        }
-    }
 }
 
 /// Simulates the robot of `urdf` (contacts off: a robot bolted down or on a gantry, moving in

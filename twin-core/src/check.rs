@@ -33,42 +33,35 @@ use rand_chacha::ChaCha8Rng;
 use std::sync::Arc;
 
 /// Options of [`check`]. Every field documents its default.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, smart_default::SmartDefault)]
 pub struct CheckOptions {
     /// Duration of the standing hold, seconds (default: 5).
+    #[default(5.0)]
     pub hold_secs: f64,
     /// Largest allowed base height change during the hold, metres (default: 0.05).
+    #[default(0.05)]
     pub max_height_drift_m: f64,
     /// Largest allowed horizontal base motion during the hold, metres (default: 0.05).
+    #[default(0.05)]
     pub max_slide_m: f64,
     /// Largest allowed base tilt during the hold, radians (default: 0.25).
+    #[default(0.25)]
     pub max_tilt_rad: f64,
     /// Deepest allowed contact penetration, metres (default: 0.01).
+    #[default(0.01)]
     pub max_penetration_m: f64,
     /// Joint error at which a servo gives its full effort limit, radians (default: 0.1).
+    #[default(0.1)]
     pub full_effort_error_rad: f64,
     /// Servo natural frequency for joints without an effort limit, Hz (default: 5).
+    #[default(5.0)]
     pub fallback_freq_hz: f64,
     /// Largest control step, radians or metres (default: 0.2).
+    #[default(0.2)]
     pub step_amplitude: f64,
     /// Simulated seconds timed for the real-time factor (default: 2).
+    #[default(2.0)]
     pub timing_secs: f64,
-}
-
-impl Default for CheckOptions {
-    fn default() -> Self {
-        CheckOptions {
-            hold_secs: 5.0,
-            max_height_drift_m: 0.05,
-            max_slide_m: 0.05,
-            max_tilt_rad: 0.25,
-            max_penetration_m: 0.01,
-            full_effort_error_rad: 0.1,
-            fallback_freq_hz: 5.0,
-            step_amplitude: 0.2,
-            timing_secs: 2.0,
-        }
-    }
 }
 
 /// One measured number (the engine's [`Measurement`]).

@@ -34,13 +34,15 @@ use std::fmt::Write as _;
 pub const KINDS: [&str; 7] = ["flat", "rough", "slope", "steps", "stairs", "obstacles", "gaps"];
 
 /// The `[terrain]` table of a scenario. Keys that don't belong to the `kind` are errors.
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize, smart_default::SmartDefault)]
 #[serde(deny_unknown_fields)]
 pub struct TerrainOptions {
-    /// One of [`KINDS`].
+    /// One of [`KINDS`]; a scenario's table must name it (`TerrainOptions::default()`: `flat`).
+    #[default("flat")]
     pub kind: String,
     /// From flat (0) to the parameters as written (1) (default: 1).
     #[serde(default = "one")]
+    #[default(1.0)]
     pub difficulty: f64,
     /// Seed of rough ground and obstacles (default: 0).
     #[serde(default)]
@@ -108,38 +110,6 @@ fn keys_of(kind: &str) -> &'static [&'static str] {
         "obstacles" => &["length_m", "height_m", "size_min_m", "size_max_m", "density_per_m"],
         "gaps" => &["gap_m", "count", "platform_m", "pit_depth_m"],
         _ => &[],
-    }
-}
-
-impl Default for TerrainOptions {
-    fn default() -> Self {
-        TerrainOptions {
-            kind: "flat".into(),
-            difficulty: 1.0,
-            seed: 0,
-            start_m: None,
-            direction_deg: None,
-            width_m: None,
-            length_m: None,
-            cell_m: None,
-            amplitude_m: None,
-            wavelength_m: None,
-            slope_deg: None,
-            ramp_m: None,
-            plateau_m: None,
-            height_m: None,
-            depth_m: None,
-            rise_m: None,
-            run_m: None,
-            count: None,
-            landing_m: None,
-            size_min_m: None,
-            size_max_m: None,
-            density_per_m: None,
-            gap_m: None,
-            platform_m: None,
-            pit_depth_m: None,
-        }
     }
 }
 

@@ -124,19 +124,15 @@ pub struct TopicInfo {
 }
 
 /// Rates of the table's streams.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct TopicRates {
     /// `/joint_states`, `/odom`, contacts, commands, and IMUs without their own rate, Hz.
     /// (default: 500)
+    #[default(500.0)]
     pub state_rate_hz: f64,
     /// `/tf`, Hz. (default: 100)
+    #[default(100.0)]
     pub tf_rate_hz: f64,
-}
-
-impl Default for TopicRates {
-    fn default() -> Self {
-        TopicRates { state_rate_hz: 500.0, tf_rate_hz: 100.0 }
-    }
 }
 
 /// The topics of a robot, in publication order.

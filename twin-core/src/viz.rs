@@ -352,29 +352,21 @@ pub fn write_curves(
 }
 
 /// Options of [`record_log`].
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, smart_default::SmartDefault)]
 pub struct ViewOptions {
     /// JointState topic that animates the robot (default: `/joint_states`).
+    #[default("/joint_states")]
     pub joint_states_topic: String,
     /// Odometry topic that moves the floating base, used when the log has it (default: `/odom`).
+    #[default("/odom")]
     pub odom_topic: String,
     /// Rate of the posed frames, Hz; joint and IMU scalars keep every sample (default: 50).
+    #[default(50.0)]
     pub pose_rate_hz: f64,
     /// Polled between frames and topics: once raised (e.g. Ctrl-C through
     /// [`crate::fsio::interrupt_flag`]), [`record_log`] stops and returns what it logged so far
     /// with [`ViewSummary::interrupted`] set (default: none).
     pub stop: Option<&'static std::sync::atomic::AtomicBool>,
-}
-
-impl Default for ViewOptions {
-    fn default() -> Self {
-        ViewOptions {
-            joint_states_topic: "/joint_states".into(),
-            odom_topic: "/odom".into(),
-            pose_rate_hz: 50.0,
-            stop: None,
-        }
-    }
 }
 
 /// What [`record_log`] did.

@@ -9,17 +9,20 @@ use nalgebra::DMatrix;
 use std::sync::Arc;
 
 /// Options of [`PdHold`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct PdHoldOptions {
     /// Joint angle error (radians; metres for slides) at which a joint's PD torque reaches its
     /// effort limit: `kp = effort / saturation_error`. Stiff enough for the shipped humanoid's
     /// ankles to hold its whole weight. (default: 0.25)
+    #[default(0.25)]
     pub saturation_error: f64,
     /// Damping ratio of each joint on its own effective inertia (`1 / dof_invweight0`):
     /// `kd = 2 · ratio · sqrt(kp · inertia)`. (default: 1.0)
+    #[default(1.0)]
     pub damping_ratio: f64,
     /// Effort (N·m or N) assumed for joints and actuators without a force limit, when
     /// `min_natural_freq_hz` is not set. (default: 100.0)
+    #[default(100.0)]
     pub default_effort: f64,
     /// Lowest natural frequency of a joint on its inertia, Hz: a floor on `kp`, and the
     /// stiffness of joints without an effort limit. (default: none)
@@ -38,6 +41,7 @@ pub struct PdHoldOptions {
     /// by one factor (kd by its square root): light robots whose URDFs give placeholder effort
     /// limits (1000 N·m on a 2 kg quadruped) stay stable. `f64::INFINITY`: no cap. (default:
     /// 0.98; the shipped humanoid keeps its gains, down to 0.7 times its masses)
+    #[default(0.98)]
     pub max_loop_margin: f64,
     /// Floor on the stiffness of the joints between a floating base and its feet, as a
     /// multiple of the stiffness gravity asks of them for the robot to stand in its home pose
@@ -46,21 +50,8 @@ pub struct PdHoldOptions {
     /// 40.5 kg) got 103 N·m/rad per ankle from `effort / saturation_error` against the
     /// 120 N·m/rad per ankle its inverted pendulum needs, and fell in 1.4 s. `0`: no floor.
     /// (default: 3.0)
+    #[default(3.0)]
     pub stance_stiffness_margin: f64,
-}
-
-impl Default for PdHoldOptions {
-    fn default() -> Self {
-        PdHoldOptions {
-            saturation_error: 0.25,
-            damping_ratio: 1.0,
-            default_effort: 100.0,
-            min_natural_freq_hz: None,
-            stability_dt_secs: None,
-            max_loop_margin: 0.98,
-            stance_stiffness_margin: 3.0,
-        }
-    }
 }
 
 /// One PD loop: a command entry driving one 1-DOF joint.

@@ -70,9 +70,10 @@ impl CommandKind {
 }
 
 /// Options of [`analyze`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct AnalyzeOptions {
     /// The `sensor_msgs/msg/JointState` topic. (default: `/joint_states`)
+    #[default("/joint_states")]
     pub joint_states_topic: String,
     /// The IMU topic. (default: none given = the first `sensor_msgs/msg/Imu` topic)
     pub imu_topic: Option<String>,
@@ -91,27 +92,14 @@ pub struct AnalyzeOptions {
     /// initial base height, 1.0 rad of tilt)
     pub fall: FallOptions,
     /// Length of the sensor window before the onset, s. (default: 1.0)
+    #[default(1.0)]
     pub window_secs: f64,
     /// Horizontal speed of a loaded, flat foot above which it slips, m/s. (default: 0.1)
+    #[default(0.1)]
     pub slip_speed_mps: f64,
     /// How many of the worst-tracking joints to report and plot. (default: 5)
+    #[default(5)]
     pub worst_joints: usize,
-}
-
-impl Default for AnalyzeOptions {
-    fn default() -> Self {
-        AnalyzeOptions {
-            joint_states_topic: "/joint_states".into(),
-            imu_topic: None,
-            odom_topic: None,
-            command_topic: None,
-            command_kind: None,
-            fall: FallOptions::default(),
-            window_secs: 1.0,
-            slip_speed_mps: 0.1,
-            worst_joints: 5,
-        }
-    }
 }
 
 /// One signal's first change in the window before the onset.

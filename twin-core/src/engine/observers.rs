@@ -69,20 +69,16 @@ impl Observer for StopFlag {
 }
 
 /// Options of [`Fall`].
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct FallOptions {
     /// The robot has fallen when its base is lower than this fraction of its initial height.
     /// (default: 0.6)
+    #[default(0.6)]
     pub height_fraction: f64,
     /// The robot has fallen when its base tilts more than this from upright, radians.
     /// (default: 1.0, about 57°)
+    #[default(1.0)]
     pub tilt_rad: f64,
-}
-
-impl Default for FallOptions {
-    fn default() -> Self {
-        FallOptions { height_fraction: 0.6, tilt_rad: 1.0 }
-    }
 }
 
 /// Watches the floating base: its largest tilt from upright, and a fall (base below a

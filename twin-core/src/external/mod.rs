@@ -73,7 +73,7 @@ pub enum Interface {
 /// flood_commands_per_period = 10.0 # commands beyond one per period, averaged over
 /// flood_window_secs = 1.0          #   this much simulated time, that fail the episode
 /// ```
-#[derive(Debug, Clone, PartialEq, serde::Deserialize)]
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, smart_default::SmartDefault)]
 #[serde(deny_unknown_fields, default)]
 pub struct RosOptions {
     /// The command line, run with `sh -c` in the scenario file's folder (so `$VARIABLES` and
@@ -81,18 +81,24 @@ pub struct RosOptions {
     pub command: String,
     /// Meaning of the `Float64MultiArray` commands on `/<robot>/joint_commands` (default:
     /// position).
+    #[default(Interface::Position)]
     pub command_interface: Interface,
     /// Control rate: `/clock` and command periods, Hz (default: 100).
     #[serde(alias = "control_rate")]
+    #[default(100.0)]
     pub control_rate_hz: f64,
     /// Longest wait for the process to join the ROS graph, wall seconds (default: 30).
+    #[default(30.0)]
     pub join_timeout_secs: f64,
     /// Longest wait for one control period's command, wall seconds (default: 5).
+    #[default(5.0)]
     pub period_timeout_secs: f64,
     /// Wait after SIGINT and again after SIGTERM before the next signal, wall seconds
     /// (default: 2).
+    #[default(2.0)]
     pub stop_timeout_secs: f64,
     /// When `twin randomize` starts a new process (default: every episode).
+    #[default(Restart::Episode)]
     pub restart: Restart,
     /// Under a kept process (`restart = "never"`), how long twin says the jump back in time on
     /// `/clock` (again every 10 ms) before the first lockstep period, wall seconds (default:
@@ -100,36 +106,22 @@ pub struct RosOptions {
     /// 1, best effort): a node busy with the last episode's messages that gets the jump and
     /// the first period's time together keeps the second alone, reads it as the jump, and its
     /// sim-time timer waits one more period, so no command comes.
+    #[default(0.1)]
     pub reset_settle_secs: f64,
     /// Topics (besides `/clock`) the process must subscribe to before simulated time starts,
     /// so that it misses none of their messages (default: `["/joint_states"]`).
+    #[default(vec!["/joint_states".into()])]
     pub subscribes: Vec<String>,
     /// Commands beyond one per control period, averaged over `flood_window_secs`, above which
     /// the episode fails as a flood (default: 10). Twin takes one command per period; the
     /// others still queued when the next period opens are dropped and counted
     /// ([`crate::live::flood`]). A node with one command per `/clock` period sends none beyond;
     /// a timer at twice the control rate sends 1.
+    #[default(10.0)]
     pub flood_commands_per_period: f64,
     /// The window of that average, simulated seconds (default: 1).
+    #[default(1.0)]
     pub flood_window_secs: f64,
-}
-
-impl Default for RosOptions {
-    fn default() -> Self {
-        RosOptions {
-            command: String::new(),
-            command_interface: Interface::Position,
-            control_rate_hz: 100.0,
-            join_timeout_secs: 30.0,
-            period_timeout_secs: 5.0,
-            stop_timeout_secs: 2.0,
-            restart: Restart::Episode,
-            reset_settle_secs: 0.1,
-            subscribes: vec!["/joint_states".into()],
-            flood_commands_per_period: 10.0,
-            flood_window_secs: 1.0,
-        }
-    }
 }
 
 impl RosOptions {

@@ -39,65 +39,88 @@ use std::sync::Arc;
 
 /// Options of the [`Grasper`]. Every field has a default; scenario files set them by name in
 /// `[grasp]`.
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize, smart_default::SmartDefault)]
 #[serde(default, deny_unknown_fields)]
 pub struct GraspOptions {
     /// Which arm grasps: `auto` (the cup's side, else the one that reaches), `left` or `right`
     /// (default: `auto`).
+    #[default("auto")]
     pub arm: String,
     /// Squeeze of each finger, N (default: 8: six times what μ 0.8 needs for a 0.2 kg cup).
+    #[default(8.0)]
     pub grip_force_n: f64,
     /// How high to lift the cup, m (default: 0.15).
+    #[default(0.15)]
     pub lift_height_m: f64,
     /// Time to stand and look before moving, s (default: 1.6: the walker's 1 s crouch, then
     /// frames of the settled camera).
+    #[default(1.6)]
     pub settle_secs: f64,
     /// The depth camera (default: `head_depth`, the camera of models/humanoid_gripper.urdf).
+    #[default("head_depth")]
     pub camera: String,
     /// Camera frame rate, Hz (default: 15).
+    #[default(15.0)]
     pub camera_rate_hz: f64,
     /// Depth noise standard deviation, m (default: 0.002). A scenario stores it in the model
     /// (the camera's user number 0), which wins, so that `twin randomize` can draw it.
+    #[default(0.002)]
     pub camera_noise_std_m: f64,
     /// Seed of the depth noise (default: 0).
     pub camera_seed: u64,
     /// Frames whose estimates are averaged (default: 3).
+    #[default(3)]
     pub detect_frames: usize,
     /// Distance of the pre-grasp pose before the grasp pose along the approach, m (default: 0.1).
+    #[default(0.1)]
     pub pregrasp_distance_m: f64,
     /// Raise the hand above the table's height, s (default: 1.0).
+    #[default(1.0)]
     pub raise_secs: f64,
     /// Least height of the grasp point above the table when the arm is raised, m (default:
     /// 0.04).
+    #[default(0.04)]
     pub clearance_height_m: f64,
     /// Shoulder pitch backwards of the arm that does not grasp, rad (default: 0.4: its hand
     /// stays clear of the table when the trunk turns).
+    #[default(0.4)]
     pub tuck_rad: f64,
     /// Shoulder roll of the raised arm (sideways, beside the table), rad (default: 1.25).
+    #[default(1.25)]
     pub raise_roll_rad: f64,
     /// Move to the pre-grasp pose, s (default: 1.0).
+    #[default(1.0)]
     pub reach_secs: f64,
     /// Approach from pre-grasp to grasp, s (default: 1.0).
+    #[default(1.0)]
     pub approach_secs: f64,
     /// Closing the fingers, s (default: 0.6).
+    #[default(0.6)]
     pub close_secs: f64,
     /// Lifting, s (default: 1.5).
+    #[default(1.5)]
     pub lift_secs: f64,
     /// Largest IK position error of a planned pose that still counts as reachable, m
     /// (default: 0.01).
+    #[default(0.01)]
     pub reach_tolerance_m: f64,
     /// Finger opening (each finger's joint position) while reaching, m (default: 0.05).
+    #[default(0.05)]
     pub open_m: f64,
     /// PD saturation error of the arm joints, rad (default: 0.15).
+    #[default(0.15)]
     pub saturation_error: f64,
     /// Shoulder roll away from the body at the start, rad (default: 0.25: the open grippers
     /// clear the thighs).
+    #[default(0.25)]
     pub arms_out_rad: f64,
     /// How far the approach axis points down, rad (default: 0.1: the forearm rises slightly
     /// away from the table).
+    #[default(0.1)]
     pub approach_pitch_rad: f64,
     /// Largest tilt of the jaw axis out of the horizontal in a planned pose, rad (default: 0.3;
     /// μ 0.8 holds a vertical cylinder up to 0.67).
+    #[default(0.3)]
     pub max_jaw_tilt_rad: f64,
     /// Trunk joints the arms' IK may use besides the arm's own, with their IK weight (smaller:
     /// moves less) (default: none: the walker holds the trunk; e.g. `[["waist_yaw_joint", 0.2]]` lets a
@@ -105,40 +128,8 @@ pub struct GraspOptions {
     pub trunk_joints: Vec<(String, f64)>,
     /// Grasp frames of the left and right grippers (default: `left_grasp_link`,
     /// `right_grasp_link`).
+    #[default(["left_grasp_link".into(), "right_grasp_link".into()])]
     pub grasp_bodies: [String; 2],
-}
-
-impl Default for GraspOptions {
-    fn default() -> Self {
-        GraspOptions {
-            arm: "auto".into(),
-            grip_force_n: 8.0,
-            lift_height_m: 0.15,
-            settle_secs: 1.6,
-            camera: "head_depth".into(),
-            camera_rate_hz: 15.0,
-            camera_noise_std_m: 0.002,
-            camera_seed: 0,
-            detect_frames: 3,
-            pregrasp_distance_m: 0.1,
-            raise_secs: 1.0,
-            clearance_height_m: 0.04,
-            raise_roll_rad: 1.25,
-            tuck_rad: 0.4,
-            reach_secs: 1.0,
-            approach_secs: 1.0,
-            close_secs: 0.6,
-            lift_secs: 1.5,
-            reach_tolerance_m: 0.01,
-            open_m: 0.05,
-            saturation_error: 0.15,
-            arms_out_rad: 0.25,
-            approach_pitch_rad: 0.1,
-            max_jaw_tilt_rad: 0.3,
-            trunk_joints: Vec::new(),
-            grasp_bodies: ["left_grasp_link".into(), "right_grasp_link".into()],
-        }
-    }
 }
 
 impl GraspOptions {

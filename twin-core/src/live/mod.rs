@@ -120,55 +120,47 @@ pub enum Pacing {
 }
 
 /// Options of the live bridge.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct LiveOptions {
     /// DDS domain (the CLI reads `ROS_DOMAIN_ID`) (default: 0).
     pub domain_id: u16,
     /// Address of the only interface DDS uses: discovery, multicast and advertised locators
     /// (default: 127.0.0.1, loopback only: unicast discovery to 127.0.0.1, no multicast).
+    #[default(IpAddr::V4(std::net::Ipv4Addr::LOCALHOST))]
     pub interface: IpAddr,
     /// Control rate: `/clock` and command periods, Hz (default: 100, the workflow's gait
     /// controller).
+    #[default(100.0)]
     pub control_rate_hz: f64,
     /// Meaning of `Float64MultiArray` commands (default: position).
+    #[default(CommandInterface::Position)]
     pub command_interface: CommandInterface,
     /// Pacing (default: real time).
+    #[default(Pacing::RealTime(1.0))]
     pub pacing: Pacing,
     /// Wall time without a good command after which the joints hold their current pose, s
     /// (default: 0.5).
+    #[default(0.5)]
     pub silence_timeout_secs: f64,
     /// Longest wait for a command in lockstep, wall s (default: 10).
+    #[default(10.0)]
     pub lockstep_timeout_secs: f64,
     /// Lockstep: longest wait for the controller's command publisher before time starts, wall
     /// s (default: 30: a Python node with rclpy takes a few seconds to start and discover).
+    #[default(30.0)]
     pub join_timeout_secs: f64,
     /// Steering a walker: simulated time without a Twist on `/cmd_vel` after which it stops
     /// and stands, s (default: 0.5, as `diff_drive_controller`'s `cmd_vel_timeout`).
+    #[default(0.5)]
     pub cmd_vel_timeout_secs: f64,
     /// Lockstep: commands beyond the one each control period uses, averaged over
     /// [`LiveOptions::flood_window_secs`], above which the run fails as a flood (default: 10;
     /// a well-behaved node sends none beyond, a timer twice as fast as the control rate one).
+    #[default(10.0)]
     pub flood_commands_per_period: f64,
     /// Lockstep: the window of that average, simulated s (default: 1).
+    #[default(1.0)]
     pub flood_window_secs: f64,
-}
-
-impl Default for LiveOptions {
-    fn default() -> Self {
-        LiveOptions {
-            domain_id: 0,
-            interface: IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),
-            control_rate_hz: 100.0,
-            command_interface: CommandInterface::Position,
-            pacing: Pacing::RealTime(1.0),
-            silence_timeout_secs: 0.5,
-            lockstep_timeout_secs: 10.0,
-            join_timeout_secs: 30.0,
-            cmd_vel_timeout_secs: 0.5,
-            flood_commands_per_period: 10.0,
-            flood_window_secs: 1.0,
-        }
-    }
 }
 
 /// In lockstep, how often `/clock` is said again while twin waits for a command.

@@ -54,39 +54,30 @@ pub struct Imu {
 }
 
 /// `nav_msgs/msg/Odometry`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct Odometry {
     /// Header (frame: usually `odom`).
     pub header: Header,
     /// Body frame of the twist.
     pub child_frame_id: String,
     /// Position in the header frame, m.
+    #[default([0.0; 3])]
     pub position: [f64; 3],
     /// Orientation x y z w.
+    #[default([0.0, 0.0, 0.0, 1.0])]
     pub orientation_xyzw: [f64; 4],
     /// Row-major 6×6 pose covariance.
+    #[default([0.0; 36])]
     pub pose_covariance: [f64; 36],
     /// Linear velocity in the child frame, m/s.
+    #[default([0.0; 3])]
     pub linear_velocity: [f64; 3],
     /// Angular velocity in the child frame, rad/s.
+    #[default([0.0; 3])]
     pub angular_velocity: [f64; 3],
     /// Row-major 6×6 twist covariance.
+    #[default([0.0; 36])]
     pub twist_covariance: [f64; 36],
-}
-
-impl Default for Odometry {
-    fn default() -> Self {
-        Self {
-            header: Header::default(),
-            child_frame_id: String::new(),
-            position: [0.0; 3],
-            orientation_xyzw: [0.0, 0.0, 0.0, 1.0],
-            pose_covariance: [0.0; 36],
-            linear_velocity: [0.0; 3],
-            angular_velocity: [0.0; 3],
-            twist_covariance: [0.0; 36],
-        }
-    }
 }
 
 /// `geometry_msgs/msg/WrenchStamped`.
@@ -111,18 +102,14 @@ pub struct PointStamped {
 }
 
 /// `geometry_msgs/msg/Pose` inside a [`PoseArray`].
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Debug, Clone, Copy, PartialEq, smart_default::SmartDefault)]
 pub struct Pose {
     /// Position, m.
+    #[default([0.0; 3])]
     pub position: [f64; 3],
     /// Orientation x y z w.
+    #[default([0.0, 0.0, 0.0, 1.0])]
     pub orientation_xyzw: [f64; 4],
-}
-
-impl Default for Pose {
-    fn default() -> Self {
-        Pose { position: [0.0; 3], orientation_xyzw: [0.0, 0.0, 0.0, 1.0] }
-    }
 }
 
 /// `geometry_msgs/msg/PoseArray`: e.g. a walking controller's planned footsteps.

@@ -40,25 +40,23 @@ pub enum Compression {
 }
 
 /// How to write.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, smart_default::SmartDefault)]
 pub struct WriterOptions {
     /// Uncompressed bytes after which a chunk is compressed and written; also the most a killed
     /// run can lose (default: 1 MiB).
+    #[default(1 << 20)]
     pub chunk_size_bytes: u64,
     /// Chunk compression (default: zstd level 1: cheap enough for a simulation loop).
+    #[default(Compression::Zstd(1))]
     pub compression: Compression,
     /// Keep an existing file at the path as a numbered backup (`<name>.bak`, `.bak.1`, …, see
     /// [`crate::fsio::Backup::Numbered`]) instead of failing (default: true).
+    #[default(true)]
     pub backup_existing: bool,
     /// Compress and write on a background thread; the caller only encodes (default: true).
     /// Either way the file's bytes are identical.
+    #[default(true)]
     pub background: bool,
-}
-
-impl Default for WriterOptions {
-    fn default() -> Self {
-        Self { chunk_size_bytes: 1 << 20, compression: Compression::Zstd(1), backup_existing: true, background: true }
-    }
 }
 
 /// A typed topic handle from [`LogWriter::add_topic`].

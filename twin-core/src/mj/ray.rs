@@ -18,21 +18,17 @@ use mujoco_sys as sys;
 use std::ffi::c_int;
 
 /// Which geoms rays see.
-#[derive(Debug, Clone, PartialEq, Eq)]
+#[derive(Debug, Clone, PartialEq, Eq, smart_default::SmartDefault)]
 pub struct RayFilter {
     /// Geom groups 0–5 seen (groups above 5 count as 5). (default: 0, 1, 2: what MuJoCo's
     /// viewer shows; twin's converter puts URDF visuals in group 2 and collision geoms in 3)
+    #[default([true, true, true, false, false, false])]
     pub groups: [bool; 6],
     /// Whether geoms of bodies welded to the world (floor, table) are seen. (default: true)
+    #[default(true)]
     pub static_geoms: bool,
     /// Bodies whose geoms are not seen, e.g. the robot carrying the sensor. (default: none)
     pub exclude_bodies: Vec<usize>,
-}
-
-impl Default for RayFilter {
-    fn default() -> Self {
-        RayFilter { groups: [true, true, true, false, false, false], static_geoms: true, exclude_bodies: Vec::new() }
-    }
 }
 
 impl RayFilter {

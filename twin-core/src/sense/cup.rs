@@ -33,44 +33,36 @@ pub struct CupEstimate {
 }
 
 /// How [`detect_cup`] searches.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct CupDetectOptions {
     /// RANSAC draws per plane. (default: 300)
+    #[default(300)]
     pub ransac_iterations: usize,
     /// Distance from the plane within which a point belongs to it, metres. (default: 0.004)
+    #[default(0.004)]
     pub plane_inlier_m: f64,
     /// Largest angle between a table's normal and world z, radians. (default: 0.17, ≈ 10°)
+    #[default(0.17)]
     pub max_tilt_rad: f64,
     /// Smallest share of all points a plane must hold to count as a table (or floor).
     /// (default: 0.05)
+    #[default(0.05)]
     pub min_plane_fraction: f64,
     /// Points at least this high above the table belong to objects, metres (default: 0.008)
+    #[default(0.008)]
     pub min_height_m: f64,
     /// Points higher than this above the table are ignored (not a cup), metres.
     /// (default: 0.4)
+    #[default(0.4)]
     pub max_height_m: f64,
     /// Largest gap between neighbouring points of one object, metres. (default: 0.015)
+    #[default(0.015)]
     pub cluster_gap_m: f64,
     /// Fewest points of a cup. (default: 30)
+    #[default(30)]
     pub min_cluster_points: usize,
     /// Seed of RANSAC's draws. (default: 0)
     pub seed: u64,
-}
-
-impl Default for CupDetectOptions {
-    fn default() -> Self {
-        CupDetectOptions {
-            ransac_iterations: 300,
-            plane_inlier_m: 0.004,
-            max_tilt_rad: 0.17,
-            min_plane_fraction: 0.05,
-            min_height_m: 0.008,
-            max_height_m: 0.4,
-            cluster_gap_m: 0.015,
-            min_cluster_points: 30,
-            seed: 0,
-        }
-    }
 }
 
 /// A plane `n · p = d` with unit normal `n` pointing up (n.z > 0).

@@ -203,11 +203,13 @@ impl DepthFrame {
 }
 
 /// How a [`DepthCamera`] images.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct DepthCameraOptions {
     /// Image width, pixels. (default: 320)
+    #[default(320)]
     pub width: u32,
     /// Image height, pixels. (default: 240)
+    #[default(240)]
     pub height: u32,
     /// Horizontal field of view, radians; `None`: the model camera's `fovy` (vertical) with
     /// square pixels. (default: `None`)
@@ -215,18 +217,8 @@ pub struct DepthCameraOptions {
     /// Range limits (in depth along the optical axis), noise, rate, threads and the geoms the
     /// camera sees. (default: [`RayOptions::default`] with a near clip `min_range_m` of 0.05 and
     /// a `rate_hz` of 15.0)
+    #[default(RayOptions { min_range_m: 0.05, rate_hz: 15.0, ..RayOptions::default() })]
     pub ray: RayOptions,
-}
-
-impl Default for DepthCameraOptions {
-    fn default() -> Self {
-        DepthCameraOptions {
-            width: 320,
-            height: 240,
-            hfov_rad: None,
-            ray: RayOptions { min_range_m: 0.05, rate_hz: 15.0, ..RayOptions::default() },
-        }
-    }
 }
 
 /// Pixels per tile side: the rays of a tile are culled against the geoms together.

@@ -11,15 +11,17 @@ use rand::SeedableRng;
 /// What every ray sensor (a [`super::DepthCamera`], a [`super::Lidar`]) is given besides its
 /// pattern of rays: range limits, noise, rate, threads and the geoms it sees. The defaults are a
 /// LiDAR's; [`super::DepthCameraOptions::default`] changes `min_range_m` and `rate_hz`.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct RayOptions {
     /// Nearest range measured, metres: a LiDAR's minimum range along the beam (a nearer return
     /// reads `−Inf`); a depth camera's near clip in depth, as a renderer's near plane (Gazebo's
     /// `<clip><near>`): nearer geometry is not seen and what lies behind it is measured, so a
     /// camera inside its own housing or head sees out of it. (default: 0.1)
+    #[default(0.1)]
     pub min_range_m: f64,
     /// Farthest range measured, metres; farther returns read `+Inf` in a scan, NaN in a depth
     /// image. (default: 10.0)
+    #[default(10.0)]
     pub max_range_m: f64,
     /// Standard deviation of the Gaussian noise added to each valid return, metres (0: none).
     /// (default: 0.0)
@@ -28,6 +30,7 @@ pub struct RayOptions {
     /// reproducible. (default: 0)
     pub seed: u64,
     /// Readings per second when the sensor is published on a schedule, Hz. (default: 10.0)
+    #[default(10.0)]
     pub rate_hz: f64,
     /// Threads casting rays: 0 uses rayon's global pool, 1 casts on the calling thread, more
     /// builds a pool of that many for this sensor. The reading is the same for any count.
@@ -36,20 +39,6 @@ pub struct RayOptions {
     /// Which geoms the rays see. (default: [`RayFilter::default`]: groups 0–2, i.e. MJCF geoms
     /// and URDF visuals)
     pub filter: RayFilter,
-}
-
-impl Default for RayOptions {
-    fn default() -> Self {
-        RayOptions {
-            min_range_m: 0.1,
-            max_range_m: 10.0,
-            noise_std_m: 0.0,
-            seed: 0,
-            rate_hz: 10.0,
-            threads: 0,
-            filter: RayFilter::default(),
-        }
-    }
 }
 
 impl RayOptions {

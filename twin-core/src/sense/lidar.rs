@@ -43,29 +43,17 @@ impl ScanAxis {
 }
 
 /// How a [`Lidar`] scans.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct LidarOptions {
     /// Horizontal beams. (default: 360 from −π to π·359/180, one per degree)
+    #[default(ScanAxis { samples: 360, min_rad: -std::f64::consts::PI, max_rad: std::f64::consts::PI * 179.0 / 180.0, })]
     pub horizontal: ScanAxis,
     /// Vertical beams (rings); one ring is a planar scan. (default: one ring at 0)
+    #[default(ScanAxis { samples: 1, min_rad: 0.0, max_rad: 0.0 })]
     pub vertical: ScanAxis,
     /// Range limits, noise, rate, threads and the geoms the beams see. (default:
     /// [`RayOptions::default`])
     pub ray: RayOptions,
-}
-
-impl Default for LidarOptions {
-    fn default() -> Self {
-        LidarOptions {
-            horizontal: ScanAxis {
-                samples: 360,
-                min_rad: -std::f64::consts::PI,
-                max_rad: std::f64::consts::PI * 179.0 / 180.0,
-            },
-            vertical: ScanAxis { samples: 1, min_rad: 0.0, max_rad: 0.0 },
-            ray: RayOptions::default(),
-        }
-    }
 }
 
 /// One scan.

@@ -35,19 +35,14 @@ use crate::mj::Model;
 use rand::SeedableRng;
 
 /// How long and how to simulate.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct SimOptions {
     /// Simulated time, seconds (default: 5.0).
+    #[default(5.0)]
     pub duration_secs: f64,
     /// Seed of the run's one random stream: sensor noise and biases, random disturbances
     /// (default: 0).
     pub seed: u64,
-}
-
-impl Default for SimOptions {
-    fn default() -> Self {
-        SimOptions { duration_secs: 5.0, seed: 0 }
-    }
 }
 
 /// The sensor model of `robot` as its files describe it: the white noise of each sensor

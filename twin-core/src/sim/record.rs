@@ -55,7 +55,7 @@ use nalgebra::{Quaternion, Vector3};
 use std::path::PathBuf;
 
 /// What to record and how often.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, smart_default::SmartDefault)]
 pub struct RecordOptions {
     /// MCAP file to write (default: none).
     pub mcap: Option<PathBuf>,
@@ -65,10 +65,13 @@ pub struct RecordOptions {
     pub connect: Option<String>,
     /// Rate of `/joint_states`, `/odom`, contacts and commands, Hz; every step when the
     /// timestep is longer than its period (default: 500).
+    #[default(500.0)]
     pub state_rate_hz: f64,
     /// Rate of `/tf`, Hz (default: 100: enough for RViz, a fifth of the bytes of 500 Hz).
+    #[default(100.0)]
     pub tf_rate_hz: f64,
     /// Rate of the rerun poses and scalars, Hz (default: 50).
+    #[default(50.0)]
     pub rerun_rate_hz: f64,
     /// MCAP writer options (default: [`WriterOptions::default`]).
     pub writer: WriterOptions,
@@ -82,23 +85,6 @@ pub struct RecordOptions {
     /// Names of the topics the run's controller declares ([`crate::control::Controller::topics`]),
     /// which `topics` may name too (default: none).
     pub controller_topics: Vec<String>,
-}
-
-impl Default for RecordOptions {
-    fn default() -> Self {
-        RecordOptions {
-            mcap: None,
-            rrd: None,
-            connect: None,
-            state_rate_hz: 500.0,
-            tf_rate_hz: 100.0,
-            rerun_rate_hz: 50.0,
-            writer: WriterOptions::default(),
-            topics: None,
-            command_topic: None,
-            controller_topics: Vec::new(),
-        }
-    }
 }
 
 /// What was recorded.

@@ -46,29 +46,21 @@ const POLL: Duration = Duration::from_millis(10);
 const DRAIN: Duration = Duration::from_secs(1);
 
 /// Options of the server.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct FoxgloveOptions {
     /// Address to listen on (default: 127.0.0.1:8765, loopback only).
+    #[default(SocketAddr::from(([127, 0, 0, 1], 8765)))]
     pub addr: SocketAddr,
     /// Server name shown by clients (default: "twin").
+    #[default("twin")]
     pub name: String,
     /// The robot file, for `package://` assets (its packages are found as the converter finds
     /// its meshes) (default: none: no assets).
     pub robot_file: Option<PathBuf>,
     /// Offer the pause/resume/step/reset services (default: true; false for a log player
     /// that cannot reset).
+    #[default(true)]
     pub services: bool,
-}
-
-impl Default for FoxgloveOptions {
-    fn default() -> Self {
-        FoxgloveOptions {
-            addr: SocketAddr::from(([127, 0, 0, 1], 8765)),
-            name: "twin".into(),
-            robot_file: None,
-            services: true,
-        }
-    }
 }
 
 /// A channel the server offers.

@@ -577,7 +577,8 @@ pub struct Imu {
     pub quat_adr: Option<usize>,
     /// Address of the angular velocity (site frame, rad/s) in `sensordata`.
     pub gyro_adr: usize,
-    /// Orientation of the IMU site in the frame of the body it is on.
+    /// Orientation of the IMU site in the pelvis frame, home pose (the site's own orientation
+    /// in the body it is on, turned by that body's orientation relative to the pelvis).
     pub site_rot: UnitQuaternion<f64>,
 }
 
@@ -755,7 +756,9 @@ impl Body {
             name: format!("{}_gyro", i.meta.name),
             quat_adr: i.quat_adr,
             gyro_adr: i.gyro_adr,
-            site_rot: quat(i.body_from_imu.1),
+            // The site's orientation in the pelvis frame at home: an IMU on a child body
+            // of the pelvis (Talos's `imu_link`, turned half a turn) reads that body's turn too.
+            site_rot: pelvis_rot.inverse() * frames.xrot[i.body] * quat(i.body_from_imu.1),
         });
         Ok(Body {
             pelvis,
