@@ -28,7 +28,9 @@
 //!    at most [`LiveOptions::join_timeout_secs`], until the controller's command publisher has
 //!    matched one of its command readers (a command written before that match would be lost:
 //!    DDS does not keep volatile samples for readers it has not met), then up to 2 s more for
-//!    a reader of `/joint_states` (so the controller gets the first state);
+//!    a reader of `/joint_states` (so the controller gets the first state). A node's `/clock`
+//!    subscription can match a moment after its publisher (discovery runs each way on its
+//!    own); one that matched after the last `/clock` = 0 first hears period 1's time;
 //! 2. **period 0** runs without waiting, under hold (the home pose): a `use_sim_time` timer
 //!    fires when simulation time has advanced by its period, so it can only fire once `/clock`
 //!    moves past 0;
