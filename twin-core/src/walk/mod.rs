@@ -373,6 +373,18 @@ pub struct WalkOptions {
     /// aim). A swing foot that lands past its spot (at 0.35-s steps the shipped humanoid's land
     /// 5.5 cm long) otherwise lengthens every step by that much: 0.42 m/s for 0.3 commanded.
     pub progress_hold_gain: f64,
+    /// Walking, each step's landing is moved toward where the asked command puts the feet's
+    /// centre path when that step lands, by this fraction of the gap (position and heading),
+    /// the step staying within `max_step_length`, `max_step_lateral` and `max_step_yaw`
+    /// (default: 0.0, off; 1: all of it). The asked command (the steering target, `/cmd_vel`
+    /// or a schedule's entry, else the constant one) is integrated over time from the feet's
+    /// centre and heading while the walker walks (while it stands, the integral restarts
+    /// there), so the distance and the angle walked follow the command's time integral, not
+    /// the steps the plan counted: the landing correction against a DCM that lags its
+    /// reference otherwise pulls each step back, and the loss adds up (the G1 stepping to the
+    /// left at 0.1 m/s went 0.40 m of 0.5; measurements in BENCHMARKS.md, "Walker velocity
+    /// tracking").
+    pub command_hold_gain: f64,
     /// Touch-down from contact ([`contact`]): whether a swing foot has landed is read from the
     /// robot's foot sensors (touch or force) or, without them, from its sole's motion, and the
     /// landed sole's height is the ground under that foot. A foot that lands early (ground
@@ -454,6 +466,7 @@ impl Default for WalkOptions {
             ground_slope_gain: 0.0,
             stance_ground_read: false,
             progress_hold_gain: 0.0,
+            command_hold_gain: 0.0,
             touchdown_from_contact: false,
             touchdown_reach_m: 0.04,
         }
@@ -587,6 +600,9 @@ impl WalkOptions {
         if !(0.0..=1.0).contains(&self.progress_hold_gain) {
             return Err(("progress_hold_gain", format!("must be in [0, 1] (got {})", self.progress_hold_gain)));
         }
+        if !(0.0..=1.0).contains(&self.command_hold_gain) {
+            return Err(("command_hold_gain", format!("must be in [0, 1] (got {})", self.command_hold_gain)));
+        }
         self.validate_hip()
     }
 
@@ -713,6 +729,14 @@ pub struct Walker {
     /// Whether the current step was planned with a zero command (feet brought side by side:
     /// at its touchdown a walker told to stop stands).
     step_zero: bool,
+    /// The command asked at the last solve (`command_hold_gain`): the steering target, else
+    /// the constant command.
+    asked: Command,
+    /// Where the asked command, integrated since walking started, puts the feet's centre path
+    /// (`command_hold_gain`): world x y, m, and heading, rad; at the last solve (`hold_secs`,
+    /// controller seconds). While the walker stands, the feet's midpoint and mean heading.
+    hold: (Vector2<f64>, f64),
+    hold_secs: f64,
     t0: f64,
     tick: u64,
     com_prev: Option<Vector3<f64>>,
@@ -979,6 +1003,9 @@ impl Walker {
             command: options.command(),
             steer_target: None,
             step_zero: false,
+            asked: Command::default(),
+            hold: (Vector2::zeros(), 0.0),
+            hold_secs: 0.0,
             t0: 0.0,
             tick: 0,
             com_prev: None,
@@ -1766,6 +1793,66 @@ impl Walker {
         Step { swing_to: Foothold { pos, ..step.swing_to }, ..step }
     }
 
+    /// Advances the asked command's integral (`command_hold_gain`) to `t` with the command
+    /// `asked` while walking (not recovering from a push); standing, restarts it at the feet
+    /// `feet` (their midpoint and mean heading).
+    fn integrate_hold(&mut self, asked: Command, t: f64, feet: &[Foothold; 2]) {
+        if matches!(self.mode, Mode::Walking(_)) && !self.recovering {
+            let dt = t - self.hold_secs;
+            let mid_yaw = self.hold.1 + asked.yaw_rate * dt / 2.0;
+            self.hold.0 += rotation(mid_yaw) * Vector2::new(asked.vx, asked.vy) * dt;
+            self.hold.1 += asked.yaw_rate * dt;
+        } else {
+            let heading = feet[0].yaw + wrap(feet[1].yaw - feet[0].yaw) / 2.0;
+            self.hold = ((feet[0].pos + feet[1].pos) / 2.0, heading);
+        }
+        self.asked = asked;
+        self.hold_secs = t;
+    }
+
+    /// The walking step `step` with its landing moved toward where the asked command's
+    /// integral will be at its touchdown (`command_hold_gain` of the gap, in position and
+    /// heading; the heading measured at the stance foot): a step with a command puts the feet's
+    /// centre path there (as the plan's own steps do, a step's advance after the last); a step
+    /// with none, which brings the feet side by side to stand, puts their midpoint there, so
+    /// that the walker stands where the integral stopped (from the centre path it would stand
+    /// half the last step's overshoot past it: the last step is planned before the command
+    /// stops). The step's advance stays within the step limits (or within the planned advance,
+    /// when it is beyond).
+    fn command_held(&self, step: Step) -> Step {
+        let o = &self.options;
+        let gait = o.gait();
+        let a = self.asked;
+        let ahead = step.end() - self.hold_secs;
+        let ref_yaw = self.hold.1 + a.yaw_rate * ahead;
+        let ref_pos = self.hold.0 + rotation(self.hold.1 + a.yaw_rate * ahead / 2.0) * Vector2::new(a.vx, a.vy) * ahead;
+        let stance_center = gait.center_of(&step.stance);
+        let center = gait.center_of(&step.swing_to);
+        // The feet's headings as the stance foot stands, not as planned: feet turn on the ground.
+        let stance_yaw = self.foothold_of(&self.frames, step.stance.side.index()).yaw;
+        let yaw = step.swing_to.yaw + wrap(stance_yaw - step.stance.yaw);
+        let (gap_m, gap_rad) = if self.command.is_zero() {
+            let mid_yaw = stance_yaw + wrap(yaw - stance_yaw) / 2.0;
+            ((ref_pos - (stance_center + center) / 2.0) * 2.0, 2.0 * wrap(ref_yaw - mid_yaw))
+        } else {
+            (ref_pos - center, wrap(ref_yaw - yaw))
+        };
+        let k = o.command_hold_gain;
+        let to_stance = rotation(-step.stance.yaw);
+        let planned = to_stance * (center - stance_center);
+        let held = planned + to_stance * gap_m * k;
+        let within = |v: f64, planned: f64, limit: f64| v.clamp((-limit).min(planned), limit.max(planned));
+        let advance = Vector2::new(
+            within(held.x, planned.x, o.max_step_length),
+            within(held.y, planned.y, o.max_step_lateral),
+        );
+        let turn_planned = wrap(step.swing_to.yaw - step.stance.yaw);
+        let turn = within(turn_planned + k * gap_rad, turn_planned, o.max_step_yaw);
+        let swing_to =
+            gait.foothold(step.swing_to.side, stance_center + rotation(step.stance.yaw) * advance, step.stance.yaw + turn);
+        Step { swing_to, ..step }
+    }
+
     /// The command of the step about to be planned, moved toward the steering `goal` by at most
     /// the acceleration limits over one step period ([`steer::ramp`]): the steps' advance is
     /// what the command sets, and it changes once per step.
@@ -1782,6 +1869,9 @@ impl Walker {
         let mut step = self.first_step(t, feet, swing, ds, zmp_from);
         if let (Mode::Walking(prev), false) = (self.mode, self.recovering) {
             step = self.progress_held(step, &prev.swing_to);
+        }
+        if !self.recovering && self.options.command_hold_gain > 0.0 {
+            step = self.command_held(step);
         }
         if self.recovering {
             // A recovery step: quick, since the DCM diverges meanwhile.
@@ -1986,6 +2076,9 @@ impl Controller for Walker {
         self.com_prev = Some(com);
         let dcm = Vector2::new(com.x + self.com_vel.x / self.omega, com.y + self.com_vel.y / self.omega);
         let feet = [self.foothold_of(&self.frames, 0), self.foothold_of(&self.frames, 1)];
+        if o.command_hold_gain > 0.0 {
+            self.integrate_hold(goal.unwrap_or(self.command), t, &feet);
+        }
 
         // 3. Step timing: touchdown, start, stop.
         let mut replan = self.tick == 0;
