@@ -466,7 +466,7 @@ impl Default for WalkOptions {
             ground_slope_gain: 0.0,
             stance_ground_read: false,
             progress_hold_gain: 0.0,
-            command_hold_gain: 0.0,
+            command_hold_gain: 0.35,
             touchdown_from_contact: false,
             touchdown_reach_m: 0.04,
         }
