@@ -9,7 +9,10 @@
 //!    the swing foot half a step width beside a centre path advanced by the command. During a
 //!    step the landing spot moves by the DCM error predicted at touchdown beyond what the stance
 //!    ankle takes back, and the touchdown comes earlier when the spot alone can't absorb it
-//!    (Khadiv et al. 2016). With a zero command the walker stands, and starts stepping in place
+//!    (Khadiv et al. 2016). Around that, an outer loop on position: each step, when planned, is
+//!    moved toward where the command's time integral (since walking started) will be at its
+//!    touchdown (`command_hold_gain`), so that the distance and angle walked follow the command
+//!    and not the steps counted. With a zero command the walker stands, and starts stepping in place
 //!    when its DCM nears the edge of the feet's support (`recovery_margin`): quick steps that land
 //!    under the capture point predicted at touchdown.
 //! 3. **CoM reference**: standing, LIPM ZMP preview control (Kajita, [`preview`]) over
@@ -59,8 +62,13 @@
 //! limits (none at a 1-ms timestep), it fell turning and at 0.2 and 0.3 m/s. Randomized
 //! (`scenarios/walk_g1.toml`, default spec, 100 episodes) it passes 28 % (BENCHMARKS.md): every
 //! episode with a push under 0.15 m/s, none above 0.3 m/s. Steered by the README's `/cmd_vel`
-//! node it goes 1 m forward and turns 95°, but steps 0.39 m of 0.5 m sideways (21 % short at
-//! its derived 0.615-s `step_period`; 0.47 m at 0.45 s). What is known of the falls left:
+//! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
+//! Talos (motors) 1.14 m, 99.7° and 0.49 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
+//! Romeo falls in the forward leg (3.4 s). Without the outer loop (`command_hold_gain` 0) the
+//! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
+//! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
+//! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
+//! tracking"). What is known of the falls left:
 //! - Romeo: the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change
