@@ -45,17 +45,15 @@
 //! (no two six-joint legs with feet, legs on position servos, actuators too weak to hold the
 //! crouch, steps out of reach). What that gives on example-robot-data 6.0.0's humanoids, no
 //! robot-specific option (`twin sim ROBOT --controller walk [--vx 0.25] --duration D`, release
-//! build, 2-ms steps; with the outer loop on position, `command_hold_gain` 0.35; before it, main
-//! `c4f9e54`: humanoid 8.64 m at 0.29 m/s, G1 6.64 m at 0.22 m/s, 5.27 m at 0.2, 7.95 m at 0.3;
-//! turns 92.9°, 94.9°, 92.1°, 100.3°):
+//! build, 2-ms steps):
 //!
 //! | robot | mass | stands 10 s, pd-hold | stands 10 s, walker | walks (`--vx 0.25`, 30 s) | speed | falls | turns 90° in place |
 //! |---|---|---|---|---|---|---|---|
-//! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 7.23 m, drift 0.04 m | 0.24 m/s | no | 94.0° |
-//! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 7.11 m, drift 0.03 m, heading −0.4° (`--vx` 0.2: 5.69 m; 0.3: 8.53 m) | 0.24 m/s | no | 92.6° |
-//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 0.84 m | 0.28 m/s | at 3.2 s (heading −8°) | 92.3° |
+//! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 92.9° |
+//! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 94.9° |
+//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.1° |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
-//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | forward, then back: −0.58 m | – | at 5.3 s (heading −17°) | 98.8° |
+//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 0.5 m forward, then back: −0.57 m | – | at 4.7 s (heading −34°) | 100.3° |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
 //! turns and is steered over `/cmd_vel` since the damping of its hip and waist loops is capped

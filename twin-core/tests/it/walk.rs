@@ -895,13 +895,12 @@ fn derived_run(mut s: Scenario, path: &std::path::Path) -> twin_core::walk::Gait
 }
 
 /// Example-robot-data's Unitree G1 (33 kg, no robot-specific option) walks over 5 m straight
-/// at 0.25 m/s without a fall, holding its heading (in the lab: 7.11 m in 30 s, heading
-/// −0.4°; 6.64 m and −0.3°, mean slip 7 mm, before the outer loop on position,
-/// `command_hold_gain`). (Before the walker capped the damping of the loops on its light
+/// at 0.25 m/s without a fall, holding its heading (in the lab: 6.64 m in 30 s, heading
+/// −0.3°, mean slip 7 mm). (Before the walker capped the damping of the loops on its light
 /// pelvis, `Walker::cap_pelvis_damping`, it chattered at its hips' limits and needed the swing
 /// foot placed from the measured pelvis, `swing_from_measured_pelvis`: from the commanded one
-/// it fell at 3.4 s; then both walked, 6.64 m and 5.35 m.) Romeo (40.5 kg) turns 90° in place
-/// within 15° (in the lab: 92.3°).
+/// it fell at 3.4 s; now both walk, 6.64 m and 5.35 m.) Romeo (40.5 kg) turns 90° in place
+/// within 15° (in the lab: 92.5°).
 #[test]
 fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
@@ -927,8 +926,7 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
 /// cap (the hips' and waist's torques flipping sign from one physics step to the next in
 /// single support, at their effort limits) it spun 194° and fell at 5.5 s turning, fell at
 /// 14.7 s (0.2 m/s, heading 115° off) and 3.9 s (0.3 m/s), slipping 3 cm a stance. In the
-/// lab: 92.6° (moved 0.08 m); 5.69 m and 8.53 m in 30 s, headings within 1°; before the outer
-/// loop on position (`command_hold_gain`): 94.9°, 5.27 m and 7.95 m, slip 6 and 9 mm.
+/// lab: 94.9° (moved 0.24 m); 5.27 m and 7.95 m in 30 s, headings within 0.5°, slip 6 and 9 mm.
 #[test]
 fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
