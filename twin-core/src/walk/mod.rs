@@ -381,17 +381,19 @@ pub struct WalkOptions {
     /// aim). A swing foot that lands past its spot (at 0.35-s steps the shipped humanoid's land
     /// 5.5 cm long) otherwise lengthens every step by that much: 0.42 m/s for 0.3 commanded.
     pub progress_hold_gain: f64,
-    /// Walking, each step's landing is moved toward where the asked command puts the feet's
-    /// centre path when that step lands, by this fraction of the gap (position and heading),
-    /// the step staying within `max_step_length`, `max_step_lateral` and `max_step_yaw`
-    /// (default: 0.0, off; 1: all of it). The asked command (the steering target, `/cmd_vel`
-    /// or a schedule's entry, else the constant one) is integrated over time from the feet's
-    /// centre and heading while the walker walks (while it stands, the integral restarts
-    /// there), so the distance and the angle walked follow the command's time integral, not
-    /// the steps the plan counted: the landing correction against a DCM that lags its
-    /// reference otherwise pulls each step back, and the loss adds up (the G1 stepping to the
-    /// left at 0.1 m/s went 0.40 m of 0.5; measurements in BENCHMARKS.md, "Walker velocity
-    /// tracking").
+    /// Steered walking (a `/cmd_vel` target or a schedule's entry, [`steer`]): each step's
+    /// landing is moved toward where the steering target, integrated over time, puts the feet's
+    /// centre path when that step lands, by this fraction of the gap (position; heading against
+    /// the stance foot's measured yaw), the step staying within `max_step_length`,
+    /// `max_step_lateral` and `max_step_yaw`; the step that brings the feet together puts their
+    /// midpoint there (default: 0.35; 0: off; 1: all of the gap). The integral runs from the
+    /// feet's centre and heading while the walker walks (while it stands, it restarts there), so
+    /// the distance and angle walked follow the command's time integral, not the steps the plan
+    /// counted: the landing corrections against a DCM that lags its reference otherwise pull
+    /// each step back and the loss adds up (the G1 stepping left at 0.1 m/s went 0.41 m of 0.5;
+    /// 0.46 m with it). A constant command (`vx`, `vy`, `yaw_rate` without a target) is not
+    /// held: on the G1's randomized walk (`walk_g1.toml`, pushes) holding it lost episodes
+    /// (8/40 against 13/40). Measurements in BENCHMARKS.md, "Walker velocity tracking".
     pub command_hold_gain: f64,
     /// Touch-down from contact ([`contact`]): whether a swing foot has landed is read from the
     /// robot's foot sensors (touch or force) or, without them, from its sole's motion, and the
@@ -737,9 +739,8 @@ pub struct Walker {
     /// Whether the current step was planned with a zero command (feet brought side by side:
     /// at its touchdown a walker told to stop stands).
     step_zero: bool,
-    /// The command asked at the last solve (`command_hold_gain`): the steering target, else
-    /// the constant command.
-    asked: Command,
+    /// The steering target at the last solve (`command_hold_gain`), if any.
+    asked: Option<Command>,
     /// Where the asked command, integrated since walking started, puts the feet's centre path
     /// (`command_hold_gain`): world x y, m, and heading, rad; at the last solve (`hold_secs`,
     /// controller seconds). While the walker stands, the feet's midpoint and mean heading.
@@ -1011,7 +1012,7 @@ impl Walker {
             command: options.command(),
             steer_target: None,
             step_zero: false,
-            asked: Command::default(),
+            asked: None,
             hold: (Vector2::zeros(), 0.0),
             hold_secs: 0.0,
             t0: 0.0,
@@ -1801,11 +1802,11 @@ impl Walker {
         Step { swing_to: Foothold { pos, ..step.swing_to }, ..step }
     }
 
-    /// Advances the asked command's integral (`command_hold_gain`) to `t` with the command
-    /// `asked` while walking (not recovering from a push); standing, restarts it at the feet
-    /// `feet` (their midpoint and mean heading).
-    fn integrate_hold(&mut self, asked: Command, t: f64, feet: &[Foothold; 2]) {
-        if matches!(self.mode, Mode::Walking(_)) && !self.recovering {
+    /// Advances the steering target's integral (`command_hold_gain`) to `t` with the target
+    /// `goal` while walking (not recovering from a push); standing, or with no target (a
+    /// constant command), restarts it at the feet `feet` (their midpoint and mean heading).
+    fn integrate_hold(&mut self, goal: Option<Command>, t: f64, feet: &[Foothold; 2]) {
+        if let (Some(asked), Mode::Walking(_), false) = (goal, self.mode, self.recovering) {
             let dt = t - self.hold_secs;
             let mid_yaw = self.hold.1 + asked.yaw_rate * dt / 2.0;
             self.hold.0 += rotation(mid_yaw) * Vector2::new(asked.vx, asked.vy) * dt;
@@ -1814,7 +1815,7 @@ impl Walker {
             let heading = feet[0].yaw + wrap(feet[1].yaw - feet[0].yaw) / 2.0;
             self.hold = ((feet[0].pos + feet[1].pos) / 2.0, heading);
         }
-        self.asked = asked;
+        self.asked = goal;
         self.hold_secs = t;
     }
 
@@ -1827,10 +1828,9 @@ impl Walker {
     /// half the last step's overshoot past it: the last step is planned before the command
     /// stops). The step's advance stays within the step limits (or within the planned advance,
     /// when it is beyond).
-    fn command_held(&self, step: Step) -> Step {
+    fn command_held(&self, step: Step, a: Command) -> Step {
         let o = &self.options;
         let gait = o.gait();
-        let a = self.asked;
         let ahead = step.end() - self.hold_secs;
         let ref_yaw = self.hold.1 + a.yaw_rate * ahead;
         let ref_pos = self.hold.0 + rotation(self.hold.1 + a.yaw_rate * ahead / 2.0) * Vector2::new(a.vx, a.vy) * ahead;
@@ -1878,8 +1878,8 @@ impl Walker {
         if let (Mode::Walking(prev), false) = (self.mode, self.recovering) {
             step = self.progress_held(step, &prev.swing_to);
         }
-        if !self.recovering && self.options.command_hold_gain > 0.0 {
-            step = self.command_held(step);
+        if let (Some(asked), false, true) = (self.asked, self.recovering, self.options.command_hold_gain > 0.0) {
+            step = self.command_held(step, asked);
         }
         if self.recovering {
             // A recovery step: quick, since the DCM diverges meanwhile.
@@ -2085,7 +2085,7 @@ impl Controller for Walker {
         let dcm = Vector2::new(com.x + self.com_vel.x / self.omega, com.y + self.com_vel.y / self.omega);
         let feet = [self.foothold_of(&self.frames, 0), self.foothold_of(&self.frames, 1)];
         if o.command_hold_gain > 0.0 {
-            self.integrate_hold(goal.unwrap_or(self.command), t, &feet);
+            self.integrate_hold(goal, t, &feet);
         }
 
         // 3. Step timing: touchdown, start, stop.
