@@ -1850,14 +1850,15 @@ impl Walker {
         let planned = to_stance * (center - stance_center);
         let held = planned + to_stance * gap_m * k;
         let within = |v: f64, planned: f64, limit: f64| v.clamp((-limit).min(planned), limit.max(planned));
-        let advance = Vector2::new(
-            within(held.x, planned.x, o.max_step_length),
-            within(held.y, planned.y, o.max_step_lateral),
-        );
+        let advance =
+            Vector2::new(within(held.x, planned.x, o.max_step_length), within(held.y, planned.y, o.max_step_lateral));
         let turn_planned = wrap(step.swing_to.yaw - step.stance.yaw);
         let turn = within(turn_planned + k * gap_rad, turn_planned, o.max_step_yaw);
-        let swing_to =
-            gait.foothold(step.swing_to.side, stance_center + rotation(step.stance.yaw) * advance, step.stance.yaw + turn);
+        let swing_to = gait.foothold(
+            step.swing_to.side,
+            stance_center + rotation(step.stance.yaw) * advance,
+            step.stance.yaw + turn,
+        );
         Step { swing_to, ..step }
     }
 

@@ -201,8 +201,8 @@ fn steer_legs(s: &GaitSummary) -> (f64, f64, f64) {
 
 /// The walker's outer loop on position (`command_hold_gain`) on example-robot-data's G1 under
 /// `scenarios/steer.toml` (its options derived, as `twin sim G1 --scenario steer.toml`): with
-/// it (the default) each leg is within 10 % of its 1 m, 90° and 0.5 m (in the lab: 1.044 m,
-/// 95.3°, 0.463 m); without it the sideways leg falls 18 % short (0.409 m: the landing
+/// it (the default) each leg is within 10 % of its 1 m, 90° and 0.5 m (in the lab: 1.032 m,
+/// 95.2°, 0.463 m); without it the sideways leg falls 21 % short (0.393 m: the landing
 /// corrections pulled each step back), more than twice the shortfall with it.
 #[test]
 fn command_hold_brings_the_g1_sideways_leg_within_ten_percent() {
