@@ -900,7 +900,7 @@ fn derived_run(mut s: Scenario, path: &std::path::Path) -> twin_core::walk::Gait
 /// pelvis, `Walker::cap_pelvis_damping`, it chattered at its hips' limits and needed the swing
 /// foot placed from the measured pelvis, `swing_from_measured_pelvis`: from the commanded one
 /// it fell at 3.4 s; now both walk, 6.64 m and 5.35 m.) Romeo (40.5 kg) turns 90° in place
-/// within 15° (in the lab: 92.5°).
+/// within 15° (in the lab: 92.3°).
 #[test]
 fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
@@ -926,7 +926,7 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
 /// cap (the hips' and waist's torques flipping sign from one physics step to the next in
 /// single support, at their effort limits) it spun 194° and fell at 5.5 s turning, fell at
 /// 14.7 s (0.2 m/s, heading 115° off) and 3.9 s (0.3 m/s), slipping 3 cm a stance. In the
-/// lab: 94.9° (moved 0.24 m); 5.27 m and 7.95 m in 30 s, headings within 0.5°, slip 6 and 9 mm.
+/// lab: 92.6° (moved 0.08 m; 94.9° before the outer loop on position, `command_hold_gain`); 5.27 m and 7.95 m in 30 s, headings within 0.5°, slip 6 and 9 mm.
 #[test]
 fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
@@ -952,7 +952,7 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
 /// from one physics step to the next, the legs' torques hit their limits with alternating
 /// signs, the feet left the ground at 0.04 s and landed 3 to 6 cm from where they stood, the
 /// pelvis leant 6–11° while standing (0.185 rad at 0.94 s), and the turn fell at 4.1 s. (In
-/// the lab: upright within 0.3°, turned 100.3°.)
+/// the lab: upright within 0.3°, turned 98.8°; 100.3° before `command_hold_gain`.)
 #[test]
 fn talos_on_motors_stands_upright_and_turns_in_place() {
     use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
