@@ -926,7 +926,8 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
 /// cap (the hips' and waist's torques flipping sign from one physics step to the next in
 /// single support, at their effort limits) it spun 194° and fell at 5.5 s turning, fell at
 /// 14.7 s (0.2 m/s, heading 115° off) and 3.9 s (0.3 m/s), slipping 3 cm a stance. In the
-/// lab: 92.6° (moved 0.08 m; 94.9° before the outer loop on position, `command_hold_gain`); 5.27 m and 7.95 m in 30 s, headings within 0.5°, slip 6 and 9 mm.
+/// lab: 92.6° (moved 0.08 m; 94.9° before the outer loop on position, `command_hold_gain`);
+/// 5.27 m and 7.95 m in 30 s, headings within 0.5°, slip 6 and 9 mm.
 #[test]
 fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
