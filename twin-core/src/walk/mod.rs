@@ -2770,11 +2770,15 @@ mod tests {
     }
 
     #[test]
-    fn progress_hold_gain_out_of_range_is_refused() {
+    fn progress_and_command_hold_gains_out_of_range_are_refused() {
         for bad in [-0.1, 1.5, f64::NAN] {
             let o = WalkOptions { progress_hold_gain: bad, ..WalkOptions::default() };
             assert_eq!(o.validate().unwrap_err().0, "progress_hold_gain");
+            let o = WalkOptions { command_hold_gain: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "command_hold_gain");
         }
-        assert!(WalkOptions { progress_hold_gain: 1.0, ..WalkOptions::default() }.validate().is_ok());
+        let ends = WalkOptions { progress_hold_gain: 1.0, command_hold_gain: 1.0, ..WalkOptions::default() };
+        assert!(ends.validate().is_ok());
+        assert!(WalkOptions { command_hold_gain: 0.0, ..WalkOptions::default() }.validate().is_ok());
     }
 }
