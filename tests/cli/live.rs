@@ -786,31 +786,42 @@ fn turned(odom: &[(u64, Odometry)], from: f64, to: f64) -> f64 {
 /// `/odom` bit for bit.
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_the_walker_forward_turn_and_sideways_within_twenty_percent() {
-    steers_within(Path::new(MODEL), [10, 11], 0.2);
+    steers_within_twenty_percent(Path::new(MODEL), &[10, 11]);
 }
 
 /// The same README command and node, unchanged, on example-robot-data's Unitree G1 (its URDF
 /// given as `twin sim`'s model, which replaces the scenario's; the walker's options derived
-/// from the G1, `scenarios/steer.toml`'s `[walk]` for every robot): forward and the turn
-/// within 20 %, the sideways leg within 30 %. In the lab: forward 0.996 m, turned 95.0°,
-/// lateral 0.393 m of 0.5 — 21 % short, with the G1's derived `step_period` of 0.615 s (the
-/// same schedule without ROS: 0.397 m; at `step_period = 0.45`, 0.473 m; the humanoid's
-/// 0.35 s: 0.549 m). Not fixed: the 20 % is not met sideways on the G1.
+/// from the G1, `scenarios/steer.toml`'s `[walk]` for every robot): each leg within 20 %. In
+/// the lab: forward 1.04 m, turned 95°, lateral 0.46 m of 0.5. Without the walker's
+/// `command_hold_gain` (0) the sideways leg fails, 0.39 m of 0.5 (21 % short: each step's
+/// landing correction, against a DCM that lags its reference, pulled the feet back).
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_the_g1_forward_turn_and_sideways() {
     let g1 = crate::example_robot_data::example_robot_data().join("g1_description/urdf/g1_29dof_rev_1_0.urdf");
-    steers_within(&g1, [13, 14], 0.3);
+    steers_within_twenty_percent(&g1, &[13, 14]);
 }
 
-/// Runs the README's steering command and node on `model` twice (in domains `domain(k)`) and
-/// checks each leg (forward and turn within 20 %, sideways within `lateral_share` of its
-/// 0.5 m), the robot's standing at the end and that both runs give the same `/odom`.
-fn steers_within(model: &Path, k: [u32; 2], lateral_share: f64) {
+/// The same on example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin
+/// convert --actuators motor`: the walker refuses its position servos), once. In the lab:
+/// forward 1.15 m, turned 99.6°, lateral 0.49 m of 0.5.
+#[test]
+fn ros_cmd_vel_from_rclpy_steers_talos_on_motors_forward_turn_and_sideways() {
+    let urdf = crate::example_robot_data::example_robot_data().join("talos_data/robots/talos_full_v2.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let talos = dir.path().join("talos_motors.xml");
+    let out = twin().arg("convert").arg(&urdf).args(["--actuators", "motor", "-o"]).arg(&talos).output().unwrap();
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    steers_within_twenty_percent(&talos, &[4]);
+}
+
+/// Runs the README's steering command and node on `model` once per domain `domain(k)` of `k`
+/// and checks each leg (forward, turn and sideways within 20 % of 1 m, 90° and 0.5 m), the
+/// robot's standing at the end and, for two runs, that both give the same `/odom`.
+fn steers_within_twenty_percent(model: &Path, k: &[u32]) {
     let dir = tempfile::tempdir().unwrap();
     let (twin_args, node_args, script) = readme_steer(dir.path());
-    let a = run_rclpy_on(model, k[0], &twin_args, Some(&script), &node_args);
-    let b = run_rclpy_on(model, k[1], &twin_args, Some(&script), &node_args);
-    for run in [&a, &b] {
+    let runs: Vec<RosRun> = k.iter().map(|&k| run_rclpy_on(model, k, &twin_args, Some(&script), &node_args)).collect();
+    for run in &runs {
         assert_eq!(count_before(&run.stdout, "control periods"), 430, "{}", run.stdout);
         assert_eq!(count_before(&run.stdout, "commands applied"), 429, "{}", run.stdout);
         assert!(run.stdout.contains("0 Twists clamped"), "{}", run.stdout);
@@ -841,8 +852,10 @@ fn steers_within(model: &Path, k: [u32; 2], lateral_share: f64) {
         );
         assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
         assert!((angle - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {angle} rad");
-        assert!((lateral - 0.5).abs() < lateral_share * 0.5, "lateral {lateral} m of 0.5 m");
+        assert!((lateral - 0.5).abs() < 0.2 * 0.5, "lateral {lateral} m of 0.5 m");
     }
-    let (oa, ob) = (read::<Odometry>(&a.mcap, "/odom"), read::<Odometry>(&b.mcap, "/odom"));
-    assert!(oa == ob, "two lockstep runs of the same node differ");
+    if let [a, b] = &runs[..] {
+        let (oa, ob) = (read::<Odometry>(&a.mcap, "/odom"), read::<Odometry>(&b.mcap, "/odom"));
+        assert!(oa == ob, "two lockstep runs of the same node differ");
+    }
 }

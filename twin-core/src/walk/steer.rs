@@ -10,6 +10,13 @@
 //! a step's advance is what the command sets. With a zero command it finishes the step it is
 //! in, brings the feet side by side and stands.
 //!
+//! The steps alone walk what they count, not what was asked: a command that changes between
+//! step starts, and every step's landing correction, add up. So while the walker walks, the
+//! target is also integrated over time into a pose (from the feet's centre and heading when
+//! walking starts), and each step is moved toward where that pose will be at its touchdown
+//! (`command_hold_gain`); the step that brings the feet together puts their midpoint there,
+//! so the walker stands where the integral stopped.
+//!
 //! A walker with neither a schedule nor a live target keeps its constant command
 //! (`vx`, `vy`, `yaw_rate`) and never runs this path.
 
