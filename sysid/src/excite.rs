@@ -56,7 +56,8 @@ use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
 use crate::model::RobotModel;
 use crate::regressor::{FrictionModel, Regressor};
-use crate::rng::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use faer::Mat;
 use std::f64::consts::PI;
 use std::path::Path;
@@ -1085,15 +1086,15 @@ fn option_error(name: &'static str, message: String) -> Error {
 /// limit.
 /// A random `h`-harmonic trajectory (each velocity coefficient uniform in ±v_max/h, the rest in
 /// the middle half of the range), its harmonics above `h` zero up to the template's.
-fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut Rng) -> Vec<FourierJoint> {
+fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut ChaCha8Rng) -> Vec<FourierJoint> {
     let nv = vars_per_joint(h);
     let mut x = Vec::with_capacity(template.len() * nv);
     for lim in limits {
         let mid = 0.5 * (lim.lower + lim.upper);
         let half = 0.5 * (lim.upper - lim.lower);
-        x.push(mid + half * 0.5 * (2.0 * rng.uniform() - 1.0));
+        x.push(mid + half * 0.5 * (2.0 * rng.random::<f64>() - 1.0));
         for _ in 0..2 * (h - 1) {
-            x.push(lim.velocity / h as f64 * (2.0 * rng.uniform() - 1.0));
+            x.push(lim.velocity / h as f64 * (2.0 * rng.random::<f64>() - 1.0));
         }
     }
     let mut js = joints_from_vars(&x, h, template);
@@ -1110,11 +1111,11 @@ fn random_joints_anywhere(
     template: &[FourierJoint],
     limits: &[JointLimits],
     h: usize,
-    rng: &mut Rng,
+    rng: &mut ChaCha8Rng,
 ) -> Vec<FourierJoint> {
     let mut js = random_joints(template, limits, h, rng);
     for (f, lim) in js.iter_mut().zip(limits) {
-        f.rest = lim.lower + (lim.upper - lim.lower) * rng.uniform();
+        f.rest = lim.lower + (lim.upper - lim.lower) * rng.random::<f64>();
     }
     js
 }
@@ -1410,7 +1411,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         .collect();
 
     // Random candidates, each scaled to the limits; the first feasible one fixes the base columns.
-    let mut rng = Rng::new(opts.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     let mut candidates = Vec::new();
     let mut last_violation = None;
     for _ in 0..opts.random_candidates {

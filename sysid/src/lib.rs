@@ -143,7 +143,6 @@ pub mod number;
 pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
-pub mod rng;
 pub mod signal;
 pub mod synth;
 pub mod writeback;
