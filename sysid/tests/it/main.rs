@@ -11,3 +11,17 @@ mod regressor;
 mod synthetic;
 #[path = "../../../twin-core/tests/it/test_python.rs"]
 mod test_python;
+
+/// The three seeds of a synthetic identification run (training log, held-out log, perturbed
+/// start): `default`, or from the environment variable `var` ("a,b,c") to measure the spread
+/// over draws (BENCHMARKS.md, "sysid's synthetic logs over many draws").
+fn seeds(var: &str, default: [u64; 3]) -> [u64; 3] {
+    match std::env::var(var) {
+        Ok(v) => {
+            let s: Vec<u64> = v.split(',').filter_map(|x| x.trim().parse().ok()).collect();
+            assert_eq!(s.len(), 3, "{var}={v:?}: three seeds, a,b,c");
+            [s[0], s[1], s[2]]
+        }
+        Err(_) => default,
+    }
+}
