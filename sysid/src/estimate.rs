@@ -338,6 +338,17 @@ fn interior_point(p: &[f64], kinds: &[ParamKind], scales: &[f64], shift: &[f64],
     p
 }
 
+/// What constrains each parameter of [`consistent_fit`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Bounds<'a> {
+    /// Each parameter's kind (a link's first parameter, the rest of a link's, non-negative, free).
+    pub kinds: &'a [ParamKind],
+    /// Each parameter's typical size.
+    pub scales: &'a [f64],
+    /// The share of each link's parameters left out of its physical constraint (zero where none).
+    pub shift: &'a [f64],
+}
+
 /// Minimises `πᵀ·H·π − 2·bᵀ·π` subject to every link's pseudo-inertia `J(π − shift) ⪰ 0` and
 /// the non-negative terms `≥ 0` (`shift`: the share of each body that is not identified, such
 /// as the fixed-joint links lumped into it at their URDF values, so that the share written
@@ -352,11 +363,10 @@ pub(crate) fn consistent_fit(
     b: &[f64],
     cost_offset: f64,
     start: &[f64],
-    kinds: &[ParamKind],
-    scales: &[f64],
-    shift: &[f64],
+    bounds: &Bounds<'_>,
     max_iterations: usize,
 ) -> Result<(Vec<f64>, usize)> {
+    let Bounds { kinds, scales, shift } = *bounds;
     let n = b.len();
     let basis = pseudo_inertia_basis();
     let link_starts: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::Link).collect();

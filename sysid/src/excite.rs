@@ -56,9 +56,9 @@ use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
 use crate::model::RobotModel;
 use crate::regressor::{FrictionModel, Regressor};
+use faer::Mat;
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
-use faer::Mat;
 use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
@@ -334,6 +334,12 @@ pub struct ExciteReport {
     pub baseline_harmonics: usize,
     /// The best random trajectory (the search's start).
     pub best_random: Excitation,
+    /// The median random trajectory by condition number (the lower median of an even count):
+    /// what a random draw typically gives, the baseline a design is fairly compared with (the
+    /// best of a few draws is itself a lucky draw).
+    pub median_random: Excitation,
+    /// Its condition number.
+    pub median_random_condition: f64,
     /// Base parameters (columns of the base regressor).
     pub base_parameters: usize,
     /// Limits used.
@@ -1086,7 +1092,12 @@ fn option_error(name: &'static str, message: String) -> Error {
 /// limit.
 /// A random `h`-harmonic trajectory (each velocity coefficient uniform in ±v_max/h, the rest in
 /// the middle half of the range), its harmonics above `h` zero up to the template's.
-fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut ChaCha8Rng) -> Vec<FourierJoint> {
+fn random_joints(
+    template: &[FourierJoint],
+    limits: &[JointLimits],
+    h: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<FourierJoint> {
     let nv = vars_per_joint(h);
     let mut x = Vec::with_capacity(template.len() * nv);
     for lim in limits {
@@ -1453,6 +1464,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     }
     let (_, best_eval, best_random) = best.expect("at least one candidate");
     let best_random_condition = best_eval.condition;
+    let mut by_condition: Vec<usize> = (0..kept.len()).collect();
+    by_condition.sort_by(|&a, &b| random_conditions[a].total_cmp(&random_conditions[b]));
+    let median_index = by_condition[(kept.len() - 1) / 2];
+    let (median_random, median_random_condition) = (kept[median_index].clone(), random_conditions[median_index]);
 
     // Global stage: more random trajectories (the same draw, but the rest position anywhere in
     // the range) and the 20 above, each scaled per joint to touch its position, velocity or
@@ -1558,6 +1573,8 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         best_random_condition,
         baseline_harmonics: hb,
         best_random: problem.excitation(best_random),
+        median_random: problem.excitation(median_random),
+        median_random_condition,
         base_parameters: problem.base_cols.len(),
         limits: problem.limits.clone(),
         usage,

@@ -3,7 +3,7 @@
 
 use crate::condition::{ConditionOptions, Conditioned, condition, quote_list};
 use crate::error::{Error, Result};
-use crate::estimate::{Accumulator, Identifiability, ParamKind, base_analysis, consistent_fit};
+use crate::estimate::{Accumulator, Bounds, Identifiability, ParamKind, base_analysis, consistent_fit};
 use crate::log::JointLog;
 use crate::model::{LINK_PARAM_NAMES, LINK_PARAMS, MassProperties, RobotModel, physically_valid};
 use crate::regressor::{FrictionModel, Layout, Regressor};
@@ -188,15 +188,16 @@ fn for_each_sample(
     let (mut q, mut qd, mut qdd) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
     let mut used_now = vec![false; nj];
     for seg in &data.segments {
-        let used: Vec<Vec<bool>> = (0..nj)
-            .map(|j| rows_used(&seg.t_secs, &seg.qd[j], opts.velocity_deadzone, guard_secs))
-            .collect();
+        let used: Vec<Vec<bool>> =
+            (0..nj).map(|j| rows_used(&seg.t_secs, &seg.qd[j], opts.velocity_deadzone, guard_secs)).collect();
         for k in 0..seg.len() {
             for j in 0..nj {
                 q[j] = seg.q[j][k];
                 qd[j] = seg.qd[j][k];
                 qdd[j] = seg.qdd[j][k];
-                used_now[j] = used[j][k];
+            }
+            for (u, joint_used) in used_now.iter_mut().zip(&used) {
+                *u = joint_used[k];
             }
             match (robot.floating.is_some(), seg.base.get(k)) {
                 (true, Some(b)) => reg.compute_floating(b, &q, &qd, &qdd, &mut rows)?,
@@ -492,7 +493,14 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     for (l, link) in robot.links.iter().enumerate() {
         shift[layout.link_col(l)..layout.link_col(l) + LINK_PARAMS].copy_from_slice(&link.welded);
     }
-    let (after, iterations) = consistent_fit(&h, &b, offset, &before, &kinds, &scales, &shift, opts.max_iterations)?;
+    let (after, iterations) = consistent_fit(
+        &h,
+        &b,
+        offset,
+        &before,
+        &Bounds { kinds: &kinds, scales: &scales, shift: &shift },
+        opts.max_iterations,
+    )?;
     // Posterior covariance σ²·H⁻¹ (data and prior together).
     let h_inv = h
         .llt(Side::Lower)

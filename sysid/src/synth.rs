@@ -4,9 +4,12 @@
 //!
 //! The true model is the URDF as MuJoCo compiles it (its `<dynamics damping friction>` become
 //! viscous damping and dry friction loss) plus an armature per joint. Each joint follows a sum
-//! of sines inside its range, tracked by a PD controller on top of MuJoCo's bias forces; the
-//! logged effort is the torque applied to the joint, the only one driving it (the model's own
-//! actuators are disabled).
+//! of sines inside its range (or a given reference, e.g. `twin excite`'s design), tracked by
+//! computed torque (the full mass matrix, bias and damping forces, a 4 Hz PD on the error; a
+//! floating base's free joint unactuated), so that the robot stays inside its joint ranges as
+//! identification assumes; the logged effort is the torque applied to the joint, the only one
+//! driving it (the model's own actuators are disabled). Every random draw (trajectory phases,
+//! wrench waves, sensor noise, the perturbed "CAD") comes from one seeded `ChaCha8Rng`.
 
 use crate::error::Result;
 use crate::log::JointLog;
@@ -231,18 +234,17 @@ fn simulate_impl(
     // (a floating base's free joint) taking whatever acceleration their own equations give.
     // The robot then stays on its reference, inside its joint ranges (whose limit forces no
     // log carries), however strongly the joints and the base are coupled.
-    let wn = 2.0 * PI * std::env::var("TWIN_DEBUG_HZ").ok().and_then(|v| v.parse().ok()).unwrap_or(4.0);
-    let nv_all = model.nv();
+    let wn = 2.0 * PI * 4.0;
+    let nv = model.nv();
     let joint_dofs: Vec<usize> = robot.joints.iter().map(|j| j.dof).collect();
-    let free: Vec<usize> = (0..nv_all).filter(|d| !joint_dofs.contains(d)).collect();
-    let mut qacc = vec![0.0; nv_all];
+    let free: Vec<usize> = (0..nv).filter(|d| !joint_dofs.contains(d)).collect();
+    let mut qacc = vec![0.0; nv];
 
     let steps = (opts.duration_secs * opts.rate_hz).round() as usize;
     let names: Vec<String> = robot.joints.iter().map(|j| j.name.clone()).collect();
     let mut log = JointLog::new(names, format!("synthetic log of {}", urdf.display()));
     let resolution = 2.0 * PI / (1u64 << opts.encoder_bits) as f64;
     let (mut p, mut v, mut e) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
-    let nv = model.nv();
     let mut qfrc_ext = vec![0.0; nv];
     let (mut jacp, mut jacr, mut jacp_dot, mut jacr_dot) =
         (vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
@@ -271,7 +273,8 @@ fn simulate_impl(
             let qpos = &data.qpos()[fb.qpos_adr..fb.qpos_adr + 7];
             let p = [qpos[0], qpos[1], qpos[2]].map(|x| x + f.position_noise_m * rng.sample::<f64, _>(StandardNormal));
             // Orientation noise: a small random rotation (half-angles in the vector part).
-            let e: [f64; 3] = std::array::from_fn(|_| 0.5 * f.orientation_noise_rad * rng.sample::<f64, _>(StandardNormal));
+            let e: [f64; 3] =
+                std::array::from_fn(|_| 0.5 * f.orientation_noise_rad * rng.sample::<f64, _>(StandardNormal));
             let mut q = [qpos[3], qpos[4], qpos[5], qpos[6]];
             let dq = [1.0, e[0], e[1], e[2]];
             q = [
@@ -285,8 +288,8 @@ fn simulate_impl(
             let qvel = &data.qvel()[fb.dof..fb.dof + 6];
             let r = data.xmat()[fb.body];
             let v_base = [0, 1, 2].map(|i| r[i] * qvel[0] + r[3 + i] * qvel[1] + r[6 + i] * qvel[2]);
-            let twist =
-                [v_base[0], v_base[1], v_base[2], qvel[3], qvel[4], qvel[5]].map(|x| x + f.twist_noise * rng.sample::<f64, _>(StandardNormal));
+            let twist = [v_base[0], v_base[1], v_base[2], qvel[3], qvel[4], qvel[5]]
+                .map(|x| x + f.twist_noise * rng.sample::<f64, _>(StandardNormal));
             base_log.twist.push(twist);
             base_log.t_nanos.push(t_nanos);
             base_log.position.push(p);
@@ -322,16 +325,6 @@ fn simulate_impl(
             let tau = other[d] + (0..nv).map(|c| mass[d * nv + c] * qacc[c]).sum::<f64>();
             data.qfrc_applied_mut()[d] = tau;
             e[j] = tau;
-            if std::env::var("TWIN_DEBUG_LIMITS").is_ok() {
-                let jid = model.dof_jntid()[joint.dof] as usize;
-                let q = data.qpos()[joint.qpos_adr];
-                if model.jnt_limited()[jid] {
-                    let r = model.jnt_range()[jid];
-                    if q < r[0] + 0.01 || q > r[1] - 0.01 {
-                        eprintln!("LIMIT seed {} {} t {t:.3} q {q:.3} range {:?}", opts.seed, joint.name, r);
-                    }
-                }
-            }
         }
         log.push((t * 1e9).round() as i64, &p, &v, &e);
         data.step2()?;
@@ -346,7 +339,9 @@ fn simulate_impl(
         for series in &mut wrench_log {
             for w in &mut series.wrench {
                 for (k, x) in w.iter_mut().enumerate() {
-                    *x += f.wrench_noise_rel * if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm } * rng.sample::<f64, _>(StandardNormal);
+                    *x += f.wrench_noise_rel
+                        * if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm }
+                        * rng.sample::<f64, _>(StandardNormal);
                 }
             }
         }

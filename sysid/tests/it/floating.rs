@@ -146,5 +146,9 @@ fn floating_humanoid_with_foot_wrenches_is_identified() {
     assert!(o.worst_nrmse < 0.07, "worst held-out NRMSE {}", o.worst_nrmse);
     // The base rows reach their noise floor (the true model's residual on the same log; how
     // far the URDF started above it depends on the perturbation's draw).
-    assert!(o.base_after_over_before < 1.0 && o.base_after_over_truth < 1.02, "base rows ×{:.3} of the truth's", o.base_after_over_truth);
+    assert!(
+        o.base_after_over_before < 1.0 && o.base_after_over_truth < 1.02,
+        "base rows ×{:.3} of the truth's",
+        o.base_after_over_truth
+    );
 }

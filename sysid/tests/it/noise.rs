@@ -2,10 +2,10 @@
 //! recovered from synthetic IMUs (hours of data generated here), encoder σ and quantization,
 //! refusals of moving and short logs, and the URDF write-back.
 
-use sysid::noise::{AxisTruth, ImuLog, NoiseOptions, analyze_encoders, analyze_imu, imu_noise_updates, synth_imu};
 use rand::{Rng, SeedableRng};
 use rand_chacha::ChaCha8Rng;
 use rand_distr::StandardNormal;
+use sysid::noise::{AxisTruth, ImuLog, NoiseOptions, analyze_encoders, analyze_imu, imu_noise_updates, synth_imu};
 
 fn truth(offset: f64, n: f64, b: f64, k: f64) -> AxisTruth {
     AxisTruth { offset, white_density: n, bias_instability: b, bias_random_walk: k }

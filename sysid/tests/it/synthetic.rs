@@ -76,13 +76,7 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
 
     let robot = RobotModel::from_urdf(&start).unwrap();
     let true_robot = RobotModel::from_urdf(truth).unwrap();
-    let mut opts = SysidOptions::default();
-    if let Some(dz) = std::env::var("TWIN_DEBUG_DZ").ok().and_then(|v| v.parse().ok()) {
-        opts.velocity_deadzone = dz;
-    }
-    if let Some(g) = std::env::var("TWIN_DEBUG_GUARD").ok().and_then(|v| v.parse().ok()) {
-        opts.reversal_guard_periods = g;
-    }
+    let opts = SysidOptions::default();
     let ident = identify(&robot, &train, &opts).unwrap();
     eprintln!("{}", ident.report.table());
 
@@ -95,7 +89,12 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
     let mut worst_nrmse: f64 = 0.0;
     for (j, joint) in robot.joints.iter().enumerate() {
         let (before, after) = (nrmse[0][j], nrmse[1][j]);
-        eprintln!("NRMSE {:<28} after {:.2} % truth {:.2} %", joint.name, 100.0 * after, 100.0 * nrmse[2][j]);
+        eprintln!(
+            "{:<30} held-out NRMSE after {:5.2} % truth {:5.2} %",
+            joint.name,
+            100.0 * after,
+            100.0 * nrmse[2][j]
+        );
         assert!(
             after <= 0.02,
             "{}: held-out NRMSE {:.2} % > 2 % (before {:.2} %)",
@@ -114,7 +113,8 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
             [("viscous", viscous, joint.damping), ("Coulomb", coulomb, joint.friction)].into_iter().enumerate()
         {
             let err = (got / want - 1.0).abs();
-            eprintln!("FRICTION {:<28} {what:<8} err {:5.1} % = {:5.1} σ", joint.name, 100.0 * err, (got - want).abs() / ident.std[ident.layout.joint_col(j) + k]);
+            let sigmas = (got - want).abs() / ident.std[ident.layout.joint_col(j) + k];
+            eprintln!("{:<30} {what:<8} friction error {:5.1} % ({sigmas:.1} σ)", joint.name, 100.0 * err);
             assert!(err <= 0.10, "{}: {what} {got} vs true {want} ({:.1} %)", joint.name, 100.0 * err);
             worst_friction_error = worst_friction_error.max(err);
         }
