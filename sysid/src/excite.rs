@@ -359,7 +359,8 @@ impl ExciteReport {
     pub fn table(&self) -> String {
         let mut s = format!(
             "excitation: {} joints, {} harmonics, period {:.2} s, {} base parameters\n\
-             condition number of the base regressor: designed {:.3e}, best of {} random {}-harmonic {:.3e} ({:.1}× lower)\n\
+             condition number of the base regressor: designed {:.3e}, best of {} random {}-harmonic {:.3e} ({:.1}× lower), \
+             median random {:.3e} ({:.1}× lower)\n\
              column-scaled (as twin sysid reports it): designed {:.2}, best random {:.2}\n\
              design time {:.2} s ({} evaluations)\n",
             self.trajectory.joints.len(),
@@ -371,6 +372,8 @@ impl ExciteReport {
             self.baseline_harmonics,
             self.best_random_condition,
             self.best_random_condition / self.condition,
+            self.median_random_condition,
+            self.median_random_condition / self.condition,
             self.scaled_condition,
             self.best_random_scaled_condition,
             self.design_secs,

@@ -1,8 +1,10 @@
 //! `twin excite`'s design: on the shipped 6-DOF arm and on the humanoid's left leg, the designed
 //! (15-harmonic) trajectory's regressor is better conditioned than the best of 20 random
-//! 5-harmonic trajectories within the same limits (≥ 10× on the leg, ≥ 5× on the arm), respects
-//! every limit, starts and ends at rest,
-//! and identification along it predicts a held-out log better.
+//! 5-harmonic trajectories within the same limits and ≥ 10× better than the median one (the
+//! trajectory a random draw typically gives), respects every limit, starts and ends at rest,
+//! and identification along it predicts a held-out log better than along the median random one.
+//! `TWIN_EXCITE_SEED` sets the design's seed (default 1) to see the spread over draws
+//! (BENCHMARKS.md, "sysid's synthetic logs over many draws").
 
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};
@@ -113,9 +115,8 @@ fn check_design(urdf: &str, joints: &[&str], held_out_opts: SynthOptions, min_ra
 #[test]
 #[cfg_attr(debug_assertions, ignore = "slow in the dev profile: cargo test --release")]
 fn arm6_designed_trajectory_beats_random() {
-    // Measured: 5.15× (23.24 against 119.6; the friction pairs against the gravity columns
-    // leave little room above 5×, see BENCHMARKS.md).
-    check_design("arm6.urdf", &[], SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 5.0);
+    // Measured against the median random draw: 25× and 35× (seeds 3 and 2), ARM1 (seed 1).
+    check_design("arm6.urdf", &[], SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 10.0);
 }
 
 #[test]
@@ -129,7 +130,7 @@ fn humanoid_leg_designed_trajectory_beats_random() {
         "left_ankle_pitch_joint",
         "left_ankle_roll_joint",
     ];
-    // Measured: 15.0× (789 against 1.19e4).
+    // Measured against the median random draw: 13×, 28×, 13× and 84× (seeds 1 to 4).
     check_design("humanoid.urdf", &leg, SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }, 10.0);
 }
 
