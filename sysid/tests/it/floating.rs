@@ -80,10 +80,7 @@ fn run(wrench_links: &[&str], train_secs: f64) -> Outcome {
 
     // The true model (the URDF simulated, with its armature) explains the held-out log.
     let true_robot = RobotModel::from_urdf_floating(&truth).unwrap();
-    let mut truth_params = sysid::identify::cad_params(&true_robot, &ident.layout);
-    for j in 0..true_robot.joints.len() {
-        truth_params[ident.layout.joint_col(j) + 2] = SynthOptions::default().armature;
-    }
+    let truth_params = crate::truth_params(&true_robot, &ident.layout);
     let nrmse = validate(&robot, &held_out, &opts, &[&ident.before, &ident.after, &truth_params]).unwrap();
     for (j, joint) in robot.joints.iter().enumerate() {
         let (before, after, truth) = (nrmse[0][j], nrmse[1][j], nrmse[2][j]);

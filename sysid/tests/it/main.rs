@@ -25,3 +25,13 @@ fn seeds(var: &str, default: [u64; 3]) -> [u64; 3] {
         Err(_) => default,
     }
 }
+
+/// The parameters of the robot a synthetic log simulates: the URDF's, plus the armature
+/// [`sysid::synth::SynthOptions`] gives every joint by default.
+fn truth_params(true_robot: &sysid::RobotModel, layout: &sysid::regressor::Layout) -> Vec<f64> {
+    let mut params = sysid::identify::cad_params(true_robot, layout);
+    for j in 0..true_robot.joints.len() {
+        params[layout.joint_col(j) + 2] = sysid::synth::SynthOptions::default().armature;
+    }
+    params
+}

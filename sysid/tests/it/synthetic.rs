@@ -81,10 +81,7 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
     eprintln!("{}", ident.report.table());
 
     // Held-out torque NRMSE ≤ 2 % on every joint, and much better than the starting URDF.
-    let mut truth_params = sysid::identify::cad_params(&true_robot, &ident.layout);
-    for j in 0..true_robot.joints.len() {
-        truth_params[ident.layout.joint_col(j) + 2] = SynthOptions::default().armature;
-    }
+    let truth_params = crate::truth_params(&true_robot, &ident.layout);
     let nrmse = validate(&robot, &held_out, &opts, &[&ident.before, &ident.after, &truth_params]).unwrap();
     let mut worst_nrmse: f64 = 0.0;
     for (j, joint) in robot.joints.iter().enumerate() {
