@@ -386,12 +386,14 @@ fn solve_spd(a: &[Vec<f64>], b: &[f64]) -> Option<(Vec<f64>, Vec<f64>)> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::rng::Rng;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::StandardNormal;
 
     #[test]
     fn white_noise_adev_is_sigma_over_sqrt_m_and_quantiles_are_right() {
-        let mut rng = Rng::new(3);
-        let x: Vec<f64> = (0..200_000).map(|_| 0.5 * rng.normal()).collect();
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        let x: Vec<f64> = (0..200_000).map(|_| 0.5 * rng.sample::<f64, _>(StandardNormal)).collect();
         let pts = overlapping_adev(&x, 100.0, &[1, 10, 100]);
         for p in &pts {
             let expect = 0.5 / (p.m as f64).sqrt();

@@ -308,19 +308,28 @@ fn pseudo_inertia_basis() -> [Matrix4<f64>; LINK_PARAMS] {
     })
 }
 
-/// Strictly feasible point near `p`: each link's pseudo-inertia with its eigenvalues raised to
-/// `floor × the largest`, non-negative terms raised to a small positive value.
-fn interior_point(p: &[f64], kinds: &[ParamKind], scales: &[f64], floor: f64) -> Vec<f64> {
+/// A link's constrained share: its 10 parameters from `s` less `shift`'s.
+fn own_share(p: &[f64], shift: &[f64], s: usize) -> [f64; LINK_PARAMS] {
+    std::array::from_fn(|k| p[s + k] - shift[s + k])
+}
+
+/// Strictly feasible point near `p`: each link's pseudo-inertia (of its share less `shift`)
+/// with its eigenvalues raised to `floor × the largest`, non-negative terms raised to a small
+/// positive value.
+fn interior_point(p: &[f64], kinds: &[ParamKind], scales: &[f64], shift: &[f64], floor: f64) -> Vec<f64> {
     let mut p = p.to_vec();
     for i in 0..p.len() {
         match kinds[i] {
             ParamKind::Link => {
-                let lp: [f64; LINK_PARAMS] = p[i..i + LINK_PARAMS].try_into().expect("10");
+                let lp = own_share(&p, shift, i);
                 let eig = pseudo_inertia(&lp).symmetric_eigen();
                 let top = eig.eigenvalues.abs().max().max(1e-12);
                 let clipped = eig.eigenvalues.map(|l| l.max(floor * top));
                 let j = eig.eigenvectors * Matrix4::from_diagonal(&clipped) * eig.eigenvectors.transpose();
-                p[i..i + LINK_PARAMS].copy_from_slice(&params_from_pseudo_inertia(&j));
+                let own = params_from_pseudo_inertia(&j);
+                for k in 0..LINK_PARAMS {
+                    p[i + k] = own[k] + shift[i + k];
+                }
             }
             ParamKind::NonNegative => p[i] = p[i].max(1e-3 * scales[i]),
             _ => {}
@@ -329,8 +338,21 @@ fn interior_point(p: &[f64], kinds: &[ParamKind], scales: &[f64], floor: f64) ->
     p
 }
 
-/// Minimises `πᵀ·H·π − 2·bᵀ·π` subject to every link's pseudo-inertia `J(π) ⪰ 0` and the
-/// non-negative terms `≥ 0`: a convex problem (quadratic objective, linear matrix
+/// What constrains each parameter of [`consistent_fit`].
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Bounds<'a> {
+    /// Each parameter's kind (a link's first parameter, the rest of a link's, non-negative, free).
+    pub kinds: &'a [ParamKind],
+    /// Each parameter's typical size.
+    pub scales: &'a [f64],
+    /// The share of each link's parameters left out of its physical constraint (zero where none).
+    pub shift: &'a [f64],
+}
+
+/// Minimises `πᵀ·H·π − 2·bᵀ·π` subject to every link's pseudo-inertia `J(π − shift) ⪰ 0` and
+/// the non-negative terms `≥ 0` (`shift`: the share of each body that is not identified, such
+/// as the fixed-joint links lumped into it at their URDF values, so that the share written
+/// back is the one constrained to be physical; zero elsewhere): a convex problem (quadratic objective, linear matrix
 /// inequalities), solved by a primal log-barrier interior-point method (Newton steps on
 /// `t·f(π) − Σ log det J_l(π) − Σ log π_i`, `t` raised ×10 per round until the duality gap
 /// is below 1e-7 of the cost, faer Cholesky for each step). Every iterate, the answer included, is strictly physically consistent.
@@ -341,10 +363,10 @@ pub(crate) fn consistent_fit(
     b: &[f64],
     cost_offset: f64,
     start: &[f64],
-    kinds: &[ParamKind],
-    scales: &[f64],
+    bounds: &Bounds<'_>,
     max_iterations: usize,
 ) -> Result<(Vec<f64>, usize)> {
+    let Bounds { kinds, scales, shift } = *bounds;
     let n = b.len();
     let basis = pseudo_inertia_basis();
     let link_starts: Vec<usize> = (0..n).filter(|&i| kinds[i] == ParamKind::Link).collect();
@@ -365,8 +387,7 @@ pub(crate) fn consistent_fit(
     let barrier = |p: &[f64]| -> Option<f64> {
         let mut phi = 0.0;
         for &s in &link_starts {
-            let lp: [f64; LINK_PARAMS] = p[s..s + LINK_PARAMS].try_into().expect("10");
-            let ch = pseudo_inertia(&lp).cholesky()?;
+            let ch = pseudo_inertia(&own_share(p, shift, s)).cholesky()?;
             phi -= 2.0 * ch.l().diagonal().iter().map(|d| d.ln()).sum::<f64>();
         }
         for &i in &bounded {
@@ -383,9 +404,9 @@ pub(crate) fn consistent_fit(
     let rhs = Mat::from_fn(n, 1, |i, _| b[i]);
     let sol = llt.solve(&rhs);
     let unconstrained: Vec<f64> = (0..n).map(|i| sol[(i, 0)]).collect();
-    let mut p = interior_point(&unconstrained, kinds, scales, 1e-3);
+    let mut p = interior_point(&unconstrained, kinds, scales, shift, 1e-3);
     if barrier(&p).is_none() || p.iter().any(|v| !v.is_finite()) {
-        p = interior_point(start, kinds, scales, 1e-3);
+        p = interior_point(start, kinds, scales, shift, 1e-3);
     }
     if barrier(&p).is_none() {
         return Err(Error::Numerical("no physically consistent starting point".into()));
@@ -412,8 +433,7 @@ pub(crate) fn consistent_fit(
                 grad[i] = 2.0 * t * (hp - b[i]);
             }
             for &s in &link_starts {
-                let lp: [f64; LINK_PARAMS] = p[s..s + LINK_PARAMS].try_into().expect("10");
-                let jinv = pseudo_inertia(&lp)
+                let jinv = pseudo_inertia(&own_share(&p, shift, s))
                     .try_inverse()
                     .ok_or_else(|| Error::Numerical("pseudo-inertia became singular".into()))?;
                 let g: Vec<Matrix4<f64>> = basis.iter().map(|a| jinv * a).collect();

@@ -56,8 +56,9 @@ use crate::error::{Error, Result};
 use crate::estimate::Accumulator;
 use crate::model::RobotModel;
 use crate::regressor::{FrictionModel, Regressor};
-use crate::rng::Rng;
 use faer::Mat;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
@@ -333,6 +334,12 @@ pub struct ExciteReport {
     pub baseline_harmonics: usize,
     /// The best random trajectory (the search's start).
     pub best_random: Excitation,
+    /// The median random trajectory by condition number (the lower median of an even count):
+    /// what a random draw typically gives, the baseline a design is fairly compared with (the
+    /// best of a few draws is itself a lucky draw).
+    pub median_random: Excitation,
+    /// Its condition number.
+    pub median_random_condition: f64,
     /// Base parameters (columns of the base regressor).
     pub base_parameters: usize,
     /// Limits used.
@@ -352,7 +359,8 @@ impl ExciteReport {
     pub fn table(&self) -> String {
         let mut s = format!(
             "excitation: {} joints, {} harmonics, period {:.2} s, {} base parameters\n\
-             condition number of the base regressor: designed {:.3e}, best of {} random {}-harmonic {:.3e} ({:.1}× lower)\n\
+             condition number of the base regressor: designed {:.3e}, best of {} random {}-harmonic {:.3e} ({:.1}× lower), \
+             median random {:.3e} ({:.1}× lower)\n\
              column-scaled (as twin sysid reports it): designed {:.2}, best random {:.2}\n\
              design time {:.2} s ({} evaluations)\n",
             self.trajectory.joints.len(),
@@ -364,6 +372,8 @@ impl ExciteReport {
             self.baseline_harmonics,
             self.best_random_condition,
             self.best_random_condition / self.condition,
+            self.median_random_condition,
+            self.median_random_condition / self.condition,
             self.scaled_condition,
             self.best_random_scaled_condition,
             self.design_secs,
@@ -1085,15 +1095,20 @@ fn option_error(name: &'static str, message: String) -> Error {
 /// limit.
 /// A random `h`-harmonic trajectory (each velocity coefficient uniform in ±v_max/h, the rest in
 /// the middle half of the range), its harmonics above `h` zero up to the template's.
-fn random_joints(template: &[FourierJoint], limits: &[JointLimits], h: usize, rng: &mut Rng) -> Vec<FourierJoint> {
+fn random_joints(
+    template: &[FourierJoint],
+    limits: &[JointLimits],
+    h: usize,
+    rng: &mut ChaCha8Rng,
+) -> Vec<FourierJoint> {
     let nv = vars_per_joint(h);
     let mut x = Vec::with_capacity(template.len() * nv);
     for lim in limits {
         let mid = 0.5 * (lim.lower + lim.upper);
         let half = 0.5 * (lim.upper - lim.lower);
-        x.push(mid + half * 0.5 * (2.0 * rng.uniform() - 1.0));
+        x.push(mid + half * 0.5 * (2.0 * rng.random::<f64>() - 1.0));
         for _ in 0..2 * (h - 1) {
-            x.push(lim.velocity / h as f64 * (2.0 * rng.uniform() - 1.0));
+            x.push(lim.velocity / h as f64 * (2.0 * rng.random::<f64>() - 1.0));
         }
     }
     let mut js = joints_from_vars(&x, h, template);
@@ -1110,11 +1125,11 @@ fn random_joints_anywhere(
     template: &[FourierJoint],
     limits: &[JointLimits],
     h: usize,
-    rng: &mut Rng,
+    rng: &mut ChaCha8Rng,
 ) -> Vec<FourierJoint> {
     let mut js = random_joints(template, limits, h, rng);
     for (f, lim) in js.iter_mut().zip(limits) {
-        f.rest = lim.lower + (lim.upper - lim.lower) * rng.uniform();
+        f.rest = lim.lower + (lim.upper - lim.lower) * rng.random::<f64>();
     }
     js
 }
@@ -1410,7 +1425,7 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         .collect();
 
     // Random candidates, each scaled to the limits; the first feasible one fixes the base columns.
-    let mut rng = Rng::new(opts.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     let mut candidates = Vec::new();
     let mut last_violation = None;
     for _ in 0..opts.random_candidates {
@@ -1452,6 +1467,10 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
     }
     let (_, best_eval, best_random) = best.expect("at least one candidate");
     let best_random_condition = best_eval.condition;
+    let mut by_condition: Vec<usize> = (0..kept.len()).collect();
+    by_condition.sort_by(|&a, &b| random_conditions[a].total_cmp(&random_conditions[b]));
+    let median_index = by_condition[(kept.len() - 1) / 2];
+    let (median_random, median_random_condition) = (kept[median_index].clone(), random_conditions[median_index]);
 
     // Global stage: more random trajectories (the same draw, but the rest position anywhere in
     // the range) and the 20 above, each scaled per joint to touch its position, velocity or
@@ -1557,6 +1576,8 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
         best_random_condition,
         baseline_harmonics: hb,
         best_random: problem.excitation(best_random),
+        median_random: problem.excitation(median_random),
+        median_random_condition,
         base_parameters: problem.base_cols.len(),
         limits: problem.limits.clone(),
         usage,

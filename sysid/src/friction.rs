@@ -895,7 +895,9 @@ pub struct SweepOptions {
 /// # Errors
 /// Loading errors of the URDF; [`Error::Core`] if MuJoCo fails.
 pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptions) -> Result<JointLog> {
-    use crate::rng::Rng;
+    use rand::{Rng, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+    use rand_distr::StandardNormal;
     use std::f64::consts::PI;
     let source = crate::model::UrdfSource::read(urdf)?;
     let model = std::sync::Arc::new(source.model("", false)?);
@@ -918,7 +920,7 @@ pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptio
     let home: Vec<f64> = ranges.iter().map(|(lo, hi)| 0.5 * (lo + hi)).collect();
     let dt = 1.0 / opts.rate_hz;
     let ramp = 0.2;
-    let mut rng = Rng::new(opts.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     let resolution = 2.0 * PI / (1u64 << opts.encoder_bits) as f64;
     let mut log = JointLog::new(
         robot.joints.iter().map(|j| j.name.clone()).collect(),
@@ -950,8 +952,8 @@ pub fn synth_sweep(urdf: &std::path::Path, truth: &[Stribeck], opts: &SweepOptio
         let mut e = vec![0.0; nj];
         for (j, joint) in robot.joints.iter().enumerate() {
             p[j] = (q[j] / resolution).round() * resolution;
-            e[j] = tau[joint.dof] + truth[j].torque(qd[j]) + opts.effort_noise * rng.normal();
-            v[j] = qd[j] + opts.velocity_noise * rng.normal();
+            e[j] = tau[joint.dof] + truth[j].torque(qd[j]) + opts.effort_noise * rng.sample::<f64, _>(StandardNormal);
+            v[j] = qd[j] + opts.velocity_noise * rng.sample::<f64, _>(StandardNormal);
         }
         log.push((t * 1e9).round() as i64, &p, &v, &e);
         Ok(())

@@ -3,7 +3,7 @@
 
 use crate::condition::{ConditionOptions, Conditioned, condition, quote_list};
 use crate::error::{Error, Result};
-use crate::estimate::{Accumulator, Identifiability, ParamKind, base_analysis, consistent_fit};
+use crate::estimate::{Accumulator, Bounds, Identifiability, ParamKind, base_analysis, consistent_fit};
 use crate::log::JointLog;
 use crate::model::{LINK_PARAM_NAMES, LINK_PARAMS, MassProperties, RobotModel, physically_valid};
 use crate::regressor::{FrictionModel, Layout, Regressor};
@@ -36,6 +36,14 @@ pub struct SysidOptions {
     /// is undetermined there (default: 0.05).
     #[default(0.05)]
     pub velocity_deadzone: f64,
+    /// Rows of a joint closer than this many cut-off periods (`1/cutoff_hz` of
+    /// [`ConditionOptions`]) to a reversal of its velocity are left out too (default: 0.5): the
+    /// low-pass filter spreads the Coulomb friction's jump over about a period on each side of
+    /// the reversal, which the model's `sign(q̇)` column can't follow; kept, those rows bias the
+    /// Coulomb estimate low (by 10 % and more on fast-reversing joints) and set a floor under
+    /// the torque error of light joints with strong friction.
+    #[default(0.5)]
+    pub reversal_guard_periods: f64,
     /// Relative standard deviation of the CAD (URDF) values in the prior that keeps directions
     /// the log cannot see at CAD (default: 1.0, i.e. CAD trusted to about ±100 %: a weak pull).
     #[default(1.0)]
@@ -156,16 +164,20 @@ fn wrench_bodies(robot: &RobotModel, log: &JointLog) -> (Vec<(usize, usize)>, Ve
     (found, warnings)
 }
 
-/// Calls `f(rows, target, ext, qd)` for every conditioned sample: the regressor rows
+/// Calls `f(rows, target, ext, used)` for every conditioned sample: the regressor rows
 /// ([`Regressor::nrows`] × ncols), the measured side `τ + Jᵀ·w_ext` (joints) and `Jᵀ·w_ext`
-/// (base rows), the external part `Jᵀ·w_ext` alone, and the joint velocities.
+/// (base rows), the external part `Jᵀ·w_ext` alone, and per joint whether its row is used: its
+/// speed at least `opts.velocity_deadzone` and its velocity's nearest reversal at least
+/// `opts.reversal_guard_periods` cut-off periods away.
 fn for_each_sample(
     robot: &RobotModel,
     reg: &mut Regressor<'_>,
     data: &Conditioned,
     wrenches: &[(usize, usize)],
-    mut f: impl FnMut(&[f64], &[f64], &[f64], &[f64]),
+    opts: &SysidOptions,
+    mut f: impl FnMut(&[f64], &[f64], &[f64], &[bool]),
 ) -> Result<()> {
+    let guard_secs = opts.reversal_guard_periods / data.cutoff_hz;
     let nj = robot.joints.len();
     let nr = reg.nrows();
     let ncols = reg.layout().ncols();
@@ -174,12 +186,18 @@ fn for_each_sample(
     let mut target = vec![0.0; nr];
     let mut w = Vec::with_capacity(wrenches.len());
     let (mut q, mut qd, mut qdd) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
+    let mut used_now = vec![false; nj];
     for seg in &data.segments {
+        let used: Vec<Vec<bool>> =
+            (0..nj).map(|j| rows_used(&seg.t_secs, &seg.qd[j], opts.velocity_deadzone, guard_secs)).collect();
         for k in 0..seg.len() {
             for j in 0..nj {
                 q[j] = seg.q[j][k];
                 qd[j] = seg.qd[j][k];
                 qdd[j] = seg.qdd[j][k];
+            }
+            for (u, joint_used) in used_now.iter_mut().zip(&used) {
+                *u = joint_used[k];
             }
             match (robot.floating.is_some(), seg.base.get(k)) {
                 (true, Some(b)) => reg.compute_floating(b, &q, &qd, &qdd, &mut rows)?,
@@ -195,28 +213,48 @@ fn for_each_sample(
             for r in 0..nr {
                 target[r] = if r < nj { seg.tau[r][k] } else { 0.0 } + ext[r];
             }
-            f(&rows, &target, &ext, &qd);
+            f(&rows, &target, &ext, &used_now);
         }
     }
     Ok(())
 }
 
-/// Feeds every conditioned sample into `acc` (joint rows inside the dead zone left out when
-/// `deadzone > 0`; base rows always in).
+/// Whether each sample of one joint's velocity `qd` (at times `t_secs`) makes a row: at least
+/// `deadzone` fast and more than `guard_secs` from the nearest sign change of `qd`.
+fn rows_used(t_secs: &[f64], qd: &[f64], deadzone: f64, guard_secs: f64) -> Vec<bool> {
+    let n = qd.len();
+    // Time of the last reversal at or before each sample, then of the next one after it.
+    let mut last = vec![f64::NEG_INFINITY; n];
+    for k in 1..n {
+        last[k] = if qd[k].signum() != qd[k - 1].signum() { 0.5 * (t_secs[k] + t_secs[k - 1]) } else { last[k - 1] };
+    }
+    let mut next = f64::INFINITY;
+    let mut used = vec![false; n];
+    for k in (0..n).rev() {
+        if k + 1 < n && qd[k].signum() != qd[k + 1].signum() {
+            next = 0.5 * (t_secs[k] + t_secs[k + 1]);
+        }
+        used[k] = qd[k].abs() >= deadzone && t_secs[k] - last[k] > guard_secs && next - t_secs[k] > guard_secs;
+    }
+    used
+}
+
+/// Feeds every conditioned sample into `acc` (joint rows left out where
+/// [`for_each_sample`] says; base rows always in).
 fn accumulate(
     robot: &RobotModel,
     reg: &mut Regressor<'_>,
     data: &Conditioned,
     wrenches: &[(usize, usize)],
-    deadzone: f64,
+    opts: &SysidOptions,
     acc: &mut Accumulator,
 ) -> Result<()> {
     let nj = robot.joints.len();
     let nr = reg.nrows();
     let ncols = reg.layout().ncols();
-    for_each_sample(robot, reg, data, wrenches, |rows, target, _, qd| {
+    for_each_sample(robot, reg, data, wrenches, opts, |rows, target, _, used| {
         for r in 0..nr {
-            if r >= nj || qd[r].abs() >= deadzone {
+            if r >= nj || used[r] {
                 acc.push(r, &rows[r * ncols..(r + 1) * ncols], target[r]);
             }
         }
@@ -354,7 +392,7 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
         cols.push(base_columns(robot, &layout));
     }
     let mut acc = Accumulator::new(n, cols);
-    accumulate(robot, &mut reg, &data, &wrenches, opts.velocity_deadzone, &mut acc)?;
+    accumulate(robot, &mut reg, &data, &wrenches, opts, &mut acc)?;
     let total_rows = acc.total_rows();
     let few: Vec<String> = (0..nj).filter(|&j| acc.rows(j) < 50).map(|j| robot.joints[j].name.clone()).collect();
     if !few.is_empty() {
@@ -449,7 +487,20 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     // Constant part of the cost: ‖z‖² + ρ² + Σ p·π_cad², so that f + offset is the χ²-like cost.
     let offset = (0..=n).map(|i| rz[(i, n)] * rz[(i, n)]).sum::<f64>()
         + (0..n).map(|i| prior[i] * before[i] * before[i]).sum::<f64>();
-    let (after, iterations) = consistent_fit(&h, &b, offset, &before, &kinds, &scales, opts.max_iterations)?;
+    // A body's fixed-joint links keep their URDF share: the physical constraint is on the rest,
+    // the URDF link's own share, which is what the write-back puts in its `<inertial>`.
+    let mut shift = vec![0.0; n];
+    for (l, link) in robot.links.iter().enumerate() {
+        shift[layout.link_col(l)..layout.link_col(l) + LINK_PARAMS].copy_from_slice(&link.welded);
+    }
+    let (after, iterations) = consistent_fit(
+        &h,
+        &b,
+        offset,
+        &before,
+        &Bounds { kinds: &kinds, scales: &scales, shift: &shift },
+        opts.max_iterations,
+    )?;
     // Posterior covariance σ²·H⁻¹ (data and prior together).
     let h_inv = h
         .llt(Side::Lower)
@@ -593,7 +644,8 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
 }
 
 /// Per-joint torque NRMSE (`rms(τ_model − τ_log) / rms(τ_log)`) of `params` on the held-out
-/// `log`, conditioned as for identification, every sample included (no dead zone).
+/// `log`, conditioned as for identification, on the rows identification would use (outside the
+/// velocity dead zone and the reversal guard, where no friction model predicts the torque).
 ///
 /// # Errors
 /// As [`identify`]'s conditioning.
@@ -611,9 +663,9 @@ pub fn validate(robot: &RobotModel, log: &JointLog, opts: &SysidOptions, params:
     let ncols = reg.layout().ncols();
     let mut err2 = vec![vec![0.0; nj]; params.len()];
     let mut tau2 = vec![0.0; nj];
-    for_each_sample(robot, &mut reg, &data, &wrenches, |rows, target, ext, qd| {
+    for_each_sample(robot, &mut reg, &data, &wrenches, opts, |rows, target, ext, used| {
         for j in 0..nj {
-            if qd[j].abs() < opts.velocity_deadzone {
+            if !used[j] {
                 continue;
             }
             // Normalised by the measured torque; the prediction is Y·π − Jᵀ·w_ext.

@@ -29,7 +29,8 @@
 //!    (optional offset). `Y` is built from MuJoCo's kinematics of the twin (`mj_jacBody`,
 //!    `mj_jacDot`), not from a second model; tests check `Y·π` against MuJoCo's `mj_inverse` to
 //!    1e-9. Rows of a joint slower than a small dead zone are left out (Coulomb friction is
-//!    set-valued at rest).
+//!    set-valued at rest), and so are those within half a cut-off period of a reversal of its
+//!    velocity (the filter spreads the friction's jump there; `reversal_guard_periods`).
 //! 3. **Estimation** ([`estimate`]): each joint's rows are compressed by QR as they come (memory
 //!    and time linear in the log, only the columns a joint can touch), then stacked.
 //!    Column-pivoted QR (faer) of the column-scaled problem gives the rank, the base
@@ -41,7 +42,8 @@
 //!    the wrong sign or a gain far from the URDF model's torques) give warnings, or errors with
 //!    `strict`; a robot that stood still is always refused.
 //! 4. **Physical consistency**: `min ‖W·π − τ‖²_w + Σ ((π_i − π_cad,i)/(s·scale_i))²` subject to
-//!    each link's pseudo-inertia `J(π) ⪰ 0` (Wensing, Kim, Slotine 2017) and friction and
+//!    each link's pseudo-inertia `J(π) ⪰ 0` (Wensing, Kim, Slotine 2017; for a body with
+//!    fixed-joint links lumped into it, of the URDF link's own share, the one written back) and friction and
 //!    armature `≥ 0`. The prior is weak (CAD trusted to ±100 % by default): directions the log
 //!    can't see stay at the URDF's values, the others follow the data.
 //! 5. **Write-back** ([`writeback`]): only the numbers of `<inertial>` and
@@ -88,8 +90,9 @@
 //! fall (for its joints and base rows the same as floating in zero gravity), joints driven by
 //! the exciting trajectory, known wrenches on both feet, odometry with 0.1 mm / 1e-4 rad pose
 //! and 0.002 m/s, rad/s twist noise, starting URDF off by 20–40 %: held-out torque NRMSE
-//! 0.3–6.2 % per joint (6.2 % on the waist pitch), within 1.5 points of the true model's on the
-//! same data (the twist noise enters the regressor: errors in variables), every link valid.
+//! 0.3–6 % per joint, within 1.5 points of the true model's on the same data (the twist noise
+//! enters the regressor: errors in variables), the base rows' residual at the true model's,
+//! every link valid; on 20 of 20 seed triples (BENCHMARKS.md).
 //!
 //! ## Why an interior-point fit with faer instead of Clarabel's SDP cones
 //! Clarabel's PSD cones need BLAS and LAPACK, which a fresh machine lacks (no OpenBLAS, no
@@ -119,8 +122,9 @@
 //! - Links joined by fixed joints are identified as the MuJoCo bodies they are (loaded with
 //!   `fusestatic="false"`): a welded link's inertia is only seen together with its parent's,
 //!   and its share stays at the URDF's value.
-//! - The validation NRMSE leaves out the samples inside the velocity dead zone, where Coulomb
-//!   friction is undetermined (stiction) and no friction model predicts the torque.
+//! - The validation NRMSE leaves out the samples inside the velocity dead zone and the reversal
+//!   guard, where Coulomb friction is undetermined (stiction) or smeared by the filter and no
+//!   friction model predicts the torque.
 //! - Regressor samples after decimation are correlated (5× the cut-off), so σ is optimistic by
 //!   about √(5/2).
 
@@ -143,7 +147,6 @@ pub mod number;
 pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
-pub mod rng;
 pub mod signal;
 pub mod synth;
 pub mod writeback;

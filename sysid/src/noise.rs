@@ -25,7 +25,9 @@
 use crate::allan::{self, AllanPoint, NoiseFit};
 use crate::error::{Error, Result};
 use crate::log::JointLog;
-use crate::rng::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use serde::Serialize;
 use std::fmt::Write as _;
 use std::path::Path;
@@ -810,14 +812,13 @@ pub struct AxisTruth {
 /// with correlation times spaced 3 per decade from 2 samples to 100× the duration and equal
 /// variances `c`: their summed spectrum is `c/(f·ln r)` (r = 10^⅓), whose Allan deviation is
 /// flat at `√(2·ln 2·c/ln r)`, set to `0.664·B`.
-pub fn synth_axis(truth: &AxisTruth, rate_hz: f64, samples: usize, rng: &mut Rng) -> Vec<f64> {
+pub fn synth_axis(truth: &AxisTruth, rate_hz: f64, samples: usize, rng: &mut ChaCha8Rng) -> Vec<f64> {
     let dt = 1.0 / rate_hz;
     let white = truth.white_density * rate_hz.sqrt();
     let walk = truth.bias_random_walk * dt.sqrt();
     let ln_r = 10f64.ln() / 3.0;
     let floor = allan::BIAS_INSTABILITY_FLOOR * truth.bias_instability;
     let c = floor * floor * ln_r / (2.0 * 2f64.ln());
-    let mut normals = NormalPairs::default();
     // Slow processes are advanced every `every` samples (T/200 of their correlation time) and
     // interpolated linearly in between: the same spectrum where it matters, far fewer draws.
     struct Gm {
@@ -834,8 +835,8 @@ pub fn synth_axis(truth: &AxisTruth, rate_hz: f64, samples: usize, rng: &mut Rng
         while t < t_max {
             let every = ((t / (200.0 * dt)).floor() as usize).max(1);
             let phi = (-(every as f64) * dt / t).exp();
-            let prev = c.sqrt() * normals.next(rng);
-            let next = phi * prev + (c * (1.0 - phi * phi)).sqrt() * normals.next(rng);
+            let prev = c.sqrt() * rng.sample::<f64, _>(StandardNormal);
+            let next = phi * prev + (c * (1.0 - phi * phi)).sqrt() * rng.sample::<f64, _>(StandardNormal);
             gm.push(Gm { every, phi, drive: (c * (1.0 - phi * phi)).sqrt(), prev, next });
             t *= ln_r.exp();
         }
@@ -848,32 +849,14 @@ pub fn synth_axis(truth: &AxisTruth, rate_hz: f64, samples: usize, rng: &mut Rng
             let phase = k % g.every;
             if phase == 0 && k > 0 {
                 g.prev = g.next;
-                g.next = g.phi * g.prev + g.drive * normals.next(rng);
+                g.next = g.phi * g.prev + g.drive * rng.sample::<f64, _>(StandardNormal);
             }
             flicker += g.prev + (g.next - g.prev) * phase as f64 / g.every as f64;
         }
-        out.push(truth.offset + bias + flicker + white * normals.next(rng));
-        bias += walk * normals.next(rng);
+        out.push(truth.offset + bias + flicker + white * rng.sample::<f64, _>(StandardNormal));
+        bias += walk * rng.sample::<f64, _>(StandardNormal);
     }
     out
-}
-
-/// Standard normals two at a time (Box–Muller, both outputs used).
-#[derive(Default)]
-struct NormalPairs(Option<f64>);
-
-impl NormalPairs {
-    fn next(&mut self, rng: &mut Rng) -> f64 {
-        if let Some(v) = self.0.take() {
-            return v;
-        }
-        let u1 = rng.uniform().max(1e-300);
-        let u2 = rng.uniform();
-        let r = (-2.0 * u1.ln()).sqrt();
-        let (s, c) = (2.0 * std::f64::consts::PI * u2).sin_cos();
-        self.0 = Some(r * s);
-        r * c
-    }
 }
 
 /// A synthetic still IMU on `topic` (frame `frame_id`): axes from `gyro` and `accel` truths,
@@ -890,7 +873,7 @@ pub fn synth_imu(
     let n = (duration_secs * rate_hz).round() as usize + 1;
     let step = (1e9 / rate_hz).round() as i64;
     let t_nanos: Vec<i64> = (0..n as i64).map(|k| 1_000_000_000 + k * step).collect();
-    let mut rng = Rng::new(seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
     let gyro = gyro.map(|t| synth_axis(&t, rate_hz, n, &mut rng));
     let accel = accel.map(|t| synth_axis(&t, rate_hz, n, &mut rng));
     ImuLog { topic: topic.into(), frame_id: frame_id.into(), t_nanos, gyro, accel }

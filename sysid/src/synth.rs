@@ -4,14 +4,19 @@
 //!
 //! The true model is the URDF as MuJoCo compiles it (its `<dynamics damping friction>` become
 //! viscous damping and dry friction loss) plus an armature per joint. Each joint follows a sum
-//! of sines inside its range, tracked by a PD controller on top of MuJoCo's bias forces; the
-//! logged effort is the torque applied to the joint, the only one driving it (the model's own
-//! actuators are disabled).
+//! of sines inside its range (or a given reference, e.g. `twin excite`'s design), tracked by
+//! computed torque (the full mass matrix, bias and damping forces, a 4 Hz PD on the error; a
+//! floating base's free joint unactuated), so that the robot stays inside its joint ranges as
+//! identification assumes; the logged effort is the torque applied to the joint, the only one
+//! driving it (the model's own actuators are disabled). Every random draw (trajectory phases,
+//! wrench waves, sensor noise, the perturbed "CAD") comes from one seeded `ChaCha8Rng`.
 
 use crate::error::Result;
 use crate::log::JointLog;
 use crate::model::{RobotModel, UrdfSource};
-use crate::rng::Rng;
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use std::f64::consts::PI;
 use std::path::Path;
 use std::sync::Arc;
@@ -140,7 +145,7 @@ fn simulate_impl(
     let model = stiff_friction(&base, free_dofs, dt, opts.armature)?;
     let robot = RobotModel::of_urdf(&source, model.clone(), floating.is_some())?;
     let nj = robot.joints.len();
-    let mut rng = Rng::new(opts.seed);
+    let mut rng = ChaCha8Rng::seed_from_u64(opts.seed);
     // Known external wrenches: per link and component, 3 sines between 0.2 and 1.5 Hz.
     let wrench_links: Vec<(String, usize)> = match floating {
         Some(f) => f
@@ -159,7 +164,7 @@ fn simulate_impl(
         .map(|_| {
             std::array::from_fn(|k| {
                 let amp = floating.map_or(0.0, |f| if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm });
-                std::array::from_fn(|_| (amp / 3.0, 0.2 + 1.3 * rng.uniform(), 2.0 * PI * rng.uniform()))
+                std::array::from_fn(|_| (amp / 3.0, 0.2 + 1.3 * rng.random::<f64>(), 2.0 * PI * rng.random::<f64>()))
             })
         })
         .collect();
@@ -195,12 +200,12 @@ fn simulate_impl(
         };
         centre[j] = 0.5 * (lo + hi);
         let total = (0.8 * 0.5 * (hi - lo)).min(opts.max_amplitude);
-        let f0 = opts.base_frequency_hz * (1.0 + 0.13 * j as f64 + 0.2 * rng.uniform());
+        let f0 = opts.base_frequency_hz * (1.0 + 0.13 * j as f64 + 0.2 * rng.random::<f64>());
         let weights: Vec<f64> = HARMONICS.iter().map(|h| 1.0 / h).collect();
         let wsum: f64 = weights.iter().sum();
         for k in 0..5 {
             amp[j][k] = total * weights[k] / wsum;
-            phase[j][k] = 2.0 * PI * rng.uniform();
+            phase[j][k] = 2.0 * PI * rng.random::<f64>();
             freq[j][k] = f0 * HARMONICS[k];
         }
     }
@@ -223,28 +228,23 @@ fn simulate_impl(
         data.qpos_mut()[joint.qpos_adr] = q;
         data.qvel_mut()[joint.dof] = qd;
     }
-    // PD gains from the joint-space inertia at the start (about 4 Hz bandwidth, critically
-    // damped): M_jj from MuJoCo's RNE with a unit acceleration.
-    data.forward()?;
-    let bias = data.rne(false)?;
-    let mut kp = vec![0.0; nj];
-    let mut kd = vec![0.0; nj];
+    // Computed-torque tracking: each joint's acceleration command is the reference's plus a
+    // critically damped PD on the error (about 4 Hz), and the torques that realise it come from
+    // the full mass matrix (armature included), bias and damping forces, the unactuated DOFs
+    // (a floating base's free joint) taking whatever acceleration their own equations give.
+    // The robot then stays on its reference, inside its joint ranges (whose limit forces no
+    // log carries), however strongly the joints and the base are coupled.
     let wn = 2.0 * PI * 4.0;
-    for (j, joint) in robot.joints.iter().enumerate() {
-        data.qacc_mut().fill(0.0);
-        data.qacc_mut()[joint.dof] = 1.0;
-        let m = data.rne(true)?;
-        let mjj = (m[joint.dof] - bias[joint.dof]).max(1e-4);
-        kp[j] = mjj * wn * wn;
-        kd[j] = 2.0 * mjj * wn;
-    }
+    let nv = model.nv();
+    let joint_dofs: Vec<usize> = robot.joints.iter().map(|j| j.dof).collect();
+    let free: Vec<usize> = (0..nv).filter(|d| !joint_dofs.contains(d)).collect();
+    let mut qacc = vec![0.0; nv];
 
     let steps = (opts.duration_secs * opts.rate_hz).round() as usize;
     let names: Vec<String> = robot.joints.iter().map(|j| j.name.clone()).collect();
     let mut log = JointLog::new(names, format!("synthetic log of {}", urdf.display()));
     let resolution = 2.0 * PI / (1u64 << opts.encoder_bits) as f64;
     let (mut p, mut v, mut e) = (vec![0.0; nj], vec![0.0; nj], vec![0.0; nj]);
-    let nv = model.nv();
     let mut qfrc_ext = vec![0.0; nv];
     let (mut jacp, mut jacr, mut jacp_dot, mut jacr_dot) =
         (vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv], vec![0.0; 3 * nv]);
@@ -271,9 +271,10 @@ fn simulate_impl(
         }
         if let (Some(f), Some(fb)) = (floating, &robot.floating) {
             let qpos = &data.qpos()[fb.qpos_adr..fb.qpos_adr + 7];
-            let p = [qpos[0], qpos[1], qpos[2]].map(|x| x + f.position_noise_m * rng.normal());
+            let p = [qpos[0], qpos[1], qpos[2]].map(|x| x + f.position_noise_m * rng.sample::<f64, _>(StandardNormal));
             // Orientation noise: a small random rotation (half-angles in the vector part).
-            let e: [f64; 3] = std::array::from_fn(|_| 0.5 * f.orientation_noise_rad * rng.normal());
+            let e: [f64; 3] =
+                std::array::from_fn(|_| 0.5 * f.orientation_noise_rad * rng.sample::<f64, _>(StandardNormal));
             let mut q = [qpos[3], qpos[4], qpos[5], qpos[6]];
             let dq = [1.0, e[0], e[1], e[2]];
             q = [
@@ -287,22 +288,42 @@ fn simulate_impl(
             let qvel = &data.qvel()[fb.dof..fb.dof + 6];
             let r = data.xmat()[fb.body];
             let v_base = [0, 1, 2].map(|i| r[i] * qvel[0] + r[3 + i] * qvel[1] + r[6 + i] * qvel[2]);
-            let twist =
-                [v_base[0], v_base[1], v_base[2], qvel[3], qvel[4], qvel[5]].map(|x| x + f.twist_noise * rng.normal());
+            let twist = [v_base[0], v_base[1], v_base[2], qvel[3], qvel[4], qvel[5]]
+                .map(|x| x + f.twist_noise * rng.sample::<f64, _>(StandardNormal));
             base_log.twist.push(twist);
             base_log.t_nanos.push(t_nanos);
             base_log.position.push(p);
             base_log.orientation_wxyz.push(q.map(|x| x / n));
         }
-        let bias = data.qfrc_bias().to_vec();
+        // Generalised forces besides the command: bias less damping and the known wrenches.
+        let qvel = data.qvel();
+        let other: Vec<f64> =
+            (0..nv).map(|d| data.qfrc_bias()[d] + model.dof_damping()[d] * qvel[d] - qfrc_ext[d]).collect();
         for (j, joint) in robot.joints.iter().enumerate() {
             let (qr, qdr, qddr) = reference(j, t);
             let (q, qd) = (data.qpos()[joint.qpos_adr], data.qvel()[joint.dof]);
-            let m = kp[j] / (wn * wn);
-            let tau = bias[joint.dof] - qfrc_ext[joint.dof] + m * qddr + kp[j] * (qr - q) + kd[j] * (qdr - qd);
-            data.qfrc_applied_mut()[joint.dof] = tau;
+            qacc[joint.dof] = qddr + wn * wn * (qr - q) + 2.0 * wn * (qdr - qd);
             p[j] = (q / resolution).round() * resolution;
-            v[j] = qd + opts.velocity_noise * rng.normal();
+            v[j] = qd + opts.velocity_noise * rng.sample::<f64, _>(StandardNormal);
+        }
+        let mass = data.full_mass_matrix();
+        if !free.is_empty() {
+            // M_ff·a_f = −(M_fj·a_j + other_f): no command acts on the free DOFs.
+            let a = nalgebra::DMatrix::from_fn(free.len(), free.len(), |r, c| mass[free[r] * nv + free[c]]);
+            let b = nalgebra::DVector::from_fn(free.len(), |r, _| {
+                -other[free[r]] - joint_dofs.iter().map(|&d| mass[free[r] * nv + d] * qacc[d]).sum::<f64>()
+            });
+            let a_free = a.lu().solve(&b).ok_or_else(|| {
+                crate::Error::Numerical(format!("the free DOFs' mass matrix of {} is singular", urdf.display()))
+            })?;
+            for (k, &d) in free.iter().enumerate() {
+                qacc[d] = a_free[k];
+            }
+        }
+        for (j, joint) in robot.joints.iter().enumerate() {
+            let d = joint.dof;
+            let tau = other[d] + (0..nv).map(|c| mass[d * nv + c] * qacc[c]).sum::<f64>();
+            data.qfrc_applied_mut()[d] = tau;
             e[j] = tau;
         }
         log.push((t * 1e9).round() as i64, &p, &v, &e);
@@ -318,7 +339,9 @@ fn simulate_impl(
         for series in &mut wrench_log {
             for w in &mut series.wrench {
                 for (k, x) in w.iter_mut().enumerate() {
-                    *x += f.wrench_noise_rel * if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm } * rng.normal();
+                    *x += f.wrench_noise_rel
+                        * if k < 3 { f.wrench_force_n } else { f.wrench_torque_nm }
+                        * rng.sample::<f64, _>(StandardNormal);
                 }
             }
         }
@@ -329,7 +352,7 @@ fn simulate_impl(
     for j in 0..nj {
         let rms = (log.effort[j].iter().map(|x| x * x).sum::<f64>() / steps.max(1) as f64).sqrt();
         for x in &mut log.effort[j] {
-            *x += opts.effort_noise_rel * rms * rng.normal();
+            *x += opts.effort_noise_rel * rms * rng.sample::<f64, _>(StandardNormal);
         }
     }
     Ok(log)
@@ -381,10 +404,10 @@ pub fn simulation_model_of(source: &UrdfSource, dt_secs: f64, armature: f64) -> 
 /// Loading or writing errors.
 pub fn perturbed_urdf(src: &Path, dst: &Path, seed: u64) -> Result<()> {
     let robot = RobotModel::from_urdf(src)?;
-    let mut rng = Rng::new(seed);
-    let factor = |rng: &mut Rng| {
-        let size = 0.2 + 0.2 * rng.uniform();
-        if rng.uniform() < 0.5 { 1.0 - size } else { 1.0 + size }
+    let mut rng = ChaCha8Rng::seed_from_u64(seed);
+    let factor = |rng: &mut ChaCha8Rng| {
+        let size = 0.2 + 0.2 * rng.random::<f64>();
+        if rng.random::<f64>() < 0.5 { 1.0 - size } else { 1.0 + size }
     };
     let links: Vec<crate::writeback::LinkUpdate> = robot
         .links

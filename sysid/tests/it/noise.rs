@@ -2,8 +2,10 @@
 //! recovered from synthetic IMUs (hours of data generated here), encoder σ and quantization,
 //! refusals of moving and short logs, and the URDF write-back.
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
+use rand_distr::StandardNormal;
 use sysid::noise::{AxisTruth, ImuLog, NoiseOptions, analyze_encoders, analyze_imu, imu_noise_updates, synth_imu};
-use sysid::rng::Rng;
 
 fn truth(offset: f64, n: f64, b: f64, k: f64) -> AxisTruth {
     AxisTruth { offset, white_density: n, bias_instability: b, bias_random_walk: k }
@@ -130,10 +132,10 @@ fn encoder_sigma_and_quantization_step() {
     let step17 = 2.0 * std::f64::consts::PI / f64::from(1u32 << 17);
     let step12 = 2.0 * std::f64::consts::PI / 4096.0;
     let mut log = sysid::JointLog::new(vec!["a".into(), "b".into()], "mem");
-    let mut rng = Rng::new(8);
+    let mut rng = ChaCha8Rng::seed_from_u64(8);
     for k in 0..60_000 {
-        let a = ((0.7 + 3.0 * step17 * rng.normal()) / step17).round() * step17;
-        let b = ((-0.2 + 0.01 * step12 * rng.normal()) / step12).round() * step12;
+        let a = ((0.7 + 3.0 * step17 * rng.sample::<f64, _>(StandardNormal)) / step17).round() * step17;
+        let b = ((-0.2 + 0.01 * step12 * rng.sample::<f64, _>(StandardNormal)) / step12).round() * step12;
         log.push(k * 5_000_000, &[a, b], &[], &[]);
     }
     let enc = analyze_encoders(&log, &NoiseOptions::default()).unwrap();
@@ -221,9 +223,9 @@ fn still_log_through_a_ros2_bag_and_spec_fragment() {
     let imu = still_imu(120.0);
     let mut joints = sysid::JointLog::new(vec!["j1".into()], "mem");
     let step = 2.0 * std::f64::consts::PI / 65536.0;
-    let mut rng = Rng::new(5);
+    let mut rng = ChaCha8Rng::seed_from_u64(5);
     for &t in imu.t_nanos.iter().step_by(2) {
-        joints.push(t, &[((0.3 + 2.0 * step * rng.normal()) / step).round() * step], &[], &[]);
+        joints.push(t, &[((0.3 + 2.0 * step * rng.sample::<f64, _>(StandardNormal)) / step).round() * step], &[], &[]);
     }
     {
         let mut w = twin_core::log::LogWriter::create(&bag, &twin_core::log::WriterOptions::default()).unwrap();

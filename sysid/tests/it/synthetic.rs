@@ -52,11 +52,14 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
     let truth_name = truth.file_name().unwrap();
     let dir = tempfile::tempdir().unwrap();
     let start = dir.path().join(truth_name);
-    perturbed_urdf(truth, &start, 3).unwrap();
+    let [train_seed, held_out_seed, start_seed] = crate::seeds("TWIN_SYNTH_SEEDS", [1, 2, 3]);
+    perturbed_urdf(truth, &start, start_seed).unwrap();
     let original = std::fs::read_to_string(&start).unwrap();
 
-    let train = simulate(truth, &SynthOptions { duration_secs: train_secs, seed: 1, ..Default::default() }).unwrap();
-    let held_out = simulate(truth, &SynthOptions { duration_secs: 8.0, seed: 2, ..Default::default() }).unwrap();
+    let train =
+        simulate(truth, &SynthOptions { duration_secs: train_secs, seed: train_seed, ..Default::default() }).unwrap();
+    let held_out =
+        simulate(truth, &SynthOptions { duration_secs: 8.0, seed: held_out_seed, ..Default::default() }).unwrap();
     // The logs go through ROS 2 bags (/joint_states), as a real robot's would.
     let bags = tempfile::tempdir().unwrap();
     let through_bag = |mut log: JointLog, name: &str| {
@@ -78,10 +81,17 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
     eprintln!("{}", ident.report.table());
 
     // Held-out torque NRMSE ≤ 2 % on every joint, and much better than the starting URDF.
-    let nrmse = validate(&robot, &held_out, &opts, &[&ident.before, &ident.after]).unwrap();
+    let truth_params = crate::truth_params(&true_robot, &ident.layout);
+    let nrmse = validate(&robot, &held_out, &opts, &[&ident.before, &ident.after, &truth_params]).unwrap();
     let mut worst_nrmse: f64 = 0.0;
     for (j, joint) in robot.joints.iter().enumerate() {
         let (before, after) = (nrmse[0][j], nrmse[1][j]);
+        eprintln!(
+            "{:<30} held-out NRMSE after {:5.2} % truth {:5.2} %",
+            joint.name,
+            100.0 * after,
+            100.0 * nrmse[2][j]
+        );
         assert!(
             after <= 0.02,
             "{}: held-out NRMSE {:.2} % > 2 % (before {:.2} %)",
@@ -96,8 +106,12 @@ fn run_benchmark_on(truth: &Path, train_secs: f64) -> Outcome {
     let mut worst_friction_error: f64 = 0.0;
     for (j, joint) in true_robot.joints.iter().enumerate() {
         let (viscous, coulomb, _) = ident.joint_friction(j);
-        for (what, got, want) in [("viscous", viscous, joint.damping), ("Coulomb", coulomb, joint.friction)] {
+        for (k, (what, got, want)) in
+            [("viscous", viscous, joint.damping), ("Coulomb", coulomb, joint.friction)].into_iter().enumerate()
+        {
             let err = (got / want - 1.0).abs();
+            let sigmas = (got - want).abs() / ident.std[ident.layout.joint_col(j) + k];
+            eprintln!("{:<30} {what:<8} friction error {:5.1} % ({sigmas:.1} σ)", joint.name, 100.0 * err);
             assert!(err <= 0.10, "{}: {what} {got} vs true {want} ({:.1} %)", joint.name, 100.0 * err);
             worst_friction_error = worst_friction_error.max(err);
         }
