@@ -367,6 +367,16 @@ pub struct WalkOptions {
     /// nominal pass into a fall: there a foot lands on the step's edge either way, and whether
     /// the walker survives it depends on where the feet happen to land.
     pub stance_ground_read: bool,
+    /// With `follow_ground`, a landed foot's ground is read when its sole has come to rest
+    /// (still for [`GROUND_READ_STILL_SECS`] and level within [`GROUND_READ_MAX_TILT_RAD`]):
+    /// at the planned touchdown when it already is, else at the first solve after it (the
+    /// foot planted); until then it is the ground its swing aimed at (the stance foot's,
+    /// carried along the footholds' slope by `ground_slope_gain`). Default: false: the
+    /// sole's height at the planned touchdown, wherever the foot is then. The soft swing leg
+    /// lags its trajectory, and after a kick a foot is often still coming down at the
+    /// planned touchdown: its height, taken as the ground, raised the pelvis and aimed the
+    /// next swing too high until the mid-stance read (`stance_ground_read`) corrected it.
+    pub landing_read_at_rest: bool,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
     /// fore-aft gap, at most `max_step_adjust` (default: 0.0, from where it landed; 1: from the
@@ -453,6 +463,7 @@ impl Default for WalkOptions {
             step_down_reach: 0.0,
             ground_slope_gain: 0.0,
             stance_ground_read: false,
+            landing_read_at_rest: false,
             progress_hold_gain: 0.0,
             touchdown_from_contact: false,
             touchdown_reach_m: 0.04,
@@ -741,6 +752,9 @@ pub struct Walker {
     sole_prev_z: [f64; 2],
     /// How long each sole has been at rest ([`GROUND_READ_STILL_SECS`]), s.
     sole_still_secs: [f64; 2],
+    /// Per foot, whether its ground is still to be read once its sole rests
+    /// (`landing_read_at_rest`).
+    ground_pending: [bool; 2],
     /// The feet's contact sensing (`touchdown_from_contact`).
     contact: ContactSensing,
     /// Each sole's target height at the last solve, m.
@@ -994,6 +1008,7 @@ impl Walker {
             ground_read_done: false,
             sole_prev_z: [0.0; 2],
             sole_still_secs: [0.0; 2],
+            ground_pending: [false; 2],
             contact,
             target_z: [0.0; 2],
             touchdown_planned: None,
@@ -1875,6 +1890,28 @@ impl Walker {
             .map_or(0.0, |(from, _)| (TOUCHDOWN_SEARCH_MPS * (t - from)).min(self.options.touchdown_reach_m))
     }
 
+    /// The ground `step`'s swing foot is to land on (`follow_ground`): the stance foot's,
+    /// going on rising or falling as under the last footholds (`ground_slope_gain`).
+    fn landing_ground(&self, step: &Step) -> f64 {
+        let mut other = self.ground_z[step.stance.side.index()];
+        if self.options.ground_slope_gain != 0.0 {
+            let along = Vector2::new(step.stance.yaw.cos(), step.stance.yaw.sin());
+            other += self.options.ground_slope_gain
+                * self.ground_slope(along)
+                * (step.swing_to.pos - step.stance.pos).dot(&along);
+        }
+        other
+    }
+
+    /// Whether foot `leg`'s sole rests on the ground (`follow_ground`): level within
+    /// [`GROUND_READ_MAX_TILT_RAD`] (not on an edge, heel or toe) and still for
+    /// [`GROUND_READ_STILL_SECS`].
+    fn sole_at_rest(&self, leg: usize) -> bool {
+        let l = &self.body.legs[leg];
+        let sole_up = self.frames.xrot[l.foot] * l.foot_rot_home.inverse() * Vector3::z();
+        sole_up.z >= GROUND_READ_MAX_TILT_RAD.cos() && self.sole_still_secs[leg] >= GROUND_READ_STILL_SECS
+    }
+
     /// Whether the ground under the footholds rises: the stance foot's last mid-stance read is
     /// more than [`GROUND_RISE_M`] above its previous one (false without reads).
     fn ground_rising(&self) -> bool {
@@ -1941,6 +1978,7 @@ impl Controller for Walker {
         self.ground_reads = [None; 3];
         self.ground_read_done = false;
         self.sole_still_secs = [0.0; 2];
+        self.ground_pending = [false; 2];
         self.sole_prev_z = [self.sole_world(&self.frames, 0).z, self.sole_world(&self.frames, 1).z];
         for ik in &self.ik {
             for k in 0..ik.len() {
@@ -2052,7 +2090,12 @@ impl Controller for Walker {
                         }
                     } else {
                         let sole = self.sole_world(&self.frames, landed);
-                        if o.follow_ground {
+                        let descending = sole.z - self.sole_prev_z[landed] < -GROUND_READ_MAX_SPEED_MPS * self.dt;
+                        if o.follow_ground && o.landing_read_at_rest && descending {
+                            // Still coming down: the ground it aimed at, until it rests.
+                            self.ground_z[landed] = self.landing_ground(&step);
+                            self.ground_pending[landed] = true;
+                        } else if o.follow_ground {
                             self.ground_z[landed] =
                                 if (sole.z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { sole.z };
                         }
@@ -2214,12 +2257,10 @@ impl Controller for Walker {
                 // A sole tilted beyond any slope the walker follows stands on an edge or a heel:
                 // its height is no ground (the landing's read stays).
                 let stance = step.stance.side.index();
-                let l = &self.body.legs[stance];
-                let sole_up = self.frames.xrot[l.foot] * l.foot_rot_home.inverse() * Vector3::z();
                 let z = self.sole_world(&self.frames, stance).z;
-                let still = self.sole_still_secs[stance] >= GROUND_READ_STILL_SECS;
-                if sole_up.z >= GROUND_READ_MAX_TILT_RAD.cos() && still {
+                if self.sole_at_rest(stance) {
                     self.ground_read_done = true;
+                    self.ground_pending[stance] = false;
                     self.ground_z[stance] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
                     foot_ground[stance] = self.ground_z[stance];
                     self.ground_reads = [self.ground_reads[1], self.ground_reads[2], Some((feet[stance].pos, z))];
@@ -2238,12 +2279,7 @@ impl Controller for Walker {
             let pos = from.pos + (to.pos - from.pos) * blend;
             let yaw = from.yaw + wrap(to.yaw - from.yaw) * blend;
             foot_targets[to.side.index()] = (Foothold { side: to.side, pos, yaw }, lift * o.foot_clearance);
-            let (own, mut other) = (self.ground_z[to.side.index()], self.ground_z[step.stance.side.index()]);
-            if o.ground_slope_gain != 0.0 {
-                // The ground ahead goes on rising or falling as under the last footholds.
-                let along = Vector2::new(step.stance.yaw.cos(), step.stance.yaw.sin());
-                other += o.ground_slope_gain * self.ground_slope(along) * (to.pos - step.stance.pos).dot(&along);
-            }
+            let (own, other) = (self.ground_z[to.side.index()], self.landing_ground(&step));
             foot_ground[to.side.index()] = own + (other - own) * blend;
             if o.step_down_reach > 0.0 && !self.ground_rising() {
                 // Late in the swing the foot keeps going down past the stance foot's ground
@@ -2263,6 +2299,14 @@ impl Controller for Walker {
                 let moved = (z - self.sole_prev_z[leg]).abs() > GROUND_READ_MAX_SPEED_MPS * self.dt;
                 self.sole_still_secs[leg] = if moved { 0.0 } else { self.sole_still_secs[leg] + self.dt };
                 self.sole_prev_z[leg] = z;
+                if self.ground_pending[leg] && swinging == Some(leg) {
+                    self.ground_pending[leg] = false;
+                } else if self.ground_pending[leg] && !moved {
+                    // A foot that landed after its planned touchdown, now at rest on its ground.
+                    self.ground_pending[leg] = false;
+                    self.ground_z[leg] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
+                    foot_ground[leg] = self.ground_z[leg];
+                }
             }
         }
         let yaw_l = foot_targets[0].0.yaw;
