@@ -2307,7 +2307,7 @@ impl Controller for Walker {
             self.landing_feet(observation.sensordata, t, &mut foot_ground, swinging);
         }
         if o.follow_ground {
-            for leg in 0..2 {
+            for (leg, ground) in foot_ground.iter_mut().enumerate() {
                 let z = self.sole_world(&self.frames, leg).z;
                 let moved = (z - self.sole_prev_z[leg]).abs() > GROUND_READ_MAX_SPEED_MPS * self.dt;
                 self.sole_still_secs[leg] = if moved { 0.0 } else { self.sole_still_secs[leg] + self.dt };
@@ -2318,7 +2318,7 @@ impl Controller for Walker {
                     // A foot that came down after its planned touchdown, now stopped on its ground.
                     self.ground_pending[leg] = false;
                     self.ground_z[leg] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
-                    foot_ground[leg] = self.ground_z[leg];
+                    *ground = self.ground_z[leg];
                     if let Some(e) = self.state.touchdowns.iter_mut().rev().find(|e| e.leg == leg) {
                         (e.ground_m, e.ground_secs) = (self.ground_z[leg], t);
                     }
