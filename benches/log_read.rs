@@ -10,6 +10,8 @@
 //! 2. Read speed: a ~100 MB ROS 2 bag (JointState, IMU, odometry, TF, wrenches, commands at
 //!    500 Hz) decoded for `/joint_states` by twin and by `mcap-ros2-support`, same file, same run.
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 use std::process::Command;
 use std::sync::Arc;
@@ -29,15 +31,12 @@ fn humanoid_joint_names() -> Vec<String> {
 /// Deterministic joint-like signals (no RNG dependency): smooth motion plus a small
 /// pseudo-random jitter so the data compresses like real sensor values.
 struct Signals {
-    state: u64,
+    rng: ChaCha8Rng,
 }
 
 impl Signals {
     fn noise(&mut self) -> f64 {
-        self.state ^= self.state << 13;
-        self.state ^= self.state >> 7;
-        self.state ^= self.state << 17;
-        (self.state >> 11) as f64 / (1u64 << 53) as f64 - 0.5
+        self.rng.random_range(-0.5..0.5)
     }
 
     fn joint_state(&mut self, names: &[String], i: u64, js: &mut JointState) {
@@ -66,7 +65,7 @@ fn new_joint_state(names: &[String]) -> JointState {
 fn write_throughput(dir: &Path, names: &[String]) -> f64 {
     let path = dir.join("throughput.mcap");
     let n = 200_000u64;
-    let mut sig = Signals { state: 0x9e3779b97f4a7c15 };
+    let mut sig = Signals { rng: ChaCha8Rng::seed_from_u64(1) };
     let mut js = new_joint_state(names);
     let mut w = LogWriter::create(&path, &WriterOptions::default()).unwrap();
     let topic = w.add_topic::<JointState>("/joint_states").unwrap();
@@ -147,7 +146,7 @@ fn write_bag(path: &Path, names: &[String], target_bytes: u64) -> u64 {
     let t_lw = w.add_topic::<WrenchStamped>("/left_foot/wrench").unwrap();
     let t_rw = w.add_topic::<WrenchStamped>("/right_foot/wrench").unwrap();
     let t_cmd = w.add_topic::<Float64MultiArray>("/humanoid/joint_commands").unwrap();
-    let mut sig = Signals { state: 42 };
+    let mut sig = Signals { rng: ChaCha8Rng::seed_from_u64(42) };
     let mut js = new_joint_state(names);
     let mut imu = Imu::default();
     let mut odom = Odometry::default();

@@ -1,5 +1,7 @@
 //! The regressor `Y·π` equals MuJoCo's own inverse dynamics of the same parameters.
 
+use rand::{Rng, SeedableRng};
+use rand_chacha::ChaCha8Rng;
 use std::path::Path;
 use std::sync::Arc;
 use sysid::RobotModel;
@@ -12,9 +14,8 @@ fn models_dir() -> &'static Path {
 }
 
 /// Deterministic pseudo-random numbers in [-1, 1).
-fn lcg(state: &mut u64) -> f64 {
-    *state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-    ((*state >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
+fn uniform(rng: &mut ChaCha8Rng) -> f64 {
+    rng.random_range(-1.0..1.0)
 }
 
 /// The model's own parameters in `layout`'s columns: each link's CAD, each joint's damping and
@@ -64,14 +65,14 @@ fn check_against_inverse_dynamics(urdf: &Path) {
     // Friction loss is zeroed above: the Coulomb columns are 0.
     let params = model_params(&robot, &layout, None);
     let mut data = Data::new(model.clone()).unwrap();
-    let mut rng = 7u64;
+    let mut rng = ChaCha8Rng::seed_from_u64(7);
     let nj = robot.joints.len();
     let mut rows = Vec::new();
     let mut worst = 0.0f64;
     for _ in 0..20 {
-        let q: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 1.5).collect();
-        let qd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 3.0).collect();
-        let qdd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 10.0).collect();
+        let q: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 1.5).collect();
+        let qd: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 3.0).collect();
+        let qdd: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 10.0).collect();
         let tau = reg.torques(None, &q, &qd, &qdd, &params, &mut rows).unwrap();
         let inverse = joint_inverse_dynamics(&robot, &mut data, &q, &qd, &qdd);
         for (j, (joint, &expected)) in robot.joints.iter().zip(&inverse).enumerate() {
@@ -164,19 +165,19 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
     assert!(wrench_bodies.len() >= 2, "humanoid bodies renamed?");
     let mut data = Data::new(model.clone()).unwrap();
     let nj = robot.joints.len();
-    let mut rng = 11u64;
+    let mut rng = ChaCha8Rng::seed_from_u64(11);
     let (mut rows, mut ext) = (Vec::new(), vec![0.0; reg.nrows()]);
     let mut worst = 0.0f64;
     for _ in 0..10 {
-        let q: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 1.2).collect();
-        let qd: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 3.0).collect();
-        let tau_joint: Vec<f64> = (0..nj).map(|_| lcg(&mut rng) * 20.0).collect();
-        let mut quat = [1.0 + lcg(&mut rng), lcg(&mut rng), lcg(&mut rng), lcg(&mut rng)];
+        let q: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 1.2).collect();
+        let qd: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 3.0).collect();
+        let tau_joint: Vec<f64> = (0..nj).map(|_| uniform(&mut rng) * 20.0).collect();
+        let mut quat = [1.0 + uniform(&mut rng), uniform(&mut rng), uniform(&mut rng), uniform(&mut rng)];
         let norm = quat.iter().map(|x| x * x).sum::<f64>().sqrt();
         quat.iter_mut().for_each(|x| *x /= norm);
-        let mut base_qpos = [lcg(&mut rng), lcg(&mut rng), 1.0 + lcg(&mut rng), 0.0, 0.0, 0.0, 0.0];
+        let mut base_qpos = [uniform(&mut rng), uniform(&mut rng), 1.0 + uniform(&mut rng), 0.0, 0.0, 0.0, 0.0];
         base_qpos[3..].copy_from_slice(&quat);
-        let base_qvel: [f64; 6] = std::array::from_fn(|_| lcg(&mut rng) * 2.0);
+        let base_qvel: [f64; 6] = std::array::from_fn(|_| uniform(&mut rng) * 2.0);
         data.qpos_mut()[fb.qpos_adr..fb.qpos_adr + 7].copy_from_slice(&base_qpos);
         data.qvel_mut()[fb.dof..fb.dof + 6].copy_from_slice(&base_qvel);
         data.qfrc_applied_mut().fill(0.0);
@@ -190,7 +191,7 @@ fn floating_base_rows_match_mujoco_inverse_dynamics_with_external_wrenches() {
         data.kinematics_with_velocity().unwrap();
         let wrenches: Vec<(usize, [f64; 6])> = wrench_bodies
             .iter()
-            .map(|&b| (b, std::array::from_fn(|k| lcg(&mut rng) * if k < 3 { 50.0 } else { 5.0 })))
+            .map(|&b| (b, std::array::from_fn(|k| uniform(&mut rng) * if k < 3 { 50.0 } else { 5.0 })))
             .collect();
         data.xfrc_applied_mut().iter_mut().for_each(|x| *x = [0.0; 6]);
         for &(b, w) in &wrenches {

@@ -188,14 +188,17 @@ pub const GROUND_PITCH_FOLLOW_SECS: f64 = GROUND_FOLLOW_SECS;
 pub const WALK_ARMATURE: f64 = 0.01;
 
 /// Options of the [`Walker`]. Every field has a default; scenario files set them by name.
-#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize)]
+#[derive(Debug, Clone, PartialEq, serde::Deserialize, serde::Serialize, smart_default::SmartDefault)]
 #[serde(default, deny_unknown_fields)]
 pub struct WalkOptions {
     /// Forward velocity command, m/s (default: 0.0: stand and balance).
+    #[default(0.0)]
     pub vx: f64,
     /// Leftward velocity command, m/s (default: 0.0).
+    #[default(0.0)]
     pub vy: f64,
     /// Yaw-rate command, rad/s (default: 0.0).
+    #[default(0.0)]
     pub yaw_rate: f64,
     /// A schedule of velocity commands, `[t_secs, vx, vy, yaw_rate]` each (s, m/s, m/s,
     /// rad/s): from each time on, the walker steers toward that command ([`steer`]) at the
@@ -207,108 +210,146 @@ pub struct WalkOptions {
     /// schedule's entry or a live `/cmd_vel`), m/s²: the command is taken once per step and
     /// changes by at most this × `step_period` from one step to the next (default: 0.5: at
     /// 0.6-s steps, 0.3 m/s per step).
+    #[default(0.5)]
     pub max_accel_mps2: f64,
     /// Largest change per second of the yaw-rate command, rad/s², taken per step as above
     /// (default: 1.0).
+    #[default(1.0)]
     pub max_yaw_accel_radps2: f64,
     /// Step duration (double + single support), s (default: 0.6).
+    #[default(0.6)]
     pub step_period: f64,
     /// Fraction of a step in double support (default: 0.2).
+    #[default(0.2)]
     pub double_support: f64,
     /// Lateral distance between the soles' centres, m (default: 0.18, the hip spacing).
+    #[default(0.18)]
     pub step_width: f64,
     /// How far inside the stance sole's centre (toward the other foot) walking plans the ZMP
     /// in single support, m (default: 0.0).
+    #[default(0.0)]
     pub zmp_inward: f64,
     /// Straight walking (no `vy`, no `yaw_rate`) holds the line it started on: each planned
     /// step's centre moves back toward that line by this fraction of the planned centre's
     /// offset from it (default: 0.0, off). It acts only through the footstep plan, so each
     /// step's DCM reference is built from the corrected plan (landing corrections after kicks
     /// otherwise leave the whole walk offset sideways).
+    #[default(0.0)]
     pub line_hold_gain: f64,
     /// Largest sideways correction of one step toward the line, m (default: 0.03).
+    #[default(0.03)]
     pub line_hold_step: f64,
     /// Centre-of-mass height while walking, m, above the floor (z = 0), or with
     /// [`WalkOptions::follow_ground`] above the soles at the start (default: 0.62: knees bent,
     /// away from the stretched-leg singularity of the shipped humanoid, whose standing CoM is at
     /// 0.68 m).
+    #[default(0.62)]
     pub com_height: f64,
     /// Swing-foot clearance at mid-swing, m (default: 0.05).
+    #[default(0.05)]
     pub foot_clearance: f64,
     /// Longest forward advance per step, m (default: 0.2); a command needing more is refused.
+    #[default(0.2)]
     pub max_step_length: f64,
     /// Longest sideways advance per step, m (default: 0.1).
+    #[default(0.1)]
     pub max_step_lateral: f64,
     /// Largest yaw change per step, rad (default: 0.3).
+    #[default(0.3)]
     pub max_step_yaw: f64,
     /// Time from the start to crouch to `com_height` before stepping, s (default: 1.0).
+    #[default(1.0)]
     pub settle_secs: f64,
     /// Double support of the first step from standing, s (default: 0.3).
+    #[default(0.3)]
     pub start_double_support: f64,
     /// Preview horizon of the ZMP preview control, s (default: 1.6).
+    #[default(1.6)]
     pub preview_horizon: f64,
     /// Preview control's ZMP-error weight (default: 1.0).
+    #[default(1.0)]
     pub preview_qe: f64,
     /// Preview control's jerk weight (default: 1e-6).
+    #[default(1e-6)]
     pub preview_r: f64,
     /// DCM feedback gain `k` on the commanded ZMP, 1/s (default: 2.0).
+    #[default(2.0)]
     pub dcm_zmp_gain: f64,
     /// DCM feedback on the CoM command, m per m of DCM error (default: 0.3).
+    #[default(0.3)]
     pub dcm_com_gain: f64,
     /// Landing-spot correction per metre of predicted DCM error at touchdown (default: 1.0).
+    #[default(1.0)]
     pub step_adjust_gain: f64,
     /// Largest landing-spot correction, m (default: 0.3).
+    #[default(0.3)]
     pub max_step_adjust: f64,
     /// Part of the stance sole the landing-spot correction counts on the ankles to use: the
     /// DCM error predicted at touchdown is the one left after ZMP feedback within this part of
     /// the sole (default: 1.0; 0: the error grows as `e^(ω·t)`, no ankle help).
+    #[default(1.0)]
     pub step_adjust_ankle: f64,
     /// Shortest single support a walking step is cut to when its landing spot alone can't
     /// absorb the DCM error (an earlier touchdown lets the error grow less), s (default: 0.25,
     /// as `stand.toml`'s recovery steps).
+    #[default(0.25)]
     pub min_single_support_secs: f64,
     /// Single support of a recovery step (stepping after a push at a zero command), s
     /// (default: 0.35: short, since the DCM diverges while the foot swings).
+    #[default(0.35)]
     pub recovery_swing_secs: f64,
     /// Double support before a recovery step, s (default: 0.05).
+    #[default(0.05)]
     pub recovery_double_support_secs: f64,
     /// A standing walker steps when its DCM comes closer than this to the edge of the feet's
     /// support region (or leaves it), m; inside, the ankles and hips hold it (default: 0.02).
+    #[default(0.02)]
     pub recovery_margin: f64,
     /// In double support, the part of the commanded ZMP that the weight split between the feet
     /// cannot reach (fore-aft) is given by the ankles, moving each foot's planned force within
     /// its sole (default: true: it holds fore-aft pushes in place). A controller that moves
     /// the arms while the legs balance (`grasp`) turns it off: the reaching arm shifts the
     /// commanded ZMP forward and the ankles then tip the torso into the table.
+    #[default(true)]
     pub double_support_ankle: bool,
     /// Torso tilt feedback: pelvis counter-rotation per radian of tilt (default: 0.5).
+    #[default(0.5)]
     pub tilt_gain: f64,
     /// Torso rate feedback: pelvis counter-rotation per rad/s of tilt rate, s (default: 0.05).
+    #[default(0.05)]
     pub tilt_rate_gain: f64,
     /// PD saturation error of the leg joints, rad (`kp = effort / this`) (default: 0.1).
+    #[default(0.1)]
     pub leg_saturation_error: f64,
     /// PD saturation error of the other joints, rad (default: 0.25, as `pd-hold`).
+    #[default(0.25)]
     pub saturation_error: f64,
     /// PD damping ratio (default: 1.0).
+    #[default(1.0)]
     pub damping_ratio: f64,
     /// Bound on `√(kp/I)·dt` of a swinging leg's joints, `I` the inertia they move (default:
     /// 0.3).
+    #[default(0.3)]
     pub swing_stiffness: f64,
     /// Damped-least-squares iterations of the leg IK per tick, warm-started from the last
     /// tick's solution (default: 1: the targets move by millimetres per tick and the residual
     /// is taken up at the next one; measurements in BENCHMARKS.md, "Walker option choices").
+    #[default(1)]
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
+    #[default(BodyNames::default())]
     pub bodies: BodyNames,
     /// Part of a recovery step's swing by which the foot is over its landing spot (it comes
     /// down there for the rest); the spot follows the predicted capture point for the first
     /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move comes
     /// in its middle, fast enough to saturate the hip roll, and sideways steps land short
     /// (measurements in BENCHMARKS.md, "Walker option choices").
+    #[default(0.6)]
     pub recovery_reach_fraction: f64,
     /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
     /// DCM until this part of the swing has passed (default: 0.7; later, the foot is close to
     /// the ground and a moved spot drags it sideways).
+    #[default(0.7)]
     pub step_adjust_until: f64,
     /// A swinging leg's IK target is placed from the measured pelvis pose instead of the
     /// commanded one, so the foot follows its trajectory in the world (default: true). From
@@ -317,16 +358,20 @@ pub struct WalkOptions {
     /// carries the swing foot into the ground short of its spot, and on a robot with compliant
     /// legs every landing lands off by the stance leg's error (measurements in BENCHMARKS.md,
     /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
+    #[default(true)]
     pub swing_from_measured_pelvis: bool,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
     /// 0.0, off; 1: all of it, within `hip_max_lean_rad`).
+    #[default(0.0)]
     pub hip_gain: f64,
     /// Largest lean of the upper body the hip strategy commands (roll, pitch), rad (default:
     /// [0.15, 0.4]: the hips' roll, which also spreads the legs, has less range to spare).
+    #[default([0.15, 0.4])]
     pub hip_max_lean_rad: [f64; 2],
     /// Time constant of the upper body's return upright once the feet hold the ZMP again, s
     /// (default: 0.4: the return moves the CMP back, which the feet then take).
+    #[default(0.4)]
     pub hip_return_secs: f64,
     /// The walker solves (state, step planning, DCM, IK, feed-forward) on one physics step in
     /// this many, as a robot's balance layer runs below its joint servo rate; the joint PD
@@ -335,6 +380,7 @@ pub struct WalkOptions {
     /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`])
     /// (default: 1, every step; at 2 the walker costs a third less: measurements in
     /// BENCHMARKS.md, "Walker option choices").
+    #[default(1)]
     pub plan_every_ticks: u64,
     /// Blind walking on uneven ground: each landed sole's height is the ground under that foot
     /// (unless within [`GROUND_DEADBAND_M`] of the start, flat ground), a swinging foot goes
@@ -343,10 +389,12 @@ pub struct WalkOptions {
     /// start (a start on raised ground) instead of from z = 0 (default: false: a foot that lands tilted after a kick
     /// reads as uneven ground; on flat ground with the default spec's kicks, 1 of 6 randomized
     /// `walk.toml` episodes passed with it against 6 of 6 without).
+    #[default(false)]
     pub follow_ground: bool,
     /// Fraction of the ground's slope between the planted feet (along the heading) that the
     /// soles are pitched by, so that ankles follow a slope instead of standing on a heel or a
     /// toe (default: 0.0, off: on rough ground the two feet's heights are no slope).
+    #[default(0.0)]
     pub ground_pitch_gain: f64,
     /// How far below the stance foot's ground a swinging foot reaches at touchdown, m: steps
     /// down a slope or a step land instead of ending in the air (default: 0.0). Not while the
@@ -354,6 +402,7 @@ pub struct WalkOptions {
     /// [`GROUND_RISE_M`]): there the reach lands every step into the up slope, a leg pushed
     /// down at touchdown brakes the climb, and the walker climbed a 5° ramp at 0.22 m/s against
     /// 0.38 commanded, and fell under kicks it survives on the flat.
+    #[default(0.0)]
     pub step_down_reach: f64,
     /// Fraction of the ground's slope along the path by which a swinging foot's landing height
     /// is carried on past the stance foot's ground (`follow_ground`): the ground ahead is taken
@@ -364,6 +413,7 @@ pub struct WalkOptions {
     /// ground (default: 0.0, off).
     /// Blind on a ramp without it, every step lands a step's rise early going up (the foot
     /// pushed into the ground) and late going down.
+    #[default(0.0)]
     pub ground_slope_gain: f64,
     /// With `follow_ground`, the ground under the stance foot is read again in mid stance
     /// ([`GROUND_READ_PHASE`]), once its sole is level and at rest, replacing the height its
@@ -374,6 +424,7 @@ pub struct WalkOptions {
     /// stance the estimate is the loaded sole's. On `walk_steps.toml` (a 3-cm step) it turns a
     /// nominal pass into a fall: there a foot lands on the step's edge either way, and whether
     /// the walker survives it depends on where the feet happen to land.
+    #[default(false)]
     pub stance_ground_read: bool,
     /// With `follow_ground`, a foot whose sole is still coming down at its planned touchdown
     /// (faster than [`GROUND_READ_MAX_SPEED_MPS`]: in the air) gives no ground read then: its
@@ -387,12 +438,14 @@ pub struct WalkOptions {
     /// 60/67/64 without (BENCHMARKS.md). A sole that is still, blocked early on higher
     /// ground (an up ramp), is read at the touchdown as before: waiting for it to rest level
     /// for [`GROUND_READ_STILL_SECS`] lost the up ramp (38/100).
+    #[default(false)]
     pub landing_read_at_rest: bool,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
     /// fore-aft gap, at most `max_step_adjust` (default: 0.0, from where it landed; 1: from the
     /// aim). A swing foot that lands past its spot (at 0.35-s steps the shipped humanoid's land
     /// 5.5 cm long) otherwise lengthens every step by that much: 0.42 m/s for 0.3 commanded.
+    #[default(0.0)]
     pub progress_hold_gain: f64,
     /// Steered walking (a `/cmd_vel` target or a schedule's entry, [`steer`]): each step's
     /// landing is moved toward where the steering target, integrated over time, puts the feet's
@@ -407,6 +460,7 @@ pub struct WalkOptions {
     /// 0.46 m with it). A constant command (`vx`, `vy`, `yaw_rate` without a target) is not
     /// held: on the G1's randomized walk (`walk_g1.toml`, pushes) holding it lost episodes
     /// (8/40 against 13/40). Measurements in BENCHMARKS.md, "Walker velocity tracking".
+    #[default(0.35)]
     pub command_hold_gain: f64,
     /// Touch-down from contact ([`contact`]): whether a swing foot has landed is read from the
     /// robot's foot sensors (touch or force) or, without them, from its sole's motion, and the
@@ -425,76 +479,14 @@ pub struct WalkOptions {
     /// `walk_rough.toml` 6.0 m against 5.67 m); randomized with kicks it does worse than
     /// without (20 episodes, seed 0: slope 6/20 against 14/20, rough 15/20 against 17/20;
     /// BENCHMARKS.md), so no shipped scenario turns it on.
+    #[default(false)]
     pub touchdown_from_contact: bool,
     /// How far below its planned landing height a late swing foot goes on looking for the
     /// ground (`touchdown_from_contact`), m; past it the step ends in the air as planned
     /// (default: 0.04: a 3-cm step down and a centimetre more, or three steps' drop down a 5°
     /// ramp).
+    #[default(0.04)]
     pub touchdown_reach_m: f64,
-}
-
-impl Default for WalkOptions {
-    fn default() -> Self {
-        WalkOptions {
-            vx: 0.0,
-            vy: 0.0,
-            yaw_rate: 0.0,
-            commands: Vec::new(),
-            max_accel_mps2: 0.5,
-            max_yaw_accel_radps2: 1.0,
-            step_period: 0.6,
-            double_support: 0.2,
-            step_width: 0.18,
-            zmp_inward: 0.0,
-            line_hold_gain: 0.0,
-            line_hold_step: 0.03,
-            com_height: 0.62,
-            foot_clearance: 0.05,
-            max_step_length: 0.2,
-            max_step_lateral: 0.1,
-            max_step_yaw: 0.3,
-            settle_secs: 1.0,
-            start_double_support: 0.3,
-            preview_horizon: 1.6,
-            preview_qe: 1.0,
-            preview_r: 1e-6,
-            dcm_zmp_gain: 2.0,
-            dcm_com_gain: 0.3,
-            step_adjust_gain: 1.0,
-            max_step_adjust: 0.3,
-            step_adjust_ankle: 1.0,
-            min_single_support_secs: 0.25,
-            recovery_swing_secs: 0.35,
-            recovery_double_support_secs: 0.05,
-            recovery_margin: 0.02,
-            double_support_ankle: true,
-            tilt_gain: 0.5,
-            tilt_rate_gain: 0.05,
-            leg_saturation_error: 0.1,
-            saturation_error: 0.25,
-            damping_ratio: 1.0,
-            swing_stiffness: 0.3,
-            ik_iterations: 1,
-            bodies: BodyNames::default(),
-            recovery_reach_fraction: 0.6,
-            step_adjust_until: 0.7,
-            swing_from_measured_pelvis: true,
-            hip_gain: 0.0,
-            hip_max_lean_rad: [0.15, 0.4],
-            hip_return_secs: 0.4,
-            plan_every_ticks: 1,
-            follow_ground: false,
-            ground_pitch_gain: 0.0,
-            step_down_reach: 0.0,
-            ground_slope_gain: 0.0,
-            stance_ground_read: false,
-            landing_read_at_rest: false,
-            progress_hold_gain: 0.0,
-            command_hold_gain: 0.35,
-            touchdown_from_contact: false,
-            touchdown_reach_m: 0.04,
-        }
-    }
 }
 
 impl WalkOptions {
