@@ -1,7 +1,7 @@
 //! The walking controller on the shipped humanoid: walking, standing under pushes, turning,
 //! and the regressions its metrics and checks must catch.
 
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use twin_core::engine::{Check, Disturbance, Flow, Observer, StepView};
 use twin_core::scenario::{Push, Scenario, Threshold};
 use twin_core::sim::{self, SimOptions};
@@ -1186,13 +1186,22 @@ impl Observer for FootContacts {
 fn step_down_touchdowns(
     edit: impl FnOnce(&mut WalkOptions),
 ) -> (GaitSummary, Vec<twin_core::walk::TouchdownEvent>, Vec<(f64, usize)>) {
+    step_down_touchdowns_of(&humanoid(), edit)
+}
+
+/// [`step_down_touchdowns`] for the robot file `urdf`.
+fn step_down_touchdowns_of(
+    urdf: &Path,
+    edit: impl FnOnce(&mut WalkOptions),
+) -> (GaitSummary, Vec<twin_core::walk::TouchdownEvent>, Vec<(f64, usize)>) {
     let mut scenario = Scenario::load(scenarios().join("walk_steps.toml")).unwrap();
     edit(&mut scenario.walk);
     scenario.duration_secs = 8.0;
     let terrain = scenario.terrain.as_mut().unwrap();
     terrain.start_m = Some(0.0);
     terrain.depth_m = Some(1.5);
-    let robot = scenario.robot(&humanoid()).unwrap();
+    scenario.model = Some(urdf.to_path_buf());
+    let robot = scenario.robot(urdf).unwrap();
     let mut walker = Walker::new(&robot.model, scenario.walk.clone()).unwrap();
     let mut check = scenario.check(&robot.model).unwrap();
     let mut contacts = FootContacts::new(&robot.model, walker.feet().0);
@@ -1245,6 +1254,60 @@ fn swing_ends_at_contact_on_a_step_down() {
     let down = *before.iter().find(past_edge).expect("a landing past the step down");
     println!("planned touch-down: {down:?}");
     assert!(down.sole_world_m[2] > 0.01, "at the planned time the foot was on the ground already: {down:?}");
+}
+
+/// Touch-down from contact read from foot sensors: the humanoid with a Gazebo `contact` sensor
+/// on each foot link (a MuJoCo `touch` sensor over the sole after conversion) on the step down
+/// of [`step_down_touchdowns`]. The walker finds a touch sensor on each foot (not the sole's
+/// motion), and the foot past the edge lands, by its sensor's load, within 15 ms after MuJoCo's
+/// first contact of that foot (measured 2 ms: the load crosses 10 % of the weight as the heel
+/// or toe strikes; the sole's motion needs the sole rolled flat and still: 40 ms in the blind
+/// test), at the floor's height within 1 cm (measured 3.7 mm: the sole is still rolling flat
+/// when it counts as landed).
+#[test]
+fn swing_ends_at_a_foot_sensors_load_on_a_step_down() {
+    use twin_core::walk::contact::{ContactSensing, FootSensor};
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = dir.path().join("humanoid_touch.urdf");
+    let text = std::fs::read_to_string(humanoid()).unwrap();
+    let sensors: String = ["left", "right"]
+        .iter()
+        .map(|side| {
+            format!(
+                "  <gazebo reference=\"{side}_foot_link\">\n    <sensor name=\"{side}_foot_contact\" type=\"contact\">\n      \
+                 <update_rate>500</update_rate>\n      <contact><collision>{side}_foot_link_collision</collision></contact>\n    \
+                 </sensor>\n  </gazebo>\n"
+            )
+        })
+        .collect();
+    assert!(text.contains("</robot>"));
+    std::fs::write(&urdf, text.replacen("</robot>", &format!("{sensors}</robot>"), 1)).unwrap();
+    let robot = twin_core::robot::Robot::load(&urdf).unwrap();
+    let walker = Walker::new(&robot.model, WalkOptions::default()).unwrap();
+    let sensing = ContactSensing::new(&robot.model, walker.feet().0, 350.0);
+    for foot in &sensing.feet {
+        assert!(matches!(foot, FootSensor::Touch(a) if a.len() == 1), "{:?}", sensing.feet);
+    }
+
+    let (summary, events, starts) = step_down_touchdowns_of(&urdf, |w| w.touchdown_from_contact = true);
+    println!("{summary}");
+    assert!(!summary.fell && summary.forward_m > 2.0, "{summary}");
+    let past_edge = |e: &&twin_core::walk::TouchdownEvent| e.sole_world_m[0] > 1.5 + 0.15;
+    let down = *events.iter().find(past_edge).expect("a landing past the step down");
+    let contact = starts
+        .iter()
+        .filter(|&&(t, leg)| leg == down.leg && t <= down.time_secs + 0.002)
+        .map(|&(t, _)| t)
+        .next_back()
+        .expect("a contact start of that foot");
+    println!("step down, by the foot sensor: {down:?}; MuJoCo contact start {contact:.3} s");
+    assert!(down.from_contact && down.time_secs > down.planned_secs, "{down:?}");
+    assert!(
+        (0.0..=0.015).contains(&(down.time_secs - contact)),
+        "landed {:.3} s after contact",
+        down.time_secs - contact
+    );
+    assert!(down.sole_world_m[2].abs() <= 0.01, "landed at z = {:.4} m on ground at 0", down.sole_world_m[2]);
 }
 
 /// The landing ground read once a descending sole stops (`landing_read_at_rest`), blind, on
