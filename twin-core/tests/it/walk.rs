@@ -1211,6 +1211,26 @@ fn step_down_touchdowns_of(
     (check.metrics.summary(), walker.state().touchdowns.clone(), contacts.starts)
 }
 
+/// The walk of [`step_down_touchdowns`] went on past the step (no fall, > 2 m); returns the
+/// first landing wholly past the down edge (x = 1.5 m, plus the sole's half length and a
+/// margin) and the start of MuJoCo's last contact of that foot before it.
+fn landing_past_the_edge(
+    summary: &GaitSummary,
+    events: &[twin_core::walk::TouchdownEvent],
+    starts: &[(f64, usize)],
+) -> (twin_core::walk::TouchdownEvent, f64) {
+    println!("{summary}");
+    assert!(!summary.fell && summary.forward_m > 2.0, "{summary}");
+    let down = *events.iter().find(|e| e.sole_world_m[0] > 1.5 + 0.15).expect("a landing past the step down");
+    let contact = starts
+        .iter()
+        .filter(|&&(t, leg)| leg == down.leg && t <= down.time_secs + 0.002)
+        .map(|&(t, _)| t)
+        .next_back()
+        .expect("a contact start of that foot");
+    (down, contact)
+}
+
 /// Touch-down from contact, blind, on a step down (3 cm at x = 1.5 m, [`step_down_touchdowns`]):
 /// the first foot to land past the edge is late (the ground 3 cm below the platform its swing
 /// was planned on); its step ends on time and its target goes on down through the next double
@@ -1225,17 +1245,8 @@ fn step_down_touchdowns_of(
 #[test]
 fn swing_ends_at_contact_on_a_step_down() {
     let (summary, events, starts) = step_down_touchdowns(|w| w.touchdown_from_contact = true);
-    println!("{summary}");
-    assert!(!summary.fell && summary.forward_m > 2.0, "{summary}");
-    // The sole's half length and a margin: a foot wholly past the down edge (x = 1.5 m).
     let past_edge = |e: &&twin_core::walk::TouchdownEvent| e.sole_world_m[0] > 1.5 + 0.15;
-    let down = *events.iter().find(past_edge).expect("a landing past the step down");
-    let contact = starts
-        .iter()
-        .filter(|&&(t, leg)| leg == down.leg && t <= down.time_secs + 0.002)
-        .map(|&(t, _)| t)
-        .next_back()
-        .expect("a contact start of that foot");
+    let (down, contact) = landing_past_the_edge(&summary, &events, &starts);
     println!("step down: {down:?}; MuJoCo contact start {contact:.3} s");
     assert!(down.from_contact, "{down:?}");
     assert!(down.time_secs > down.planned_secs, "a late landing: {down:?}");
@@ -1290,16 +1301,7 @@ fn swing_ends_at_a_foot_sensors_load_on_a_step_down() {
     }
 
     let (summary, events, starts) = step_down_touchdowns_of(&urdf, |w| w.touchdown_from_contact = true);
-    println!("{summary}");
-    assert!(!summary.fell && summary.forward_m > 2.0, "{summary}");
-    let past_edge = |e: &&twin_core::walk::TouchdownEvent| e.sole_world_m[0] > 1.5 + 0.15;
-    let down = *events.iter().find(past_edge).expect("a landing past the step down");
-    let contact = starts
-        .iter()
-        .filter(|&&(t, leg)| leg == down.leg && t <= down.time_secs + 0.002)
-        .map(|&(t, _)| t)
-        .next_back()
-        .expect("a contact start of that foot");
+    let (down, contact) = landing_past_the_edge(&summary, &events, &starts);
     println!("step down, by the foot sensor: {down:?}; MuJoCo contact start {contact:.3} s");
     assert!(down.from_contact && down.time_secs > down.planned_secs, "{down:?}");
     assert!(
