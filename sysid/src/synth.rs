@@ -239,6 +239,8 @@ fn simulate_impl(
     let joint_dofs: Vec<usize> = robot.joints.iter().map(|j| j.dof).collect();
     let free: Vec<usize> = (0..nv).filter(|d| !joint_dofs.contains(d)).collect();
     let mut qacc = vec![0.0; nv];
+    // Per-step buffers: the mass matrix and the generalised forces besides the command.
+    let (mut mass, mut other) = (Vec::with_capacity(nv * nv), vec![0.0; nv]);
 
     let steps = (opts.duration_secs * opts.rate_hz).round() as usize;
     let names: Vec<String> = robot.joints.iter().map(|j| j.name.clone()).collect();
@@ -296,9 +298,10 @@ fn simulate_impl(
             base_log.orientation_wxyz.push(q.map(|x| x / n));
         }
         // Generalised forces besides the command: bias less damping and the known wrenches.
-        let qvel = data.qvel();
-        let other: Vec<f64> =
-            (0..nv).map(|d| data.qfrc_bias()[d] + model.dof_damping()[d] * qvel[d] - qfrc_ext[d]).collect();
+        let (qvel, bias, damping) = (data.qvel(), data.qfrc_bias(), model.dof_damping());
+        for (d, o) in other.iter_mut().enumerate() {
+            *o = bias[d] + damping[d] * qvel[d] - qfrc_ext[d];
+        }
         for (j, joint) in robot.joints.iter().enumerate() {
             let (qr, qdr, qddr) = reference(j, t);
             let (q, qd) = (data.qpos()[joint.qpos_adr], data.qvel()[joint.dof]);
@@ -306,7 +309,7 @@ fn simulate_impl(
             p[j] = (q / resolution).round() * resolution;
             v[j] = qd + opts.velocity_noise * rng.sample::<f64, _>(StandardNormal);
         }
-        let mass = data.full_mass_matrix();
+        data.full_mass_matrix_into(&mut mass);
         if !free.is_empty() {
             // M_ff·a_f = −(M_fj·a_j + other_f): no command acts on the free DOFs.
             let a = nalgebra::DMatrix::from_fn(free.len(), free.len(), |r, c| mass[free[r] * nv + free[c]]);

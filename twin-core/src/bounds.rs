@@ -1,6 +1,7 @@
-//! Range checks of option values: the one place that says what a "positive" and a
-//! "non-negative" option value is (a finite number above, or at least, 0) and how a value out
-//! of range is reported, so that every options struct's `validate` reports it alike.
+//! Range checks of option values: the one place that says what a "positive", a "non-negative"
+//! and a "fraction" option value is (a finite number above, or at least, 0; one in [0, 1]) and
+//! how a value out of range is reported, so that every options struct's `validate` reports it
+//! alike.
 //!
 //! An options struct lists its keys with their values (an `Option<f64>` for a key that may be
 //! absent: absent passes); each check returns `Err((key, message))` for the first value out of
@@ -23,6 +24,14 @@ pub fn positive<V: Into<Option<f64>>>(values: impl IntoIterator<Item = (&'static
 /// `(key, "must be a non-negative number (got …)")` for the first that is not.
 pub fn non_negative<V: Into<Option<f64>>>(values: impl IntoIterator<Item = (&'static str, V)>) -> Result<(), Invalid> {
     first_outside(values, |v| v >= 0.0, "a non-negative number")
+}
+
+/// Each value given is a number in [0, 1] (a gain or a share of a whole).
+///
+/// # Errors
+/// `(key, "must be in [0, 1] (got …)")` for the first that is not.
+pub fn fraction<V: Into<Option<f64>>>(values: impl IntoIterator<Item = (&'static str, V)>) -> Result<(), Invalid> {
+    first_outside(values, |v| (0.0..=1.0).contains(&v), "in [0, 1]")
 }
 
 fn first_outside<V: Into<Option<f64>>>(
@@ -60,5 +69,8 @@ mod tests {
             non_negative([("a", Some(-0.5))]),
             Err(("a", "must be a non-negative number (got -0.5)".to_string()))
         );
+        assert_eq!(fraction([("a", 0.0), ("b", 1.0)]), Ok(()));
+        assert_eq!(fraction([("a", 0.5), ("b", 1.5)]), Err(("b", "must be in [0, 1] (got 1.5)".to_string())));
+        assert_eq!(fraction([("a", f64::NAN)]), Err(("a", "must be in [0, 1] (got NaN)".to_string())));
     }
 }

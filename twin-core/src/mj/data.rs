@@ -275,13 +275,20 @@ impl Data {
     /// The joint-space inertia matrix `M` (`nv × nv`, row-major, dense) of the last forward
     /// pass (`mj_fullM`).
     pub fn full_mass_matrix(&self) -> Vec<f64> {
+        let mut m = Vec::new();
+        self.full_mass_matrix_into(&mut m);
+        m
+    }
+
+    /// [`Data::full_mass_matrix`] into `m` (resized to `nv × nv`), for a loop that asks every
+    /// step without allocating.
+    pub fn full_mass_matrix_into(&self, m: &mut Vec<f64>) {
         let nv = self.model.nv();
-        let mut m = vec![0.0; nv * nv];
+        m.resize(nv * nv, 0.0);
         // SAFETY: `m` has the nv·nv entries mj_fullM writes; it reads d->qM, which the forward
         // pass filled (mj_makeData zero-fills it before); model and data are a live pair, only
         // read; mj_fullM never raises.
         unsafe { sys::mj_fullM(self.model.as_ptr(), self.ptr.as_ptr(), m.as_mut_ptr()) };
-        m
     }
 
     /// Force and torque of active contact `i` (`mj_contactForce`), in the world frame, acting on

@@ -562,12 +562,10 @@ impl WalkOptions {
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
         }
-        if !(0.0..=1.0).contains(&self.step_adjust_until) {
-            return Err(("step_adjust_until", format!("must be in [0, 1] (got {})", self.step_adjust_until)));
-        }
-        if !(0.0..=1.0).contains(&self.step_adjust_ankle) {
-            return Err(("step_adjust_ankle", format!("must be in [0, 1] (got {})", self.step_adjust_ankle)));
-        }
+        crate::bounds::fraction([
+            ("step_adjust_until", self.step_adjust_until),
+            ("step_adjust_ankle", self.step_adjust_ankle),
+        ])?;
         if !(0.0..0.9).contains(&self.double_support) {
             return Err(("double_support", format!("must be in [0, 0.9) (got {})", self.double_support)));
         }
@@ -613,12 +611,10 @@ impl WalkOptions {
                 format!("must be in 1..={MAX_PLAN_EVERY_TICKS} (got {})", self.plan_every_ticks),
             ));
         }
-        if !(0.0..=1.0).contains(&self.progress_hold_gain) {
-            return Err(("progress_hold_gain", format!("must be in [0, 1] (got {})", self.progress_hold_gain)));
-        }
-        if !(0.0..=1.0).contains(&self.command_hold_gain) {
-            return Err(("command_hold_gain", format!("must be in [0, 1] (got {})", self.command_hold_gain)));
-        }
+        crate::bounds::fraction([
+            ("progress_hold_gain", self.progress_hold_gain),
+            ("command_hold_gain", self.command_hold_gain),
+        ])?;
         self.validate_hip()
     }
 
