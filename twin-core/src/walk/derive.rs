@@ -110,6 +110,23 @@ pub const DERIVED: &[&str] = &[
 const CROUCH_STEPS: usize = 8;
 /// One step of the crouch search, as a fraction of the leg length.
 const CROUCH_STEP: f64 = 0.02;
+/// The least knee bend the walking crouch keeps in the gait's extreme poses
+/// ([`Walker::least_knee_bend_rad`]), rad. Near the straight knee a leg's length stops
+/// following its knee (it changes by `sin` of the bend per radian): the joint loops lose hold
+/// of the body's height and the knee runs into its stop. The shipped humanoid keeps 0.79 rad
+/// and the G1 0.71 at their crouches; Romeo, at the highest crouch that reaches its steps
+/// (0.68 m), 0.28, and fell at 3.3 s.
+pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
+/// The legs' static load in the crouch ([`Walker::crouch_load`]: the largest part of a leg
+/// actuator's torque spent holding the robot on both feet) above which the swing foot is
+/// lifted higher, in proportion: a stance leg carrying the whole weight at more than twice
+/// this sags and saturates in single support, its hip and knee lag, the swing foot (placed
+/// from the measured pelvis) sinks and pitches toe-down, and its toe strikes the ground
+/// short of the landing spot. The shipped humanoid's legs are loaded 0.12, the G1's 0.16;
+/// Romeo's 0.32 at its crouch. Fitted on Romeo, the one robot of example-robot-data above it
+/// (BENCHMARKS.md, "Romeo walking"): it walks with a clearance of 0.08 to 0.10 m and falls
+/// with 0.07 and 0.11.
+pub const SAG_FREE_LOAD: f64 = 0.2;
 
 impl WalkOptions {
     /// These options for `model`: each of [`DERIVED`] that `given` does not name scaled from
@@ -147,17 +164,38 @@ impl WalkOptions {
         let crouched = d.com_height * quantize(p.com_height_m / REFERENCE_COM_HEIGHT_M);
         set("com_height", &mut o.com_height, crouched);
         if !given("com_height") {
-            // The crouch from the legs' kinematics: lower until the longest step is reachable.
+            // The crouch from the legs' kinematics: lower until the longest step is reachable
+            // with the knees bent by MIN_KNEE_BEND_RAD; if no crouch bends them that far, the
+            // reachable one that bends them most.
+            let mut most_bent: Option<(f64, f64)> = None;
             for k in 0..=CROUCH_STEPS {
                 o.com_height = crouched - k as f64 * CROUCH_STEP * p.leg_length_m;
                 match Walker::new(model, o.clone()) {
-                    Ok(_) => break,
-                    // Lower only while the steps are out of reach (a lower crouch needs more
-                    // torque, not less, of actuators too weak to hold it).
+                    Ok(walker) => {
+                        let bend = walker.least_knee_bend_rad();
+                        if bend >= MIN_KNEE_BEND_RAD {
+                            most_bent = None;
+                            break;
+                        }
+                        if most_bent.is_none_or(|(_, b)| bend > b) {
+                            most_bent = Some((o.com_height, bend));
+                        }
+                    }
+                    // Lower only while the steps are out of reach or the knees too straight (a
+                    // lower crouch needs more torque, not less, of actuators too weak to hold it).
                     Err(Error::WalkReach { .. }) if k < CROUCH_STEPS => continue,
-                    Err(e) => return Err(e),
+                    Err(e) if most_bent.is_none() => return Err(e),
+                    Err(_) => break,
                 }
             }
+            if let Some((height, _)) = most_bent {
+                o.com_height = height;
+            }
+        }
+        if !given("foot_clearance") {
+            // Legs loaded past SAG_FREE_LOAD sag in single support: lift the swing foot more.
+            let load = Walker::new(model, o.clone())?.crouch_load();
+            o.foot_clearance *= (load / SAG_FREE_LOAD).max(1.0);
         }
         Ok(o)
     }

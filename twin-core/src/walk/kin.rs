@@ -894,6 +894,13 @@ impl LegIk {
         }
     }
 
+    /// How far the knee is bent in the chain's angles `q`, rad: its angle from zero (the
+    /// straight leg of a URDF) toward its larger range side, the way [`LegIk::bend_knee`] bends it.
+    pub fn knee_bend_rad(&self, q: &[f64]) -> f64 {
+        let (k, sign) = self.knee;
+        q.get(k).map_or(0.0, |v| v * sign)
+    }
+
     /// Number of joints.
     #[inline]
     pub fn len(&self) -> usize {

@@ -1295,6 +1295,30 @@ impl Walker {
     /// times its gear). Walking needs more (a whole leg's share in single support, the ankles'
     /// ZMP work); a robot that can't hold the crouch falls before its first step.
     fn check_strength(&self, model: &Model) -> Result<()> {
+        for (joint, needed, [lo, hi]) in self.crouch_torques() {
+            if needed < lo - 1e-9 || needed > hi + 1e-9 {
+                return Err(Error::Walk {
+                    message: format!(
+                        "the actuator of joint \"{}\" gives {:.1} N·m but holding the robot's {:.1} kg \
+                         on both feet with the CoM at com_height {} m takes {:.1} N·m: raise com_height \
+                         (a straighter leg needs less), or give the joint a stronger actuator (its \
+                         effort limit in the URDF)",
+                        model.name(ObjType::Joint, joint),
+                        if needed > 0.0 { hi } else { lo },
+                        self.tree.total_mass_kg,
+                        self.options.com_height,
+                        needed
+                    ),
+                });
+            }
+        }
+        Ok(())
+    }
+
+    /// Each leg joint's static torque holding the robot in the walking crouch (as
+    /// [`Walker::check_strength`] poses it), N·m, with what its actuator gives, N·m:
+    /// (joint, torque, [least, most]).
+    fn crouch_torques(&self) -> Vec<(usize, f64, [f64; 2])> {
         let HomeCrouch { qpos: home, frames, pelvis_pos, pelvis_z, .. } = self.home_crouch();
         let mut q = home.clone();
         for (leg, ik) in self.ik.iter().enumerate() {
@@ -1312,27 +1336,25 @@ impl Walker {
         let weight = -self.gravity * self.tree.total_mass_kg;
         let forces: Vec<(usize, Vector3<f64>, Vector3<f64>)> =
             (0..2).map(|leg| (self.body.legs[leg].foot, self.sole_world(&crouched, leg), weight / 2.0)).collect();
-        for l in self.loops.iter().filter(|l| l.leg.is_some()) {
-            let needed = self.tree.static_torque(&crouched, l.joint, self.gravity, &forces);
-            let (a, b) = (l.limits[0] * l.gear, l.limits[1] * l.gear);
-            let (lo, hi) = (a.min(b), a.max(b));
-            if needed < lo - 1e-9 || needed > hi + 1e-9 {
-                return Err(Error::Walk {
-                    message: format!(
-                        "the actuator of joint \"{}\" gives {:.1} N·m but holding the robot's {:.1} kg \
-                         on both feet with the CoM at com_height {} m takes {:.1} N·m: raise com_height \
-                         (a straighter leg needs less), or give the joint a stronger actuator (its \
-                         effort limit in the URDF)",
-                        model.name(ObjType::Joint, l.joint),
-                        if needed > 0.0 { hi } else { lo },
-                        self.tree.total_mass_kg,
-                        self.options.com_height,
-                        needed
-                    ),
-                });
-            }
-        }
-        Ok(())
+        self.loops
+            .iter()
+            .filter(|l| l.leg.is_some())
+            .map(|l| {
+                let needed = self.tree.static_torque(&crouched, l.joint, self.gravity, &forces);
+                let (a, b) = (l.limits[0] * l.gear, l.limits[1] * l.gear);
+                (l.joint, needed, [a.min(b), a.max(b)])
+            })
+            .collect()
+    }
+
+    /// The legs' static load in the walking crouch: the largest part of its actuator's torque
+    /// that a leg joint spends holding the robot on both feet ([`Walker::crouch_torques`]; at
+    /// most 1 once the walker is built).
+    pub fn crouch_load(&self) -> f64 {
+        self.crouch_torques()
+            .iter()
+            .map(|(_, needed, [lo, hi])| if *needed > 0.0 { needed / hi.max(1e-9) } else { needed / lo.min(-1e-9) })
+            .fold(0.0, f64::max)
     }
 
     /// The home pose and the pelvis height that puts the CoM at `com_height` (what the
@@ -1366,40 +1388,59 @@ impl Walker {
         (q, error)
     }
 
-    /// Refuses steps the legs can't reach: with the CoM at `com_height` midway between a
-    /// front and a back foot `max_step_length` apart (and `step_width` + `max_step_lateral`
-    /// wide), both legs' IK must converge.
-    fn check_reach(&self) -> Result<()> {
+    /// The gait's extreme poses: with the CoM at `com_height` midway between a front and a back
+    /// foot `max_step_length` apart (and `step_width` + `max_step_lateral` wide), soles flat in
+    /// their home orientation, each leg's IK solution (within the joint ranges) and its
+    /// remaining error: (leg, angles, error), each leg in front in turn.
+    fn extreme_poses(&self) -> Vec<(usize, Vec<f64>, kin::IkResult)> {
         let HomeCrouch { qpos: home, frames, com, pelvis_pos, pelvis_z } = self.home_crouch();
         let sole_z = self.sole_world(&frames, 0).z;
         let o = &self.options;
         let half_len = o.max_step_length / 2.0;
         let half_width = (o.step_width + o.max_step_lateral) / 2.0;
         let offset_x = pelvis_pos.x - com.x;
+        let mut poses = Vec::with_capacity(4);
         for front in 0..2 {
             for leg in 0..2 {
                 let x = if leg == front { half_len } else { -half_len };
                 let y = self.body.legs[leg].side.sign() * half_width;
                 let sole = Vector3::new(com.x + x, com.y + y, sole_z);
-                let (_, r) = self.crouched_leg(leg, &home, sole, Vector3::new(com.x + offset_x, com.y, pelvis_z));
-                if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
-                    return Err(Error::WalkReach {
-                        message: format!(
-                            "the {} leg can't reach a step of max_step_length {} m (width {} m) with the CoM at \
-                             com_height {} m: its foot stays {:.3} m and {:.3} rad from the target; shorten \
-                             max_step_length, or lower com_height",
-                            match self.body.legs[leg].side {
-                                Side::Left => "left",
-                                Side::Right => "right",
-                            },
-                            o.max_step_length,
-                            o.step_width,
-                            o.com_height,
-                            r.position_error_m,
-                            r.rotation_error_rad
-                        ),
-                    });
-                }
+                let (q, r) = self.crouched_leg(leg, &home, sole, Vector3::new(com.x + offset_x, com.y, pelvis_z));
+                poses.push((leg, q, r));
+            }
+        }
+        poses
+    }
+
+    /// The least knee bend of the gait's extreme poses ([`LegIk::knee_bend_rad`]), rad: how far
+    /// the longest step keeps the legs from the straight knee, where a leg's length stops
+    /// following its knee ([`derive`]'s crouch).
+    pub fn least_knee_bend_rad(&self) -> f64 {
+        self.extreme_poses().iter().map(|(leg, q, _)| self.ik[*leg].knee_bend_rad(q)).fold(f64::INFINITY, f64::min)
+    }
+
+    /// Refuses steps the legs can't reach: in every extreme pose of the gait
+    /// ([`Walker::extreme_poses`]) both legs' IK must converge.
+    fn check_reach(&self) -> Result<()> {
+        let o = &self.options;
+        for (leg, _, r) in self.extreme_poses() {
+            if r.position_error_m > 0.005 || r.rotation_error_rad > 0.02 {
+                return Err(Error::WalkReach {
+                    message: format!(
+                        "the {} leg can't reach a step of max_step_length {} m (width {} m) with the CoM at \
+                         com_height {} m: its foot stays {:.3} m and {:.3} rad from the target; shorten \
+                         max_step_length, or lower com_height",
+                        match self.body.legs[leg].side {
+                            Side::Left => "left",
+                            Side::Right => "right",
+                        },
+                        o.max_step_length,
+                        o.step_width,
+                        o.com_height,
+                        r.position_error_m,
+                        r.rotation_error_rad
+                    ),
+                });
             }
         }
         Ok(())
