@@ -126,7 +126,7 @@ pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
 /// Romeo's 0.32 at its crouch. Fitted on Romeo, the one robot of example-robot-data above it
 /// (BENCHMARKS.md, "Romeo walking"): it walks with a clearance of 0.08 to 0.10 m and falls
 /// with 0.07 and 0.11.
-pub const SAG_FREE_LOAD: f64 = 0.2;
+pub const SAG_FREE_LOAD: f64 = 0.22;
 
 impl WalkOptions {
     /// These options for `model`: each of [`DERIVED`] that `given` does not name scaled from
