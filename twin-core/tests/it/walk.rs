@@ -920,6 +920,39 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     assert!(s.distance_m < 0.5, "turning in place moved {} m", s.distance_m);
 }
 
+/// Example-robot-data's Romeo (40.5 kg, legs loaded 0.32 of their effort in the crouch), no
+/// robot-specific option, walks over 5 m straight at 0.2 m/s without a fall and follows
+/// `scenarios/steer.toml` (1 m forward at 0.25 m/s, 90° in place, 0.5 m to the left) within
+/// 20 % of each leg. Its derived crouch keeps the knees bent `MIN_KNEE_BEND_RAD` in the gait's
+/// extreme poses, and its swing foot is lifted by its load over `SAG_FREE_LOAD`
+/// (`walk::derive`); each is needed: at the highest crouch that reaches its steps (0.680 m,
+/// knees 0.28 rad from straight) it falls at 4.6 s, with the Froude-scaled clearance (0.06 m)
+/// at 18.8 s. (In the lab: 7.79 m in 30 s, 0.26 m/s, heading −8.6°; steer 0.94 m, 82°,
+/// 0.47 m. At 0.25 m/s straight it still falls, at 7 s.)
+#[test]
+fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
+    let romeo = example_robot("romeo_description/urdf/romeo.urdf");
+    let s = walk_with_derived_options(&romeo, 30.0, "vx = 0.2");
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
+    assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
+    assert!(s.yaw_change_rad.abs() < 0.3, "heading off by {} rad", s.yaw_change_rad);
+    assert!(s.lateral_m.abs() < 0.3, "{} m off the line", s.lateral_m);
+    // Each derived rule matters: the old crouch and the scaled clearance, given, fall.
+    for given in ["com_height = 0.6802023158286374", "foot_clearance = 0.06"] {
+        let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = 0.2\n{given}"));
+        assert!(s.fell, "{given}: walked {} m without a fall", s.forward_m);
+    }
+    let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
+    steer.model = Some(romeo.clone());
+    let summary = derived_run(steer, &romeo);
+    assert!(!summary.fell, "steered: fell at {:?}", summary.fall_time_secs);
+    let (forward, turned, lateral) = steer_legs(&summary);
+    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
+    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
+    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+}
+
 /// The G1, no robot-specific option, with the damping of its hip and waist loops capped on
 /// its 0.03-kg·m² pelvis (`Walker::cap_pelvis_damping`): it turns 90° in place within 15° and
 /// walks at 0.2 and 0.3 m/s without a fall, its feet slipping under 1 cm a stance. Without the
@@ -1333,3 +1366,4 @@ fn landing_ground_read_once_the_sole_stops() {
     println!("read at the planned touch-down: {down:?}");
     assert!(down.ground_m > 0.01, "at the planned time the foot was on the ground already: {down:?}");
 }
+
