@@ -8,10 +8,12 @@
 //! its leg length over the reference's, in steps of 5 % (so that the shipped humanoid's
 //! options are its defaults bit for bit); the step width is its hip spacing; the walking CoM
 //! height keeps the reference's crouch as a fraction of the standing CoM height, lowered
-//! further while the legs can't reach the longest step with it ([`Walker::new`]'s reach check:
-//! the crouch from the legs' kinematics). Joint gains come from the one gain rule
-//! ([`crate::control::PdHold`]) on the robot's effort limits. Options a user gives keep their
-//! values.
+//! further while the legs can't reach the longest step with it ([`Walker::new`]'s reach check)
+//! or reach it with a knee bent less than [`MIN_KNEE_BEND_RAD`] (the crouch from the legs'
+//! kinematics: [`Walker::least_knee_bend_rad`]); the swing foot's clearance rises with the
+//! legs' static load in that crouch past [`SAG_FREE_LOAD`] ([`Walker::crouch_load`]). Joint
+//! gains come from the one gain rule ([`crate::control::PdHold`]) on the robot's effort limits.
+//! Options a user gives keep their values.
 //!
 //! Where: [`crate::scenario::Scenario::fit_walk`] derives them once from the nominal model,
 //! for `twin sim --controller walk` (a scenario or the defaults; it prints what it derived),
@@ -114,8 +116,10 @@ const CROUCH_STEP: f64 = 0.02;
 /// ([`Walker::least_knee_bend_rad`]), rad. Near the straight knee a leg's length stops
 /// following its knee (it changes by `sin` of the bend per radian): the joint loops lose hold
 /// of the body's height and the knee runs into its stop. The shipped humanoid keeps 0.79 rad
-/// and the G1 0.71 at their crouches; Romeo, at the highest crouch that reaches its steps
-/// (0.68 m), 0.28, and fell at 3.3 s.
+/// and the G1 0.71 at their scaled crouches (unchanged). At the highest crouch that reaches
+/// their steps Romeo kept 0.27 (0.680 m) and fell walking at 3.3 s, Talos (motors) 0.12
+/// (0.924 m) and fell at 4.7 s; kept to 0.5 they crouch to 0.664 m (0.53 rad) and 0.887 m
+/// (0.65 rad) and walk (BENCHMARKS.md, "Romeo walking").
 pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
 /// The legs' static load in the crouch ([`Walker::crouch_load`]: the largest part of a leg
 /// actuator's torque spent holding the robot on both feet) above which the swing foot is

@@ -51,9 +51,9 @@
 //! |---|---|---|---|---|---|---|---|
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 94.0° (92.9° before `command_hold_gain`) |
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
-//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.3° (92.1°) |
+//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | `--vx 0.2`: 7.79 m, drift 0.05 m, heading −8.6° (0.22: 8.38 m; 0.25: falls at 7.6 s) | 0.26 m/s | no | 92.4° (92.3°) |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
-//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 0.5 m forward, then back: −0.57 m | – | at 4.7 s (heading −34°) | 98.8° (100.3°) |
+//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 9.34 m, drift 0.05 m, heading 4.5° (`--vx` 0.2: 7.65 m) | 0.31 m/s | no | 97.1° (98.8°) |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
 //! turns and is steered over `/cmd_vel` since the damping of its hip and waist loops is capped
@@ -64,11 +64,15 @@
 //! episode with a push under 0.15 m/s, none above 0.3 m/s. Steered by the README's `/cmd_vel`
 //! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
 //! Talos (motors) 1.14 m, 99.7° and 0.49 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
-//! Romeo falls in the forward leg (3.4 s). Without the outer loop (`command_hold_gain` 0) the
+//! Romeo, as `scenarios/steer.toml` (no ROS), 1.12 m, 92.5° and 0.51 m. Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
 //! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
-//! tracking"). What is known of the falls left:
+//! tracking"). Romeo and Talos (motors) walk since the derived crouch keeps their knees bent
+//! [`derive::MIN_KNEE_BEND_RAD`] in the gait's extreme poses (and Romeo's swing foot is lifted
+//! by its legs' load, [`derive::SAG_FREE_LOAD`]): at the highest crouch that reached their
+//! steps their knees came within 0.27 and 0.12 rad of straight, Romeo fell at 3.3 s and Talos
+//! at 4.7 s (BENCHMARKS.md, "Romeo walking"). What was known of those falls before:
 //! - Romeo: the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change

@@ -900,7 +900,7 @@ fn derived_run(mut s: Scenario, path: &std::path::Path) -> twin_core::walk::Gait
 /// pelvis, `Walker::cap_pelvis_damping`, it chattered at its hips' limits and needed the swing
 /// foot placed from the measured pelvis, `swing_from_measured_pelvis`: from the commanded one
 /// it fell at 3.4 s; now both walk, 6.64 m and 5.35 m.) Romeo (40.5 kg) turns 90° in place
-/// within 15° (in the lab: 92.3°).
+/// within 15° (in the lab: 92.4°).
 #[test]
 fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
@@ -926,9 +926,9 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
 /// 20 % of each leg. Its derived crouch keeps the knees bent `MIN_KNEE_BEND_RAD` in the gait's
 /// extreme poses, and its swing foot is lifted by its load over `SAG_FREE_LOAD`
 /// (`walk::derive`); each is needed: at the highest crouch that reaches its steps (0.680 m,
-/// knees 0.28 rad from straight) it falls at 4.6 s, with the Froude-scaled clearance (0.06 m)
-/// at 18.8 s. (In the lab: 7.79 m in 30 s, 0.26 m/s, heading −8.6°; steer 0.94 m, 82°,
-/// 0.47 m. At 0.25 m/s straight it still falls, at 7 s.)
+/// knees 0.27 rad from straight) it falls at 4.6 s, with the Froude-scaled clearance (0.06 m)
+/// at 18.8 s. (In the lab: 7.79 m in 30 s, 0.26 m/s, heading −8.6°; steer legs 1.12 m,
+/// 92.5°, 0.51 m. At 0.25 m/s straight it still falls, at 7.6 s.)
 #[test]
 fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
     let romeo = example_robot("romeo_description/urdf/romeo.urdf");
@@ -986,7 +986,8 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
 /// from one physics step to the next, the legs' torques hit their limits with alternating
 /// signs, the feet left the ground at 0.04 s and landed 3 to 6 cm from where they stood, the
 /// pelvis leant 6–11° while standing (0.185 rad at 0.94 s), and the turn fell at 4.1 s. (In
-/// the lab: upright within 0.3°, turned 98.8°; 100.3° before `command_hold_gain`.)
+/// the lab: upright within 0.3°, turned 97.1°; 98.8° before the crouch kept its knees bent
+/// `MIN_KNEE_BEND_RAD`, 100.3° before `command_hold_gain`.)
 #[test]
 fn talos_on_motors_stands_upright_and_turns_in_place() {
     use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
@@ -1366,4 +1367,3 @@ fn landing_ground_read_once_the_sole_stops() {
     println!("read at the planned touch-down: {down:?}");
     assert!(down.ground_m > 0.01, "at the planned time the foot was on the ground already: {down:?}");
 }
-
