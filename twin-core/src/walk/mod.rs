@@ -1352,7 +1352,7 @@ impl Walker {
     }
 
     /// The legs' static load in the walking crouch: the largest part of its actuator's torque
-    /// that a leg joint spends holding the robot on both feet ([`Walker::crouch_torques`]; at
+    /// that a leg joint spends holding the robot on both feet (as the strength check poses it; at
     /// most 1 once the walker is built).
     pub fn crouch_load(&self) -> f64 {
         self.crouch_torques()
@@ -1418,7 +1418,7 @@ impl Walker {
 
     /// The least knee bend of the gait's extreme poses ([`LegIk::knee_bend_rad`]), rad: how far
     /// the longest step keeps the legs from the straight knee, where a leg's length stops
-    /// following its knee ([`derive`]'s crouch).
+    /// following its knee (the crouch of [`derive`](mod@derive)).
     pub fn least_knee_bend_rad(&self) -> f64 {
         self.extreme_poses().iter().map(|(leg, q, _)| self.ik[*leg].knee_bend_rad(q)).fold(f64::INFINITY, f64::min)
     }
