@@ -63,8 +63,8 @@
 //! (`scenarios/walk_g1.toml`, default spec, 100 episodes) it passes 28 % (BENCHMARKS.md): every
 //! episode with a push under 0.15 m/s, none above 0.3 m/s. Steered by the README's `/cmd_vel`
 //! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
-//! Talos (motors) 1.14 m, 99.7° and 0.49 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
-//! Romeo (`steer.toml`) 1.12 m, 92.5°, 0.51 m. Without the outer loop (`command_hold_gain` 0) the
+//! Talos (motors) 1.13 m, 98.1° and 0.50 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
+//! Romeo 1.10 m, 92.5° and 0.51 m. Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
 //! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
