@@ -123,13 +123,14 @@ const CROUCH_STEP: f64 = 0.02;
 pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
 /// The legs' static load in the crouch ([`Walker::crouch_load`]: the largest part of a leg
 /// actuator's torque spent holding the robot on both feet) above which the swing foot is
-/// lifted higher, in proportion: a stance leg carrying the whole weight at more than twice
-/// this sags and saturates in single support, its hip and knee lag, the swing foot (placed
-/// from the measured pelvis) sinks and pitches toe-down, and its toe strikes the ground
-/// short of the landing spot. The shipped humanoid's legs are loaded 0.12, the G1's 0.16;
-/// Romeo's 0.32 at its crouch. Fitted on Romeo, the one robot of example-robot-data above it
-/// (BENCHMARKS.md, "Romeo walking"): it walks with a clearance of 0.08 to 0.10 m and falls
-/// with 0.07 and 0.11.
+/// lifted higher, in proportion. In single support a stance leg carries twice that load; on
+/// Romeo (0.32) its hip and knee saturate, the swing foot (placed from the measured pelvis)
+/// lags pitched toe-down and its toe strikes the ground short of the landing spot (a
+/// mechanism the joint log suggests, not measured as such). The shipped humanoid's legs are
+/// loaded 0.12, the G1's 0.16, Talos's (motors) 0.21 at their crouches: unchanged. Fitted on
+/// Romeo, the one robot above it (BENCHMARKS.md, "Romeo walking"): at its crouch it walks at
+/// 0.2 and 0.22 m/s and follows `steer.toml` with a clearance of 0.08 to 0.09 m (derived:
+/// 0.087); with 0.075 it falls at 0.22 m/s, with 0.0955 in `steer.toml`.
 pub const SAG_FREE_LOAD: f64 = 0.22;
 
 impl WalkOptions {
