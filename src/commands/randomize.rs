@@ -306,8 +306,11 @@ fn run_one(
         duration_secs: duration,
         fall_height_fraction: args.fall_height_fraction,
         fall_tilt_rad: args.fall_tilt,
-        // An external controller comes with the scenario (below).
-        controller: if external { "pd-hold".into() } else { controller.clone() },
+        // An external controller comes with the scenario, the walker with the options derived
+        // for this robot (below): the batch starts on pd-hold, which they replace, so that no
+        // walker is built on its default options (the shipped humanoid's steps, which another
+        // robot's legs may not reach).
+        controller: if external || controller == "walk" { "pd-hold".into() } else { controller.clone() },
     };
     if external && scenario.is_none() {
         anyhow::bail!("--controller ros needs --scenario FILE with a [ros] table (the command that starts your node)");

@@ -163,3 +163,40 @@ fn sim_topics_accepts_the_controllers_topics() {
     let (ok, _, err) = run(&[&args[..], &["/walk/nope"]].concat());
     assert!(!ok && err.contains("/walk/nope") && err.contains("/walk/com"), "{err}");
 }
+
+/// `twin randomize` on a robot whose legs can't reach the shipped humanoid's steps: the batch's
+/// walker is built on the options derived for this robot, never on the defaults. Romeo (from
+/// example-robot-data) was refused before its first episode — "the left leg can't reach a step
+/// of max_step_length 0.2 m" — by a check of the default walker, though `twin sim` walks it.
+/// Each episode walks here: steps counted from its feet's landings, the CoM carried forward.
+#[test]
+fn randomize_walks_a_robot_that_the_default_steps_do_not_fit() {
+    let romeo = crate::example_robot_data::example_robot_data().join("romeo_description/urdf/romeo.urdf");
+    let dir = tempfile::tempdir().unwrap();
+    let file = write(
+        dir.path(),
+        "romeo_walk.toml",
+        &format!("model = {:?}\nduration = 5.0\n[walk]\nvx = 0.2\n[checks]\nfalls = 0\n", romeo.display().to_string()),
+    );
+    let out_dir = dir.path().join("out");
+    let args =
+        ["randomize", "--scenario", file.to_str().unwrap(), "--episodes", "2", "--out", out_dir.to_str().unwrap()];
+    let (ok, out, err) = run(&args);
+    assert!(ok, "{out}\n{err}");
+    let csv = std::fs::read_to_string(out_dir.join("episodes.csv")).unwrap();
+    let mut lines = csv.lines();
+    let header: Vec<&str> = lines.next().unwrap().split(',').collect();
+    let col = |name: &str| header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no {name}: {header:?}"));
+    let (steps, forward) = (col("steps_taken"), col("metric:scenario.forward_m"));
+    for line in lines {
+        let row: Vec<&str> = line.split(',').collect();
+        let n: f64 = row[steps].parse().unwrap();
+        let forward_m: f64 = row[forward].parse().unwrap();
+        // 0.2 m/s from the first step (after the 1-s crouch): about 0.8 m in 4 s.
+        assert!(n >= 5.0 && forward_m > 0.4, "{n} steps, {forward_m} m: {line}");
+    }
+    // Without a scenario, `--controller walk` stands Romeo on its derived options too.
+    let (ok, out, err) =
+        run(&["randomize", romeo.to_str().unwrap(), "--controller", "walk", "--episodes", "1", "--duration", "2"]);
+    assert!(ok && out.contains("success:"), "{out}\n{err}");
+}
