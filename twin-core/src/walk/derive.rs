@@ -99,6 +99,7 @@ pub const DERIVED: &[&str] = &[
     "max_step_lateral",
     "max_step_adjust",
     "line_hold_step",
+    "stride_hold_step",
     "recovery_margin",
     "min_single_support_secs",
     "recovery_swing_secs",
@@ -160,6 +161,7 @@ impl WalkOptions {
         set("max_step_lateral", &mut o.max_step_lateral, d.max_step_lateral * s);
         set("max_step_adjust", &mut o.max_step_adjust, d.max_step_adjust * s);
         set("line_hold_step", &mut o.line_hold_step, d.line_hold_step * s);
+        set("stride_hold_step", &mut o.stride_hold_step, d.stride_hold_step * s);
         set("recovery_margin", &mut o.recovery_margin, d.recovery_margin * s);
         set("min_single_support_secs", &mut o.min_single_support_secs, d.min_single_support_secs * t);
         set("recovery_swing_secs", &mut o.recovery_swing_secs, d.recovery_swing_secs * t);
