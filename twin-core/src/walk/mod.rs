@@ -553,7 +553,7 @@ impl WalkOptions {
             ("damping_ratio", self.damping_ratio),
         ];
         crate::bounds::positive(positive)?;
-        let non_negative: [(&'static str, f64); 23] = [
+        let non_negative: [(&'static str, f64); 22] = [
             ("touchdown_reach_m", self.touchdown_reach_m),
             ("ground_pitch_gain", self.ground_pitch_gain),
             ("ground_slope_gain", self.ground_slope_gain),
@@ -576,9 +576,12 @@ impl WalkOptions {
             ("tilt_rate_gain", self.tilt_rate_gain),
             ("swing_stiffness", self.swing_stiffness),
             ("leg_saturation_error", self.leg_saturation_error),
-            ("swing_overshoot_fraction", self.swing_overshoot_fraction),
         ];
         crate::bounds::non_negative(non_negative)?;
+        if !(self.swing_overshoot_fraction >= 0.0) {
+            let got = self.swing_overshoot_fraction;
+            return Err(("swing_overshoot_fraction", format!("must be a non-negative number or inf (got {got})")));
+        }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
         }
