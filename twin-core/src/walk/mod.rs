@@ -53,7 +53,7 @@
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
 //! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.3° (92.1°) |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
-//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 0.5 m forward, then back: −0.57 m | – | at 4.7 s (heading −34°) | 98.8° (100.3°) |
+//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 7.30 m, drift 0.05 m, heading 2.1° (`--vx` 0.2: 5.82 m; 0.3: 8.85 m) | 0.24 m/s | no | 98.8° (100.3°) |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
 //! turns and is steered over `/cmd_vel` since the damping of its hip and waist loops is capped
@@ -78,16 +78,22 @@
 //!   ±π), its first torques flipped sign at their limits on every physics step, the feet left
 //!   the ground at 0.04 s and landed 3–6 cm off, it stood leaning 6–11°, walked 0.17 m
 //!   backward and fell at 3.6 s, and fell turning at 4.1 s. Read right, it stands upright and
-//!   turns 90° in place; walking, it steps 0.5 m forward by 3.2 s, then the stance foot turns
-//!   on the ground (−5° to −13° in 0.25 s, as Romeo's), a step lands beside the stance foot
-//!   and the next ones go backward. With the swing foot placed from the commanded pelvis
-//!   (`swing_from_measured_pelvis = false`) it walks: 7.96 m in 30 s at `--vx 0.25` (0.27 m/s,
-//!   heading 7.3°, drift 0.01 m) and 7.19 m at 0.2 — the opposite of the G1, which falls at
-//!   3.4 s that way. A blend of the two pelvises for every robot fails one or the other
-//!   (weight 0.5: G1 falls at 3.7 s, Talos at 5.5 s; 0.25: G1 at 3.4 s, Talos walks 7.97 m
-//!   with 1.38 m drift), and the legs' static load (gravity torque / effort: humanoid 0.12,
-//!   G1 0.16, Romeo 0.24, Talos 0.14) does not tell them apart: which robots need the
-//!   measured pelvis is open.
+//!   turns 90° in place; walking, it stepped 0.5 m forward by 3.2 s, then the stance foot
+//!   turned on the ground, a step landed beside the stance foot and the next ones went
+//!   backward. The cause was its swing leg: its hip pitch moves 2.8 kg·m², on which the gain
+//!   rule's loop is slow (`√(kp/I)` 24 rad/s), and damped on the joint velocity it lags a
+//!   target moving at `v` by `kd/kp · v` (84 ms): in mid swing the hip lagged 0.23 rad (the
+//!   foot 18 cm behind its trajectory, the damping holding the hip at its 160 N·m limit
+//!   against the motion), then the foot swung through and landed 7 cm past its aim on the
+//!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
+//!   landing corrections stepped backward and it fell (4.7 s). A first step that lands past
+//!   its aim by over a third of the sole now switches the swinging legs' damping to the error
+//!   from their targets' velocity (`swing_overshoot_fraction`): the feet land within 1 cm
+//!   and it walks at 0.2–0.3 m/s. The shipped humanoid's first step lands 27 % of its sole
+//!   past, the G1's under 1 cm: neither switches (damped on the targets' velocity from the
+//!   start, the G1 walked as far but held fewer pushes, BENCHMARKS.md "Talos walks
+//!   straight"). (Placing the swing foot from the commanded pelvis, which also walked Talos,
+//!   only offset the lag by the pelvis's own lag, and felled the G1.)
 //! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
 //!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
 //!   and 47 N·m hip pitch saturate, so the swing foot lags its trajectory pitched 16–20°; its
