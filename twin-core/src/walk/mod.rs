@@ -584,7 +584,7 @@ impl WalkOptions {
             ("leg_saturation_error", self.leg_saturation_error),
         ];
         crate::bounds::non_negative(non_negative)?;
-        if !(self.swing_overshoot_fraction >= 0.0) {
+        if self.swing_overshoot_fraction.is_nan() || self.swing_overshoot_fraction < 0.0 {
             let got = self.swing_overshoot_fraction;
             return Err(("swing_overshoot_fraction", format!("must be a non-negative number or inf (got {got})")));
         }
@@ -2893,6 +2893,12 @@ mod tests {
             let o = WalkOptions { plan_every_ticks: bad, ..WalkOptions::default() };
             assert_eq!(o.validate().unwrap_err().0, "plan_every_ticks");
         }
+        for bad in [-0.1, f64::NAN] {
+            let o = WalkOptions { swing_overshoot_fraction: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "swing_overshoot_fraction");
+        }
+        // `inf`: never switch.
+        assert!(WalkOptions { swing_overshoot_fraction: f64::INFINITY, ..WalkOptions::default() }.validate().is_ok());
     }
 
     #[test]
