@@ -88,7 +88,7 @@
 //!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
 //!   landing corrections stepped backward and it fell (4.7 s). A first step that lands past
 //!   its aim by over a third of the sole now switches the swinging legs' damping to the error
-//!   from their targets' velocity (`swing_overshoot_fraction`): the feet land within 1 cm
+//!   from their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm
 //!   and it walks at 0.2–0.3 m/s. The shipped humanoid's first step lands 27 % of its sole
 //!   past, the G1's under 1 cm: neither switches (damped on the targets' velocity from the
 //!   start, the G1 walked as far but held fewer pushes, BENCHMARKS.md "Talos walks
@@ -128,7 +128,7 @@ use preview::{PreviewAxis, PreviewGains};
 use std::sync::Arc;
 
 /// Time constant of the filter on the joint targets' rate that a swinging leg's damping
-/// tracks (`swing_overshoot_fraction`), s.
+/// tracks (`swing_miss_fraction`), s.
 pub const SWING_VELOCITY_FILTER_SECS: f64 = 0.01;
 
 /// A landed sole within this of the starting soles' height stands on the same (flat) ground, m.
@@ -384,7 +384,7 @@ pub struct WalkOptions {
     /// same on every walk; later steps land past their aim after a push too (measurements in
     /// BENCHMARKS.md, "Talos walks straight").
     #[default(0.33)]
-    pub swing_overshoot_fraction: f64,
+    pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
     /// 0.0, off; 1: all of it, within `hip_max_lean_rad`).
@@ -584,9 +584,9 @@ impl WalkOptions {
             ("leg_saturation_error", self.leg_saturation_error),
         ];
         crate::bounds::non_negative(non_negative)?;
-        if self.swing_overshoot_fraction.is_nan() || self.swing_overshoot_fraction < 0.0 {
-            let got = self.swing_overshoot_fraction;
-            return Err(("swing_overshoot_fraction", format!("must be a non-negative number or inf (got {got})")));
+        if self.swing_miss_fraction.is_nan() || self.swing_miss_fraction < 0.0 {
+            let got = self.swing_miss_fraction;
+            return Err(("swing_miss_fraction", format!("must be a non-negative number or inf (got {got})")));
         }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
@@ -851,9 +851,9 @@ pub struct Walker {
     /// over [`MEASURED_FRAME_RELEASE_SECS`] after touchdown.
     measured_frame: [f64; 2],
     /// Whether the swinging legs' damping acts on the error to their target's velocity
-    /// (`swing_overshoot_fraction`).
+    /// (`swing_miss_fraction`).
     track_swing_velocity: bool,
-    /// The step under way is the first of a walk from standing (`swing_overshoot_fraction`).
+    /// The step under way is the first of a walk from standing (`swing_miss_fraction`).
     first_step: bool,
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
@@ -899,7 +899,7 @@ struct Held {
     pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
     /// Each joint loop's target `q_des` at the last solve (NaN before the first), rad (m on a
     /// slide), and its rate, filtered over [`SWING_VELOCITY_FILTER_SECS`], rad/s (m/s)
-    /// (`swing_overshoot_fraction`).
+    /// (`swing_miss_fraction`).
     q_prev: Vec<f64>,
     qd_des: Vec<f64>,
 }
@@ -2003,16 +2003,16 @@ impl Walker {
     }
 
     /// Whether `step`'s swing foot, at its end, is past its aim along its swing by more than
-    /// `swing_overshoot_fraction` of its sole's length (a swing shorter than that can't tell).
-    fn swing_overshot(&self, step: &Step) -> bool {
+    /// `swing_miss_fraction` of its sole's length (a swing shorter than that can't tell).
+    fn swing_missed(&self, step: &Step) -> bool {
         let leg = step.swing_to.side.index();
-        let limit = self.options.swing_overshoot_fraction * 2.0 * self.body.legs[leg].sole_half[0];
+        let limit = self.options.swing_miss_fraction * 2.0 * self.body.legs[leg].sole_half[0];
         let swing = step.swing_to.pos - step.swing_from.pos;
         if !limit.is_finite() || swing.norm() <= limit {
             return false;
         }
         let past = (self.sole_world(&self.frames, leg).xy() - step.swing_to.pos).dot(&swing.normalize());
-        past > limit
+        past.abs() > limit
     }
 
     /// A foot landed (`touchdown_from_contact`): its sole's height is the ground under it, and
@@ -2230,7 +2230,7 @@ impl Controller for Walker {
                 }
                 if t >= step.end() {
                     if std::mem::take(&mut self.first_step) && !self.recovering {
-                        self.track_swing_velocity |= self.swing_overshot(&step);
+                        self.track_swing_velocity |= self.swing_missed(&step);
                     }
                     if let (Some(goal), false) = (goal, self.recovering) {
                         self.steer_step(goal);
@@ -2601,7 +2601,7 @@ impl Controller for Walker {
             }
         }
 
-        self.track_swing_velocity |= o.swing_overshoot_fraction == 0.0;
+        self.track_swing_velocity |= o.swing_miss_fraction == 0.0;
         if self.track_swing_velocity {
             // The targets' rate between solves, filtered (the IK's one iteration a solve
             // moves them in small, uneven steps).
@@ -2894,11 +2894,11 @@ mod tests {
             assert_eq!(o.validate().unwrap_err().0, "plan_every_ticks");
         }
         for bad in [-0.1, f64::NAN] {
-            let o = WalkOptions { swing_overshoot_fraction: bad, ..WalkOptions::default() };
-            assert_eq!(o.validate().unwrap_err().0, "swing_overshoot_fraction");
+            let o = WalkOptions { swing_miss_fraction: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "swing_miss_fraction");
         }
         // `inf`: never switch.
-        assert!(WalkOptions { swing_overshoot_fraction: f64::INFINITY, ..WalkOptions::default() }.validate().is_ok());
+        assert!(WalkOptions { swing_miss_fraction: f64::INFINITY, ..WalkOptions::default() }.validate().is_ok());
     }
 
     #[test]

@@ -963,8 +963,8 @@ fn talos_on_motors(dir: &std::path::Path) -> std::path::PathBuf {
 /// velocity its first step lands 7 cm past its aim (41 % of its sole), the next 11 cm, the
 /// steps then go backward and it falls (at 4.7 s in the lab); the walker sees the first
 /// overshoot and damps the swing legs on the error to their targets' velocity
-/// (`swing_overshoot_fraction`), and the feet land within 1 cm. In the lab: 7.30 m,
-/// 0.243 m/s, heading 2.1°, drift 0.05 m; `swing_overshoot_fraction = inf` (never) falls.
+/// (`swing_miss_fraction`), and the feet land within 1 cm. In the lab: 7.30 m,
+/// 0.243 m/s, heading 2.1°, drift 0.05 m; `swing_miss_fraction = inf` (never) falls.
 #[test]
 fn talos_on_motors_walks_five_metres_straight() {
     let dir = tempfile::tempdir().unwrap();
@@ -976,7 +976,7 @@ fn talos_on_motors_walks_five_metres_straight() {
     assert!(s.yaw_change_rad.abs() < 0.1, "heading off by {} rad", s.yaw_change_rad);
     assert!(s.lateral_m.abs() < 0.25, "drifted {} m sideways", s.lateral_m);
     // The cause: damped on the joint velocity alone, the swing legs' lag fells it.
-    let before = walk_with_derived_options(&talos, 30.0, "vx = 0.25\nswing_overshoot_fraction = inf");
+    let before = walk_with_derived_options(&talos, 30.0, "vx = 0.25\nswing_miss_fraction = inf");
     assert!(
         before.fell || before.forward_m < 5.0,
         "walked {} m without tracking the swing's velocity",
