@@ -86,8 +86,8 @@
 //!   foot 18 cm behind its trajectory, the damping holding the hip at its 160 N·m limit
 //!   against the motion), then the foot swung through and landed 7 cm past its aim on the
 //!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
-//!   landing corrections stepped backward and it fell (4.7 s). A first step that lands past
-//!   its aim by over a third of the sole now switches the swinging legs' damping to the error
+//!   landing corrections stepped backward and it fell (4.7 s). A first step that lands off
+//!   its aim (short or past) by over a third of the sole now switches the swinging legs' damping to the error
 //!   from their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm
 //!   and it walks at 0.2–0.3 m/s. The shipped humanoid's first step lands 27 % of its sole
 //!   past, the G1's under 1 cm: neither switches (damped on the targets' velocity from the
@@ -370,9 +370,9 @@ pub struct WalkOptions {
     /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     #[default(true)]
     pub swing_from_measured_pelvis: bool,
-    /// The first step of a walk from standing whose swing foot lands past its aim, along its
-    /// swing, by more than this fraction of its sole's length shows a swing leg that lags its
-    /// trajectory and then overshoots it: from then on the swinging legs' joint damping acts on
+    /// The first step of a walk from standing whose swing foot lands off its aim, along its
+    /// swing (short or past), by more than this fraction of its sole's length shows a swing leg
+    /// that does not follow its trajectory: from then on the swinging legs' joint damping acts on
     /// the error to their targets' velocity (the IK targets' rate) instead of on the joint
     /// velocity (default: 0.33; 0: from the start; `inf`: never). Damping on the joint
     /// velocity makes a joint lag a target moving at `v` by `kd/kp · v`: Talos's swing hip
@@ -381,8 +381,9 @@ pub struct WalkOptions {
     /// falls. The shipped humanoid's first step lands 5.3 cm past (27 % of its sole; its
     /// tuned gait walks with that), the G1's under 1 cm: both keep the damping as tuned (with
     /// it, the G1 lost pushes it held). Only the first step is measured: undisturbed, the
-    /// same on every walk; later steps land past their aim after a push too (measurements in
-    /// BENCHMARKS.md, "Talos walks straight").
+    /// same on every walk; later steps land off their aim after a push too. (Romeo's first step
+    /// is within it, yet with 0 it walks: measurements in BENCHMARKS.md, "Talos walks
+    /// straight".)
     #[default(0.33)]
     pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
@@ -2002,8 +2003,9 @@ impl Walker {
         step
     }
 
-    /// Whether `step`'s swing foot, at its end, is past its aim along its swing by more than
-    /// `swing_miss_fraction` of its sole's length (a swing shorter than that can't tell).
+    /// Whether `step`'s swing foot, at its end, is off its aim along its swing (short or past)
+    /// by more than `swing_miss_fraction` of its sole's length (a swing shorter than that
+    /// can't tell).
     fn swing_missed(&self, step: &Step) -> bool {
         let leg = step.swing_to.side.index();
         let limit = self.options.swing_miss_fraction * 2.0 * self.body.legs[leg].sole_half[0];
@@ -2011,8 +2013,8 @@ impl Walker {
         if !limit.is_finite() || swing.norm() <= limit {
             return false;
         }
-        let past = (self.sole_world(&self.frames, leg).xy() - step.swing_to.pos).dot(&swing.normalize());
-        past.abs() > limit
+        let off = (self.sole_world(&self.frames, leg).xy() - step.swing_to.pos).dot(&swing.normalize());
+        off.abs() > limit
     }
 
     /// A foot landed (`touchdown_from_contact`): its sole's height is the ground under it, and
