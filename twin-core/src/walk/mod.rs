@@ -384,7 +384,7 @@ pub struct WalkOptions {
     /// same on every walk; later steps land off their aim after a push too. (Romeo's first step
     /// is within it, yet with 0 it walks: measurements in BENCHMARKS.md, "Talos walks
     /// straight".)
-    #[default(0.33)]
+    #[default(0.5)]
     pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
@@ -854,8 +854,10 @@ pub struct Walker {
     /// Whether the swinging legs' damping acts on the error to their target's velocity
     /// (`swing_miss_fraction`).
     track_swing_velocity: bool,
-    /// The step under way is the first of a walk from standing (`swing_miss_fraction`).
+    /// The step under way is the first of a walk from standing, and the farthest its swing
+    /// foot has been off its trajectory along the swing so far, m (`swing_miss_fraction`).
     first_step: bool,
+    first_swing_off_m: f64,
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
     /// The hip strategy's lean of the upper body (`hip_gain`).
@@ -1097,6 +1099,7 @@ impl Walker {
             measured_frame: [0.0; 2],
             track_swing_velocity: false,
             first_step: false,
+            first_swing_off_m: 0.0,
             diagnostics: Diagnostics::default(),
             hip: hip::HipStrategy::default(),
             held: Held::default(),
@@ -2003,20 +2006,6 @@ impl Walker {
         step
     }
 
-    /// Whether `step`'s swing foot, at its end, is off its aim along its swing (short or past)
-    /// by more than `swing_miss_fraction` of its sole's length (a swing shorter than that
-    /// can't tell).
-    fn swing_missed(&self, step: &Step) -> bool {
-        let leg = step.swing_to.side.index();
-        let limit = self.options.swing_miss_fraction * 2.0 * self.body.legs[leg].sole_half[0];
-        let swing = step.swing_to.pos - step.swing_from.pos;
-        if !limit.is_finite() || swing.norm() <= limit {
-            return false;
-        }
-        let off = (self.sole_world(&self.frames, leg).xy() - step.swing_to.pos).dot(&swing.normalize());
-        off.abs() > limit
-    }
-
     /// A foot landed (`touchdown_from_contact`): its sole's height is the ground under it, and
     /// the touch-down is logged.
     fn foot_landed(&mut self, leg: usize, t: f64, planned_secs: f64, from_contact: bool) {
@@ -2218,7 +2207,7 @@ impl Controller for Walker {
                     self.start_step(t, &feet, swing, ds, zmp_from);
                     replan = true;
                     if !push {
-                        self.first_step = true;
+                        (self.first_step, self.first_swing_off_m) = (true, 0.0);
                         // Walking takes over the preview's CoM reference where it is.
                         self.track.com = Vector2::new(self.axes[0].x[0], self.axes[1].x[0]);
                         new_step = true;
@@ -2232,7 +2221,8 @@ impl Controller for Walker {
                 }
                 if t >= step.end() {
                     if std::mem::take(&mut self.first_step) && !self.recovering {
-                        self.track_swing_velocity |= self.swing_missed(&step);
+                        let sole_m = 2.0 * self.body.legs[step.swing_to.side.index()].sole_half[0];
+                        self.track_swing_velocity |= self.first_swing_off_m > o.swing_miss_fraction * sole_m;
                     }
                     if let (Some(goal), false) = (goal, self.recovering) {
                         self.steer_step(goal);
@@ -2457,6 +2447,12 @@ impl Controller for Walker {
             }
             if s > 0.0 && s < 1.0 {
                 swinging = Some(to.side.index());
+                if self.first_step {
+                    // How far the foot is off its trajectory, along the swing.
+                    let along = (to.pos - from.pos).try_normalize(1e-9).unwrap_or_default();
+                    let off = (self.sole_world(&self.frames, to.side.index()).xy() - pos).dot(&along);
+                    self.first_swing_off_m = self.first_swing_off_m.max(off.abs());
+                }
             }
         }
         if o.touchdown_from_contact {
