@@ -51,7 +51,7 @@
 //! |---|---|---|---|---|---|---|---|
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 94.0° (92.9° before `command_hold_gain`) |
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
-//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 1.05 m, 7 steps | 0.32 m/s | at 3.3 s (heading −11°) | 92.3° (92.1°) |
+//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 9.13 m, drift 0.08 m, heading −1.6° (`--vx` 0.2: 7.19 m; 0.3: falls at 3.6 s) | 0.30 m/s | no (before `swing_miss_fraction`: at 3.3 s) | 92.3° (92.1°) |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
 //! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 7.30 m, drift 0.05 m, heading 2.1° (`--vx` 0.2: 5.82 m; 0.3: 8.85 m) | 0.24 m/s | no | 98.8° (100.3°) |
 //!
@@ -64,12 +64,13 @@
 //! episode with a push under 0.15 m/s, none above 0.3 m/s. Steered by the README's `/cmd_vel`
 //! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
 //! Talos (motors) 1.14 m, 99.7° and 0.49 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
-//! Romeo falls in the forward leg (3.4 s). Without the outer loop (`command_hold_gain` 0) the
+//! Romeo fell in the forward leg (3.4 s). (The same sequence without ROS, `steer.toml`, since
+//! `swing_miss_fraction`: Talos 1.07 m, 97.2°, 0.52 m; Romeo 1.06 m, 91.8°, 0.54 m.) Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
 //! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
 //! tracking"). What is known of the falls left:
-//! - Romeo: the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
+//! - Romeo (before `swing_miss_fraction`; it walks since): the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change
 //!   the fall (3.28 s against 3.32 s), a higher `foot_clearance` (0.1 m) delays it to 4.8 s.
@@ -86,13 +87,13 @@
 //!   foot 18 cm behind its trajectory, the damping holding the hip at its 160 N·m limit
 //!   against the motion), then the foot swung through and landed 7 cm past its aim on the
 //!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
-//!   landing corrections stepped backward and it fell (4.7 s). A first step that lands off
-//!   its aim (short or past) by over a third of the sole now switches the swinging legs' damping to the error
-//!   from their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm
-//!   and it walks at 0.2–0.3 m/s. The shipped humanoid's first step lands 27 % of its sole
-//!   past, the G1's under 1 cm: neither switches (damped on the targets' velocity from the
-//!   start, the G1 walked as far but held fewer pushes, BENCHMARKS.md "Talos walks
-//!   straight"). (Placing the swing foot from the commanded pelvis, which also walked Talos,
+//!   landing corrections stepped backward and it fell (4.7 s). A first swing that strays from its
+//!   trajectory by over half the sole now switches the swinging legs' damping to the error
+//!   from their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm and it
+//!   walks at 0.2–0.3 m/s. The shipped humanoid's first swing strays 39 % of its sole, the
+//!   G1's 7 %: neither switches (damped on the targets' velocity from the start, the G1
+//!   walked as far but held fewer pushes, BENCHMARKS.md "Talos walks straight"). Romeo's
+//!   strays 78 %: it switches too, and walks. (Placing the swing foot from the commanded pelvis, which also walked Talos,
 //!   only offset the lag by the pelvis's own lag, and felled the G1.)
 //! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
 //!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
@@ -370,20 +371,18 @@ pub struct WalkOptions {
     /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     #[default(true)]
     pub swing_from_measured_pelvis: bool,
-    /// The first step of a walk from standing whose swing foot lands off its aim, along its
-    /// swing (short or past), by more than this fraction of its sole's length shows a swing leg
-    /// that does not follow its trajectory: from then on the swinging legs' joint damping acts on
-    /// the error to their targets' velocity (the IK targets' rate) instead of on the joint
-    /// velocity (default: 0.33; 0: from the start; `inf`: never). Damping on the joint
+    /// When the swing foot of a walk's first step (from standing) strays from its trajectory,
+    /// along the swing (behind or ahead), by more than this fraction of its sole's length, the
+    /// swing leg does not follow its targets: from then on the swinging legs' joint damping
+    /// acts on the error to their targets' velocity (the IK targets' rate) instead of on the
+    /// joint velocity (default: 0.5; 0: from the start; `inf`: never). Damping on the joint
     /// velocity makes a joint lag a target moving at `v` by `kd/kp · v`: Talos's swing hip
-    /// pitch (2.8 kg·m², `√(kp/I)` 24 rad/s, 84 ms) puts its foot 18 cm behind in mid swing and
-    /// its first step lands 6–7 cm (36–41 % of its sole) past the aim, the next 11 cm, and it
-    /// falls. The shipped humanoid's first step lands 5.3 cm past (27 % of its sole; its
-    /// tuned gait walks with that), the G1's under 1 cm: both keep the damping as tuned (with
-    /// it, the G1 lost pushes it held). Only the first step is measured: undisturbed, the
-    /// same on every walk; later steps land off their aim after a push too. (Romeo's first step
-    /// is within it, yet with 0 it walks: measurements in BENCHMARKS.md, "Talos walks
-    /// straight".)
+    /// pitch (2.8 kg·m², `√(kp/I)` 24 rad/s, 84 ms) puts its first swing foot 11 cm behind
+    /// (63 % of its sole), then 7 cm past its aim, and it falls; Romeo's strays 78 %. The
+    /// shipped humanoid's strays 39 % on `walk.toml` (its tuned gait walks with it), the G1's
+    /// 7 %: both keep the damping as tuned (tracking the targets' velocity, the G1 held fewer
+    /// pushes). Only the first step is measured: undisturbed, the same on every walk (later
+    /// steps stray after a push too). Measurements in BENCHMARKS.md, "Talos walks straight".
     #[default(0.5)]
     pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
