@@ -960,11 +960,11 @@ fn talos_on_motors(dir: &std::path::Path) -> std::path::PathBuf {
 /// Talos (motors, 93 kg), no robot-specific option, walks over 5 m straight at over 0.2 m/s
 /// in 30 s without a fall, holding its heading and line. Its swing hip pitch (2.8 kg·m²) is
 /// slow under the gain rule (`√(kp/I)` 24 rad/s): with the swing legs damped on their joint
-/// velocity its first step lands 7 cm past its aim (41 % of its sole), the next 11 cm, the
-/// steps then go backward and it falls (at 4.7 s in the lab); the walker sees the first
-/// overshoot and damps the swing legs on the error to their targets' velocity
-/// (`swing_miss_fraction`), and the feet land within 1 cm. In the lab: 7.30 m,
-/// 0.243 m/s, heading 2.1°, drift 0.05 m; `swing_miss_fraction = inf` (never) falls.
+/// velocity its first swing foot falls 11 cm behind its trajectory and lands 7 cm past its
+/// aim, the next 11 cm, the steps then go backward and it falls (at 4.7 s in the lab); the
+/// walker sees the first swing stray over half a sole and damps the swing legs on the error to
+/// their targets' velocity (`swing_miss_fraction`), and the feet land within 1 cm. In the lab:
+/// 7.30 m, 0.243 m/s, heading 2.1°, drift 0.05 m; `swing_miss_fraction = inf` (never) falls.
 #[test]
 fn talos_on_motors_walks_five_metres_straight() {
     let dir = tempfile::tempdir().unwrap();
@@ -982,6 +982,23 @@ fn talos_on_motors_walks_five_metres_straight() {
         "walked {} m without tracking the swing's velocity",
         before.forward_m
     );
+}
+
+/// Romeo (40.5 kg), no robot-specific option, walks over 5 m straight at 0.25 m/s without a
+/// fall: its first swing strays 78 % of its sole from its trajectory and the walker tracks the
+/// swing targets' velocity from the second step (`swing_miss_fraction`). Before, its swing
+/// foot touched down 0.2 m short and it fell at 3.3 s (as with `swing_miss_fraction = inf`).
+/// In the lab: 9.13 m, heading −1.6°, drift 0.08 m.
+#[test]
+fn romeo_walks_five_metres_straight() {
+    let romeo = example_robot("romeo_description/urdf/romeo.urdf");
+    let s = walk_with_derived_options(&romeo, 30.0, "vx = 0.25");
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
+    assert!(s.yaw_change_rad.abs() < 0.1, "heading off by {} rad", s.yaw_change_rad);
+    assert!(s.lateral_m.abs() < 0.25, "drifted {} m sideways", s.lateral_m);
+    let before = walk_with_derived_options(&romeo, 30.0, "vx = 0.25\nswing_miss_fraction = inf");
+    assert!(before.fell, "walked {} m without tracking the swing's velocity", before.forward_m);
 }
 
 /// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
