@@ -65,12 +65,14 @@
 //! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
 //! Talos (motors) 1.14 m, 99.7° and 0.49 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
 //! Romeo fell in the forward leg (3.4 s). (The same sequence without ROS, `steer.toml`, since
-//! `swing_miss_fraction`: Talos 1.07 m, 97.2°, 0.52 m; Romeo 1.06 m, 91.8°, 0.54 m.) Without the outer loop (`command_hold_gain` 0) the
+//! `swing_miss_fraction`: Talos 1.07 m, 97.2°, 0.52 m; Romeo 1.06 m, 91.8°, 0.54 m.)
+//! Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
 //! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
 //! tracking"). What is known of the falls left:
-//! - Romeo (before `swing_miss_fraction`; it walks since): the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
+//! - Romeo (before `swing_miss_fraction`; it walks since): the swing foot touches the ground
+//!   at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change
 //!   the fall (3.28 s against 3.32 s), a higher `foot_clearance` (0.1 m) delays it to 4.8 s.
@@ -87,14 +89,14 @@
 //!   foot 18 cm behind its trajectory, the damping holding the hip at its 160 N·m limit
 //!   against the motion), then the foot swung through and landed 7 cm past its aim on the
 //!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
-//!   landing corrections stepped backward and it fell (4.7 s). A first swing that strays from its
-//!   trajectory by over half the sole now switches the swinging legs' damping to the error
+//!   landing corrections stepped backward and it fell (4.7 s). A first swing that strays
+//!   from its trajectory by over half the sole now switches the swinging legs' damping to the error
 //!   from their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm and it
 //!   walks at 0.2–0.3 m/s. The shipped humanoid's first swing strays 39 % of its sole, the
 //!   G1's 7 %: neither switches (damped on the targets' velocity from the start, the G1
 //!   walked as far but held fewer pushes, BENCHMARKS.md "Talos walks straight"). Romeo's
-//!   strays 78 %: it switches too, and walks. (Placing the swing foot from the commanded pelvis, which also walked Talos,
-//!   only offset the lag by the pelvis's own lag, and felled the G1.)
+//!   strays 78 %: it switches too, and walks. (Placing the swing foot from the commanded
+//!   pelvis, which also walked Talos, only offset the lag by the pelvis's own lag, and felled the G1.)
 //! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
 //!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
 //!   and 47 N·m hip pitch saturate, so the swing foot lags its trajectory pitched 16–20°; its
