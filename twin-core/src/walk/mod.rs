@@ -96,7 +96,8 @@
 //!   G1's 7 %: neither switches (damped on the targets' velocity from the start, the G1
 //!   walked as far but held fewer pushes, BENCHMARKS.md "Talos walks straight"). Romeo's
 //!   strays 78 %: it switches too, and walks. (Placing the swing foot from the commanded
-//!   pelvis, which also walked Talos, only offset the lag by the pelvis's own lag, and felled the G1.)
+//!   pelvis, which also walked Talos, only offset the lag by the pelvis's own lag, and
+//!   felled the G1.)
 //! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
 //!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
 //!   and 47 N·m hip pitch saturate, so the swing foot lags its trajectory pitched 16–20°; its
