@@ -803,8 +803,8 @@ fn ros_cmd_vel_from_rclpy_steers_the_g1_forward_turn_and_sideways() {
 
 /// The same on example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin
 /// convert --actuators motor`: the walker refuses its position servos), once. In the lab:
-/// forward 1.13 m, turned 98.1°, lateral 0.50 m of 0.5 (1.15 m, 99.6°, 0.49 m before the
-/// derived crouch kept its knees bent).
+/// forward 1.07 m, turned 97.3°, lateral 0.52 m of 0.5 (1.15 m, 99.6°, 0.49 m before the
+/// derived crouch kept its knees bent and the first swing's miss switched its swing damping).
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_talos_on_motors_forward_turn_and_sideways() {
     let urdf = crate::example_robot_data::example_robot_data().join("talos_data/robots/talos_full_v2.urdf");
@@ -816,9 +816,9 @@ fn ros_cmd_vel_from_rclpy_steers_talos_on_motors_forward_turn_and_sideways() {
 }
 
 /// The same on example-robot-data's Romeo (40.5 kg), its options derived (`walk::derive`: the
-/// crouch that keeps its knees bent, the clearance for its loaded legs). In the lab: forward
-/// 1.10 m, turned 92.5°, lateral 0.51 m of 0.5 (it fell in the forward leg, at 3.4 s, before
-/// the crouch kept its knees bent).
+/// crouch that keeps its knees bent, the clearance for its loaded legs; its swing damping
+/// switched by its first swing's miss). In the lab: forward 1.04 m, turned 91.9°, lateral
+/// 0.53 m of 0.5 (it fell in the forward leg, at 3.4 s, before the crouch kept its knees bent).
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_romeo_forward_turn_and_sideways() {
     let romeo = crate::example_robot_data::example_robot_data().join("romeo_description/urdf/romeo.urdf");

@@ -51,9 +51,9 @@
 //! |---|---|---|---|---|---|---|---|
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 94.0° (92.9° before `command_hold_gain`) |
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
-//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | `--vx 0.2`: 7.79 m, drift 0.05 m, heading −8.6° (0.22: 8.38 m; 0.25: falls at 7.6 s) | 0.26 m/s | no | 92.4° (92.3°) |
+//! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 8.56 m, drift 0.08 m, heading −1.2° (`--vx` 0.2: 7.05 m; 0.3: 9.77 m) | 0.29 m/s | no | 92.4° (92.3°) |
 //! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
-//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 9.34 m, drift 0.05 m, heading 4.5° (`--vx` 0.2: 7.65 m) | 0.31 m/s | no | 97.1° (98.8°) |
+//! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 7.29 m, drift 0.04 m, heading 2.0° (`--vx` 0.2: 7.65 m; 0.3: 8.74 m) | 0.24 m/s | no | 97.1° (98.8°) |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
 //! turns and is steered over `/cmd_vel` since the damping of its hip and waist loops is capped
@@ -63,16 +63,23 @@
 //! (`scenarios/walk_g1.toml`, default spec, 100 episodes) it passes 28 % (BENCHMARKS.md): every
 //! episode with a push under 0.15 m/s, none above 0.3 m/s. Steered by the README's `/cmd_vel`
 //! node (1 m forward, 90° in place, 0.5 m to the left) it covers 1.03 m, 95.3° and 0.46 m;
-//! Talos (motors) 1.13 m, 98.1° and 0.50 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
-//! Romeo 1.10 m, 92.5° and 0.51 m. Without the outer loop (`command_hold_gain` 0) the
+//! Talos (motors) 1.07 m, 97.3° and 0.52 m; the shipped humanoid 1.09 m, 93.4° and 0.55 m;
+//! Romeo 1.04 m, 91.9° and 0.53 m. Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
 //! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
-//! tracking"). Romeo and Talos (motors) walk since the derived crouch keeps their knees bent
-//! [`derive::MIN_KNEE_BEND_RAD`] in the gait's extreme poses (and Romeo's swing foot is lifted
-//! by its legs' load, [`derive::SAG_FREE_LOAD`]): at the highest crouch that reached their
-//! steps their knees came within 0.27 and 0.12 rad of straight, Romeo fell at 3.3 s and Talos
-//! at 4.7 s (BENCHMARKS.md, "Romeo walking"). What was known of those falls before:
+//! tracking"). Romeo and Talos (motors) walk since two rules derived from the robot and one
+//! measured on its first step: the crouch keeps the knees bent [`derive::MIN_KNEE_BEND_RAD`]
+//! in the gait's extreme poses (at the highest crouch that reached their steps their knees
+//! came within 0.27 and 0.12 rad of straight; Romeo fell at 3.3 s, Talos at 4.7 s); legs
+//! loaded over [`derive::SAG_FREE_LOAD`] of their effort in the crouch lift the swing foot
+//! higher (Romeo only); and a first swing that strays from its trajectory by over
+//! `swing_miss_fraction` of the sole switches the swing legs' damping to the error from their
+//! targets' velocity (Talos 0.63, Romeo 0.78; the shipped humanoid 0.39 and the G1 0.07 do
+//! not switch). At 0.3 m/s Romeo needs all three (each left out, it falls at 3.5, 5.4 and
+//! 3.4 s); Talos walks with either the crouch or the switch, and with the switch at the pace
+//! it is asked (0.24 against 0.31 m/s at `--vx 0.25`). BENCHMARKS.md, "Romeo walking" and
+//! "Talos walks straight". What was known of those falls before:
 //! - Romeo: the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,
 //!   hip yaw limited to 9.2 N·m); torsional friction on the soles (`condim` 6) does not change
@@ -82,16 +89,19 @@
 //!   ±π), its first torques flipped sign at their limits on every physics step, the feet left
 //!   the ground at 0.04 s and landed 3–6 cm off, it stood leaning 6–11°, walked 0.17 m
 //!   backward and fell at 3.6 s, and fell turning at 4.1 s. Read right, it stands upright and
-//!   turns 90° in place; walking, it steps 0.5 m forward by 3.2 s, then the stance foot turns
-//!   on the ground (−5° to −13° in 0.25 s, as Romeo's), a step lands beside the stance foot
-//!   and the next ones go backward. With the swing foot placed from the commanded pelvis
-//!   (`swing_from_measured_pelvis = false`) it walks: 7.96 m in 30 s at `--vx 0.25` (0.27 m/s,
-//!   heading 7.3°, drift 0.01 m) and 7.19 m at 0.2 — the opposite of the G1, which falls at
-//!   3.4 s that way. A blend of the two pelvises for every robot fails one or the other
-//!   (weight 0.5: G1 falls at 3.7 s, Talos at 5.5 s; 0.25: G1 at 3.4 s, Talos walks 7.97 m
-//!   with 1.38 m drift), and the legs' static load (gravity torque / effort: humanoid 0.12,
-//!   G1 0.16, Romeo 0.24, Talos 0.14) does not tell them apart: which robots need the
-//!   measured pelvis is open.
+//!   turns 90° in place; walking, it stepped 0.5 m forward by 3.2 s, then the stance foot
+//!   turned on the ground, a step landed beside the stance foot and the next ones went
+//!   backward. The cause was its swing leg: its hip pitch moves 2.8 kg·m², on which the gain
+//!   rule's loop is slow (`√(kp/I)` 24 rad/s), and damped on the joint velocity it lags a
+//!   target moving at `v` by `kd/kp · v` (84 ms): in mid swing the hip lagged 0.23 rad (the
+//!   foot 18 cm behind its trajectory, the damping holding the hip at its 160 N·m limit
+//!   against the motion), then the foot swung through and landed 7 cm past its aim on the
+//!   first step (41 % of its sole) and 11 cm on the second, the DCM fell behind, the
+//!   landing corrections stepped backward and it fell (4.7 s). Damped on the targets'
+//!   velocity from the start, the G1 walked as far but held fewer pushes (BENCHMARKS.md
+//!   "Talos walks straight"), hence the switch on the first swing's miss. (Placing the swing
+//!   foot from the commanded pelvis, which also walked Talos, only offset the lag by the
+//!   pelvis's own lag, and felled the G1.)
 //! - Romeo, further: in its second step the trailing ankle sits at its −0.52 rad limit from
 //!   2.11 to 2.27 s (knee 1.0 rad, hip −0.25 rad: flat would need −0.79) and the 38 N·m knee
 //!   and 47 N·m hip pitch saturate, so the swing foot lags its trajectory pitched 16–20°; its
@@ -124,6 +134,10 @@ use nalgebra::{UnitQuaternion, Vector2, Vector3};
 use plan::{Foothold, Gait, Schedule, Step, dcm_error_ahead, rotation, swing_profile, wrap};
 use preview::{PreviewAxis, PreviewGains};
 use std::sync::Arc;
+
+/// Time constant of the filter on the joint targets' rate that a swinging leg's damping
+/// tracks (`swing_miss_fraction`), s.
+pub const SWING_VELOCITY_FILTER_SECS: f64 = 0.01;
 
 /// A landed sole within this of the starting soles' height stands on the same (flat) ground, m.
 pub const GROUND_DEADBAND_M: f64 = 0.004;
@@ -379,6 +393,20 @@ pub struct WalkOptions {
     /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     #[default(true)]
     pub swing_from_measured_pelvis: bool,
+    /// When the swing foot of a walk's first step (from standing) strays from its trajectory,
+    /// along the swing (behind or ahead), by more than this fraction of its sole's length, the
+    /// swing leg does not follow its targets: from then on the swinging legs' joint damping
+    /// acts on the error to their targets' velocity (the IK targets' rate) instead of on the
+    /// joint velocity (default: 0.5; 0: from the start; `inf`: never). Damping on the joint
+    /// velocity makes a joint lag a target moving at `v` by `kd/kp · v`: Talos's swing hip
+    /// pitch (2.8 kg·m², `√(kp/I)` 24 rad/s, 84 ms) puts its first swing foot 11 cm behind
+    /// (63 % of its sole), then 7 cm past its aim, and it falls; Romeo's strays 78 %. The
+    /// shipped humanoid's strays 39 % on `walk.toml` (its tuned gait walks with it), the G1's
+    /// 7 %: both keep the damping as tuned (tracking the targets' velocity, the G1 held fewer
+    /// pushes). Only the first step is measured: undisturbed, the same on every walk (later
+    /// steps stray after a push too). Measurements in BENCHMARKS.md, "Talos walks straight".
+    #[default(0.5)]
+    pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
     /// rotating the upper body about the hips gives, by moving the CMP beyond the ZMP (default:
     /// 0.0, off; 1: all of it, within `hip_max_lean_rad`).
@@ -579,6 +607,10 @@ impl WalkOptions {
             ("leg_saturation_error", self.leg_saturation_error),
         ];
         crate::bounds::non_negative(non_negative)?;
+        if self.swing_miss_fraction.is_nan() || self.swing_miss_fraction < 0.0 {
+            let got = self.swing_miss_fraction;
+            return Err(("swing_miss_fraction", format!("must be a non-negative number or inf (got {got})")));
+        }
         if !(self.leg_saturation_error > 0.0 && self.saturation_error > 0.0) {
             return Err(("saturation_error", "saturation errors must be positive".into()));
         }
@@ -844,6 +876,13 @@ pub struct Walker {
     /// the commanded one (`swing_from_measured_pelvis`): 1 while it swings, then back to 0
     /// over [`MEASURED_FRAME_RELEASE_SECS`] after touchdown.
     measured_frame: [f64; 2],
+    /// Whether the swinging legs' damping acts on the error to their target's velocity
+    /// (`swing_miss_fraction`).
+    track_swing_velocity: bool,
+    /// The step under way is the first of a walk from standing, and the farthest its swing
+    /// foot has been off its trajectory along the swing so far, m (`swing_miss_fraction`).
+    first_step: bool,
+    first_swing_off_m: f64,
     /// The diagnostics of the last tick, when it was one to publish.
     diagnostics: Diagnostics,
     /// The hip strategy's lean of the upper body (`hip_gain`).
@@ -886,6 +925,11 @@ struct Held {
     /// The measured pelvis pose (`qpos` of the free joint) at the solve, when a leg is
     /// placed from it.
     pelvis: Option<(Vector3<f64>, UnitQuaternion<f64>)>,
+    /// Each joint loop's target `q_des` at the last solve (NaN before the first), rad (m on a
+    /// slide), and its rate, filtered over [`SWING_VELOCITY_FILTER_SECS`], rad/s (m/s)
+    /// (`swing_miss_fraction`).
+    q_prev: Vec<f64>,
+    qd_des: Vec<f64>,
 }
 
 /// The home pose and the crouch from it that the strength and reach checks start from
@@ -1079,6 +1123,9 @@ impl Walker {
             swing_s: 0.0,
             swing_t: 0.0,
             measured_frame: [0.0; 2],
+            track_swing_velocity: false,
+            first_step: false,
+            first_swing_off_m: 0.0,
             diagnostics: Diagnostics::default(),
             hip: hip::HipStrategy::default(),
             held: Held::default(),
@@ -1623,7 +1670,13 @@ impl Walker {
                 }
             }
         }
-        self.held = Held { ff: vec![0.0; loops.len()], dq: vec![0.0; loops.len()], ..Held::default() };
+        self.held = Held {
+            ff: vec![0.0; loops.len()],
+            dq: vec![0.0; loops.len()],
+            q_prev: vec![f64::NAN; loops.len()],
+            qd_des: vec![0.0; loops.len()],
+            ..Held::default()
+        };
         self.loops = loops;
     }
 
@@ -2241,6 +2294,7 @@ impl Controller for Walker {
                     self.start_step(t, &feet, swing, ds, zmp_from);
                     replan = true;
                     if !push {
+                        (self.first_step, self.first_swing_off_m) = (true, 0.0);
                         // Walking takes over the preview's CoM reference where it is.
                         self.track.com = Vector2::new(self.axes[0].x[0], self.axes[1].x[0]);
                         new_step = true;
@@ -2253,6 +2307,10 @@ impl Controller for Walker {
                     self.mode = Mode::Walking(step);
                 }
                 if t >= step.end() {
+                    if std::mem::take(&mut self.first_step) && !self.recovering {
+                        let sole_m = 2.0 * self.body.legs[step.swing_to.side.index()].sole_half[0];
+                        self.track_swing_velocity |= self.first_swing_off_m > o.swing_miss_fraction * sole_m;
+                    }
                     if let (Some(goal), false) = (goal, self.recovering) {
                         self.steer_step(goal);
                     }
@@ -2479,6 +2537,12 @@ impl Controller for Walker {
             }
             if s > 0.0 && s < 1.0 {
                 swinging = Some(to.side.index());
+                if self.first_step {
+                    // How far the foot is off its trajectory, along the swing.
+                    let along = (to.pos - from.pos).try_normalize(1e-9).unwrap_or_default();
+                    let off = (self.sole_world(&self.frames, to.side.index()).xy() - pos).dot(&along);
+                    self.first_swing_off_m = self.first_swing_off_m.max(off.abs());
+                }
             }
         }
         if o.touchdown_from_contact {
@@ -2625,6 +2689,19 @@ impl Controller for Walker {
             }
         }
 
+        self.track_swing_velocity |= o.swing_miss_fraction == 0.0;
+        if self.track_swing_velocity {
+            // The targets' rate between solves, filtered (the IK's one iteration a solve
+            // moves them in small, uneven steps).
+            let alpha = self.dt / (self.dt + SWING_VELOCITY_FILTER_SECS);
+            let h = &mut self.held;
+            for (i, l) in self.loops.iter().enumerate() {
+                let q = self.q_des[l.qpos_adr];
+                let v = if h.q_prev[i].is_finite() { (q - h.q_prev[i]) / self.dt } else { 0.0 };
+                h.qd_des[i] += (v - h.qd_des[i]) * alpha;
+                h.q_prev[i] = q;
+            }
+        }
         // 8. PD + feed-forward.
         self.hold_feed_forward(&forces[..nforces], swinging);
         self.joint_torques(observation, command);
@@ -2739,14 +2816,15 @@ impl Walker {
     /// The joint PD toward the IK targets plus the held feed-forward, into `command`.
     fn joint_torques(&self, observation: &Observation<'_>, command: &mut [f64]) {
         command.fill(0.0);
-        for ((l, &ff), &dq) in self.loops.iter().zip(&self.held.ff).zip(&self.held.dq) {
-            let (kp, kd) = match (l.leg, self.held.swinging) {
-                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing),
-                _ => (l.kp, l.kd),
+        for (i, ((l, &ff), &dq)) in self.loops.iter().zip(&self.held.ff).zip(&self.held.dq).enumerate() {
+            let (kp, kd, track) = match (l.leg, self.held.swinging) {
+                (Some((leg, _)), Some(s)) if leg == s => (l.kp_swing, l.kd_swing, self.track_swing_velocity),
+                _ => (l.kp, l.kd, false),
             };
             // (`dq` is zero on a solve's step.)
             let q_target = self.q_des[l.qpos_adr] + dq;
-            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * observation.qvel[l.dof] + ff;
+            let qd_target = if track { self.held.qd_des[i] } else { 0.0 };
+            let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * (observation.qvel[l.dof] - qd_target) + ff;
             command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
         }
     }
@@ -2903,6 +2981,12 @@ mod tests {
             let o = WalkOptions { plan_every_ticks: bad, ..WalkOptions::default() };
             assert_eq!(o.validate().unwrap_err().0, "plan_every_ticks");
         }
+        for bad in [-0.1, f64::NAN] {
+            let o = WalkOptions { swing_miss_fraction: bad, ..WalkOptions::default() };
+            assert_eq!(o.validate().unwrap_err().0, "swing_miss_fraction");
+        }
+        // `inf`: never switch.
+        assert!(WalkOptions { swing_miss_fraction: f64::INFINITY, ..WalkOptions::default() }.validate().is_ok());
     }
 
     #[test]

@@ -921,26 +921,31 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
 }
 
 /// Example-robot-data's Romeo (40.5 kg, legs loaded 0.32 of their effort in the crouch), no
-/// robot-specific option, walks over 5 m straight at 0.2 m/s without a fall and follows
-/// `scenarios/steer.toml` (1 m forward at 0.25 m/s, 90° in place, 0.5 m to the left) within
-/// 20 % of each leg. Its derived crouch keeps the knees bent `MIN_KNEE_BEND_RAD` in the gait's
-/// extreme poses, and its swing foot is lifted by its load over `SAG_FREE_LOAD`
-/// (`walk::derive`); each is needed: at the highest crouch that reaches its steps (0.680 m,
-/// knees 0.27 rad from straight) it falls at 4.6 s, with the Froude-scaled clearance (0.06 m)
-/// at 18.8 s. (In the lab: 7.79 m in 30 s, 0.26 m/s, heading −8.6°; steer legs 1.12 m,
-/// 92.5°, 0.51 m. At 0.25 m/s straight it still falls, at 7.6 s.)
+/// robot-specific option, walks over 5 m straight at 0.2, 0.25 and 0.3 m/s without a fall and
+/// follows `scenarios/steer.toml` (1 m forward at 0.25 m/s, 90° in place, 0.5 m to the left)
+/// within 20 % of each leg. Three derived rules make it walk, and at 0.3 m/s each is needed:
+/// the crouch keeps the knees bent `MIN_KNEE_BEND_RAD` in the gait's extreme poses (at the
+/// highest crouch that reaches its steps, 0.680 m, knees 0.27 rad from straight, it falls at
+/// 3.5 s), the swing foot is lifted by the legs' load over `SAG_FREE_LOAD` (`walk::derive`;
+/// with the Froude-scaled clearance, 0.06 m, it falls at 5.4 s), and its first swing strays
+/// 78 % of its sole from its trajectory, so the walker damps the swing legs on the error to
+/// their targets' velocity (`swing_miss_fraction`; never, it falls at 3.4 s). Before them it
+/// fell at 3.3 s. (In the lab: 7.05 m, 8.56 m and 9.77 m in 30 s at 0.2, 0.25 and 0.3 m/s.)
 #[test]
 fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
     let romeo = example_robot("romeo_description/urdf/romeo.urdf");
-    let s = walk_with_derived_options(&romeo, 30.0, "vx = 0.2");
-    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
-    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
-    assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
-    assert!(s.yaw_change_rad.abs() < 0.3, "heading off by {} rad", s.yaw_change_rad);
-    assert!(s.lateral_m.abs() < 0.3, "{} m off the line", s.lateral_m);
-    // Each derived rule matters: the old crouch and the scaled clearance, given, fall.
-    for given in ["com_height = 0.6802023158286374", "foot_clearance = 0.06"] {
-        let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = 0.2\n{given}"));
+    for vx in [0.2, 0.25, 0.3] {
+        let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = {vx}"));
+        assert!(!s.fell, "{vx} m/s: fell at {:?}", s.fall_time_secs);
+        assert!(s.forward_m >= 5.0, "{vx} m/s: walked {} m", s.forward_m);
+        assert!(s.average_speed_mps >= 0.2, "{vx} m/s: {} m/s", s.average_speed_mps);
+        assert!(s.yaw_change_rad.abs() < 0.3, "{vx} m/s: heading off by {} rad", s.yaw_change_rad);
+        assert!(s.lateral_m.abs() < 0.3, "{vx} m/s: {} m off the line", s.lateral_m);
+    }
+    // Each derived rule matters: the old crouch, the scaled clearance and the swing damped on
+    // its joints' velocity alone, given, fall at 0.3 m/s.
+    for given in ["com_height = 0.6802023158286374", "foot_clearance = 0.06", "swing_miss_fraction = inf"] {
+        let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = 0.3\n{given}"));
         assert!(s.fell, "{given}: walked {} m without a fall", s.forward_m);
     }
     let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
@@ -978,6 +983,50 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     }
 }
 
+/// Example-robot-data's Talos (full v2), converted with torque motors as `twin convert
+/// --actuators motor` does (the walker refuses its position servos), written into `dir`.
+fn talos_on_motors(dir: &std::path::Path) -> std::path::PathBuf {
+    use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
+    let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
+    let options = ConvertOptions { actuators: ActuatorMode::Motor, ..ConvertOptions::default() };
+    let converted = convert_urdf(&urdf, &options).unwrap();
+    let talos = dir.join("talos_motors.xml");
+    std::fs::write(&talos, &converted.mjcf).unwrap();
+    talos
+}
+
+/// Talos (motors, 93 kg), no robot-specific option, walks over 5 m straight at 0.25 m/s in 30 s
+/// without a fall, holding its heading, its line and the commanded speed. At the highest crouch
+/// that reached its steps (knees 0.12 rad from straight) it fell at 4.7 s; the derived crouch
+/// keeps them bent `MIN_KNEE_BEND_RAD`. Its swing hip pitch (2.8 kg·m²) is slow under the gain
+/// rule (`√(kp/I)` 24 rad/s): damped on their joint velocity, the swing legs lag their targets
+/// (the first swing foot 11 cm behind its trajectory) and the feet land 7–11 cm past their
+/// aims. At the old crouch that fell it; at the derived one it walks, but 25 % faster than
+/// commanded. The walker sees the first swing stray over half a sole and damps the swing legs
+/// on the error to their targets' velocity (`swing_miss_fraction`): the feet land within 1 cm
+/// and the pace is the command's. In the lab: 7.29 m, 0.243 m/s, drift 0.04 m; with
+/// `swing_miss_fraction = inf` (never) 9.34 m, 0.31 m/s.
+#[test]
+fn talos_on_motors_walks_five_metres_straight() {
+    let dir = tempfile::tempdir().unwrap();
+    let talos = talos_on_motors(dir.path());
+    let s = walk_with_derived_options(&talos, 30.0, "vx = 0.25");
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
+    // 29 s of walking after the 1-s settle, averaged over the 30 s.
+    let commanded_mps = 0.25 * 29.0 / 30.0;
+    assert!((s.average_speed_mps - commanded_mps).abs() < 0.1 * commanded_mps, "{} m/s", s.average_speed_mps);
+    assert!(s.yaw_change_rad.abs() < 0.1, "heading off by {} rad", s.yaw_change_rad);
+    assert!(s.lateral_m.abs() < 0.25, "drifted {} m sideways", s.lateral_m);
+    // Damped on the joint velocity alone, the swing legs overshoot and the pace runs away.
+    let before = walk_with_derived_options(&talos, 30.0, "vx = 0.25\nswing_miss_fraction = inf");
+    assert!(
+        before.fell || before.average_speed_mps > 1.2 * commanded_mps,
+        "without tracking the swing's velocity: {} m/s",
+        before.average_speed_mps
+    );
+}
+
 /// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
 /// --actuators motor`: the walker refuses its position servos) stands upright under the walker
 /// and turns 90° in place within 15°, no robot-specific option. Its IMU site is on `imu_link`,
@@ -990,13 +1039,8 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
 /// `MIN_KNEE_BEND_RAD`, 100.3° before `command_hold_gain`.)
 #[test]
 fn talos_on_motors_stands_upright_and_turns_in_place() {
-    use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
-    let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
-    let options = ConvertOptions { actuators: ActuatorMode::Motor, ..ConvertOptions::default() };
-    let converted = convert_urdf(&urdf, &options).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let talos = dir.path().join("talos_motors.xml");
-    std::fs::write(&talos, &converted.mjcf).unwrap();
+    let talos = talos_on_motors(dir.path());
 
     /// The largest pelvis tilt (rad) before `until_secs`.
     struct MaxTilt {
