@@ -148,22 +148,24 @@ impl PdHold {
                     }
                     let [lo, hi] = limits[a.id];
                     let dof = model.jnt_dofadr()[joint] as usize;
-                    let (kp, kd) = match a.interface {
-                        // Servos close their own loop: no twin gains.
-                        Interface::Position | Interface::Velocity => (0.0, 0.0),
-                        Interface::Effort => {
-                            let mut effort = (hi.abs().min(lo.abs())) * gear.abs();
-                            if model.actuator_forcelimited()[a.id] {
-                                let [flo, fhi] = model.actuator_forcerange()[a.id];
-                                effort = effort.min(flo.abs().min(fhi.abs()));
-                            }
-                            if model.jnt_actfrclimited()[joint] {
-                                let [jlo, jhi] = model.jnt_actfrcrange()[joint];
-                                effort = effort.min(jlo.abs().min(jhi.abs()));
-                            }
-                            gains(effort, dof, gear)
-                        }
+                    // The torque the actuator can give: a motor's command range times its gear,
+                    // within its force range and the joint's actuator-force range.
+                    let mut effort = match a.interface {
+                        Interface::Effort => (hi.abs().min(lo.abs())) * gear.abs(),
+                        Interface::Position | Interface::Velocity => f64::INFINITY,
                     };
+                    if model.actuator_forcelimited()[a.id] {
+                        let [flo, fhi] = model.actuator_forcerange()[a.id];
+                        effort = effort.min(flo.abs().min(fhi.abs()));
+                    }
+                    if model.jnt_actfrclimited()[joint] {
+                        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
+                        effort = effort.min(jlo.abs().min(jhi.abs()));
+                    }
+                    // A servo closes its own loop here (`compute` sends it the target); its
+                    // gains are the rule's for its force limit, for controllers that command
+                    // torque through it (the walker). None without a force limit.
+                    let (kp, kd) = if effort.is_finite() { gains(effort, dof, gear) } else { (0.0, 0.0) };
                     self.loops.push(PdLoop {
                         command: a.id,
                         joint,

@@ -387,6 +387,9 @@ model_arrays! {
     actuator_gaintype: i32 = nu;
     /// Bias type of each actuator (`mjtBias`) (len `nu`).
     actuator_biastype: i32 = nu;
+    /// Activation dynamics type of each actuator (`mjtDyn`; 0 = none: the force follows `ctrl`
+    /// within the step) (len `nu`).
+    actuator_dyntype: i32 = nu;
     /// Body each camera is attached to (len `ncam`).
     cam_bodyid: i32 = ncam;
     /// Position of each camera in its body's frame, metres (len `ncam`).

@@ -42,7 +42,7 @@
 //! [`crate::scenario::Scenario::fit_walk`] wherever twin builds the walker); the torso-tilt
 //! rate loop is bounded by the inertia it turns within a physics step
 //! ([`Walker::stable_tilt_rate_gains`]); robots it can't drive are refused with what to change
-//! (no two six-joint legs with feet, legs on position servos, actuators too weak to hold the
+//! (no two six-joint legs with feet, servos without a force limit, actuators too weak to hold the
 //! crouch, steps out of reach). What that gives on example-robot-data 6.0.0's humanoids, no
 //! robot-specific option (`twin sim ROBOT --controller walk [--vx 0.25] --duration D`, release
 //! build, 2-ms steps):
@@ -52,7 +52,7 @@
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 94.0° (92.9° before `command_hold_gain`) |
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
 //! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 8.56 m, drift 0.08 m, heading −1.2° (`--vx` 0.2: 7.05 m; 0.3: 9.77 m) | 0.29 m/s | no | 92.4° (92.3°) |
-//! | Talos (`talos_full_v2.urdf`, position servos) | 93.3 kg | yes | refused: legs on position servos | – | – | – | – |
+//! | Talos (`talos_full_v2.urdf`, its position servos) | 93.3 kg | yes | yes | 7.72 m, drift 0.29 m, heading 4.8° | 0.26 m/s | no | 97.6° |
 //! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 7.29 m, drift 0.04 m, heading 2.0° (`--vx` 0.2: 7.65 m; 0.3: 8.74 m) | 0.24 m/s | no | 97.1° (98.8°) |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
@@ -690,7 +690,13 @@ struct JointLoop {
     qpos_adr: usize,
     dof: usize,
     gear: f64,
+    /// The command's range (a motor's torque / gear, a servo's setpoint).
     limits: [f64; 2],
+    /// The joint torque its actuator can give, N·m (N on a slide): [least, most].
+    torque_limits: [f64; 2],
+    /// How the loop's torque becomes its command when the actuator is a servo; `None` for a
+    /// motor (or `qfrc_applied`): torque / gear.
+    servo: Option<AffineServo>,
     kp: f64,
     kd: f64,
     /// Gains while its leg swings.
@@ -698,6 +704,49 @@ struct JointLoop {
     kd_swing: f64,
     /// (leg index, index in the leg chain).
     leg: Option<(usize, usize)>,
+}
+
+/// A servo actuator with fixed gain and affine bias (MuJoCo's `position` and `velocity`
+/// actuators, no activation dynamics): its force is `gain · ctrl + bias[0] + bias[1] · length +
+/// bias[2] · velocity`, where a joint transmission's length and velocity are `gear · q` and
+/// `gear · q̇`. The walker drives it with the setpoint whose force is the torque its own loop
+/// wants, so that a robot on position servos walks on the same joint loops (the one gain rule,
+/// from the servo's force range) as one on torque motors; the servo's own gains cancel.
+#[derive(Debug, Clone, Copy, PartialEq)]
+struct AffineServo {
+    gain: f64,
+    bias: [f64; 3],
+}
+
+impl AffineServo {
+    /// The setpoint whose actuator force is `force` at actuator `length` and `velocity`.
+    fn command_for(&self, force: f64, length: f64, velocity: f64) -> f64 {
+        (force - self.bias[0] - self.bias[1] * length - self.bias[2] * velocity) / self.gain
+    }
+}
+
+/// How the walker drives actuator `a` (a joint transmission, command range `limits`) and the
+/// joint torque it can give, [least, most]: a motor its command range times its gear; a servo
+/// ([`AffineServo`]) its force range times its gear, within the joint's actuator-force range.
+fn drive_of(model: &Model, a: &crate::robot::Actuator, limits: [f64; 2]) -> (Option<AffineServo>, [f64; 2]) {
+    if a.interface == crate::convert::Interface::Effort {
+        let (lo, hi) = (limits[0] * a.gear, limits[1] * a.gear);
+        return (None, [lo.min(hi), lo.max(hi)]);
+    }
+    let [gain, ..] = model.actuator_gainprm()[a.id];
+    let [b0, b1, b2, ..] = model.actuator_biasprm()[a.id];
+    let [flo, fhi] = if model.actuator_forcelimited()[a.id] {
+        model.actuator_forcerange()[a.id]
+    } else {
+        [f64::NEG_INFINITY, f64::INFINITY]
+    };
+    let (lo, hi) = (flo * a.gear, fhi * a.gear);
+    let (mut lo, mut hi) = (lo.min(hi), lo.max(hi));
+    if let Some(joint) = a.joint.filter(|&j| model.jnt_actfrclimited()[j]) {
+        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
+        (lo, hi) = (lo.max(jlo), hi.min(jhi));
+    }
+    (Some(AffineServo { gain, bias: [b0, b1, b2] }), [lo, hi])
 }
 
 /// Standing or stepping.
@@ -1335,26 +1384,41 @@ impl Walker {
         }
     }
 
-    /// Refuses legs driven by position or velocity servos: the walker commands joint torques
-    /// (PD toward its IK targets plus the feed-forward that holds the weight), which a servo's
-    /// `ctrl` would take as a target angle or speed. Example-robot-data's Talos declares position
-    /// transmissions; converted with torque motors it stands under the walker.
+    /// Refuses legs driven by servos the walker can't command a torque through: the walker
+    /// computes joint torques (PD toward its IK targets plus the feed-forward that holds the
+    /// weight) and sends a position or velocity servo the setpoint whose force is that torque
+    /// ([`AffineServo`]), which needs the servo's force law to be affine in its setpoint with no
+    /// activation dynamics, and a force limit for the gain rule to scale the loop by.
     fn check_torque_actuators(&self, model: &Model) -> Result<()> {
         let legs: Vec<usize> = self.body.legs.iter().flat_map(|l| l.joints.iter().copied()).collect();
         for a in crate::robot::actuators_of(model, &[]) {
             let Some(joint) = a.joint.filter(|j| legs.contains(j)) else { continue };
-            if a.interface != crate::convert::Interface::Effort {
-                return Err(Error::Walk {
-                    message: format!(
-                        "the leg joint \"{}\" is driven by a {} servo (actuator \"{}\"), and the walker \
-                         commands joint torques: convert the URDF with torque motors \
-                         (`twin convert --actuators motor ROBOT.urdf`) and walk the MJCF it writes",
-                        model.name(ObjType::Joint, joint),
-                        format!("{:?}", a.interface).to_lowercase(),
-                        a.name
-                    ),
-                });
+            if a.interface == crate::convert::Interface::Effort {
+                continue;
             }
+            let affine = model.actuator_dyntype()[a.id] == 0
+                && model.actuator_gaintype()[a.id] == 0
+                && model.actuator_gainprm()[a.id][0] != 0.0;
+            let force_limited = model.actuator_forcelimited()[a.id] || model.jnt_actfrclimited()[joint];
+            let what = if !affine {
+                "whose force is not an affine function of its setpoint (activation dynamics, or a \
+                 gain that is not fixed)"
+            } else if !force_limited {
+                "with no force limit (`forcerange`), so the walker can't scale its joint loop to \
+                 the actuator's strength"
+            } else {
+                continue;
+            };
+            return Err(Error::Walk {
+                message: format!(
+                    "the leg joint \"{}\" is driven by a {} servo (actuator \"{}\") {what}: give it \
+                     a plain position servo with a force range (the URDF joint's effort limit), or \
+                     convert the URDF with torque motors (`twin convert --actuators motor ROBOT.urdf`)",
+                    model.name(ObjType::Joint, joint),
+                    format!("{:?}", a.interface).to_lowercase(),
+                    a.name
+                ),
+            });
         }
         Ok(())
     }
@@ -1412,8 +1476,7 @@ impl Walker {
             .filter(|l| l.leg.is_some())
             .map(|l| {
                 let needed = self.tree.static_torque(&crouched, l.joint, self.gravity, &forces);
-                let (a, b) = (l.limits[0] * l.gear, l.limits[1] * l.gear);
-                (l.joint, needed, [a.min(b), a.max(b)])
+                (l.joint, needed, l.torque_limits)
             })
             .collect()
     }
@@ -1621,7 +1684,12 @@ impl Walker {
         self.loops.clear();
         // The same loops, in the same order, as PdHold builds (joint transmissions on hinges).
         let mut k = 0;
-        let mut push = |command: usize, joint: usize, gear: f64, limits: [f64; 2], loops: &mut Vec<JointLoop>| {
+        let mut push = |command: usize,
+                        joint: usize,
+                        gear: f64,
+                        limits: [f64; 2],
+                        drive: (Option<AffineServo>, [f64; 2]),
+                        loops: &mut Vec<JointLoop>| {
             let leg = self
                 .ik
                 .iter()
@@ -1644,6 +1712,8 @@ impl Walker {
                 dof: model.jnt_dofadr()[joint] as usize,
                 gear,
                 limits,
+                torque_limits: drive.1,
+                servo: drive.0,
                 kp,
                 kd,
                 kp_swing,
@@ -1657,7 +1727,7 @@ impl Walker {
                 // The one actuator finder (joint transmissions on hinges and slides).
                 for a in crate::robot::actuators_of(model, &[]) {
                     let Some(joint) = a.joint.filter(|_| a.gear != 0.0) else { continue };
-                    push(a.id, joint, a.gear, limits[a.id], &mut loops);
+                    push(a.id, joint, a.gear, limits[a.id], drive_of(model, &a, limits[a.id]), &mut loops);
                 }
             }
             Actuation::Qfrc => {
@@ -1666,7 +1736,7 @@ impl Walker {
                         continue;
                     }
                     let dof = model.jnt_dofadr()[joint] as usize;
-                    push(dof, joint, 1.0, limits[dof], &mut loops);
+                    push(dof, joint, 1.0, limits[dof], (None, limits[dof]), &mut loops);
                 }
             }
         }
@@ -2825,7 +2895,15 @@ impl Walker {
             let q_target = self.q_des[l.qpos_adr] + dq;
             let qd_target = if track { self.held.qd_des[i] } else { 0.0 };
             let tau = kp * (q_target - observation.qpos[l.qpos_adr]) - kd * (observation.qvel[l.dof] - qd_target) + ff;
-            command[l.command] = (tau / l.gear).clamp(l.limits[0], l.limits[1]);
+            let u = match &l.servo {
+                None => tau / l.gear,
+                Some(servo) => servo.command_for(
+                    tau / l.gear,
+                    l.gear * observation.qpos[l.qpos_adr],
+                    l.gear * observation.qvel[l.dof],
+                ),
+            };
+            command[l.command] = u.clamp(l.limits[0], l.limits[1]);
         }
     }
 

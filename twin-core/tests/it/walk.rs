@@ -984,7 +984,7 @@ fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
 }
 
 /// Example-robot-data's Talos (full v2), converted with torque motors as `twin convert
-/// --actuators motor` does (the walker refuses its position servos), written into `dir`.
+/// --actuators motor` does, written into `dir`.
 fn talos_on_motors(dir: &std::path::Path) -> std::path::PathBuf {
     use twin_core::convert::{ActuatorMode, ConvertOptions, convert_urdf};
     let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
@@ -1027,8 +1027,36 @@ fn talos_on_motors_walks_five_metres_straight() {
     );
 }
 
+/// Talos as `twin convert` makes it by default: its legs on the position servos its
+/// transmissions declare (kp 2000–5000, force ranges from its effort limits). The walker sends
+/// each servo the setpoint whose force is the torque its own loop wants (`AffineServo`): the
+/// same joint loops as on torque motors, the servo's gains cancelled. No robot-specific
+/// option: it walks over 5 m straight at 0.25 m/s and turns 90° in place within 15°. (It was
+/// refused: "the leg joint is driven by a position servo … convert with torque motors". In
+/// the lab: 7.72 m, 0.257 m/s, heading 4.8°, drift 0.29 m; turned 97.6°.)
+#[test]
+fn talos_on_its_position_servos_walks_and_turns() {
+    let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
+    let converted = twin_core::convert::convert_urdf(&urdf, &Default::default()).unwrap();
+    assert!(converted.mjcf.matches("<position ").count() >= 12, "Talos's legs on position servos");
+    let dir = tempfile::tempdir().unwrap();
+    let talos = dir.path().join("talos.xml");
+    std::fs::write(&talos, &converted.mjcf).unwrap();
+    let s = walk_with_derived_options(&talos, 30.0, "vx = 0.25");
+    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
+    assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
+    assert!(s.yaw_change_rad.abs() < 0.15, "heading off by {} rad", s.yaw_change_rad);
+    assert!(s.lateral_m.abs() < 0.5, "drifted {} m sideways", s.lateral_m);
+    let turn = walk_with_derived_options(&talos, 12.0, "commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]");
+    assert!(!turn.fell, "turning: fell at {:?}", turn.fall_time_secs);
+    let deg = turn.yaw_change_rad.to_degrees();
+    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
+    assert!(turn.distance_m < 0.5, "turning in place moved {} m", turn.distance_m);
+}
+
 /// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
-/// --actuators motor`: the walker refuses its position servos) stands upright under the walker
+/// --actuators motor`) stands upright under the walker
 /// and turns 90° in place within 15°, no robot-specific option. Its IMU site is on `imu_link`,
 /// turned half a turn about the pelvis's x + y axis: read as the pelvis's own orientation, the
 /// walker saw the torso upside down (roll ±π), its tilt feedback flipped the pelvis ±0.2 rad
@@ -1090,15 +1118,18 @@ fn talos_on_motors_stands_upright_and_turns_in_place() {
 }
 
 /// The walker refuses what it can't drive, saying what to change, instead of a fall: legs on
-/// position servos (Talos's transmissions), and actuators too weak to hold the crouch (the
+/// position servos with no force limit (Talos's transmissions with their `forcerange` taken
+/// out, and the joints' actuator-force ranges: nothing to scale the joint loops by), and actuators too weak to hold the crouch (the
 /// shipped humanoid with every effort limit cut to 10 N·m: its knees need 14.8 N·m at the
 /// 0.62-m crouch, half its weight on each foot).
 #[test]
 fn walker_refuses_servo_legs_and_weak_actuators() {
     let talos = example_robot("talos_data/robots/talos_full_v2.urdf");
-    let robot = twin_core::robot::Robot::load(&talos).unwrap();
-    let e = Walker::new(&robot.model, WalkOptions::default()).unwrap_err().to_string();
-    assert!(e.contains("position servo") && e.contains("--actuators motor"), "{e}");
+    let converted = twin_core::convert::convert_urdf(&talos, &Default::default()).unwrap();
+    let unlimited = strip_attribute(&strip_attribute(&converted.mjcf, " forcerange=\""), " actuatorfrcrange=\"");
+    let model = twin_core::mj::Model::from_xml_str(&unlimited).unwrap();
+    let e = Walker::new(&model, WalkOptions::default()).unwrap_err().to_string();
+    assert!(e.contains("position servo") && e.contains("no force limit") && e.contains("--actuators motor"), "{e}");
     let text = std::fs::read_to_string(humanoid()).unwrap();
     let weak = with_efforts_of_ten(&text);
     let dir = std::env::temp_dir().join(format!("twin-weak-{}", std::process::id()));
@@ -1110,6 +1141,19 @@ fn walker_refuses_servo_legs_and_weak_actuators() {
     let e = s.fit_walk(&robot.model).unwrap_err().to_string();
     assert!(e.contains("left_knee_joint") && e.contains("gives -10.0 N·m") && e.contains("raise com_height"), "{e}");
     std::fs::remove_dir_all(&dir).ok();
+}
+
+/// `text` with every attribute that starts with `attribute` (e.g. ` forcerange="`) taken out.
+fn strip_attribute(text: &str, attribute: &str) -> String {
+    let mut out = String::new();
+    let mut rest = text;
+    while let Some(i) = rest.find(attribute) {
+        out.push_str(&rest[..i]);
+        let after = &rest[i + attribute.len()..];
+        rest = &after[after.find('"').map_or(after.len(), |e| e + 1)..];
+    }
+    out.push_str(rest);
+    out
 }
 
 /// Every effort limit of a URDF (`effort="…"` and ros2_control's `min`/`max` params) set to 10.
