@@ -5,8 +5,9 @@
 //! For each robot (loaded as `twin sim` loads it, armature as `scenarios/walk.toml`, walking
 //! options derived from the robot by [`WalkOptions::for_robot`], no robot-specific option;
 //! `--vx` the forward speed, m/s, default 0 = the walker stepping in place), each repetition
-//! runs back to back from `home`. A robot whose converted leg joints are position servos (the
-//! walker refuses them) is converted again with torque motors (`twin convert --actuators
+//! runs back to back from `home`. Leg joints on position servos are driven through them (the
+//! walker sends the setpoint whose force is its torque); a robot whose servos the walker
+//! refuses (no force limit) is converted again with torque motors (`twin convert --actuators
 //! motor`), as the refusal says, and marked so in its row.
 //!
 //! 1. **pd-hold**: twin's loop (`mj_step1`, [`PdHold::compute`], `mj_step2`) for N steps.

@@ -1031,9 +1031,11 @@ fn talos_on_motors_walks_five_metres_straight() {
 /// transmissions declare (kp 2000–5000, force ranges from its effort limits). The walker sends
 /// each servo the setpoint whose force is the torque its own loop wants (`AffineServo`): the
 /// same joint loops as on torque motors, the servo's gains cancelled. No robot-specific
-/// option: it walks over 5 m straight at 0.25 m/s and turns 90° in place within 15°. (It was
+/// option: it walks over 5 m straight at 0.25 m/s, turns 90° in place within 15° and follows
+/// `scenarios/steer.toml` within 20 % of each leg. (It was
 /// refused: "the leg joint is driven by a position servo … convert with torque motors". In
-/// the lab: 7.72 m, 0.257 m/s, heading 4.8°, drift 0.29 m; turned 97.6°.)
+/// the lab: 7.72 m, 0.257 m/s, heading 4.8°, drift 0.29 m; turned 97.6°; steered 1.109 m,
+/// 99.7°, 0.532 m.)
 #[test]
 fn talos_on_its_position_servos_walks_and_turns() {
     let urdf = example_robot("talos_data/robots/talos_full_v2.urdf");
@@ -1053,6 +1055,14 @@ fn talos_on_its_position_servos_walks_and_turns() {
     let deg = turn.yaw_change_rad.to_degrees();
     assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
     assert!(turn.distance_m < 0.5, "turning in place moved {} m", turn.distance_m);
+    let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
+    steer.model = Some(talos.clone());
+    let summary = derived_run(steer, &talos);
+    assert!(!summary.fell, "steered: fell at {:?}", summary.fall_time_secs);
+    let (forward, turned, lateral) = steer_legs(&summary);
+    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
+    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
+    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
 }
 
 /// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
