@@ -181,10 +181,35 @@ fn steer_scenario_forward_turn_lateral_within_twenty_percent() {
     assert!(verdicts.iter().all(|v| v.passed), "{verdicts:?}");
     let seg = &s.segments;
     assert!((seg[1].commanded_distance_m - 1.0).abs() < 1e-9 && (seg[5].commanded_distance_m - 0.5).abs() < 1e-9);
-    let (forward, turned, lateral) = steer_legs(&s);
+    legs_within_twenty_percent(&s);
+}
+
+/// Each leg of a `scenarios/steer.toml` run `s` within 20 % of its 1 m, 90° and 0.5 m.
+fn legs_within_twenty_percent(s: &GaitSummary) {
+    let (forward, turned, lateral) = steer_legs(s);
     assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
     assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
     assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+}
+
+/// The robot at `path`, its walking options derived, follows `scenarios/steer.toml` without a
+/// fall, each leg within 20 %.
+fn steers_within_twenty_percent(path: &std::path::Path) {
+    let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
+    steer.model = Some(path.to_path_buf());
+    let summary = derived_run(steer, path);
+    assert!(!summary.fell, "steered: fell at {:?}", summary.fall_time_secs);
+    legs_within_twenty_percent(&summary);
+}
+
+/// The robot at `path`, its walking options derived, turns 90° in place within 15° at
+/// 0.3 rad/s (from 1 s, for π/(2·0.3) s, then standing) without a fall, moving under 0.5 m.
+fn turns_ninety_degrees_in_place_within_fifteen(path: &std::path::Path) {
+    let turn = walk_with_derived_options(path, 12.0, "commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]");
+    assert!(!turn.fell, "turning: fell at {:?}", turn.fall_time_secs);
+    let deg = turn.yaw_change_rad.to_degrees();
+    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
+    assert!(turn.distance_m < 0.5, "turning in place moved {} m", turn.distance_m);
 }
 
 /// The legs of `scenarios/steer.toml` in a run of it: (forward m, turned rad, lateral m), each
@@ -910,14 +935,7 @@ fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
     assert!(s.yaw_change_rad.abs() < 0.2, "heading off by {} rad", s.yaw_change_rad);
     assert!(s.lateral_m.abs() < 0.3, "{} m off the line", s.lateral_m);
-    // 0.3 rad/s for π/(2·0.3) s: 90° to the left, then standing.
-    let romeo = example_robot("romeo_description/urdf/romeo.urdf");
-    let turn = "commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]";
-    let s = walk_with_derived_options(&romeo, 12.0, turn);
-    assert!(!s.fell, "turning: fell at {:?}", s.fall_time_secs);
-    let deg = s.yaw_change_rad.to_degrees();
-    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
-    assert!(s.distance_m < 0.5, "turning in place moved {} m", s.distance_m);
+    turns_ninety_degrees_in_place_within_fifteen(&example_robot("romeo_description/urdf/romeo.urdf"));
 }
 
 /// Example-robot-data's Romeo (40.5 kg, legs loaded 0.32 of their effort in the crouch), no
@@ -948,14 +966,7 @@ fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
         let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = 0.3\n{given}"));
         assert!(s.fell, "{given}: walked {} m without a fall", s.forward_m);
     }
-    let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
-    steer.model = Some(romeo.clone());
-    let summary = derived_run(steer, &romeo);
-    assert!(!summary.fell, "steered: fell at {:?}", summary.fall_time_secs);
-    let (forward, turned, lateral) = steer_legs(&summary);
-    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
-    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
-    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+    steers_within_twenty_percent(&romeo);
 }
 
 /// The G1, no robot-specific option, with the damping of its hip and waist loops capped on
@@ -969,11 +980,7 @@ fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
 #[test]
 fn g1_turns_in_place_and_walks_at_two_and_three_tenths_of_a_metre_per_second() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
-    let turn = walk_with_derived_options(&g1, 12.0, "commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]");
-    assert!(!turn.fell, "turning: fell at {:?}", turn.fall_time_secs);
-    let deg = turn.yaw_change_rad.to_degrees();
-    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
-    assert!(turn.distance_m < 0.5, "turning in place moved {} m", turn.distance_m);
+    turns_ninety_degrees_in_place_within_fifteen(&g1);
     for (vx, least_m) in [(0.2, 5.0), (0.3, 7.0)] {
         let s = walk_with_derived_options(&g1, 30.0, &format!("vx = {vx}"));
         assert!(!s.fell, "{vx} m/s: fell at {:?}", s.fall_time_secs);
@@ -1050,19 +1057,8 @@ fn talos_on_its_position_servos_walks_and_turns() {
     assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
     assert!(s.yaw_change_rad.abs() < 0.15, "heading off by {} rad", s.yaw_change_rad);
     assert!(s.lateral_m.abs() < 0.5, "drifted {} m sideways", s.lateral_m);
-    let turn = walk_with_derived_options(&talos, 12.0, "commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]");
-    assert!(!turn.fell, "turning: fell at {:?}", turn.fall_time_secs);
-    let deg = turn.yaw_change_rad.to_degrees();
-    assert!((deg - 90.0).abs() <= 15.0, "turned {deg}°");
-    assert!(turn.distance_m < 0.5, "turning in place moved {} m", turn.distance_m);
-    let mut steer = Scenario::load(scenarios().join("steer.toml")).unwrap();
-    steer.model = Some(talos.clone());
-    let summary = derived_run(steer, &talos);
-    assert!(!summary.fell, "steered: fell at {:?}", summary.fall_time_secs);
-    let (forward, turned, lateral) = steer_legs(&summary);
-    assert!((forward - 1.0).abs() < 0.2, "forward {forward} m of 1 m");
-    assert!((turned - std::f64::consts::FRAC_PI_2).abs() < 0.2 * std::f64::consts::FRAC_PI_2, "turned {turned} rad");
-    assert!((lateral - 0.5).abs() < 0.1, "lateral {lateral} m of 0.5 m");
+    turns_ninety_degrees_in_place_within_fifteen(&talos);
+    steers_within_twenty_percent(&talos);
 }
 
 /// Example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin convert
