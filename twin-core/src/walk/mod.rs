@@ -487,15 +487,6 @@ pub struct WalkOptions {
     /// for [`GROUND_READ_STILL_SECS`] lost the up ramp (38/100).
     #[default(false)]
     pub landing_read_at_rest: bool,
-    /// With `ground_slope_gain`, a single step down (the stance foot's mid-stance read more
-    /// than [`GROUND_RISE_M`] below the previous foot's, over at least
-    /// [`GROUND_SLOPE_MIN_BASE_M`]) that the step before does not agree with is taken as the
-    /// start of a down slope: the next landings are carried on down along that step's slope
-    /// at once instead of after two steps agree (default: false: a single step is no slope).
-    /// Past a ramp's crest the first steps otherwise aim at the top's height and land in the
-    /// air. Only down: a foot aimed too low is stopped by the ground, one aimed too high falls.
-    #[default(false)]
-    pub ground_drop_slope: bool,
     /// Walking, each step's advance counts from where the previous step was aimed (its
     /// corrected landing spot) rather than where the foot landed, by this fraction of the
     /// fore-aft gap, at most `max_step_adjust` (default: 0.0, from where it landed; 1: from the
@@ -2246,8 +2237,7 @@ impl Walker {
         let (s0, s1) = ((z1 - z0) / d0, (z2 - z1) / d1);
         let steeper = s0.abs().max(s1.abs());
         if s0 * s1 <= 0.0 || (s1 - s0).abs() > GROUND_SLOPE_AGREEMENT * steeper {
-            let drop = self.options.ground_drop_slope && d1 > 0.0 && z2 - z1 < -GROUND_RISE_M;
-            return if drop { s1.max(-MAX_GROUND_SLOPE) } else { 0.0 };
+            return 0.0;
         }
         ((s0 + s1) / 2.0).clamp(-MAX_GROUND_SLOPE, MAX_GROUND_SLOPE)
     }
