@@ -52,7 +52,7 @@
 //! | shipped humanoid (`models/humanoid.urdf`) | 35.7 kg | yes | yes | 8.64 m, drift 0.04 m | 0.29 m/s | no | 94.0° (92.9° before `command_hold_gain`) |
 //! | Unitree G1 (`g1_29dof_rev_1_0.urdf`) | 33.3 kg | yes | yes | 6.64 m, drift 0.10 m, heading 0.3° (`--vx` 0.2: 5.27 m; 0.3: 7.95 m) | 0.22 m/s | no | 92.6° (94.9°) |
 //! | Romeo (`romeo.urdf`) | 40.5 kg | yes | yes | 8.56 m, drift 0.08 m, heading −1.2° (`--vx` 0.2: 7.05 m; 0.3: 9.77 m) | 0.29 m/s | no | 92.4° (92.3°) |
-//! | Talos (`talos_full_v2.urdf`, its position servos) | 93.3 kg | yes | yes | 7.72 m, drift 0.29 m, heading 4.8° | 0.26 m/s | no | 97.6° |
+//! | Talos (`talos_full_v2.urdf`, its position servos) | 93.3 kg | yes | yes | 7.72 m, drift 0.29 m, heading 4.8° (`--vx` 0.2: 7.93 m, drift 0.61 m; 0.3: falls at 3.7 s) | 0.26 m/s | no | 97.6° |
 //! | Talos, `twin convert --actuators motor` | 93.3 kg | – | yes (10 s, upright within 0.4°) | 7.29 m, drift 0.04 m, heading 2.0° (`--vx` 0.2: 7.65 m; 0.3: 8.74 m) | 0.24 m/s | no | 97.1° (98.8°) |
 //!
 //! (Turning: `[walk] commands = [[1.0, 0.0, 0.0, 0.3], [6.236, 0.0, 0.0, 0.0]]`.) The G1 walks,
