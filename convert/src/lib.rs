@@ -250,6 +250,45 @@ pub fn convert_urdf<C: Compiler>(
     convert_urdf_str(path, &text, opts, compiler)
 }
 
+/// Adds a contact sensor on each link of [`ConvertOptions::contact_sensors`] that has none.
+fn add_contact_sensors(path: &Path, robot: &mut ir::RobotIr, links: &[String]) -> Result<()> {
+    for link in links {
+        if !robot.links.iter().any(|l| &l.name == link) {
+            let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
+            return Err(Error::Urdf {
+                path: path.to_path_buf(),
+                line: 1,
+                element: "robot".into(),
+                name: None,
+                message: format!(
+                    "no link \"{link}\" for the contact sensor asked for (contact_sensors); links: {}",
+                    names.join(", ")
+                ),
+            });
+        }
+        if robot.sensors.iter().any(|s| s.kind == "contact" && &s.reference == link) {
+            continue;
+        }
+        robot.sensors.push(ir::SensorIr {
+            name: format!("{link}_contact"),
+            kind: "contact".into(),
+            reference: link.clone(),
+            pose: ir::Pose::IDENTITY,
+            update_rate_hz: None,
+            line: 0,
+            topic: None,
+            frame_name: None,
+            gyro_noise_std: 0.0,
+            accel_noise_std: 0.0,
+            gyro_bias: ImuBias::default(),
+            accel_bias: ImuBias::default(),
+            cameras: Vec::new(),
+            ray: None,
+        });
+    }
+    Ok(())
+}
+
 /// Converts URDF `text`; `path` names it in errors and anchors relative mesh paths.
 ///
 /// # Errors
@@ -262,7 +301,8 @@ pub fn convert_urdf_str<C: Compiler>(
 ) -> Result<ConvertedModel, C::Error> {
     let doc = urdf::parse(path, text)?;
     let ctx = Ctx { path, doc: &doc };
-    let robot = ir::parse_robot(&ctx)?;
+    let mut robot = ir::parse_robot(&ctx)?;
+    add_contact_sensors(path, &mut robot, &opts.contact_sensors)?;
     let tree = Tree::build(&robot)?;
     let mut conv = Converter::new(&robot, &tree, opts)?;
     conv.prepare()?;

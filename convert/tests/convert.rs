@@ -264,3 +264,37 @@ fn metadata_round_trips_through_the_custom_texts() {
     assert_eq!(meta.name, "boxbot");
     assert!(twin_convert::RobotMeta::from_custom_texts(&[("other", "x")]).is_none());
 }
+
+/// `ConvertOptions::contact_sensors`: a link named there gets what a Gazebo contact sensor on it
+/// would: a `touch` sensor `LINK_contact` on a box site covering the link's collision box 5 %
+/// larger (the arm's 0.05 × 0.05 × 0.2 m box: half sizes 0.02625 × 0.02625 × 0.105 m, at the
+/// collision's origin 0.1 m down); a name that is no link is refused, naming the URDF, the
+/// option and the link, and listing the links there are.
+#[test]
+fn contact_sensors_put_a_touch_sensor_over_a_links_collision() {
+    let opts = ConvertOptions { contact_sensors: vec!["arm".into()], ..Default::default() };
+    let mut engine = BoxEngine { invweight: 0.5, ..Default::default() };
+    let out = convert_urdf_str(Path::new("boxbot.urdf"), &robot_urdf(), &opts, &mut engine).unwrap();
+    let doc = roxmltree::Document::parse(&out.mjcf).unwrap();
+    let touch: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("touch")).collect();
+    assert_eq!(touch.len(), 1, "{}", out.mjcf);
+    assert_eq!(touch[0].attribute("name"), Some("arm_contact"));
+    let site_name = touch[0].attribute("site").unwrap();
+    let site = doc.descendants().find(|n| n.has_tag_name("site") && n.attribute("name") == Some(site_name)).unwrap();
+    assert_eq!(site.parent().unwrap().attribute("name"), Some("arm"), "the site is on the arm's body");
+    assert_eq!(site.attribute("type"), Some("box"));
+    let size = attr_nums(site, "size");
+    for (got, want) in size.iter().zip([0.02625, 0.02625, 0.105]) {
+        assert!((got - want).abs() < 1e-9, "site size {size:?}");
+    }
+    assert!((attr_nums(site, "pos")[2] + 0.1).abs() < 1e-9, "at the collision's origin");
+    let without = convert(&mut BoxEngine { invweight: 0.5, ..Default::default() });
+    assert!(!without.mjcf.contains("<touch"), "no sensor unless asked for");
+
+    let opts = ConvertOptions { contact_sensors: vec!["foot".into()], ..Default::default() };
+    let err = convert_urdf_str(Path::new("boxbot.urdf"), &robot_urdf(), &opts, &mut engine).unwrap_err();
+    let text = err.to_string();
+    assert!(text.starts_with("boxbot.urdf:"), "{text}");
+    assert!(text.contains("no link \"foot\"") && text.contains("contact_sensors"), "{text}");
+    assert!(text.contains("base, payload, arm"), "{text}");
+}

@@ -8,6 +8,8 @@
 //! controller = "walk"                # walk | pd-hold | passive
 //! armature = 0.01                    # joint armature, kg·m² (default: walk::WALK_ARMATURE)
 //! # friction = 0.8                   # sliding friction of every geom (default: the model's)
+//! # contact_sensors = ["left_foot_link", "right_foot_link"]  # links given a contact sensor
+//!                                    # (a MuJoCo touch sensor), as a Gazebo one would (default: none)
 //!
 //! [walk]                             # walk::WalkOptions, by field name; the gait options
 //! vx = 0.3                           # not written here come from the robot (walk::derive)
@@ -145,6 +147,8 @@ struct File {
     armature: Option<f64>,
     friction: Option<f64>,
     #[serde(default)]
+    contact_sensors: Vec<String>,
+    #[serde(default)]
     walk: WalkOptions,
     #[serde(default)]
     push: Vec<Push>,
@@ -183,6 +187,8 @@ pub struct Scenario {
     pub armature: f64,
     /// Sliding friction of every geom, if set.
     pub friction: Option<f64>,
+    /// Links given a contact sensor (`convert::ConvertOptions::contact_sensors`).
+    pub contact_sensors: Vec<String>,
     /// Walking options.
     pub walk: WalkOptions,
     /// The `[walk]` keys the file (or the command line) gave: [`Scenario::fit_walk`] derives
@@ -271,6 +277,7 @@ impl Scenario {
             controller: controller.to_string(),
             armature: WALK_ARMATURE,
             friction: None,
+            contact_sensors: Vec::new(),
             walk: WalkOptions::default(),
             walk_given: Default::default(),
             pushes: Vec::new(),
@@ -411,6 +418,7 @@ impl Scenario {
             controller: file.controller,
             armature: file.armature.unwrap_or(WALK_ARMATURE),
             friction: file.friction,
+            contact_sensors: file.contact_sensors,
             walk: file.walk,
             walk_given,
             pushes: file.push,
@@ -446,7 +454,11 @@ impl Scenario {
     /// As [`Robot::load`]; [`Error::Scenario`] for a push on a missing body.
     pub fn robot(&self, default_model: &Path) -> Result<Robot> {
         let path = self.model.clone().unwrap_or_else(|| default_model.to_path_buf());
-        let convert = crate::convert::ConvertOptions { world: self.world.clone(), ..Default::default() };
+        let convert = crate::convert::ConvertOptions {
+            world: self.world.clone(),
+            contact_sensors: self.contact_sensors.clone(),
+            ..Default::default()
+        };
         // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where
         // `twin randomize` draws it per episode.
         let grasping = self.controller == "grasp";

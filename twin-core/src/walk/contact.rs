@@ -163,6 +163,12 @@ impl ContactSensing {
         }
     }
 
+    /// Whether a foot whose sensors read `load` newtons carries load: more than
+    /// [`TOUCHDOWN_LOAD_FRACTION`] of the robot's weight.
+    pub fn carries_load(&self, load: f64) -> bool {
+        load > self.load_n
+    }
+
     /// Whether the swinging foot `leg` has landed: `swing_s` its swing progress, `gap_m` its
     /// sole's height above its target (m), `searching` whether its target goes on down past
     /// the planned end ([`TOUCHDOWN_SEARCH_MPS`]).
@@ -171,7 +177,7 @@ impl ContactSensing {
             return false;
         }
         match self.load_n(leg, sensordata) {
-            Some(load) => load > self.load_n,
+            Some(load) => self.carries_load(load),
             None => {
                 (self.still_secs[leg] >= TOUCHDOWN_STILL_SECS
                     && (gap_m > TOUCHDOWN_BLOCKED_M || (searching && gap_m > 0.0)))
