@@ -155,6 +155,9 @@ pub(crate) struct SensorIr {
     pub cameras: Vec<CameraIr>,
     /// `<ray>` / `<lidar>` scan.
     pub ray: Option<RayIr>,
+    /// A contact sensor over every collision geom of its link, not the first alone (one asked
+    /// for by `ConvertOptions::contact_sensors`).
+    pub every_collision: bool,
 }
 
 #[derive(Debug, Clone)]
@@ -988,6 +991,7 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
         accel_bias,
         cameras,
         ray,
+        every_collision: false,
     })
 }
 

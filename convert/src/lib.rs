@@ -261,7 +261,8 @@ fn add_contact_sensors(path: &Path, robot: &mut ir::RobotIr, links: &[String]) -
                 element: "robot".into(),
                 name: None,
                 message: format!(
-                    "no link \"{link}\" for the contact sensor asked for (contact_sensors); links: {}",
+                    "no link \"{link}\" for the contact sensor asked for (`--contact-sensor`, a scenario's \
+                     `contact_sensors`): name one of its links: {}",
                     names.join(", ")
                 ),
             });
@@ -284,6 +285,7 @@ fn add_contact_sensors(path: &Path, robot: &mut ir::RobotIr, links: &[String]) -
             accel_bias: ImuBias::default(),
             cameras: Vec::new(),
             ray: None,
+            every_collision: true,
         });
     }
     Ok(())

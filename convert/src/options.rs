@@ -106,9 +106,10 @@ pub struct ConvertOptions {
     #[default(1.0)]
     pub velocity_kv_per_effort: f64,
     /// Links given a contact sensor as if the URDF declared one on each
-    /// (`<gazebo reference="LINK"><sensor type="contact">`): a MuJoCo `touch` sensor over the
-    /// link's first collision geom, named `LINK_contact`, e.g. the feet of a robot whose real
-    /// feet sense load but whose URDF does not say so (default: empty). A link that already has a
-    /// contact sensor keeps its own; a name that is no link is an error.
+    /// (`<gazebo reference="LINK"><sensor type="contact">`), covering every collision geom of
+    /// the link: a MuJoCo `touch` sensor over each, named `LINK_contact`, `LINK_contact_2`, …
+    /// (a declared Gazebo sensor covers the first alone), e.g. the feet of a robot whose real
+    /// feet sense load but whose URDF does not say so (default: empty). A link that already has
+    /// a contact sensor keeps its own; a name that is no link is an error.
     pub contact_sensors: Vec<String>,
 }

@@ -140,35 +140,44 @@ impl Converter<'_> {
                 }
                 "contact" => {
                     let l = &robot.links[link];
-                    let Some(g) = l.collisions.first() else {
+                    if l.collisions.is_empty() {
                         self.notes.push(format!(
                             "contact sensor \"{}\": link \"{}\" has no collision geom; not converted",
                             s.name, l.name
                         ));
                         continue;
-                    };
-                    // The touch sensor counts contacts inside the site: cover the geom, 5 % larger.
-                    let (ty, size) = match &g.shape {
-                        Shape::Box(sz) => ("box", vec![sz[0] * 0.525, sz[1] * 0.525, sz[2] * 0.525]),
-                        Shape::Sphere(r) => ("sphere", vec![r * 1.05]),
-                        Shape::Cylinder { radius, length } => ("cylinder", vec![radius * 1.05, length * 0.525]),
-                        Shape::Capsule { radius, length } => ("capsule", vec![radius * 1.05, length * 0.525]),
-                        Shape::Mesh { .. } => {
-                            self.notes.push(format!(
-                                "contact sensor \"{}\": mesh collision (line {}) approximated by a 10 cm sphere site",
-                                s.name, g.line
-                            ));
-                            ("sphere", vec![0.1])
-                        }
-                    };
-                    let site = format!("{name}_site");
-                    self.sites[link].push(format!(
-                        "<site name=\"{site}\" type=\"{ty}\" size=\"{}\"{} group=\"4\" rgba=\"1 0 0 0.2\"/>",
-                        fv(&size),
-                        pose_attrs(&g.pose)
-                    ));
-                    self.sensor_xml.push(format!("<touch name=\"{name}\" site=\"{site}\"/>"));
-                    self.sensor_meta.push(meta(vec![s.name.clone()]));
+                    }
+                    // Gazebo's sensor reports its link's (first) collision; one asked for by
+                    // `contact_sensors` covers each (a foot of several spheres), one touch
+                    // sensor per geom (the walker sums a foot's).
+                    let covered = if s.every_collision { l.collisions.len() } else { 1 };
+                    let mut made = Vec::new();
+                    for (k, g) in l.collisions.iter().take(covered).enumerate() {
+                        // The touch sensor counts contacts inside the site: cover the geom, 5 % larger.
+                        let (ty, size) = match &g.shape {
+                            Shape::Box(sz) => ("box", vec![sz[0] * 0.525, sz[1] * 0.525, sz[2] * 0.525]),
+                            Shape::Sphere(r) => ("sphere", vec![r * 1.05]),
+                            Shape::Cylinder { radius, length } => ("cylinder", vec![radius * 1.05, length * 0.525]),
+                            Shape::Capsule { radius, length } => ("capsule", vec![radius * 1.05, length * 0.525]),
+                            Shape::Mesh { .. } => {
+                                self.notes.push(format!(
+                                    "contact sensor \"{}\": mesh collision (line {}) approximated by a 10 cm sphere site",
+                                    s.name, g.line
+                                ));
+                                ("sphere", vec![0.1])
+                            }
+                        };
+                        let touch = if k == 0 { name.clone() } else { format!("{name}_{}", k + 1) };
+                        let site = format!("{touch}_site");
+                        self.sites[link].push(format!(
+                            "<site name=\"{site}\" type=\"{ty}\" size=\"{}\"{} group=\"4\" rgba=\"1 0 0 0.2\"/>",
+                            fv(&size),
+                            pose_attrs(&g.pose)
+                        ));
+                        self.sensor_xml.push(format!("<touch name=\"{touch}\" site=\"{site}\"/>"));
+                        made.push(if k == 0 { s.name.clone() } else { format!("{}_{}", s.name, k + 1) });
+                    }
+                    self.sensor_meta.push(meta(made));
                 }
                 other => {
                     self.notes.push(format!(

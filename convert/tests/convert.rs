@@ -290,6 +290,20 @@ fn contact_sensors_put_a_touch_sensor_over_a_links_collision() {
     assert!((attr_nums(site, "pos")[2] + 0.1).abs() < 1e-9, "at the collision's origin");
     let without = convert(&mut BoxEngine { invweight: 0.5, ..Default::default() });
     assert!(!without.mjcf.contains("<touch"), "no sensor unless asked for");
+    // A link of two collision geoms (a foot of several contact shapes): a touch sensor over each
+    // (a Gazebo contact sensor in the URDF covers its first collision only).
+    let two = robot_urdf().replace(
+        "<geometry><box size=\"0.05 0.05 0.2\"/></geometry></collision>",
+        "<geometry><box size=\"0.05 0.05 0.2\"/></geometry></collision>\n    \
+         <collision><origin xyz=\"0 0 -0.2\"/><geometry><box size=\"0.04 0.04 0.04\"/></geometry></collision>",
+    );
+    let opts = ConvertOptions { contact_sensors: vec!["arm".into()], ..Default::default() };
+    let out = convert_urdf_str(Path::new("boxbot.urdf"), &two, &opts, &mut engine).unwrap();
+    let doc = roxmltree::Document::parse(&out.mjcf).unwrap();
+    let names: Vec<_> = doc.descendants().filter(|n| n.has_tag_name("touch")).map(|n| n.attribute("name")).collect();
+    assert_eq!(names, [Some("arm_contact"), Some("arm_contact_2")]);
+    let site = doc.descendants().find(|n| n.attribute("name") == Some("arm_contact_2_site")).unwrap();
+    assert!((attr_nums(site, "size")[0] - 0.021).abs() < 1e-9 && (attr_nums(site, "pos")[2] + 0.2).abs() < 1e-9);
 
     let opts = ConvertOptions { contact_sensors: vec!["foot".into()], ..Default::default() };
     let err = convert_urdf_str(Path::new("boxbot.urdf"), &robot_urdf(), &opts, &mut engine).unwrap_err();

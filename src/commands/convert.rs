@@ -34,6 +34,11 @@ pub struct Args {
     /// Gazebo SDF world or MJCF file to compose the robot into (default: a floor and a light).
     #[arg(long, value_name = "FILE")]
     pub world: Option<PathBuf>,
+    /// Give this link a contact sensor, as a Gazebo `contact` sensor on it would (a MuJoCo
+    /// `touch` sensor over each of its collision geoms), e.g. feet that sense load on the real
+    /// robot while the URDF does not say so (repeatable).
+    #[arg(long = "contact-sensor", value_name = "LINK")]
+    pub contact_sensors: Vec<String>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -58,6 +63,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         actuators: args.actuators,
         mesh_dir: Some(out_dir.join(format!("{stem}_meshes"))),
         world: args.world.clone(),
+        contact_sensors: args.contact_sensors.clone(),
         ..ConvertOptions::default()
     };
     let converted = convert_urdf(&args.urdf, &opts)?;

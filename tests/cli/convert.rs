@@ -92,6 +92,41 @@ fn convert_reports_bad_input_with_file_line_and_fix() {
     assert!(!dir.path().join("r.xml").exists());
 }
 
+/// `twin convert --contact-sensor LINK`: the humanoid's feet get touch sensors over their
+/// soles (read back by `twin info`); a link the robot does not have is refused, naming the
+/// URDF, the flag and the links there are, and nothing is written.
+#[test]
+fn convert_adds_contact_sensors_on_named_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("feet.xml");
+    let args = ["convert", "models/humanoid.urdf", "-o", out.to_str().unwrap()];
+    let o = twin(
+        &[&args[..], &["--contact-sensor", "left_foot_link", "--contact-sensor", "right_foot_link"]].concat(),
+        &repo(),
+    );
+    assert!(o.status.success(), "{}", text(&o));
+    let xml = std::fs::read_to_string(&out).unwrap();
+    for side in ["left", "right"] {
+        assert!(
+            xml.contains(&format!("<touch name=\"{side}_foot_link_contact\" site=\"{side}_foot_link_contact_site\"/>")),
+            "{xml}"
+        );
+    }
+    let o = twin(&["info", out.to_str().unwrap()], &repo());
+    let info = text(&o);
+    assert!(o.status.success() && info.contains("left_foot_link_contact"), "{info}");
+    let bad = dir.path().join("bad.xml");
+    let o = twin(
+        &["convert", "models/humanoid.urdf", "-o", bad.to_str().unwrap(), "--contact-sensor", "left_foot"],
+        &repo(),
+    );
+    let said = text(&o);
+    assert!(!o.status.success(), "{said}");
+    assert!(said.contains("models/humanoid.urdf") && said.contains("no link \"left_foot\""), "{said}");
+    assert!(said.contains("--contact-sensor") && said.contains("left_foot_link"), "{said}");
+    assert!(!said.contains("panicked") && !bad.exists(), "{said}");
+}
+
 #[test]
 fn check_passes_the_humanoid_and_fails_a_falling_one() {
     let o = twin(&["check"], &repo());

@@ -9,7 +9,8 @@
 //! armature = 0.01                    # joint armature, kg·m² (default: walk::WALK_ARMATURE)
 //! # friction = 0.8                   # sliding friction of every geom (default: the model's)
 //! # contact_sensors = ["left_foot_link", "right_foot_link"]  # links given a contact sensor
-//!                                    # (a MuJoCo touch sensor), as a Gazebo one would (default: none)
+//!                                    # (MuJoCo touch sensors over their collision geoms, as
+//!                                    # `twin convert --contact-sensor`; default: none)
 //!
 //! [walk]                             # walk::WalkOptions, by field name; the gait options
 //! vx = 0.3                           # not written here come from the robot (walk::derive)

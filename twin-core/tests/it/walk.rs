@@ -1525,3 +1525,50 @@ fn landing_ground_read_once_the_foot_carries_load() {
     assert!(down.ground_secs >= contact, "read before the foot touched the ground: {down:?}, contact {contact:.3} s");
     assert!(down.ground_m.abs() <= 0.005, "ground {:.4} m under a foot on the floor at 0", down.ground_m);
 }
+
+/// Records the last step's raw sensor readings.
+struct LastSensors(Vec<f64>);
+
+impl Observer for LastSensors {
+    fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
+        self.0.clear();
+        self.0.extend_from_slice(step.data.sensordata());
+        Ok(Flow::Continue)
+    }
+}
+
+/// A scenario's `contact_sensors` on a robot twin did not shape: the Unitree G1, whose feet
+/// (`left_ankle_roll_link`, `right_ankle_roll_link`) touch the ground with four 5-mm spheres
+/// each. Each foot gets a touch sensor over every sphere, the walker's contact sensing finds
+/// the four on each foot, and standing 3 s under the walker the two feet's sensors together
+/// read the robot's weight (its bodies' masses × g, 33 kg) within 5 %: the load the walker's
+/// landing test (10 % of the weight) reads is the load the feet carry. A sensor over the first
+/// sphere alone (a Gazebo contact sensor's one collision) would read one corner's share.
+#[test]
+fn contact_sensors_on_the_g1s_feet_read_its_weight() {
+    use twin_core::walk::contact::{ContactSensing, FootSensor};
+    let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
+    let text = format!(
+        "model = {g1:?}\nduration = 3.0\ncontact_sensors = [\"left_ankle_roll_link\", \"right_ankle_roll_link\"]\n"
+    );
+    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
+    let robot = s.robot(&g1).unwrap();
+    s.fit_walk(&robot.model).unwrap();
+    let weight_n = robot.model.body_mass().iter().sum::<f64>() * -robot.model.gravity()[2];
+    let walker = Walker::new(&robot.model, s.walk.clone()).unwrap();
+    let sensing = ContactSensing::new(&robot.model, walker.feet().0, weight_n);
+    for foot in &sensing.feet {
+        assert!(matches!(foot, FootSensor::Touch(a) if a.len() == 4), "{:?}", sensing.feet);
+    }
+    let mut controller = s.controller(&robot.model).unwrap();
+    let mut check = s.check(&robot.model).unwrap();
+    let mut last = LastSensors(Vec::new());
+    let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
+    sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut last])
+        .unwrap();
+    let summary = check.metrics.summary();
+    assert!(!summary.fell, "{summary}");
+    let load: f64 = (0..2).map(|leg| sensing.load_n(leg, &last.0).unwrap()).sum();
+    println!("G1 weight {weight_n:.1} N; feet's touch sensors {load:.1} N");
+    assert!((load / weight_n - 1.0).abs() < 0.05, "feet read {load:.1} N of a {weight_n:.1} N robot");
+}
