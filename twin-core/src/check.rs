@@ -97,18 +97,12 @@ fn servo_model(model: &Model, opts: &CheckOptions) -> Result<(Model, Vec<Servo>)
     let dt = model.timestep_secs();
     let mut edit = model.edit()?;
     let mut servos = Vec::new();
+    let actuators = crate::robot::actuators_of(model, &[]);
     for (j, a) in actuated_joints(model) {
         let dof = model.jnt_dofadr()[j] as usize;
         let gear = model.actuator_gear()[a][0];
-        let effort = if model.actuator_forcelimited()[a] {
-            let [lo, hi] = model.actuator_forcerange()[a];
-            Some(lo.abs().min(hi.abs()) * gear.abs())
-        } else if model.jnt_actfrclimited()[j] {
-            let [lo, hi] = model.jnt_actfrcrange()[j];
-            Some(lo.abs().min(hi.abs()))
-        } else {
-            None
-        };
+        // What the actuator can give its joint (the one reading of an actuator's strength).
+        let effort = Some(actuators[a].joint_effort(model)).filter(|e| e.is_finite());
         let inertia = model.dof_m0()[dof] + model.dof_armature()[dof];
         // Joint-space gains by twin's one rule, then expressed for the actuator (force = gear ·
         // actuator force, length = gear · q).

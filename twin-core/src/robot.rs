@@ -99,6 +99,43 @@ pub struct Actuator {
     pub ctrl_range: Option<[f64; 2]>,
 }
 
+impl Actuator {
+    /// The torque (a force, on a slide joint) this actuator can apply to its joint,
+    /// `[least, most]`, N·m or N: its actuator force (a motor's control range times its gain;
+    /// any actuator's force range, where limited) times its gear, within the joint's
+    /// actuator-force range; infinite where nothing limits it, `[0, 0]` with a zero gear. The
+    /// one reading of an actuator's strength (the gain rule of pd-hold and `twin check`, the
+    /// walker's torque budget).
+    pub fn joint_effort_range(&self, model: &Model) -> [f64; 2] {
+        if self.gear == 0.0 {
+            return [0.0, 0.0];
+        }
+        let mut force = [f64::NEG_INFINITY, f64::INFINITY];
+        if let (Interface::Effort, Some([lo, hi])) = (self.interface, self.ctrl_range) {
+            let gain = model.actuator_gainprm()[self.id][0];
+            force = [(lo * gain).min(hi * gain), (lo * gain).max(hi * gain)];
+        }
+        if model.actuator_forcelimited()[self.id] {
+            let [lo, hi] = model.actuator_forcerange()[self.id];
+            force = [force[0].max(lo), force[1].min(hi)];
+        }
+        let (a, b) = (force[0] * self.gear, force[1] * self.gear);
+        let mut torque = [a.min(b), a.max(b)];
+        if let Some(joint) = self.joint.filter(|&j| model.jnt_actfrclimited()[j]) {
+            let [lo, hi] = model.jnt_actfrcrange()[joint];
+            torque = [torque[0].max(lo), torque[1].min(hi)];
+        }
+        torque
+    }
+
+    /// The torque this actuator can apply to its joint either way, N·m or N: the smaller
+    /// magnitude of [`Actuator::joint_effort_range`] (infinite where unlimited).
+    pub fn joint_effort(&self, model: &Model) -> f64 {
+        let [lo, hi] = self.joint_effort_range(model);
+        lo.abs().min(hi.abs())
+    }
+}
+
 /// A compiled robot and what twin knows about it beyond the model.
 #[derive(Debug, Clone)]
 pub struct Robot {
@@ -557,6 +594,33 @@ pub fn geom_lowest_z(model: &Model, data: &Data, g: usize) -> Option<f64> {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    /// One reading of an actuator's strength: a motor's command range × gain × gear, within its
+    /// force range (× gear) and the joint's actuator-force range; a servo's force range × gear.
+    #[test]
+    fn joint_effort_is_force_times_gear_within_the_joints_range() {
+        let xml = r#"<mujoco><worldbody><body><joint name="a" axis="0 1 0"/><geom size="0.1"/>
+            <body><joint name="b" axis="0 1 0" actuatorfrcrange="-12 12"/><geom size="0.1"/>
+            <body><joint name="c" axis="0 1 0"/><geom size="0.1"/>
+            <body><joint name="d" axis="0 1 0"/><geom size="0.1"/></body></body></body></body></worldbody>
+            <actuator>
+              <motor joint="a" gear="2" ctrlrange="-10 10" forcerange="-8 9" forcelimited="true"/>
+              <motor joint="b" gear="2" ctrlrange="-10 10"/>
+              <position joint="c" gear="3" kp="100" forcerange="-5 6" forcelimited="true"/>
+              <position joint="d" kp="100"/>
+            </actuator></mujoco>"#;
+        let model = Model::from_xml_str(xml).unwrap();
+        let acts = actuators_of(&model, &[]);
+        let ranges: Vec<[f64; 2]> = acts.iter().map(|a| a.joint_effort_range(&model)).collect();
+        // a: force within ±10 and [−8, 9] → [−8, 9], × 2; b: ±10 × 2 = ±20 within the joint's ±12;
+        // c: [−5, 6] × 3; d: nothing limits it.
+        assert_eq!(ranges[0], [-16.0, 18.0]);
+        assert_eq!(ranges[1], [-12.0, 12.0]);
+        assert_eq!(ranges[2], [-15.0, 18.0]);
+        assert_eq!(ranges[3], [f64::NEG_INFINITY, f64::INFINITY]);
+        assert_eq!(acts[2].joint_effort(&model), 15.0);
+        assert!(acts[3].joint_effort(&model).is_infinite());
+    }
 
     /// Feet named neither `foot` nor `ankle`, with a toe body under one of them, and arms whose
     /// hands hang lower than the pelvis but above the ground.

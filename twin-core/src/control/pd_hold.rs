@@ -148,20 +148,8 @@ impl PdHold {
                     }
                     let [lo, hi] = limits[a.id];
                     let dof = model.jnt_dofadr()[joint] as usize;
-                    // The torque the actuator can give: a motor's command range times its gear,
-                    // within its force range and the joint's actuator-force range.
-                    let mut effort = match a.interface {
-                        Interface::Effort => (hi.abs().min(lo.abs())) * gear.abs(),
-                        Interface::Position | Interface::Velocity => f64::INFINITY,
-                    };
-                    if model.actuator_forcelimited()[a.id] {
-                        let [flo, fhi] = model.actuator_forcerange()[a.id];
-                        effort = effort.min(flo.abs().min(fhi.abs()));
-                    }
-                    if model.jnt_actfrclimited()[joint] {
-                        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
-                        effort = effort.min(jlo.abs().min(jhi.abs()));
-                    }
+                    // The torque the actuator can give its joint (the one reading of it).
+                    let effort = a.joint_effort(model);
                     // A servo closes its own loop here (`compute` sends it the target); its
                     // gains are the rule's for its force limit, for controllers that command
                     // torque through it (the walker). None without a force limit.

@@ -13,7 +13,9 @@
 //! - **Foot sensors**: MuJoCo `touch` or `force` sensors on a site of the foot's body or a body
 //!   below it (a Gazebo `contact` or `force_torque` sensor after `twin convert`). The foot has
 //!   landed when the load they read exceeds [`TOUCHDOWN_LOAD_FRACTION`] of the robot's weight
-//!   (a force sensor's reading less the weight of the bodies below its site).
+//!   (a force sensor's reading less the weight of the bodies below its site). A URDF without
+//!   them gets touch sensors from a scenario's `contact_sensors` or `twin convert
+//!   --contact-sensor LINK`.
 //! - **The sole's motion** (robots without foot sensors, e.g. the shipped humanoid): forward
 //!   kinematics of the observed joints gives the swing sole's height; in the second half of
 //!   the swing the foot has landed when its sole has stopped ([`TOUCHDOWN_STILL_MPS`] for

@@ -732,28 +732,17 @@ impl AffineServo {
     }
 }
 
-/// How the walker drives actuator `a` (a joint transmission, command range `limits`) and the
-/// joint torque it can give, [least, most]: a motor its command range times its gear; a servo
-/// ([`AffineServo`]) its force range times its gear, within the joint's actuator-force range.
-fn drive_of(model: &Model, a: &crate::robot::Actuator, limits: [f64; 2]) -> (Option<AffineServo>, [f64; 2]) {
+/// How the walker drives actuator `a` (a joint transmission) and the joint torque it can give,
+/// [least, most] ([`crate::robot::Actuator::joint_effort_range`]): a motor by torque, a servo
+/// through its setpoint ([`AffineServo`]).
+fn drive_of(model: &Model, a: &crate::robot::Actuator) -> (Option<AffineServo>, [f64; 2]) {
+    let range = a.joint_effort_range(model);
     if a.interface == crate::convert::Interface::Effort {
-        let (lo, hi) = (limits[0] * a.gear, limits[1] * a.gear);
-        return (None, [lo.min(hi), lo.max(hi)]);
+        return (None, range);
     }
     let [gain, ..] = model.actuator_gainprm()[a.id];
     let [b0, b1, b2, ..] = model.actuator_biasprm()[a.id];
-    let [flo, fhi] = if model.actuator_forcelimited()[a.id] {
-        model.actuator_forcerange()[a.id]
-    } else {
-        [f64::NEG_INFINITY, f64::INFINITY]
-    };
-    let (lo, hi) = (flo * a.gear, fhi * a.gear);
-    let (mut lo, mut hi) = (lo.min(hi), lo.max(hi));
-    if let Some(joint) = a.joint.filter(|&j| model.jnt_actfrclimited()[j]) {
-        let [jlo, jhi] = model.jnt_actfrcrange()[joint];
-        (lo, hi) = (lo.max(jlo), hi.min(jhi));
-    }
-    (Some(AffineServo { gain, bias: [b0, b1, b2] }), [lo, hi])
+    (Some(AffineServo { gain, bias: [b0, b1, b2] }), range)
 }
 
 /// Standing or stepping.
@@ -1734,7 +1723,7 @@ impl Walker {
                 // The one actuator finder (joint transmissions on hinges and slides).
                 for a in crate::robot::actuators_of(model, &[]) {
                     let Some(joint) = a.joint.filter(|_| a.gear != 0.0) else { continue };
-                    push(a.id, joint, a.gear, limits[a.id], drive_of(model, &a, limits[a.id]), &mut loops);
+                    push(a.id, joint, a.gear, limits[a.id], drive_of(model, &a), &mut loops);
                 }
             }
             Actuation::Qfrc => {
