@@ -477,21 +477,22 @@ pub struct WalkOptions {
     /// then: its ground is the one its swing aimed at (the stance foot's, carried along the
     /// footholds' slope by `ground_slope_gain`) until it is on the ground and its sole has
     /// stopped, and its height there is read (default: false: the sole's height at the planned
-    /// touchdown, wherever the foot is). In the air: on a robot with foot sensors (a `touch` or
-    /// `force` sensor on the foot, [`contact`]; a scenario's `contact_sensors`), its sensors
-    /// read less than [`contact::TOUCHDOWN_LOAD_FRACTION`] of the weight, and it is on the
-    /// ground once they read more; without them, its sole is still coming down (faster than
+    /// touchdown, wherever the foot is). The soft swing leg lags its trajectory, more so after a
+    /// kick: a foot still in the air read as raised ground, the next swing aimed at it and
+    /// landed higher in the air still (on flat ground, reads of 1–3 cm climbing step by step
+    /// before falls), and the pelvis rose.
+    /// In the air: on a robot with foot sensors (a `touch` or `force` sensor on the foot,
+    /// [`contact`]; a scenario's `contact_sensors`), its sensors read less than
+    /// [`contact::TOUCHDOWN_LOAD_FRACTION`] of the weight, and it is on the ground once they
+    /// read more; without them, its sole is still coming down (faster than
     /// [`GROUND_READ_MAX_SPEED_MPS`]), which misses a foot that has stopped in the air at a
-    /// target above the ground (past the crest of a slope): `walk_slope.toml` randomized (100
-    /// episodes, seeds 0/1/2) 86/73/80 passed with foot sensors against 73/–/– by the sole's
-    /// motion, and with the true ground's height at every touchdown 90 (BENCHMARKS.md). The
-    /// soft swing leg lags its trajectory, more so after a kick: a foot still in the air read
-    /// as raised ground, the next swing aimed at it and landed higher in the air still (on
-    /// flat ground, reads of 1–3 cm climbing step by step before falls), and the pelvis rose.
-    /// Randomized on `walk_slope.toml` (100 episodes, seeds 0/1/2): 68/69/72 passed against
-    /// 60/67/64 without (BENCHMARKS.md). A sole that is still, blocked early on higher
-    /// ground (an up ramp), is read at the touchdown as before: waiting for it to rest level
-    /// for [`GROUND_READ_STILL_SECS`] lost the up ramp (38/100).
+    /// target above the ground (past the crest of a slope). Randomized on `walk_slope.toml`
+    /// (100 episodes, seeds 0/1/2): by the sole's motion 68/69/72 passed against 60/67/64
+    /// without the option (with `step_down_reach`); with foot sensors and no reach 86/73/80,
+    /// against 73/72/75 by the sole's motion, and 90/88 (seeds 0/1) with the true ground's
+    /// height at every read (BENCHMARKS.md). Without sensors, a sole that is still, blocked
+    /// early on higher ground (an up ramp), is read at the touchdown: waiting for it to rest
+    /// level for [`GROUND_READ_STILL_SECS`] lost the up ramp (38/100).
     #[default(false)]
     pub landing_read_at_rest: bool,
     /// Walking, each step's advance counts from where the previous step was aimed (its
