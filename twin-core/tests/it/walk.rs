@@ -15,13 +15,15 @@ fn scenarios() -> PathBuf {
     PathBuf::from(env!("CARGO_MANIFEST_DIR")).join("../scenarios")
 }
 
-/// Keeps the last state's joint positions.
-struct Last(Vec<f64>);
+/// The last step's qpos (`.0`) and raw sensor readings (`.1`).
+struct Last(Vec<f64>, Vec<f64>);
 
 impl Observer for Last {
     fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
         self.0.clear();
         self.0.extend_from_slice(step.data.qpos());
+        self.1.clear();
+        self.1.extend_from_slice(step.data.sensordata());
         Ok(Flow::Continue)
     }
 }
@@ -35,7 +37,7 @@ fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (Ga
     let mut pushes = scenario.disturbances(&robot.model);
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
     let mut check = scenario.check(&robot.model).unwrap();
-    let mut last = Last(Vec::new());
+    let mut last = Last(Vec::new(), Vec::new());
     let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
     sim::simulate_with(
         &robot,
@@ -860,23 +862,30 @@ fn another_biped_gets_options_from_its_proportions_and_keeps_the_given_ones() {
     Walker::new(&robot.model, s.walk.clone()).unwrap();
 }
 
-/// `path` stands 10 s under the walker with its derived options and no robot-specific one:
-/// no fall, the pelvis upright (tilt < 0.1 rad) and above `min_height_m`.
-fn stands_ten_seconds_under_the_walker(path: &std::path::Path, min_height_m: f64) {
-    let text = format!("model = {path:?}\nduration = 10.0\n[checks]\nfalls = 0\n");
-    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
+/// The inline scenario `text` for the robot file `path`, its walking options derived from the
+/// robot (`fit_walk`), run: the robot, the gait summary, whether every check passed, and the last
+/// step.
+fn run_inline(path: &std::path::Path, text: &str) -> (twin_core::robot::Robot, GaitSummary, bool, Last) {
+    let mut s = Scenario::parse(&scenarios().join("inline.toml"), text).unwrap();
     let robot = s.robot(path).unwrap();
     s.fit_walk(&robot.model).unwrap();
     let mut controller = s.controller(&robot.model).unwrap();
     let mut check = s.check(&robot.model).unwrap();
-    let mut last = Last(Vec::new());
+    let mut last = Last(Vec::new(), Vec::new());
     let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
     sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut last])
         .unwrap();
-    let summary = check.metrics.summary();
+    (robot, check.metrics.summary(), check.verdict().passed, last)
+}
+
+/// `path` stands 10 s under the walker with its derived options and no robot-specific one:
+/// no fall, the pelvis upright (tilt < 0.1 rad) and above `min_height_m`.
+fn stands_ten_seconds_under_the_walker(path: &std::path::Path, min_height_m: f64) {
+    let text = format!("model = {path:?}\nduration = 10.0\n[checks]\nfalls = 0\n");
+    let (_, summary, passed, last) = run_inline(path, &text);
     println!("{}: {summary}", path.display());
     assert!(!summary.fell, "{summary}");
-    assert!(check.verdict().passed);
+    assert!(passed);
     let q = &last.0;
     // The free joint first: position, then the quaternion w x y z; tilt = the angle between
     // the pelvis's z axis and the world's.
@@ -1526,17 +1535,6 @@ fn landing_ground_read_once_the_foot_carries_load() {
     assert!(down.ground_m.abs() <= 0.005, "ground {:.4} m under a foot on the floor at 0", down.ground_m);
 }
 
-/// Records the last step's raw sensor readings.
-struct LastSensors(Vec<f64>);
-
-impl Observer for LastSensors {
-    fn observe(&mut self, step: &StepView<'_>) -> twin_core::Result<Flow> {
-        self.0.clear();
-        self.0.extend_from_slice(step.data.sensordata());
-        Ok(Flow::Continue)
-    }
-}
-
 /// A scenario's `contact_sensors` on a robot twin did not shape: the Unitree G1, whose feet
 /// (`left_ankle_roll_link`, `right_ankle_roll_link`) touch the ground with four 5-mm spheres
 /// each. Each foot gets a touch sensor over every sphere, the walker's contact sensing finds
@@ -1551,24 +1549,15 @@ fn contact_sensors_on_the_g1s_feet_read_its_weight() {
     let text = format!(
         "model = {g1:?}\nduration = 3.0\ncontact_sensors = [\"left_ankle_roll_link\", \"right_ankle_roll_link\"]\n"
     );
-    let mut s = Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap();
-    let robot = s.robot(&g1).unwrap();
-    s.fit_walk(&robot.model).unwrap();
+    let (robot, summary, _, last) = run_inline(&g1, &text);
+    assert!(!summary.fell, "{summary}");
     let weight_n = robot.model.body_mass().iter().sum::<f64>() * -robot.model.gravity()[2];
-    let walker = Walker::new(&robot.model, s.walk.clone()).unwrap();
+    let walker = Walker::new(&robot.model, WalkOptions::default()).unwrap();
     let sensing = ContactSensing::new(&robot.model, walker.feet().0, weight_n);
     for foot in &sensing.feet {
         assert!(matches!(foot, FootSensor::Touch(a) if a.len() == 4), "{:?}", sensing.feet);
     }
-    let mut controller = s.controller(&robot.model).unwrap();
-    let mut check = s.check(&robot.model).unwrap();
-    let mut last = LastSensors(Vec::new());
-    let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
-    sim::simulate_with(&robot, controller.as_mut(), &options, None, &mut |_| {}, &mut [], &mut [&mut check, &mut last])
-        .unwrap();
-    let summary = check.metrics.summary();
-    assert!(!summary.fell, "{summary}");
-    let load: f64 = (0..2).map(|leg| sensing.load_n(leg, &last.0).unwrap()).sum();
+    let load: f64 = (0..2).map(|leg| sensing.load_n(leg, &last.1).unwrap()).sum();
     println!("G1 weight {weight_n:.1} N; feet's touch sensors {load:.1} N");
     assert!((load / weight_n - 1.0).abs() < 0.05, "feet read {load:.1} N of a {weight_n:.1} N robot");
 }
