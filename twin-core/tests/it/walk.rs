@@ -1290,13 +1290,14 @@ fn g1_on_the_hill(slope_deg: f64, walk: &str) -> GaitSummary {
 /// before its planned touchdown (the toe spheres, 12 cm ahead of the ankle, touch the rising
 /// ground first), and its target went on down below that contact, so the stiff swing leg drove
 /// the foot into the ramp and lifted the body (pelvis 0.738 → 0.771 m at the second step on the
-/// ramp): the feet, unloaded, slid back (the stance soles 3 cm and 19 cm) and it fell at 7.6 s,
-/// 1.38 m forward (the ramp from 1 m). With `swing_holds_at_contact` a swing foot whose sensor
-/// carries load late in the swing is held where it met the ground: on a 3° hill the G1 walks
-/// up, across and down without a fall (6.78 m in 30 s; before: fell at 7.7 s, 1.25 m), on the
-/// 5° hill it climbs and crosses the top (to 5.04 m; the down ramp from 4 m) and falls on the
-/// down ramp at 19.6 s, where a foot lands late (not fixed here: BENCHMARKS.md). On flat
-/// ground (slope 0, same terrain mode) it walks as before: 6.68 m against 6.59 m.
+/// ramp): the feet, unloaded, slid back (the stance soles 3 cm and 19 cm) and it fell at 7.0 s,
+/// 1.09 m forward (the ramp from 1 m; 7.6 s, 1.38 m without the sensors). With
+/// `swing_holds_at_contact` a swing foot whose sensor carries load late in the swing is held
+/// where it met the ground: on a 3° hill the G1 walks up, across and down without a fall
+/// (6.78 m in 30 s; before: fell at 7.6 s, 1.17 m), on the 5° hill it climbs and crosses the
+/// top (to 5.04 m; the down ramp from 4 m) and falls on the down ramp at 19.6 s, where a foot
+/// lands late (not fixed here: BENCHMARKS.md). On flat ground (slope 0, same terrain mode) it
+/// walks as before: 6.68 m against 6.59 m.
 #[test]
 fn g1_climbs_a_hill_once_its_swing_foot_stops_at_the_ground_it_meets() {
     let hold = "swing_holds_at_contact = true";
