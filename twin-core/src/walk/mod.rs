@@ -536,6 +536,14 @@ pub struct WalkOptions {
     /// BENCHMARKS.md), so no shipped scenario turns it on.
     #[default(false)]
     pub touchdown_from_contact: bool,
+    /// With foot contact sensors, a swing foot that carries load late in its swing (past
+    /// [`contact::TOUCHDOWN_ARM_PHASE`]) is on the ground: its target goes no lower than where
+    /// its sole met it, so the stiff swing leg does not drive the foot into ground met early
+    /// (a ramp's rise under the toes) and lift the body off its stance foot (default: false;
+    /// the Unitree G1 with sensors on a 3° hill: up and down without a fall, 6.78 m in 30 s,
+    /// where without it the feet slid back and it fell at the ramp's foot; BENCHMARKS.md).
+    #[default(false)]
+    pub swing_holds_at_contact: bool,
     /// How far below its planned landing height a late swing foot goes on looking for the
     /// ground (`touchdown_from_contact`), m; past it the step ends in the air as planned
     /// (default: 0.04: a 3-cm step down and a centimetre more, or three steps' drop down a 5°
@@ -884,6 +892,9 @@ pub struct Walker {
     /// Per foot, whether its ground is still to be read once its sole rests
     /// (`landing_read_at_rest`).
     ground_pending: [bool; 2],
+    /// Where each swing foot's sole met the ground late in its swing, world z, m
+    /// (`swing_holds_at_contact`).
+    swing_contact_z: [Option<f64>; 2],
     /// Length every planned straight step's advance gets (`stride_hold_gain`), m.
     stride_add_m: f64,
     /// The feet's contact sensing (`touchdown_from_contact`).
@@ -1155,6 +1166,7 @@ impl Walker {
             sole_prev_z: [0.0; 2],
             sole_still_secs: [0.0; 2],
             ground_pending: [false; 2],
+            swing_contact_z: [None; 2],
             stride_add_m: 0.0,
             contact,
             target_z: [0.0; 2],
@@ -2605,6 +2617,20 @@ impl Controller for Walker {
                 // Late in the swing the foot keeps going down past the stance foot's ground
                 // (not on ground known to rise: there it would push the foot into the slope).
                 foot_ground[to.side.index()] -= o.step_down_reach * blend;
+            }
+            if o.swing_holds_at_contact {
+                let leg = to.side.index();
+                if s < contact::TOUCHDOWN_ARM_PHASE {
+                    self.swing_contact_z[leg] = None;
+                } else if self.swing_contact_z[leg].is_none()
+                    && self.contact.load_n(leg, observation.sensordata).is_some_and(|l| self.contact.carries_load(l))
+                {
+                    self.swing_contact_z[leg] = Some(self.sole_world(&self.frames, leg).z);
+                }
+                if let Some(z) = self.swing_contact_z[leg] {
+                    let lift = foot_targets[leg].1;
+                    foot_ground[leg] = foot_ground[leg].max(z - lift);
+                }
             }
             if s > 0.0 && s < 1.0 {
                 swinging = Some(to.side.index());

@@ -1278,6 +1278,49 @@ fn walks_down_a_slope_at_its_commanded_pace() {
     assert!(before.fell || speed.is_some_and(|v| v > 0.5), "{before}; {speed:?} m/s");
 }
 
+/// The Unitree G1 (derived options, 0.25 m/s, foot sensors on its ankle-roll links, the
+/// terrain keys of `walk_slope.toml`) on the hill of `walk_slope.toml` at `slope_deg`, with
+/// `walk` (TOML lines added to the `[walk]` table); its gait summary.
+fn g1_on_the_hill(slope_deg: f64, walk: &str) -> GaitSummary {
+    let path = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
+    let text = format!(
+        "model = {path:?}\nduration = 30.0\ncontroller = \"walk\"\n\
+         contact_sensors = [\"left_ankle_roll_link\", \"right_ankle_roll_link\"]\n\
+         [terrain]\nkind = \"slope\"\nslope_deg = {slope_deg}\nstart_m = 1.0\nramp_m = 2.0\nplateau_m = 1.0\n\
+         [walk]\nvx = 0.25\nfollow_ground = true\nground_pitch_gain = 1.0\nstance_ground_read = true\n\
+         ground_slope_gain = 1.0\nlanding_read_at_rest = true\n{walk}\n"
+    );
+    let summary = derived_run(Scenario::parse(&scenarios().join("inline.toml"), &text).unwrap(), &path);
+    println!("G1, {slope_deg}° hill, {walk:?}: {summary}");
+    summary
+}
+
+/// Why the G1 fell where the ramp begins, and the fix: its level swing foot meets the up ramp
+/// before its planned touchdown (the toe spheres, 12 cm ahead of the ankle, touch the rising
+/// ground first), and its target went on down below that contact, so the stiff swing leg drove
+/// the foot into the ramp and lifted the body (pelvis 0.738 → 0.771 m at the second step on the
+/// ramp): the feet, unloaded, slid back (the stance soles 3 cm and 19 cm) and it fell at 7.0 s,
+/// 1.09 m forward (the ramp from 1 m; 7.6 s, 1.38 m without the sensors). With
+/// `swing_holds_at_contact` a swing foot whose sensor carries load late in the swing is held
+/// where it met the ground: on a 3° hill the G1 walks up, across and down without a fall
+/// (6.78 m in 30 s; before: fell at 7.6 s, 1.17 m), on the 5° hill it climbs and crosses the
+/// top (to 5.04 m; the down ramp from 4 m) and falls on the down ramp at 19.6 s, where a foot
+/// lands late (not fixed here: BENCHMARKS.md). On flat ground (slope 0, same terrain mode) it
+/// walks as before: 6.68 m against 6.59 m.
+#[test]
+fn g1_climbs_a_hill_once_its_swing_foot_stops_at_the_ground_it_meets() {
+    let hold = "swing_holds_at_contact = true";
+    let before = g1_on_the_hill(5.0, "");
+    assert!(before.fell && before.forward_m < 2.0, "before: {before}");
+    let up = g1_on_the_hill(5.0, hold);
+    assert!(up.forward_m > 4.0, "climbs and crosses the top of the 5° hill: {up}");
+    assert!(up.fall_time_secs.is_none_or(|t| t > 15.0), "{up}");
+    let three = g1_on_the_hill(3.0, hold);
+    assert!(!three.fell && three.forward_m > 6.5, "up and down the 3° hill: {three}");
+    let three_before = g1_on_the_hill(3.0, "");
+    assert!(three_before.fell && three_before.forward_m < 2.0, "before, 3°: {three_before}");
+}
+
 /// Blind over rough ground (`walk_rough.toml`, ±1 cm from x = 0.6 m): the steps come out
 /// shorter than asked (bumps stop a swing foot short, landing corrections pull steps back), and
 /// holding the pace in step length (`stride_hold_gain`, on in the file) brings the base's speed
