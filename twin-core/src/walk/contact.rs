@@ -1,5 +1,8 @@
 //! Touch-down from contact ([`super::WalkOptions::touchdown_from_contact`]): when a swinging
-//! foot has landed, read from what the robot senses rather than from the plan's clock.
+//! foot has landed, read from what the robot senses rather than from the plan's clock. The
+//! same foot sensors tell the ground reads whether a landed foot is still in the air
+//! (`landing_read_at_rest`) and hold a swing foot where it met the ground
+//! (`swing_holds_at_contact`).
 //!
 //! Data flow, each solve of a walking step: the swing foot's sensors (or its sole's motion) and
 //! the swing progress go in, [`ContactSensing::landed`] says whether the foot is on the ground;

@@ -897,7 +897,8 @@ pub struct Walker {
     swing_contact_z: [Option<f64>; 2],
     /// Length every planned straight step's advance gets (`stride_hold_gain`), m.
     stride_add_m: f64,
-    /// The feet's contact sensing (`touchdown_from_contact`).
+    /// The feet's contact sensing (`touchdown_from_contact`; with foot sensors also
+    /// `landing_read_at_rest` and `swing_holds_at_contact`).
     contact: ContactSensing,
     /// Each sole's target height at the last solve, m.
     target_z: [f64; 2],
@@ -2422,7 +2423,7 @@ impl Controller for Walker {
                             None => sole.z - self.sole_prev_z[landed] < -GROUND_READ_MAX_SPEED_MPS * self.dt,
                         };
                         if o.follow_ground && o.landing_read_at_rest && airborne {
-                            // Still coming down: the ground it aimed at, until it rests.
+                            // In the air: the ground it aimed at, until it is down and still.
                             self.ground_z[landed] = self.landing_ground(&step);
                             self.ground_pending[landed] = true;
                         } else if o.follow_ground {
