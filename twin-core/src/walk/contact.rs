@@ -168,10 +168,10 @@ impl ContactSensing {
         }
     }
 
-    /// Whether a foot whose sensors read `load` newtons carries load: more than
-    /// [`TOUCHDOWN_LOAD_FRACTION`] of the robot's weight.
-    pub fn carries_load(&self, load: f64) -> bool {
-        load > self.load_n
+    /// Whether foot `leg` is on the ground by its sensors: they read more than
+    /// [`TOUCHDOWN_LOAD_FRACTION`] of the robot's weight (`None` without sensors).
+    pub fn on_ground(&self, leg: usize, sensordata: &[f64]) -> Option<bool> {
+        self.load_n(leg, sensordata).map(|load| load > self.load_n)
     }
 
     /// Whether the swinging foot `leg` has landed: `swing_s` its swing progress, `gap_m` its
@@ -181,8 +181,8 @@ impl ContactSensing {
         if swing_s < TOUCHDOWN_ARM_PHASE {
             return false;
         }
-        match self.load_n(leg, sensordata) {
-            Some(load) => self.carries_load(load),
+        match self.on_ground(leg, sensordata) {
+            Some(on) => on,
             None => {
                 (self.still_secs[leg] >= TOUCHDOWN_STILL_SECS
                     && (gap_m > TOUCHDOWN_BLOCKED_M || (searching && gap_m > 0.0)))

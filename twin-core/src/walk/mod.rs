@@ -1409,7 +1409,7 @@ impl Walker {
             let affine = model.actuator_dyntype()[a.id] == 0
                 && model.actuator_gaintype()[a.id] == 0
                 && model.actuator_gainprm()[a.id][0] != 0.0;
-            let force_limited = model.actuator_forcelimited()[a.id] || model.jnt_actfrclimited()[joint];
+            let force_limited = a.joint_effort(model).is_finite();
             let what = if !affine {
                 "whose force is not an affine function of its setpoint (activation dynamics, or a \
                  gain that is not fixed)"
@@ -2177,7 +2177,7 @@ impl Walker {
     /// the touch-down is logged.
     fn foot_landed(&mut self, leg: usize, t: f64, planned_secs: f64, from_contact: bool) {
         let sole = self.sole_world(&self.frames, leg);
-        self.ground_z[leg] = if (sole.z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { sole.z };
+        self.ground_z[leg] = self.ground_at(sole.z);
         self.search[leg] = None;
         self.landing[leg] = None;
         self.log_touchdown(TouchdownEvent {
@@ -2217,6 +2217,12 @@ impl Walker {
                 * (step.swing_to.pos - step.stance.pos).dot(&along);
         }
         other
+    }
+
+    /// The ground a sole resting at height `z` (world, m) stands on: the starting soles' level
+    /// within [`GROUND_DEADBAND_M`] of it (flat ground), else `z`.
+    fn ground_at(&self, z: f64) -> f64 {
+        if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z }
     }
 
     /// Whether foot `leg`'s sole rests on the ground (`follow_ground`): level within
@@ -2418,8 +2424,8 @@ impl Controller for Walker {
                     } else {
                         let sole = self.sole_world(&self.frames, landed);
                         // In the air: by the foot's sensors where it has them, else still coming down.
-                        let airborne = match self.contact.load_n(landed, observation.sensordata) {
-                            Some(load) => !self.contact.carries_load(load),
+                        let airborne = match self.contact.on_ground(landed, observation.sensordata) {
+                            Some(on) => !on,
                             None => sole.z - self.sole_prev_z[landed] < -GROUND_READ_MAX_SPEED_MPS * self.dt,
                         };
                         if o.follow_ground && o.landing_read_at_rest && airborne {
@@ -2427,8 +2433,7 @@ impl Controller for Walker {
                             self.ground_z[landed] = self.landing_ground(&step);
                             self.ground_pending[landed] = true;
                         } else if o.follow_ground {
-                            self.ground_z[landed] =
-                                if (sole.z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { sole.z };
+                            self.ground_z[landed] = self.ground_at(sole.z);
                         }
                         self.log_touchdown(TouchdownEvent {
                             time_secs: t,
@@ -2594,7 +2599,7 @@ impl Controller for Walker {
                 if self.sole_at_rest(stance) {
                     self.ground_read_done = true;
                     self.ground_pending[stance] = false;
-                    self.ground_z[stance] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
+                    self.ground_z[stance] = self.ground_at(z);
                     foot_ground[stance] = self.ground_z[stance];
                     self.ground_reads = [self.ground_reads[1], self.ground_reads[2], Some((feet[stance].pos, z))];
                 }
@@ -2624,7 +2629,7 @@ impl Controller for Walker {
                 if s < contact::TOUCHDOWN_ARM_PHASE {
                     self.swing_contact_z[leg] = None;
                 } else if self.swing_contact_z[leg].is_none()
-                    && self.contact.load_n(leg, observation.sensordata).is_some_and(|l| self.contact.carries_load(l))
+                    && self.contact.on_ground(leg, observation.sensordata) == Some(true)
                 {
                     self.swing_contact_z[leg] = Some(self.sole_world(&self.frames, leg).z);
                 }
@@ -2656,12 +2661,12 @@ impl Controller for Walker {
                     self.ground_pending[leg] = false;
                 } else if self.ground_pending[leg]
                     && !moved
-                    && self.contact.load_n(leg, observation.sensordata).is_none_or(|l| self.contact.carries_load(l))
+                    && self.contact.on_ground(leg, observation.sensordata) != Some(false)
                 {
                     // A foot that came down after its planned touchdown, now stopped on its ground
                     // (and, with foot sensors, carrying load).
                     self.ground_pending[leg] = false;
-                    self.ground_z[leg] = if (z - self.sole_z).abs() <= GROUND_DEADBAND_M { self.sole_z } else { z };
+                    self.ground_z[leg] = self.ground_at(z);
                     *ground = self.ground_z[leg];
                     if let Some(e) = self.state.touchdowns.iter_mut().rev().find(|e| e.leg == leg) {
                         (e.ground_m, e.ground_secs) = (self.ground_z[leg], t);

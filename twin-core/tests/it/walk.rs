@@ -928,6 +928,16 @@ fn derived_run(mut s: Scenario, path: &std::path::Path) -> twin_core::walk::Gait
     check.metrics.summary()
 }
 
+/// The walk `s` of `who` went at least 5 m forward at 0.2 m/s or more without a fall, its
+/// heading within `max_yaw_rad` and its line within `max_lateral_m`.
+fn walked_five_metres_straight(s: &GaitSummary, who: &str, max_yaw_rad: f64, max_lateral_m: f64) {
+    assert!(!s.fell, "{who}: fell at {:?}", s.fall_time_secs);
+    assert!(s.forward_m >= 5.0, "{who}: walked {} m", s.forward_m);
+    assert!(s.average_speed_mps >= 0.2, "{who}: {} m/s", s.average_speed_mps);
+    assert!(s.yaw_change_rad.abs() < max_yaw_rad, "{who}: heading off by {} rad", s.yaw_change_rad);
+    assert!(s.lateral_m.abs() < max_lateral_m, "{who}: {} m off the line", s.lateral_m);
+}
+
 /// Example-robot-data's Unitree G1 (33 kg, no robot-specific option) walks over 5 m straight
 /// at 0.25 m/s without a fall, holding its heading (in the lab: 6.64 m in 30 s, heading
 /// −0.3°, mean slip 7 mm). (Before the walker capped the damping of the loops on its light
@@ -938,12 +948,7 @@ fn derived_run(mut s: Scenario, path: &std::path::Path) -> twin_core::walk::Gait
 #[test]
 fn g1_walks_five_metres_straight_and_romeo_turns_in_place() {
     let g1 = example_robot("g1_description/urdf/g1_29dof_rev_1_0.urdf");
-    let s = walk_with_derived_options(&g1, 30.0, "vx = 0.25");
-    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
-    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
-    assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
-    assert!(s.yaw_change_rad.abs() < 0.2, "heading off by {} rad", s.yaw_change_rad);
-    assert!(s.lateral_m.abs() < 0.3, "{} m off the line", s.lateral_m);
+    walked_five_metres_straight(&walk_with_derived_options(&g1, 30.0, "vx = 0.25"), "G1", 0.2, 0.3);
     turns_ninety_degrees_in_place_within_fifteen(&example_robot("romeo_description/urdf/romeo.urdf"));
 }
 
@@ -963,11 +968,7 @@ fn romeo_walks_five_metres_straight_and_follows_the_steer_sequence() {
     let romeo = example_robot("romeo_description/urdf/romeo.urdf");
     for vx in [0.2, 0.25, 0.3] {
         let s = walk_with_derived_options(&romeo, 30.0, &format!("vx = {vx}"));
-        assert!(!s.fell, "{vx} m/s: fell at {:?}", s.fall_time_secs);
-        assert!(s.forward_m >= 5.0, "{vx} m/s: walked {} m", s.forward_m);
-        assert!(s.average_speed_mps >= 0.2, "{vx} m/s: {} m/s", s.average_speed_mps);
-        assert!(s.yaw_change_rad.abs() < 0.3, "{vx} m/s: heading off by {} rad", s.yaw_change_rad);
-        assert!(s.lateral_m.abs() < 0.3, "{vx} m/s: {} m off the line", s.lateral_m);
+        walked_five_metres_straight(&s, &format!("Romeo at {vx} m/s"), 0.3, 0.3);
     }
     // Each derived rule matters: the old crouch, the scaled clearance and the swing damped on
     // its joints' velocity alone, given, fall at 0.3 m/s.
@@ -1060,12 +1061,7 @@ fn talos_on_its_position_servos_walks_and_turns() {
     let dir = tempfile::tempdir().unwrap();
     let talos = dir.path().join("talos.xml");
     std::fs::write(&talos, &converted.mjcf).unwrap();
-    let s = walk_with_derived_options(&talos, 30.0, "vx = 0.25");
-    assert!(!s.fell, "fell at {:?}", s.fall_time_secs);
-    assert!(s.forward_m >= 5.0, "walked {} m", s.forward_m);
-    assert!(s.average_speed_mps >= 0.2, "{} m/s", s.average_speed_mps);
-    assert!(s.yaw_change_rad.abs() < 0.15, "heading off by {} rad", s.yaw_change_rad);
-    assert!(s.lateral_m.abs() < 0.5, "drifted {} m sideways", s.lateral_m);
+    walked_five_metres_straight(&walk_with_derived_options(&talos, 30.0, "vx = 0.25"), "Talos", 0.15, 0.5);
     turns_ninety_degrees_in_place_within_fifteen(&talos);
     steers_within_twenty_percent(&talos);
 }
