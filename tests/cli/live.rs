@@ -14,6 +14,7 @@ use serde_json::{Value as Json, json};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
+use twin_core::external::process::DomainLease;
 use twin_core::log::{
     Float64MultiArray, Imu, JointState, Log, Odometry, ReadOptions, RosMessage, TfMessage, WrenchStamped,
 };
@@ -27,10 +28,11 @@ const ELBOW: &str = "left_elbow_joint";
 const ELBOW_TARGET: f64 = -0.3;
 const PERIOD_NANOS: u64 = 10_000_000;
 
-/// A domain id for test `k` (0..15) unlikely to meet another test binary's (at most 219 of
-/// DDS's 0..=232).
-fn domain(k: u32) -> u32 {
-    10 + (std::process::id() % 14) * 15 + k
+/// A DDS domain held for one test run: the lease twin's own scenario runs take
+/// ([`DomainLease`]), so no concurrent test or `twin` process (a scenario's controller, a
+/// randomize worker) shares it. Keep it alive until the run's processes have ended.
+fn domain() -> DomainLease {
+    DomainLease::acquire().expect("a free DDS domain id")
 }
 
 fn python() -> PathBuf {
@@ -94,11 +96,12 @@ struct Run {
 }
 
 /// Runs the peer with `peer_args` and twin with `twin_args` (plus a recording and a bounded
-/// wait for the peer) in domain `domain(k)`; both must succeed.
-fn run_with_peer(k: u32, peer_args: &[&str], twin_args: &[&str]) -> Run {
+/// wait for the peer) in a domain of their own; both must succeed.
+fn run_with_peer(peer_args: &[&str], twin_args: &[&str]) -> Run {
     let dir = tempfile::tempdir().unwrap();
     let (mcap, peer_file) = (dir.path().join("live.mcap"), dir.path().join("peer.json"));
-    let d = domain(k);
+    let lease = domain();
+    let d = u32::from(lease.id());
     let peer = spawn_peer(d, &peer_file, peer_args);
     let mut args: Vec<&std::ffi::OsStr> = twin_args.iter().map(std::ffi::OsStr::new).collect();
     args.extend(["--wait-for-subscriber", "30", "--record"].map(std::ffi::OsStr::new));
@@ -120,12 +123,12 @@ fn run_with_peer(k: u32, peer_args: &[&str], twin_args: &[&str]) -> Run {
 /// 1 s of lockstep at 100 Hz, the peer in `mode` answering each `/clock` with the elbow
 /// command (the state at 500 Hz). Its answer to `/clock` = 0 (said before time starts) is the
 /// command of the second period, and so on: twin takes the k-th command in period k.
-fn lockstep_run(k: u32, mode: &str) -> Run {
+fn lockstep_run(mode: &str) -> Run {
     let command = serde_json::to_string(&elbow_command()).unwrap();
     let peer = ["--mode", mode, "--command", &command, "--until-clock", "0.99", "--timeout", "90"];
     let twin =
         ["--lockstep", "--duration", "1.0", "--control-rate", "100", "--lockstep-timeout", "20", "--rate", "500"];
-    run_with_peer(k, &peer, &twin)
+    run_with_peer(&peer, &twin)
 }
 
 /// The position command: the home pose with the left elbow at [`ELBOW_TARGET`], in command
@@ -217,7 +220,7 @@ fn elbow_at_end(mcap: &Path) -> (u64, f64) {
 
 #[test]
 fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_recording() {
-    let Run { mcap, peer, stdout, .. } = &lockstep_run(0, "lockstep");
+    let Run { mcap, peer, stdout, .. } = &lockstep_run("lockstep");
     assert!(stdout.contains("command order (") && stdout.contains(ELBOW), "{stdout}");
 
     // Sim time advances exactly one control period per command: the peer saw /clock at every
@@ -272,7 +275,7 @@ fn ros_lockstep_with_a_cyclone_peer_reaches_the_elbow_target_and_matches_the_rec
 
 #[test]
 fn ros_rejects_bad_commands_and_holds_the_last_good_one() {
-    let Run { mcap, stdout, stderr, .. } = &lockstep_run(1, "bad");
+    let Run { mcap, stdout, stderr, .. } = &lockstep_run("bad");
     // Wrong length (short and long) and NaN: each rejected with a warning naming the topic.
     for k in 1..=3 {
         assert!(stderr.contains(&format!("rejected command #{k} on /humanoid/joint_commands")), "{stderr}");
@@ -295,7 +298,8 @@ fn ros_survives_a_flood_a_peer_that_leaves_and_a_second_twin_in_the_domain() {
     python(); // before starting any twin: fail at once without cyclonedds
     let dir = tempfile::tempdir().unwrap();
     let (a, b) = (dir.path().join("a.mcap"), dir.path().join("b.mcap"));
-    let d = domain(2);
+    let lease = domain();
+    let d = u32::from(lease.id());
     let command = serde_json::to_string(&elbow_command()).unwrap();
     let args = |file: &Path| -> Vec<String> {
         ["--rtf", "1", "--duration", "6", "--silence-timeout", "0.5", "--wait-for-subscriber", "30", "--record"]
@@ -349,7 +353,6 @@ fn clock_nanos(call: &Json, key: &str) -> i64 {
 #[test]
 fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() {
     let Run { mcap, peer, stdout, stderr, .. } = &run_with_peer(
-        3,
         &["--mode", "services", "--command", "[]", "--until-clock", "0", "--timeout", "90"],
         &["--rtf", "1", "--duration", "60"],
     );
@@ -516,20 +519,20 @@ struct RosRun {
     node_out: PathBuf,
 }
 
-/// Runs `twin sim MODEL <twin_args>` (its `run.mcap` replaced by a file of its own, in domain
-/// `domain(k)`) and the node `script <node_args>` (started after twin, as the README says);
+/// Runs `twin sim MODEL <twin_args>` (its `run.mcap` replaced by a file of its own, in a
+/// domain of its own) and the node `script <node_args>` (started after twin, as the README says);
 /// twin must finish, the node is then stopped.
-fn run_rclpy(k: u32, twin_args: &[String], script: Option<&Path>, node_args: &[String]) -> RosRun {
-    run_rclpy_on(Path::new(MODEL), k, twin_args, script, node_args)
+fn run_rclpy(twin_args: &[String], script: Option<&Path>, node_args: &[String]) -> RosRun {
+    run_rclpy_on(Path::new(MODEL), twin_args, script, node_args)
 }
 
 /// [`run_rclpy`] with `twin sim model`.
-fn run_rclpy_on(model: &Path, k: u32, twin_args: &[String], script: Option<&Path>, node_args: &[String]) -> RosRun {
+fn run_rclpy_on(model: &Path, twin_args: &[String], script: Option<&Path>, node_args: &[String]) -> RosRun {
     let dir = tempfile::tempdir().unwrap();
     let mcap = dir.path().join("run.mcap");
     let node_out = dir.path().join("node.json");
-    let d = domain(k);
-    let loopback = twin_core::live::Loopback::write(dir.path(), d as u16).unwrap();
+    let lease = domain();
+    let loopback = twin_core::live::Loopback::write(dir.path(), lease.id()).unwrap();
     let args: Vec<String> =
         twin_args.iter().map(|a| if a == "run.mcap" { mcap.display().to_string() } else { a.clone() }).collect();
     let mut cmd = twin();
@@ -605,8 +608,8 @@ fn count_before(text: &str, label: &str) -> u64 {
 #[test]
 fn ros_readme_node_with_rclpy_runs_lockstep_to_the_end_twice_alike_and_keeps_the_humanoid_up() {
     let (twin_args, node_args) = readme_commands("--lockstep");
-    let a = run_rclpy(5, &twin_args, None, &node_args);
-    let b = run_rclpy(6, &twin_args, None, &node_args);
+    let a = run_rclpy(&twin_args, None, &node_args);
+    let b = run_rclpy(&twin_args, None, &node_args);
     for run in [&a, &b] {
         // To the end: every period, a command in each but the first (held).
         assert_eq!(count_before(&run.stdout, "control periods"), 1000, "{}", run.stdout);
@@ -633,7 +636,7 @@ fn ros_readme_node_with_rclpy_runs_lockstep_to_the_end_twice_alike_and_keeps_the
 #[test]
 fn ros_readme_node_with_rclpy_in_real_time_keeps_the_humanoid_up() {
     let (twin_args, node_args) = readme_commands("--rtf 1");
-    let run = run_rclpy(7, &twin_args, None, &node_args);
+    let run = run_rclpy(&twin_args, None, &node_args);
     let stdout = &run.stdout;
     // Real time: the measured factor, over the whole run.
     let rtf: f64 =
@@ -650,7 +653,7 @@ fn ros_subscription_driven_rclpy_node_in_lockstep_answers_each_state_one_period_
     let twin_args: Vec<String> =
         ["--ros", "--lockstep", "--duration", "2", "--record", "run.mcap"].map(String::from).to_vec();
     let node_args: Vec<String> = ["--mode", "subscription", "--out", "NODE_OUT"].map(String::from).to_vec();
-    let run = run_rclpy(8, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    let run = run_rclpy(&twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
     assert_eq!(count_before(&run.stdout, "control periods"), 200, "{}", run.stdout);
     assert_eq!(count_before(&run.stdout, "commands applied"), 199, "{}", run.stdout);
     // The command applied from t_k answers the state stamped t_(k−1): its elbow value is the
@@ -678,7 +681,7 @@ fn ros_joint_state_commands_by_name_from_rclpy_move_the_named_joint_only() {
         ["--ros", "--lockstep", "--duration", "2", "--record", "run.mcap"].map(String::from).to_vec();
     let node_args: Vec<String> =
         ["--mode", "by-name", "--out", "NODE_OUT", "--ros-args", "-p", "use_sim_time:=true"].map(String::from).to_vec();
-    let run = run_rclpy(9, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    let run = run_rclpy(&twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
     assert_eq!(count_before(&run.stdout, "commands applied"), 199, "{}", run.stdout);
     let commands = read::<JointState>(&run.mcap, "/humanoid/joint_command");
     assert_eq!(commands.len(), 199);
@@ -705,7 +708,7 @@ fn ros_gazebo_empty_services_from_rclpy_pause_unpause_and_reset() {
     let twin_args: Vec<String> =
         ["--ros", "--rtf", "1", "--duration", "15", "--record", "run.mcap"].map(String::from).to_vec();
     let node_args: Vec<String> = ["--mode", "services", "--out", "NODE_OUT"].map(String::from).to_vec();
-    let run = run_rclpy(12, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+    let run = run_rclpy(&twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
     let text = std::fs::read_to_string(&run.node_out)
         .unwrap_or_else(|e| panic!("the client wrote nothing ({e}): it failed or timed out\n{}", run.stdout));
     let node: Json = serde_json::from_str(&text).unwrap();
@@ -786,7 +789,7 @@ fn turned(odom: &[(u64, Odometry)], from: f64, to: f64) -> f64 {
 /// `/odom` bit for bit.
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_the_walker_forward_turn_and_sideways_within_twenty_percent() {
-    steers_within_twenty_percent(Path::new(MODEL), &[10, 11]);
+    steers_within_twenty_percent(Path::new(MODEL), 2);
 }
 
 /// The same README command and node, unchanged, on example-robot-data's Unitree G1 (its URDF
@@ -798,7 +801,7 @@ fn ros_cmd_vel_from_rclpy_steers_the_walker_forward_turn_and_sideways_within_twe
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_the_g1_forward_turn_and_sideways() {
     let g1 = crate::example_robot_data::example_robot_data().join("g1_description/urdf/g1_29dof_rev_1_0.urdf");
-    steers_within_twenty_percent(&g1, &[13, 14]);
+    steers_within_twenty_percent(&g1, 2);
 }
 
 /// The same on example-robot-data's Talos (full v2, 93 kg) converted with torque motors (`twin
@@ -812,7 +815,7 @@ fn ros_cmd_vel_from_rclpy_steers_talos_on_motors_forward_turn_and_sideways() {
     let talos = dir.path().join("talos_motors.xml");
     let out = twin().arg("convert").arg(&urdf).args(["--actuators", "motor", "-o"]).arg(&talos).output().unwrap();
     assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
-    steers_within_twenty_percent(&talos, &[4]);
+    steers_within_twenty_percent(&talos, 1);
 }
 
 /// The same on example-robot-data's Romeo (40.5 kg), its options derived (`walk::derive`: the
@@ -822,16 +825,15 @@ fn ros_cmd_vel_from_rclpy_steers_talos_on_motors_forward_turn_and_sideways() {
 #[test]
 fn ros_cmd_vel_from_rclpy_steers_romeo_forward_turn_and_sideways() {
     let romeo = crate::example_robot_data::example_robot_data().join("romeo_description/urdf/romeo.urdf");
-    steers_within_twenty_percent(&romeo, &[3]);
+    steers_within_twenty_percent(&romeo, 1);
 }
 
-/// Runs the README's steering command and node on `model` once per domain `domain(k)` of `k`
-/// and checks each leg (forward, turn and sideways within 20 % of 1 m, 90° and 0.5 m), the
+/// Runs the README's steering command and node on `model` `runs` times and checks each leg (forward, turn and sideways within 20 % of 1 m, 90° and 0.5 m), the
 /// robot's standing at the end and, for two runs, that both give the same `/odom`.
-fn steers_within_twenty_percent(model: &Path, k: &[u32]) {
+fn steers_within_twenty_percent(model: &Path, runs: usize) {
     let dir = tempfile::tempdir().unwrap();
     let (twin_args, node_args, script) = readme_steer(dir.path());
-    let runs: Vec<RosRun> = k.iter().map(|&k| run_rclpy_on(model, k, &twin_args, Some(&script), &node_args)).collect();
+    let runs: Vec<RosRun> = (0..runs).map(|_| run_rclpy_on(model, &twin_args, Some(&script), &node_args)).collect();
     for run in &runs {
         assert_eq!(count_before(&run.stdout, "control periods"), 430, "{}", run.stdout);
         assert_eq!(count_before(&run.stdout, "commands applied"), 429, "{}", run.stdout);
