@@ -27,6 +27,22 @@ pub enum Error {
         message: String,
     },
 
+    /// A link asked for by name (a contact sensor's, `ConvertOptions::contact_sensors`) is not
+    /// in the robot.
+    #[error(
+        "{}: no link \"{link}\" for the contact sensor asked for (`--contact-sensor`, a scenario's `contact_sensors`): name one of its links: {}",
+        path.display(),
+        links.join(", ")
+    )]
+    NoSuchLink {
+        /// The URDF file.
+        path: PathBuf,
+        /// The name asked for.
+        link: String,
+        /// The robot's links, in file order.
+        links: Vec<String>,
+    },
+
     /// The file is not well-formed XML.
     #[error("{}:{line}:{column}: not well-formed XML: {message}", path.display())]
     Xml {

@@ -254,17 +254,10 @@ pub fn convert_urdf<C: Compiler>(
 fn add_contact_sensors(path: &Path, robot: &mut ir::RobotIr, links: &[String]) -> Result<()> {
     for link in links {
         if !robot.links.iter().any(|l| &l.name == link) {
-            let names: Vec<&str> = robot.links.iter().map(|l| l.name.as_str()).collect();
-            return Err(Error::Urdf {
+            return Err(Error::NoSuchLink {
                 path: path.to_path_buf(),
-                line: 1,
-                element: "robot".into(),
-                name: None,
-                message: format!(
-                    "no link \"{link}\" for the contact sensor asked for (`--contact-sensor`, a scenario's \
-                     `contact_sensors`): name one of its links: {}",
-                    names.join(", ")
-                ),
+                link: link.clone(),
+                links: robot.links.iter().map(|l| l.name.clone()).collect(),
             });
         }
         if robot.sensors.iter().any(|s| s.kind == "contact" && &s.reference == link) {

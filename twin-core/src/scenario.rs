@@ -469,7 +469,20 @@ impl Scenario {
         if let Some(g) = &terrain {
             extra.push_str(&g.to_mjcf(crate::terrain::FLOOR_FRICTION));
         }
-        let mut robot = Robot::load_with_extra(&path, &convert, &extra)?;
+        let mut robot = Robot::load_with_extra(&path, &convert, &extra).map_err(|e| match e {
+            // A link of `contact_sensors` the robot lacks: the scenario's key is what to mend.
+            Error::Convert(twin_convert::Error::NoSuchLink { path: urdf, link, links }) => Error::Scenario {
+                path: self.path.clone(),
+                line: std::fs::read_to_string(&self.path).ok().and_then(|t| line_of_key(&t, None, "contact_sensors")),
+                key: Some("contact_sensors".into()),
+                message: format!(
+                    "{} has no link \"{link}\" for a contact sensor: name one of its links: {}",
+                    urdf.display(),
+                    links.join(", ")
+                ),
+            },
+            other => other,
+        })?;
         if let Some(g) = &terrain {
             let (model, _lift) = crate::terrain::settle(&robot.model, g, &robot.feet).map_err(|e| Error::Scenario {
                 path: self.path.clone(),

@@ -92,10 +92,17 @@ fn joint_loop(model: &Model, joint: usize, saturation_error: f64) -> Result<Loop
             })?,
         Actuation::Qfrc => (dof, 1.0),
     };
-    let effort = model.jnt_actfrclimited()[joint].then(|| {
-        let [lo, hi] = model.jnt_actfrcrange()[joint];
-        lo.abs().min(hi.abs())
-    });
+    // The torque the joint's drive can give (the one reading of an actuator's strength,
+    // as pd-hold's); a joint driven by qfrc has its actuator-force range alone.
+    let effort = match actuation {
+        Actuation::Ctrl => {
+            crate::robot::actuators_of(model, &[]).get(command).map(|a| a.joint_effort(model)).filter(|e| e.is_finite())
+        }
+        Actuation::Qfrc => model.jnt_actfrclimited()[joint].then(|| {
+            let [lo, hi] = model.jnt_actfrcrange()[joint];
+            lo.abs().min(hi.abs())
+        }),
+    };
     let inertia = model.dof_m0()[dof] + model.dof_armature()[dof];
     let options = PdHoldOptions { saturation_error, ..PdHoldOptions::default() };
     let (kp, kd) = pd_gains(effort, inertia.max(1e-6), &options);

@@ -1600,3 +1600,17 @@ fn contact_sensors_on_the_g1s_feet_read_its_weight() {
     println!("G1 weight {weight_n:.1} N; feet's touch sensors {load:.1} N");
     assert!((load / weight_n - 1.0).abs() < 0.05, "feet read {load:.1} N of a {weight_n:.1} N robot");
 }
+
+/// A scenario's `contact_sensors` naming a link its robot lacks: the error names the scenario
+/// file, the key's line and the key, the robot's file, and the links to choose from.
+#[test]
+fn contact_sensors_on_a_missing_link_name_the_scenario_line_and_the_links() {
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("feet.toml");
+    let text = format!("model = {:?}\nduration = 1.0\ncontact_sensors = [\"left_foot\"]\n", humanoid());
+    std::fs::write(&file, text).unwrap();
+    let scenario = Scenario::load(&file).unwrap();
+    let e = scenario.robot(&humanoid()).unwrap_err().to_string();
+    assert!(e.starts_with(&format!("{}:3: `contact_sensors`: ", file.display())), "{e}");
+    assert!(e.contains("humanoid.urdf has no link \"left_foot\"") && e.contains("left_foot_link"), "{e}");
+}
