@@ -21,7 +21,8 @@ pub struct Args {
     #[command(subcommand)]
     pub merge: Option<MergeCommand>,
 
-    /// Robot or scene model (MJCF or URDF). Default: the shipped humanoid.
+    /// Robot or scene model (MJCF or URDF); with --scenario, it replaces the scenario's
+    /// `model`. Default: the scenario's, else the shipped humanoid.
     pub model: Option<PathBuf>,
 
     /// Number of episodes of the whole batch (all shards together).
@@ -223,6 +224,14 @@ fn run_one(
         }
         (_, _, s) => s,
     };
+    // MODEL replaces the scenario's `model` (as in `twin sim`): the robot simulated is the one
+    // the summary names.
+    let scenario = scenario.map(|mut s| {
+        if args.model.is_some() {
+            s.model = args.model.clone();
+        }
+        s
+    });
     let duration = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
     super::check_range("--duration", duration, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
     super::check_range("--fall-tilt", args.fall_tilt, 0.0, std::f64::consts::PI, "rad")?;

@@ -203,4 +203,24 @@ fn randomize_walks_a_robot_that_the_default_steps_do_not_fit() {
     let (ok, out, err) =
         run(&["randomize", romeo.to_str().unwrap(), "--controller", "walk", "--episodes", "1", "--duration", "2"]);
     assert!(ok && out.contains("success:"), "{out}\n{err}");
+    // MODEL replaces a scenario's own `model`, as in `twin sim`: the episodes draw Romeo's link
+    // masses, not the shipped humanoid's (`scenarios/stand.toml`'s model), which they did while
+    // the summary named Romeo.
+    let replaced = dir.path().join("replaced");
+    let (ok, out, err) = run(&[
+        "randomize",
+        romeo.to_str().unwrap(),
+        "--scenario",
+        "scenarios/stand.toml",
+        "--episodes",
+        "1",
+        "--duration",
+        "1",
+        "--out",
+        replaced.to_str().unwrap(),
+    ]);
+    assert!(ok, "{out}\n{err}");
+    let csv = std::fs::read_to_string(replaced.join("episodes.csv")).unwrap();
+    let header = csv.lines().next().unwrap();
+    assert!(header.contains("mass:LHipYawLink") && !header.contains("mass:waist_yaw_link"), "{header}");
 }
