@@ -440,8 +440,8 @@ impl Worker {
     /// error.
     ///
     /// # Errors
-    /// [`Error::Apply`] if the drawn parameters can't be applied, [`Error::Core`] if MuJoCo
-    /// fails outside the rollout (copying, resetting).
+    /// [`Error::Apply`] if the drawn parameters can't be applied, [`Error::Episode`] if the
+    /// controller or MuJoCo fails on the episode's robot (resetting it, a controller's error).
     pub fn run(&mut self, batch: &Batch, index: u64, trajectory: Option<&mut Trajectory>) -> Result<EpisodeResult> {
         self.run_recorded(batch, index, trajectory, None)
     }
@@ -520,8 +520,10 @@ impl Worker {
             observers.push(c.as_mut());
         }
         let mut rng = episode_rng(batch.seed, index, 1);
-        let outcome =
-            self.engine.run(&model, &episode, self.controller.as_mut(), &mut disturbances, &mut observers, &mut rng)?;
+        let outcome = self
+            .engine
+            .run(&model, &episode, self.controller.as_mut(), &mut disturbances, &mut observers, &mut rng)
+            .map_err(|source| Error::Episode { episode: index, seed: batch.seed, source: Box::new(source) })?;
         drop(observers);
 
         let (unstable, unstable_reason) = match (&outcome.physics_error, &divergence.reason) {

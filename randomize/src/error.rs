@@ -51,6 +51,19 @@ pub enum Error {
         source: twin_core::Error,
     },
 
+    /// An episode could not run: its controller failed on its copy of the robot, or MuJoCo
+    /// failed resetting it (`source` says which). The episode and the master seed reproduce it:
+    /// `--seed SEED --episodes EPISODE+1` ends with it.
+    #[error("episode {episode} (master seed {seed}) could not run")]
+    Episode {
+        /// Episode index.
+        episode: u64,
+        /// The batch's master seed.
+        seed: u64,
+        /// What failed (boxed: the variant stays as small as the others).
+        source: Box<twin_core::Error>,
+    },
+
     /// A per-episode CSV or summary from a shard can't be read or doesn't fit the others.
     #[error("{}{}: {message}", path.display(), line.map_or_else(String::new, |l| format!(":{l}")))]
     Results {

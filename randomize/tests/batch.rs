@@ -310,3 +310,55 @@ fn a_stop_mid_batch_keeps_a_reproducible_prefix() {
     assert_eq!(ids, (0..kept.len() as u64).collect::<Vec<_>>(), "a contiguous prefix");
     assert_eq!(kept[..], rows(&dir.path().join("full"))[..kept.len()], "the same rows as the full run");
 }
+
+/// A controller that refuses a copy of the robot more than 2 % heavier than the nominal one.
+struct RefusesHeavierRobots {
+    nominal_kg: f64,
+}
+
+fn total_mass_kg(model: &Model) -> f64 {
+    model.body_mass().iter().sum()
+}
+
+impl twin_core::control::Controller for RefusesHeavierRobots {
+    fn name(&self) -> &'static str {
+        "refuses-heavier-robots"
+    }
+
+    fn reset(&mut self, model: &Model, _observation: &twin_core::control::Observation<'_>) -> twin_core::Result<()> {
+        if total_mass_kg(model) > 1.02 * self.nominal_kg {
+            return Err(twin_core::Error::Walk { message: "refused a robot 2 % heavier than its own".into() });
+        }
+        Ok(())
+    }
+
+    fn compute(&mut self, _model: &Model, _observation: &twin_core::control::Observation<'_>, command: &mut [f64]) {
+        command.fill(0.0);
+    }
+}
+
+/// An episode whose controller fails stops the batch with an error that names the episode and
+/// the master seed (what reproduces it), the controller's own message underneath: here the
+/// first episode whose drawn masses (the default spec's ±10 % per body) weigh more than 2 %
+/// over the nominal robot, found from the draws alone.
+#[test]
+fn an_episode_that_cannot_run_is_named_with_its_seed() {
+    let spec = Spec::default_spec();
+    let seed = 7;
+    let b = batch(&spec, 0.1, seed);
+    let nominal_kg = total_mass_kg(&humanoid());
+    let heavier = (0..200)
+        .find(|&i| {
+            let d = b.layout.draw(&humanoid(), i, &mut episode_rng(seed, i, 0)).unwrap();
+            total_mass_kg(&d.model) > 1.02 * nominal_kg
+        })
+        .expect("a draw 2 % heavier in 200");
+    let b = b.with_controller(move |_| Ok(Box::new(RefusesHeavierRobots { nominal_kg }))).unwrap();
+    let episodes = heavier + 3;
+    let info = randomize::run_info(&b, "humanoid.xml", &spec, episodes, None);
+    let options = RunOptions { episodes, threads: 1, ..RunOptions::default() };
+    let e = run_batch(&b, info, &options, &AtomicBool::new(false), &|| {}).unwrap_err();
+    assert_eq!(e.to_string(), format!("episode {heavier} (master seed {seed}) could not run"));
+    let cause = std::error::Error::source(&e).map(|c| c.to_string()).unwrap_or_default();
+    assert!(cause.contains("refused a robot 2 % heavier"), "{cause}");
+}
