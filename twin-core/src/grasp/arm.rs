@@ -3,7 +3,7 @@
 
 use crate::control::{Actuation, PdHoldOptions, pd_gains};
 use crate::error::{Error, Result};
-use crate::mj::{Data, JointType, Model, ObjType, Transmission};
+use crate::mj::{Data, JointType, Model, ObjType};
 use nalgebra::{DMatrix, DVector, Matrix3, Vector3};
 
 /// Left or right.
@@ -76,33 +76,25 @@ fn joint_loop(model: &Model, joint: usize, saturation_error: f64) -> Result<Loop
     let actuation = Actuation::of(model);
     let limits = actuation.limits(model);
     let dof = model.jnt_dofadr()[joint] as usize;
-    let (command, gear) = match actuation {
-        Actuation::Ctrl => (0..model.nu())
-            .find(|&u| {
-                model.actuator_transmission(u) == Transmission::Joint
-                    && model.actuator_trnid()[u][0] as usize == joint
-                    && model.actuator_gear()[u][0] != 0.0
-            })
-            .map(|u| (u, model.actuator_gear()[u][0]))
+    // The joint's drive (the one actuator finder) and the torque it can give its joint (the one
+    // reading of an actuator's strength, as pd-hold's); driven by qfrc, its actuator-force range.
+    let (command, gear, effort) = match actuation {
+        Actuation::Ctrl => crate::robot::actuators_of(model, &[])
+            .into_iter()
+            .find(|a| a.joint == Some(joint) && a.gear != 0.0)
+            .map(|a| (a.id, a.gear, a.joint_effort(model)))
             .ok_or_else(|| Error::Grasp {
                 message: format!(
                     "joint \"{}\" has no actuator: give it a transmission (or convert with --actuators motor)",
                     model.name(ObjType::Joint, joint)
                 ),
             })?,
-        Actuation::Qfrc => (dof, 1.0),
-    };
-    // The torque the joint's drive can give (the one reading of an actuator's strength,
-    // as pd-hold's); a joint driven by qfrc has its actuator-force range alone.
-    let effort = match actuation {
-        Actuation::Ctrl => {
-            crate::robot::actuators_of(model, &[]).get(command).map(|a| a.joint_effort(model)).filter(|e| e.is_finite())
+        Actuation::Qfrc => {
+            let [lo, hi] = limits[dof];
+            (dof, 1.0, lo.abs().min(hi.abs()))
         }
-        Actuation::Qfrc => model.jnt_actfrclimited()[joint].then(|| {
-            let [lo, hi] = model.jnt_actfrcrange()[joint];
-            lo.abs().min(hi.abs())
-        }),
     };
+    let effort = Some(effort).filter(|e| e.is_finite());
     let inertia = model.dof_m0()[dof] + model.dof_armature()[dof];
     let options = PdHoldOptions { saturation_error, ..PdHoldOptions::default() };
     let (kp, kd) = pd_gains(effort, inertia.max(1e-6), &options);
