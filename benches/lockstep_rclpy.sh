@@ -22,8 +22,8 @@ trap 'rm -rf "$work"' EXIT
 # The README's node, verbatim (the python block after its heading line).
 awk '/A complete 100 Hz controller \(`gait_controller.py`\)/{f=1} f&&/^```python/{p=1;next} p&&/^```/{exit} p' \
   README.md > "$work/gait_controller.py"
-# The loopback-only Fast DDS profile twin ships (twin_core::live::loopback::FASTDDS_PROFILE).
-sed -n '/^pub const FASTDDS_PROFILE: &str = r#"/,/^"#;/p' twin-core/src/live/loopback.rs | sed '1s/.*r#"//;$d' \
+# The loopback-only Fast DDS profile twin ships (twin_bridges::live::loopback::FASTDDS_PROFILE).
+sed -n '/^pub const FASTDDS_PROFILE: &str = r#"/,/^"#;/p' bridges/src/live/loopback.rs | sed '1s/.*r#"//;$d' \
   > "$work/fastdds.xml"
 export ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST FASTDDS_DEFAULT_PROFILES_FILE="$work/fastdds.xml"
 export RMW_IMPLEMENTATION=rmw_fastrtps_cpp

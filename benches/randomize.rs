@@ -28,7 +28,7 @@ use std::time::Instant;
 use twin_core::control::reset_to_home;
 use twin_core::engine::replay::InputLog;
 use twin_core::mj::{Data, Model};
-use twin_core::scenario::Scenario;
+use twin_scenario::Scenario;
 
 const MODEL: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/randomize/tests/fixtures/humanoid.xml");
 

@@ -395,7 +395,7 @@ impl Layout {
     /// # Errors
     /// As [`Layout::draw`].
     pub fn apply(&self, nominal: &Model, episode: u64, values: Vec<f64>) -> Result<Draw> {
-        let apply_err = |source| Error::Apply { episode, source };
+        let apply_err = |source: twin_core::mj::Error| Error::Apply { episode, source: source.into() };
         let mut edit = nominal.edit()?;
         let mut com: Vec<Option<[f64; 3]>> = vec![None; nominal.nbody()];
         // Expand per-sensor noise to per-sensordata entries (MuJoCo stores it per sensor).

@@ -26,7 +26,7 @@ pub type DisturbanceFactory = dyn Fn(&Model) -> Vec<Box<dyn Disturbance>> + Send
 pub type CheckFactory = dyn Fn(&Robot) -> twin_core::Result<Vec<Box<dyn Check>>> + Send + Sync;
 
 /// Makes a batch's controller together with the checks that watch it, for a worker thread: an
-/// external controller ([`twin_core::external`]) comes with the check that publishes the
+/// external controller ([`twin_bridges::external`]) comes with the check that publishes the
 /// robot's state to its process and judges its health, so a controller that crashes or hangs
 /// fails its episode, not the batch.
 pub type DriverFactory = dyn Fn(&Robot) -> twin_core::Result<(Box<dyn Controller>, Vec<Box<dyn Check>>)> + Send + Sync;
@@ -45,7 +45,7 @@ pub struct EpisodeOptions {
     /// (default: 1.0, about 57°)
     #[default(1.0)]
     pub fall_tilt_rad: f64,
-    /// Controller name, one of `twin_core::registry::CONTROLLERS`, used unless the batch is
+    /// Controller name, one of `twin_controllers::registry::CONTROLLERS`, used unless the batch is
     /// given a controller factory ([`Batch::with_controller`]). (default: `pd-hold`)
     #[default("pd-hold")]
     pub controller: String,
@@ -98,7 +98,8 @@ impl Batch {
             )));
         }
         let name = options.controller.clone();
-        let factory: Arc<ControllerFactory> = Arc::new(move |r: &Robot| twin_core::registry::by_name(&name, &r.model));
+        let factory: Arc<ControllerFactory> =
+            Arc::new(move |r: &Robot| twin_controllers::registry::by_name(&name, &r.model));
         let batch = Batch {
             nominal: robot.model.clone(),
             robot,
@@ -179,7 +180,7 @@ impl Batch {
     }
 
     /// The batch on a new terrain per episode: `terrain` (the nominal model's, as
-    /// `twin_core::scenario::Scenario::robot` built it) with its seed drawn from (its seed, the
+    /// `twin_scenario::Scenario::robot` built it) with its seed drawn from (its seed, the
     /// master seed, the episode index), written into the episode's model, the robot seated on
     /// it. Only the kinds with random parts (rough ground, obstacles) change.
     pub fn with_terrain(mut self, terrain: twin_core::terrain::TerrainOptions) -> Batch {
@@ -195,7 +196,7 @@ impl Batch {
     ///
     /// # Errors
     /// The scenario's controller or check error for the nominal robot.
-    pub fn with_scenario(self, scenario: Arc<twin_core::scenario::Scenario>) -> Result<Batch> {
+    pub fn with_scenario(self, scenario: Arc<twin_scenario::Scenario>) -> Result<Batch> {
         let logs = std::env::temp_dir().join("twin-controller-logs");
         self.with_scenario_logs(scenario, &logs)
     }
@@ -205,11 +206,7 @@ impl Batch {
     ///
     /// # Errors
     /// As [`Batch::with_scenario`].
-    pub fn with_scenario_logs(
-        self,
-        scenario: Arc<twin_core::scenario::Scenario>,
-        logs: &std::path::Path,
-    ) -> Result<Batch> {
+    pub fn with_scenario_logs(self, scenario: Arc<twin_scenario::Scenario>, logs: &std::path::Path) -> Result<Batch> {
         let (for_checks, for_pushes) = (scenario.clone(), scenario.clone());
         let batch = match scenario.terrain.clone() {
             Some(t) => self.with_terrain(t),
@@ -230,10 +227,10 @@ impl Batch {
             }))
     }
 
-    /// The scenario's external controller ([`twin_core::external`]) on each worker: a domain,
+    /// The scenario's external controller ([`twin_bridges::external`]) on each worker: a domain,
     /// a bridge and a process of its own.
     #[cfg(feature = "ros")]
-    fn with_external(self, scenario: &twin_core::scenario::Scenario, logs: &std::path::Path) -> Result<Batch> {
+    fn with_external(self, scenario: &twin_scenario::Scenario, logs: &std::path::Path) -> Result<Batch> {
         let Some(options) = scenario.ros.clone() else {
             return Err(Error::Options(format!(
                 "{}: controller = \"ros\" needs a [ros] table",
@@ -246,13 +243,13 @@ impl Batch {
         self.with_driver(move |r| {
             let k = workers.fetch_add(1, std::sync::atomic::Ordering::Relaxed);
             let log = logs.join(format!("worker-{k}.log"));
-            let (controller, health) = twin_core::external::external(r, &options, &folder, &log)?;
+            let (controller, health) = twin_bridges::external::external(r, &options, &folder, &log)?;
             Ok((Box::new(controller) as Box<dyn Controller>, vec![Box::new(health) as Box<dyn Check>]))
         })
     }
 
     #[cfg(not(feature = "ros"))]
-    fn with_external(self, _scenario: &twin_core::scenario::Scenario, _logs: &std::path::Path) -> Result<Batch> {
+    fn with_external(self, _scenario: &twin_scenario::Scenario, _logs: &std::path::Path) -> Result<Batch> {
         Err(twin_core::Error::FeatureMissing {
             feature: "ros",
             what: "controller = \"ros\" (your ROS 2 node through the live bridge)".into(),

@@ -1,14 +1,14 @@
 //! `twin log info FILE`: topics, types, counts, rates, time span and gaps of a ROS 2 MCAP log
 //! (a `.mcap` file or a rosbag2 folder), with what was lost if the file is damaged.
 //! `twin log analyze FILE [--model ROBOT] [--plot DIR] [--json FILE]`: why the robot fell
-//! (`twin_core::diagnose`): fall onset and direction, CoM and capture point against the
+//! (`twin_diagnose`): fall onset and direction, CoM and capture point against the
 //! support polygon, slip, what changed first, commanded vs actual, and a diagnosis.
 
 use anyhow::Context;
 use std::io::Write;
 use std::path::{Path, PathBuf};
-use twin_core::diagnose::{AnalyzeOptions, CommandKind};
 use twin_core::log::{Log, LogInfo, ReadOptions};
+use twin_diagnose::{AnalyzeOptions, CommandKind};
 
 #[derive(Debug, clap::Args)]
 pub struct Args {
@@ -105,7 +105,7 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<String> {
         window_secs: args.window,
         ..AnalyzeOptions::default()
     };
-    let analysis = twin_core::diagnose::analyze(&log, robot.as_ref(), &options)
+    let analysis = twin_diagnose::analyze(&log, robot.as_ref(), &options)
         .with_context(|| format!("analysing {}", args.file.display()))?;
     for w in &analysis.warnings {
         eprintln!("warning: {w}");
@@ -119,7 +119,7 @@ pub fn analyze(args: &AnalyzeArgs) -> anyhow::Result<String> {
     Ok(analysis.to_text())
 }
 
-fn write_plots(dir: &Path, analysis: &twin_core::diagnose::Analysis) -> anyhow::Result<()> {
+fn write_plots(dir: &Path, analysis: &twin_diagnose::Analysis) -> anyhow::Result<()> {
     if dir.exists() && !dir.is_dir() {
         anyhow::bail!("--plot {}: not a folder; give a folder for the SVG plots", dir.display());
     }

@@ -76,7 +76,7 @@ pub fn write_output(path: &std::path::Path, text: &str, what: &str) -> anyhow::R
 }
 
 /// `--controller` of `twin sim` and `twin randomize`: the names of the one controller registry
-/// ([`twin_core::registry::CONTROLLERS`]) and the scenario's own ROS 2 node. Parsed by clap, so an
+/// ([`twin_controllers::registry::CONTROLLERS`]) and the scenario's own ROS 2 node. Parsed by clap, so an
 /// unknown name is refused with the list of these before anything is loaded.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum ControllerName {
@@ -104,7 +104,7 @@ impl ControllerName {
             ControllerName::Replay => "replay",
             ControllerName::Walk => "walk",
             ControllerName::Grasp => "grasp",
-            ControllerName::Ros => twin_core::scenario::EXTERNAL_CONTROLLER,
+            ControllerName::Ros => twin_scenario::EXTERNAL_CONTROLLER,
         }
     }
 }
@@ -117,7 +117,7 @@ mod tests {
     #[test]
     fn controller_names_are_the_registry_and_ros() {
         let names: Vec<&str> = ControllerName::value_variants().iter().map(|c| c.name()).collect();
-        let mut expected = twin_core::registry::CONTROLLERS.to_vec();
+        let mut expected = twin_controllers::registry::CONTROLLERS.to_vec();
         expected.push("ros");
         assert_eq!(names, expected);
         for c in ControllerName::value_variants() {

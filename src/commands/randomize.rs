@@ -1,6 +1,6 @@
 //! `twin randomize`: domain-randomized batch rollouts, and `twin randomize merge` for shards.
 //! `--scenario FILE` takes the model, duration, controller and checks from a scenario file
-//! (`twin_core::scenario`): its checks decide each episode's success. `--sweep NAME=FROM:TO:STEP`
+//! (`twin_scenario`): its checks decide each episode's success. `--sweep NAME=FROM:TO:STEP`
 //! runs one batch per level of a spec or scenario parameter (`randomize::sweep`) and reports
 //! success against it.
 
@@ -12,7 +12,7 @@ use std::io::IsTerminal;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 use twin_core::robot::Robot;
-use twin_core::scenario::Scenario;
+use twin_scenario::Scenario;
 
 /// Arguments of `twin randomize`.
 #[derive(Debug, ClapArgs)]
@@ -267,7 +267,7 @@ fn run_one(
         s => s,
     };
     let walk_alone = (controller == "walk" && scenario.is_none())
-        .then(|| twin_core::walk::WalkOptions::default().for_robot(&model, &|_| false))
+        .then(|| twin_controllers::walk::WalkOptions::default().for_robot(&model, &|_| false))
         .transpose()?;
     // Without --config, a scenario's own spec (e.g. the grasp scenario's cup and camera draws).
     let config = args.config.clone().or_else(|| scenario.as_ref().and_then(|s| s.randomize.clone()));
@@ -310,7 +310,7 @@ fn run_one(
             skipped.join(", ")
         );
     }
-    let external = controller == twin_core::scenario::EXTERNAL_CONTROLLER;
+    let external = controller == twin_scenario::EXTERNAL_CONTROLLER;
     let options = EpisodeOptions {
         duration_secs: duration,
         fall_height_fraction: args.fall_height_fraction,
@@ -329,7 +329,7 @@ fn run_one(
     let mut batch = Batch::from_robot(robot, layout, options, args.seed)?;
     if let Some(walk) = walk_alone {
         batch = batch.with_controller(move |r| {
-            Ok(Box::new(twin_core::walk::Walker::new(&r.model, walk.clone())?)
+            Ok(Box::new(twin_controllers::walk::Walker::new(&r.model, walk.clone())?)
                 as Box<dyn twin_core::control::Controller>)
         })?;
     }
@@ -453,11 +453,11 @@ fn analyze_worst(
     robot: &Robot,
     fall: twin_core::engine::observers::FallOptions,
 ) -> anyhow::Result<()> {
-    let options = twin_core::diagnose::AnalyzeOptions { fall, ..Default::default() };
+    let options = twin_diagnose::AnalyzeOptions { fall, ..Default::default() };
     for &i in worst {
         let mcap = dir.join(format!("worst_{i:06}.mcap"));
         let log = twin_core::log::Log::open(&mcap, twin_core::log::ReadOptions::default())?;
-        let analysis = twin_core::diagnose::analyze(&log, Some(robot), &options)
+        let analysis = twin_diagnose::analyze(&log, Some(robot), &options)
             .with_context(|| format!("analysing {}", mcap.display()))?;
         twin_core::fsio::write_atomic(
             &dir.join(format!("worst_{i:06}.analysis.txt")),

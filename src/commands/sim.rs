@@ -1,9 +1,9 @@
 //! `twin sim [MODEL] --duration S --controller pd-hold|passive|replay|walk …`: runs the twin
-//! under a controller of twin's registry (`twin_core::registry::by_name_with`) and records ROS 2
+//! under a controller of twin's registry (`twin_controllers::registry::by_name_with`) and records ROS 2
 //! topics (MCAP) and a rerun recording, stamped in simulation time. `--scenario FILE` runs a
-//! scenario (`twin_core::scenario`): its model, controller, pushes and checks, printing the gait
+//! scenario (`twin_scenario`): its model, controller, pushes and checks, printing the gait
 //! metrics and each check as PASS/FAIL; `--controller walk` alone runs the default scenario.
-//! `--ros` puts the run on the ROS 2 graph (`twin_core::live`): the bridge publishes what the
+//! `--ros` puts the run on the ROS 2 graph (`twin_bridges::live`): the bridge publishes what the
 //! recorder writes and its commands drive the robot.
 //!
 //! [`run`] reads in steps: the [`Plan`] (scenario and command line merged, checked, outputs
@@ -15,13 +15,13 @@
 use anyhow::{Context, bail};
 use std::io::{IsTerminal, Write};
 use std::path::PathBuf;
+use twin_controllers::registry::ControllerOptions;
 use twin_core::control::{Controller, JointTrajectory};
 use twin_core::engine::{Disturbance, Observer};
 use twin_core::log::{Compression, WriterOptions};
-use twin_core::registry::ControllerOptions;
 use twin_core::robot::Robot;
-use twin_core::scenario::Scenario;
 use twin_core::sim::{self, RecordOptions, Recording, SimOptions};
+use twin_scenario::Scenario;
 
 #[derive(Debug, Clone, Copy, PartialEq, Eq, clap::ValueEnum)]
 pub enum CompressionKind {
@@ -185,7 +185,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let (c, h) = external::start(s, &robot, args.record.as_deref())?;
             (c, Some(h))
         }
-        None => (twin_core::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?, None),
+        None => {
+            (twin_controllers::registry::by_name_with(&plan.controller, &robot.model, &plan.controller_options)?, None)
+        }
     };
     // A scenario's pushes and its gait metrics and checks.
     let mut pushes = plan.scenario.as_ref().map(|s| s.disturbances(&robot.model)).unwrap_or_default();
@@ -312,7 +314,7 @@ impl Plan {
             .unwrap_or("pd-hold".into());
         let duration_secs = args.duration.or(scenario.as_ref().map(|s| s.duration_secs)).unwrap_or(5.0);
         super::check_range("--duration", duration_secs, super::MIN_SECS, super::MAX_SIM_SECS, "s")?;
-        // In lockstep the state comes once per control period (see twin_core::live).
+        // In lockstep the state comes once per control period (see twin_bridges::live).
         let state_rate_hz = args.rate.unwrap_or(if args.ros && args.lockstep { args.control_rate } else { 500.0 });
         super::check_range("--rate", state_rate_hz, 1e-3, super::MAX_RATE_HZ, "Hz")?;
         super::check_range("--tf-rate", args.tf_rate, 1e-3, super::MAX_RATE_HZ, "Hz")?;
@@ -467,7 +469,7 @@ impl Outputs {
         if args.ros {
             // `--controller walk` on the graph: the walker runs, steered by `/cmd_vel`.
             let walker = (plan.controller == "walk")
-                .then(|| twin_core::walk::Walker::new(&robot.model, plan.controller_options.walk.clone()))
+                .then(|| twin_controllers::walk::Walker::new(&robot.model, plan.controller_options.walk.clone()))
                 .transpose()?;
             let (live, recording) = live::Live::start(args, robot, options, viewer_sinks, walker)?;
             return Ok(Outputs { recording: Some(recording), recording_wanted, live: Some(live) });
@@ -637,7 +639,7 @@ fn print_recording(
 /// was interrupted: its numbers are partial).
 fn print_verdicts(
     out: &mut impl Write,
-    check: &twin_core::scenario::ScenarioCheck,
+    check: &twin_scenario::ScenarioCheck,
     scenario: &Scenario,
     interrupted: bool,
 ) -> anyhow::Result<()> {
@@ -657,13 +659,13 @@ fn print_verdicts(
 }
 
 /// `controller = "ros"` in a scenario: the user's node as the controller
-/// (`twin_core::external`).
+/// (`twin_bridges::external`).
 mod external {
     use std::path::Path;
     use twin_core::control::Controller;
     use twin_core::engine::Check;
     use twin_core::robot::Robot;
-    use twin_core::scenario::Scenario;
+    use twin_scenario::Scenario;
 
     /// The scenario's external controller and its health check; the process's output goes
     /// beside `record` (`<record>.controller.log`), or to `<scenario>.controller.log` in the
@@ -682,7 +684,7 @@ mod external {
             Some(r) => r.with_file_name(format!("{}.controller.log", stem(r))),
             None => Path::new(".").join(format!("{}.controller.log", stem(&s.path))),
         };
-        let (c, h) = twin_core::external::external(robot, options, &s.folder(), &log)?;
+        let (c, h) = twin_bridges::external::external(robot, options, &s.folder(), &log)?;
         eprintln!(
             "external controller `{}` on ROS domain {}: its output goes to {}",
             options.command,
@@ -706,9 +708,9 @@ mod live {
     use super::{Args, InterfaceKind};
     use anyhow::{Context, bail};
     use std::io::Write;
+    use twin_bridges::live::{self as bridge, CommandInterface, LiveController, LiveOptions, Pacing};
     use twin_core::control::Controller;
     use twin_core::engine::Disturbance;
-    use twin_core::live::{self as bridge, CommandInterface, LiveController, LiveOptions, Pacing};
     use twin_core::robot::Robot;
     use twin_core::sim::{RecordOptions, Recording};
 
@@ -788,7 +790,7 @@ mod live {
             robot: &Robot,
             record: RecordOptions,
             viewer_sinks: Vec<Box<dyn twin_core::topics::Sink>>,
-            walker: Option<twin_core::walk::Walker>,
+            walker: Option<twin_controllers::walk::Walker>,
         ) -> anyhow::Result<(Live, Recording)> {
             let options = options(args)?;
             let stop = twin_core::fsio::interrupt_flag();
@@ -911,6 +913,7 @@ mod live {
             _: &Robot,
             _: RecordOptions,
             _: Vec<Box<dyn twin_core::topics::Sink>>,
+            _: Option<twin_controllers::walk::Walker>,
         ) -> anyhow::Result<(Live, Recording)> {
             Err(twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }
                 .into())

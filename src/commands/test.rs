@@ -13,7 +13,7 @@ use randomize::{Batch, EpisodeOptions, Layout, RunOptions, Spec};
 use std::fmt::Write as _;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
-use twin_core::scenario::Scenario;
+use twin_scenario::Scenario;
 
 /// Arguments of `twin test`.
 #[derive(Debug, clap::Args)]

@@ -48,9 +48,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(addr) = &args.foxglove {
         super::check_range("--rate", args.rate, 1e-3, 1e3, "")?;
         super::check_range("--wait", args.wait, 0.0, 3600.0, "s")?;
-        let addr = super::viewers::parse_addr("--foxglove", addr)?;
+        let _addr = super::viewers::parse_addr("--foxglove", addr)?;
         #[cfg(feature = "ros")]
-        return super::viewers::play(&args.log, args.model.as_deref(), addr, args.rate, args.wait, args.strict);
+        return super::viewers::play(&args.log, args.model.as_deref(), _addr, args.rate, args.wait, args.strict);
         #[cfg(not(feature = "ros"))]
         return Err(super::viewers::unavailable());
     }

@@ -1,11 +1,12 @@
 //! The live viewers of `twin sim` (`--foxglove [ADDR:]PORT`, `--unity [[ADDR:]PORT]`) and
 //! `twin view LOG --foxglove PORT`: starting the Foxglove WebSocket server and the Unity
-//! ROS-TCP-Endpoint (`twin_core::viewer`), hooking them into the run (sinks, an observer, a
+//! ROS-TCP-Endpoint (`twin_bridges::viewer`), hooking them into the run (sinks, an observer, a
 //! reset, the controller wrapper) and playing a log to Foxglove.
 
 use anyhow::Context;
 use std::io::Write;
 use std::net::SocketAddr;
+#[cfg(feature = "ros")]
 use std::sync::Arc;
 
 /// `PORT`, `ADDR:PORT` or `[V6]:PORT`: a port alone binds loopback (127.0.0.1).
@@ -26,16 +27,16 @@ pub use enabled::*;
 #[cfg(feature = "ros")]
 mod enabled {
     use super::*;
+    use twin_bridges::viewer::foxglove::{FoxgloveOptions, FoxgloveSink, Server};
+    use twin_bridges::viewer::{SimHook, Teleop};
     use twin_core::robot::Robot;
-    use twin_core::viewer::foxglove::{FoxgloveOptions, FoxgloveSink, Server};
-    use twin_core::viewer::{SimHook, Teleop};
 
     /// The viewers of a `twin sim` run.
     pub struct Viewers {
         /// The Foxglove server.
         pub foxglove: Option<Arc<Server>>,
         /// The Unity endpoint.
-        pub unity: Option<Arc<twin_core::viewer::unity::Server>>,
+        pub unity: Option<Arc<twin_bridges::viewer::unity::Server>>,
         /// The run's observer.
         pub hook: SimHook,
     }
@@ -58,7 +59,7 @@ mod enabled {
                 .map(Arc::new)
             })
             .transpose()?;
-        let endpoint = unity.map(|addr| twin_core::viewer::unity::Server::start(addr).map(Arc::new)).transpose()?;
+        let endpoint = unity.map(|addr| twin_bridges::viewer::unity::Server::start(addr).map(Arc::new)).transpose()?;
         twin_core::fsio::cooperate();
         let stop = twin_core::fsio::interrupt_flag();
         let hook = SimHook::new(
@@ -77,7 +78,7 @@ mod enabled {
             writeln!(
                 out,
                 "unity: ROS-TCP-Endpoint {} on {} (ROS 2 CDR)",
-                twin_core::viewer::unity::ENDPOINT_VERSION,
+                twin_bridges::viewer::unity::ENDPOINT_VERSION,
                 u.local_addr()
             )?;
         }
@@ -103,7 +104,7 @@ mod enabled {
             out,
             "foxglove: ws://{} (subprotocols {})",
             server.local_addr(),
-            twin_core::viewer::foxglove::SUBPROTOCOLS.join(", ")
+            twin_bridges::viewer::foxglove::SUBPROTOCOLS.join(", ")
         )?;
         out.flush()?;
         Ok(())
@@ -117,7 +118,7 @@ mod enabled {
                 out.push(Box::new(FoxgloveSink::new(s.clone())));
             }
             if let Some(u) = &self.unity {
-                out.push(Box::new(twin_core::viewer::unity::UnitySink::new(u.clone())));
+                out.push(Box::new(twin_bridges::viewer::unity::UnitySink::new(u.clone())));
             }
             out
         }

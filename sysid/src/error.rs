@@ -74,3 +74,17 @@ impl From<twin_core::fsio::Error> for Error {
         Error::Core(e.into())
     }
 }
+
+impl From<twin_core::mj::Error> for Error {
+    /// A MuJoCo error, as `twin_core::Error` reports it.
+    fn from(e: twin_core::mj::Error) -> Error {
+        Error::Core(e.into())
+    }
+}
+
+impl From<twin_core::log::Error> for Error {
+    /// A log error, as `twin_core::Error` reports it.
+    fn from(e: twin_core::log::Error) -> Error {
+        Error::Core(e.into())
+    }
+}

@@ -14,7 +14,7 @@ use serde_json::{Value as Json, json};
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Output, Stdio};
 use std::time::{Duration, Instant};
-use twin_core::external::process::DomainLease;
+use twin_bridges::external::process::DomainLease;
 use twin_core::log::{
     Float64MultiArray, Imu, JointState, Log, Odometry, ReadOptions, RosMessage, TfMessage, WrenchStamped,
 };
@@ -135,7 +135,7 @@ fn lockstep_run(mode: &str) -> Run {
 /// order.
 fn elbow_command() -> Vec<f64> {
     let robot = twin_core::robot::Robot::load(MODEL).unwrap();
-    let c = twin_core::live::Commander::new(&robot.model, twin_core::live::CommandInterface::Position);
+    let c = twin_bridges::live::Commander::new(&robot.model, twin_bridges::live::CommandInterface::Position);
     let home = twin_core::control::nominal_pose(&robot.model);
     let names = c.joint_names();
     names
@@ -435,7 +435,7 @@ fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() 
 
 // ---------------------------------------------------------------------------------------------
 // Real ROS 2: rclpy (the PyPI ROS 2 Kilted wheels, pinned in .ci/requirements.txt) on Fast DDS,
-// loopback only (twin_core::live::Loopback: a UDPv4 transport whitelisted to 127.0.0.1, no
+// loopback only (twin_bridges::live::Loopback: a UDPv4 transport whitelisted to 127.0.0.1, no
 // builtin transports, initial peer 127.0.0.1; ROS_AUTOMATIC_DISCOVERY_RANGE=LOCALHOST), a
 // domain of its own per run.
 
@@ -487,7 +487,7 @@ fn readme_commands(flag: &str) -> (Vec<String>, Vec<String>) {
 }
 
 /// An rclpy process: `script` with `args` on `loopback`'s domain, Fast DDS.
-fn spawn_rclpy(loopback: &twin_core::live::Loopback, script: &Path, args: &[String], cwd: &Path) -> Child {
+fn spawn_rclpy(loopback: &twin_bridges::live::Loopback, script: &Path, args: &[String], cwd: &Path) -> Child {
     let mut cmd = Command::new(rclpy_python());
     cmd.arg(script).args(args).current_dir(cwd).env("RMW_IMPLEMENTATION", "rmw_fastrtps_cpp");
     for (k, v) in loopback.environment() {
@@ -532,7 +532,7 @@ fn run_rclpy_on(model: &Path, twin_args: &[String], script: Option<&Path>, node_
     let mcap = dir.path().join("run.mcap");
     let node_out = dir.path().join("node.json");
     let lease = domain();
-    let loopback = twin_core::live::Loopback::write(dir.path(), lease.id()).unwrap();
+    let loopback = twin_bridges::live::Loopback::write(dir.path(), lease.id()).unwrap();
     let args: Vec<String> =
         twin_args.iter().map(|a| if a == "run.mcap" { mcap.display().to_string() } else { a.clone() }).collect();
     let mut cmd = twin();

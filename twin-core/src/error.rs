@@ -205,7 +205,7 @@ pub enum Error {
 
     /// The walker's legs can't reach its longest step with these options (a leg's IK misses the
     /// step's foot pose): an [`Error::Walk`] of its own, so that a search over the crouch
-    /// ([`crate::walk::WalkOptions::for_robot`]) tells it from the other refusals.
+    /// (`twin_controllers::walk::WalkOptions::for_robot`) tells it from the other refusals.
     #[error("walking controller: {message}")]
     WalkReach {
         /// Which leg, by how much, and what to do.
@@ -251,6 +251,44 @@ impl From<twin_convert::Error> for Error {
             twin_convert::Error::File(e) => Error::File(e),
             twin_convert::Error::Load { path, message } => Error::Load { path, message },
             other => Error::Convert(other),
+        }
+    }
+}
+
+impl From<twin_mj::Error> for Error {
+    /// The variant of the same name, with the same text.
+    fn from(e: twin_mj::Error) -> Error {
+        use twin_mj::Error as M;
+        match e {
+            M::File(e) => Error::File(e),
+            M::OutOfRange { what, message } => Error::OutOfRange { what, message },
+            M::Load { path, message } => Error::Load { path, message },
+            M::MuJoCo { call, message } => Error::MuJoCo { call, message },
+            M::Version { library, header } => Error::Version { library, header },
+            M::Convert(e) => Error::Convert(e),
+            M::NotFound { kind, name } => Error::NotFound { kind, name },
+            M::Size { what, expected, got } => Error::Size { what, expected, got },
+            M::InvalidEdit(message) => Error::InvalidEdit(message),
+            M::Options(message) => Error::Options(message),
+            other => Error::Options(other.to_string()),
+        }
+    }
+}
+
+impl From<twin_log::Error> for Error {
+    /// The variant of the same name, with the same text.
+    fn from(e: twin_log::Error) -> Error {
+        use twin_log::Error as L;
+        match e {
+            L::File(e) => Error::File(e),
+            L::LogFormat { path, offset, message } => Error::LogFormat { path, offset, message },
+            L::MsgDef { type_name, line, message } => Error::MsgDef { type_name, line, message },
+            L::Decode { path, topic, type_name, log_time_nanos, message } => {
+                Error::Decode { path, topic, type_name, log_time_nanos, message }
+            }
+            L::LogTopic { path, topic, message } => Error::LogTopic { path, topic, message },
+            L::McapWrite { path, source } => Error::McapWrite { path, source },
+            other => Error::Options(other.to_string()),
         }
     }
 }

@@ -546,7 +546,7 @@ pub fn reset_to_home(data: &mut Data) -> Result<()> {
     let model = data.model().clone();
     if let Some(key) = model.id(ObjType::Key, "home") {
         data.reset_to_keyframe(key)?;
-        return data.forward();
+        return Ok(data.forward()?);
     }
     data.reset()?;
     data.forward()?;

@@ -655,7 +655,7 @@ impl TerrainGeometry {
             edit.set_geom_box(g, b.center_m, q, b.half_m)?;
         }
         // No mj_setConst needed for static geometry, but `finish` is the only way out.
-        edit.finish()
+        Ok(edit.finish()?)
     }
 }
 

@@ -3,7 +3,7 @@
 //! simulation into these topics' typed messages ([`TypedMessage`], the types of [`crate::log`])
 //! once per step and hand them to their sinks ([`Sink`]: the MCAP file
 //! [`crate::sim::McapSink`], the rerun recording `crate::sim::RerunSink`, the live DDS bridge
-//! `crate::live::LiveSink`, a user's own), each of which encodes what it takes. A controller adds
+//! `twin_bridges::live::LiveSink`, a user's own), each of which encodes what it takes. A controller adds
 //! topics of its own ([`crate::control::Controller::topics`], e.g. a walking controller's
 //! footsteps), recorded the same way.
 //!
@@ -18,7 +18,7 @@
 //! - `/cmd_vel` (`geometry_msgs/msg/Twist`, [`CMD_VEL_TOPIC`]), an input: under `twin sim --ros
 //!   --controller walk` it steers the walker (linear.x forward, linear.y left, angular.z yaw
 //!   rate, the robot's heading frame), the topic `teleop_twist_keyboard` and Nav2 publish by
-//!   default ([`crate::live`], [`crate::walk::steer`]);
+//!   default (`twin_bridges::live`, `twin_controllers::walk::steer`);
 //! - each ray-cast sensor's topics ([`crate::sense::rig`]): depth cameras
 //!   `<prefix>/depth/image_raw`, `<prefix>/depth/camera_info`, `<prefix>/points`; LiDARs a
 //!   `LaserScan` or `PointCloud2`, at the sensor's rate.

@@ -1,5 +1,5 @@
 //! Controllers: what drives a twin during a rollout ([`PdHold`], [`Passive`], [`Replay`]; one
-//! file each; their registry by name is [`crate::registry`], above every controller).
+//! file each; their registry by name is `twin_controllers::registry`, above every controller).
 //!
 //! A [`Controller`] reads an [`Observation`] (time, joint positions and velocities, sensor
 //! values: possibly noisy or delayed copies of the simulation's own) and writes a command. The
@@ -135,9 +135,7 @@ pub trait Controller: Send {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::error::Error;
     use crate::mj::ObjType;
-    use crate::registry::by_name;
     use crate::robot::lowest_robot_point_z;
     use std::sync::Arc;
 
@@ -179,7 +177,6 @@ mod tests {
         data.qpos_mut()[7] = 0.9;
         pd.compute(&model, &Observation::of(&data), &mut command);
         assert_eq!(command[6], -20.0);
-        assert!(by_name("dance", &model).is_err());
     }
 
     #[test]
@@ -230,6 +227,6 @@ mod tests {
             Model::from_xml_str("<mujoco><worldbody><body><freejoint/><geom size=\"1\"/></body></worldbody></mujoco>")
                 .unwrap(),
         );
-        assert!(matches!(data.set_model(other), Err(Error::Size { .. })));
+        assert!(matches!(data.set_model(other), Err(twin_mj::Error::Size { .. })));
     }
 }

@@ -190,7 +190,7 @@ impl StribeckFriction {
             edit.set_dof_frictionloss(dof, 0.0)?;
             edit.set_dof_damping(dof, 0.0)?;
         }
-        edit.finish()
+        Ok(edit.finish()?)
     }
 }
 

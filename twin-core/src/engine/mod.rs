@@ -445,7 +445,7 @@ impl Engine {
             // current already).
             if split && step > 0 {
                 if let Err(e) = data.step1() {
-                    outcome.physics_error = Some(e);
+                    outcome.physics_error = Some(e.into());
                     break;
                 }
                 // The newest observation replaces the oldest; the next oldest is one further.
@@ -478,13 +478,13 @@ impl Engine {
                 self.qpos_t.copy_from_slice(data.qpos());
                 self.qvel_t.copy_from_slice(data.qvel());
                 if split && let Err(e) = data.step1() {
-                    outcome.physics_error = Some(e);
+                    outcome.physics_error = Some(e.into());
                     break;
                 }
             }
             let stepped = if split { data.step2() } else { data.step() };
             if let Err(e) = stepped {
-                outcome.physics_error = Some(e);
+                outcome.physics_error = Some(e.into());
                 break;
             }
             outcome.steps = step + 1;

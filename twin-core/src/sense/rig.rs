@@ -408,7 +408,7 @@ impl Pipelined {
         let (mut device, mut scratch) = self.idle.take().expect("finish() leaves the device idle");
         if let Err(e) = scratch.copy_poses_from(data) {
             self.idle = Some((device, scratch));
-            return Err(e);
+            return Err(e.into());
         }
         let (tx, rx) = std::sync::mpsc::channel();
         // Inside the pool, a device's `threads = 0` (the current pool) means this pool.

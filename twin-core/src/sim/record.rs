@@ -205,7 +205,7 @@ impl Sink for McapSink {
         let (Some(writer), Some(&channel)) = (self.writer.as_mut(), self.channels.get(id)) else {
             return Ok(());
         };
-        writer.write_encoded(channel, log_time_nanos, message.to_cdr(&mut self.cdr))
+        Ok(writer.write_encoded(channel, log_time_nanos, message.to_cdr(&mut self.cdr))?)
     }
 
     fn finish(&mut self) -> Result<()> {
@@ -530,7 +530,7 @@ impl Recording {
     }
 
     /// As [`Recording::new`], and every topic also goes to each of `sinks` (e.g. the live ROS 2
-    /// bridge, `crate::live::LiveSink`), which follow `--topics` like the MCAP file.
+    /// bridge, `twin_bridges::live::LiveSink`), which follow `--topics` like the MCAP file.
     ///
     /// # Errors
     /// As [`Recording::new`]; errors of the sinks' `add_topic`.

@@ -2,8 +2,8 @@
 
 use nalgebra::{Matrix3, UnitQuaternion, Vector3};
 use std::path::{Path, PathBuf};
-use twin_core::Error;
 use twin_core::convert::{ConvertOptions, convert_urdf, convert_urdf_str};
+use twin_core::mj::Error;
 use twin_core::mj::{Data, JointType, Model, ObjType};
 
 fn humanoid() -> PathBuf {

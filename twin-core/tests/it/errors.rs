@@ -2,7 +2,7 @@
 
 use std::io::Write;
 use std::sync::Arc;
-use twin_core::Error;
+use twin_core::mj::Error;
 use twin_core::mj::{Data, Model, StateSig, Warning};
 
 /// A model whose arena is too small: mj_step runs out of stack memory while adding contacts,

@@ -1,0 +1,550 @@
+//! The external controller as a [`Controller`] of the rollout engine, and the check that
+//! publishes the robot's state to it and gives the verdict on its health.
+
+use super::process::{ControllerProcess, DomainLease, Stopped};
+use super::{Interface, Restart, RosOptions};
+use crate::live::Loopback;
+use crate::live::{self, CommandInterface, LiveController, LiveOptions, LiveSink, Pacing};
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+use twin_core::control::{Controller, Observation, PdHold, PdHoldOptions};
+use twin_core::engine::{Check, Flow, Measurement, Observer, StepView, Verdict};
+use twin_core::error::{Error, Result};
+use twin_core::mj::{Data, Model};
+use twin_core::robot::Robot;
+use twin_core::sim::{RecordOptions, Recording};
+use twin_core::topics::{Sink, TopicInfo, TypedMessage};
+
+/// The bridge's sink, shared by the recordings of successive episodes (its DDS writers stay
+/// matched to the process).
+struct SharedSink(Arc<Mutex<LiveSink>>);
+
+impl Sink for SharedSink {
+    fn add_topic(&mut self, id: usize, topic: &TopicInfo) -> Result<bool> {
+        self.0.lock().map_err(|_| poisoned())?.add_topic(id, topic)
+    }
+
+    fn write(&mut self, id: usize, topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+        self.0.lock().map_err(|_| poisoned())?.write(id, topic, log_time_nanos, message)
+    }
+}
+
+fn poisoned() -> Error {
+    Error::Live { message: "the live bridge's state was poisoned by a panic on another thread".into() }
+}
+
+/// What the controller and its check share: this episode's state publisher and verdict.
+#[derive(Default)]
+struct Shared {
+    /// Publishes the robot's topics (`/joint_states`, IMUs, `/tf`…) to the process.
+    recording: Option<Recording>,
+    /// Why the controller failed this episode (`<kind>: <details>`).
+    failure: Option<String>,
+    /// Wall seconds from the process's start to its having joined, this episode.
+    join_secs: Option<f64>,
+    /// Commands applied this episode.
+    commands: u64,
+    /// Control periods this episode.
+    periods: u64,
+}
+
+/// A user's ROS 2 node driving the twin (see the [module docs](super)).
+pub struct ExternalController {
+    options: RosOptions,
+    folder: PathBuf,
+    log: PathBuf,
+    env: Vec<(String, String)>,
+    lease: DomainLease,
+    _profile_dir: tempfile::TempDir,
+    inner: LiveController,
+    sink: Arc<Mutex<LiveSink>>,
+    robot: Robot,
+    shared: Arc<Mutex<Shared>>,
+    process: Option<ControllerProcess>,
+    hold: PdHold,
+    step: u64,
+    steps_per_period: u64,
+    /// Steps held at the start of every episode: one control period (see
+    /// [`ExternalController::compute`]).
+    hold_steps: u64,
+    /// Episodes started on this controller.
+    runs: u64,
+    stop: &'static AtomicBool,
+    /// Highest cumulative match counts seen: `/clock` subscriptions, command and trajectory
+    /// publications, then one per `subscribes` topic.
+    matched: Vec<i32>,
+    failed: bool,
+    time_secs: f64,
+    /// Wall seconds spent starting processes and waiting for them to join, and how many.
+    startup: (f64, u64),
+    /// Wall seconds spent stopping processes.
+    stopping_secs: f64,
+    stats_at_reset: (u64, u64),
+}
+
+/// The health of an external controller as a [`Check`] (named `controller`): it also
+/// publishes the robot's state to the process each step. Fails when the process exited, never
+/// joined or stopped answering, with that reason as its cause.
+pub struct ControllerHealth {
+    shared: Arc<Mutex<Shared>>,
+    tracking: twin_core::tracking::Tracking,
+}
+
+/// An external controller for `robot` as `options` say, its process started in `folder` (the
+/// scenario file's) with its output appended to `log`; with the check that publishes the
+/// state to it and judges its health. Takes a domain id of its own and joins it; the process
+/// starts at the first episode's reset.
+///
+/// # Errors
+/// [`Error::Live`] when the bridge can't start or a `subscribes` topic is not one the robot
+/// publishes; [`Error::File`] for the profile or the log.
+pub fn external(
+    robot: &Robot,
+    options: &RosOptions,
+    folder: &Path,
+    log: &Path,
+) -> Result<(ExternalController, ControllerHealth)> {
+    options.validate().map_err(|(key, m)| Error::Live { message: format!("[ros] {key} {m}") })?;
+    let lease = DomainLease::acquire()?;
+    let profile_dir = tempfile::Builder::new()
+        .prefix("twin-ros-")
+        .tempdir()
+        .map_err(|source| Error::io(std::env::temp_dir(), source))?;
+    let env = Loopback::write(profile_dir.path(), lease.id())?.environment();
+    let live_options = LiveOptions {
+        domain_id: lease.id(),
+        interface: std::net::IpAddr::V4(std::net::Ipv4Addr::LOCALHOST),
+        control_rate_hz: options.control_rate_hz,
+        command_interface: match options.command_interface {
+            Interface::Position => CommandInterface::Position,
+            Interface::Velocity => CommandInterface::Velocity,
+            Interface::Effort => CommandInterface::Effort,
+        },
+        pacing: Pacing::Lockstep,
+        silence_timeout_secs: options.period_timeout_secs,
+        lockstep_timeout_secs: options.period_timeout_secs,
+        join_timeout_secs: options.join_timeout_secs,
+        flood_commands_per_period: options.flood_commands_per_period,
+        flood_window_secs: options.flood_window_secs,
+        ..LiveOptions::default()
+    };
+    let stop = twin_core::fsio::interrupt_flag();
+    let warnings = log.to_path_buf();
+    let warn = Box::new(move |m: &str| {
+        if let Ok(mut f) = std::fs::File::options().create(true).append(true).open(&warnings) {
+            let _ = writeln!(f, "--- twin warning: {m}");
+        }
+    });
+    let (sink, mut inner) = live::start(robot, &live_options, stop, warn)?;
+    // The process's join and the first period's hold are done here, per episode.
+    inner.mark_joined();
+    let shared = Arc::new(Mutex::new(Shared::default()));
+    let controller = ExternalController {
+        options: options.clone(),
+        folder: folder.to_path_buf(),
+        log: log.to_path_buf(),
+        env,
+        lease,
+        _profile_dir: profile_dir,
+        steps_per_period: inner.steps_per_period(),
+        inner,
+        sink: Arc::new(Mutex::new(sink)),
+        robot: robot.clone(),
+        shared: shared.clone(),
+        process: None,
+        hold: PdHold::new(&robot.model, PdHoldOptions::default()),
+        step: 0,
+        hold_steps: 0,
+        runs: 0,
+        stop,
+        matched: vec![0; 3 + options.subscribes.len()],
+        failed: false,
+        time_secs: 0.0,
+        startup: (0.0, 0),
+        stopping_secs: 0.0,
+        stats_at_reset: (0, 0),
+    };
+    // The state publisher now, so that its writers exist for the process to match.
+    controller.new_recording()?;
+    {
+        let sink = controller.sink.lock().map_err(|_| poisoned())?;
+        if let Some(t) = options.subscribes.iter().find(|t| !sink.publishes(t)) {
+            return Err(Error::Live {
+                message: format!(
+                    "[ros] subscribes: twin publishes no topic {t} for {}; its topics: `twin sim --ros` prints them",
+                    robot.name
+                ),
+            });
+        }
+    }
+    Ok((controller, ControllerHealth { shared, tracking: twin_core::tracking::Tracking::new() }))
+}
+
+impl ExternalController {
+    /// The DDS domain id of this controller's process.
+    pub fn domain_id(&self) -> u16 {
+        self.lease.id()
+    }
+
+    /// The log the process's output goes to.
+    pub fn log(&self) -> &Path {
+        &self.log
+    }
+
+    /// The live bridge's statistics (all episodes so far).
+    pub fn live_stats(&self) -> &live::LiveStats {
+        self.inner.stats()
+    }
+
+    /// Wall seconds spent starting processes until they joined (all episodes), and how many
+    /// were started.
+    pub fn startup(&self) -> (f64, u64) {
+        self.startup
+    }
+
+    /// A fresh state publisher for an episode (its topics' schedules start at t = 0).
+    fn new_recording(&self) -> Result<()> {
+        let options = RecordOptions {
+            command_topic: Some(live::actuator_topic(&self.robot)),
+            controller_topics: self.inner.topics().into_iter().map(|t| t.name).collect(),
+            ..RecordOptions::default()
+        };
+        let recording = Recording::with_sinks(&self.robot, &options, vec![Box::new(SharedSink(self.sink.clone()))])?;
+        self.shared.lock().map_err(|_| poisoned())?.recording = Some(recording);
+        Ok(())
+    }
+
+    fn note(&self, line: &str) {
+        if let Ok(mut f) = std::fs::File::options().create(true).append(true).open(&self.log) {
+            let _ = writeln!(f, "--- twin: {line}");
+        }
+    }
+
+    fn fail(&mut self, why: String) {
+        self.failed = true;
+        self.note(&format!("episode failed: {why}"));
+        if let Ok(mut s) = self.shared.lock() {
+            s.failure.get_or_insert(why);
+        }
+    }
+
+    fn stop_process(&mut self) {
+        if let Some(mut p) = self.process.take() {
+            let t = Instant::now();
+            let how = p.stop(Duration::from_secs_f64(self.options.stop_timeout_secs));
+            self.stopping_secs += t.elapsed().as_secs_f64();
+            let how = match how {
+                Stopped::Exited(status) => format!("it had exited ({status})"),
+                Stopped::BySignal(s) => format!("it ended after {s}"),
+            };
+            self.note(&format!("stopped pid {}: {how}", p.pid()));
+        }
+    }
+
+    /// Starts the process and waits, bounded, until it has joined. A failure is the episode's.
+    fn start_process(&mut self) -> Result<()> {
+        let started = Instant::now();
+        let note = format!("run {} on domain {}", self.runs, self.lease.id());
+        let mut process = ControllerProcess::start(&self.options.command, &self.folder, &self.env, &self.log, &note)?;
+        let before = self.matched.clone();
+        let join = Duration::from_secs_f64(self.options.join_timeout_secs);
+        let outcome = loop {
+            self.poll_matches()?;
+            let clock = self.matched[0] > before[0];
+            let commands = self.matched[1] > before[1] || self.matched[2] > before[2];
+            let missing: Vec<&str> = self
+                .options
+                .subscribes
+                .iter()
+                .zip(&self.matched[3..])
+                .zip(&before[3..])
+                .filter(|&((_, now), then)| now <= then)
+                .map(|((t, _), _)| t.as_str())
+                .collect();
+            if clock && commands && missing.is_empty() {
+                break None;
+            }
+            if let Some(status) = process.exited() {
+                break Some(format!(
+                    "exited before joining: {status}, before it joined the graph (see {})",
+                    self.log.display()
+                ));
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                break Some("interrupted: stopped by Ctrl-C while it was joining".into());
+            }
+            if started.elapsed() >= join {
+                let mut lacks = Vec::new();
+                if !clock {
+                    lacks.push("subscribed to /clock (is use_sim_time set?)".to_string());
+                }
+                if !missing.is_empty() {
+                    lacks.push(format!("subscribed to {}", missing.join(", ")));
+                }
+                if !commands {
+                    lacks.push(format!(
+                        "published on {} or /{}/joint_trajectory",
+                        live::command_topic(&self.robot),
+                        self.robot.name
+                    ));
+                }
+                break Some(format!(
+                    "never joined: within {} s (join_timeout_secs) on domain {} it had not {} (see {})",
+                    self.options.join_timeout_secs,
+                    self.lease.id(),
+                    lacks.join(", nor "),
+                    self.log.display()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        };
+        self.process = Some(process);
+        self.startup.0 += started.elapsed().as_secs_f64();
+        self.startup.1 += 1;
+        if let Ok(mut s) = self.shared.lock() {
+            s.join_secs = Some(started.elapsed().as_secs_f64());
+        }
+        if let Some(why) = outcome {
+            self.fail(why);
+        }
+        Ok(())
+    }
+
+    fn poll_matches(&mut self) -> Result<()> {
+        for (k, n) in self.inner.match_totals().into_iter().enumerate() {
+            if let Some(n) = n {
+                self.matched[k] = self.matched[k].max(n);
+            }
+        }
+        let mut sink = self.sink.lock().map_err(|_| poisoned())?;
+        for (k, topic) in self.options.subscribes.iter().enumerate() {
+            if let Some(n) = sink.subscription_total(topic) {
+                self.matched[3 + k] = self.matched[3 + k].max(n);
+            }
+        }
+        Ok(())
+    }
+
+    /// Says `t_secs` (the episode's start) on `/clock` after a reset under a kept process (a
+    /// jump back in time), and again every 10 ms for `reset_settle_secs` of wall time before
+    /// the episode starts and the first lockstep period says the next time. ROS nodes subscribe to `/clock` keeping only the latest message
+    /// (depth 1): had the next time come while the node was still busy with the last
+    /// episode's messages, it would have replaced the jump, the node's timer would have taken
+    /// *it* for the jump (rcl: fire one period after a backward jump) and skipped the period
+    /// twin waits a command for. Said again, the same time changes nothing for the node. Wall
+    /// time only: the simulation does not move meanwhile, so the run stays deterministic.
+    fn announce_jump(&mut self, t_secs: f64) {
+        let until = Instant::now() + Duration::from_secs_f64(self.options.reset_settle_secs);
+        self.inner.announce_time(t_secs);
+        loop {
+            std::thread::sleep(Duration::from_millis(10).min(until.saturating_duration_since(Instant::now())));
+            self.inner.repeat_time();
+            let now = Instant::now();
+            if now >= until || self.stop.load(Ordering::Relaxed) {
+                break;
+            }
+        }
+    }
+
+    /// Why the process can't go on, if it has exited.
+    fn exit_reason(&mut self) -> Option<String> {
+        let status = self.process.as_mut()?.exited()?;
+        Some(format!("exited: {status} at t = {:.3} s (see {})", self.time_secs, self.log.display()))
+    }
+}
+
+impl Controller for ExternalController {
+    fn name(&self) -> &'static str {
+        "ros"
+    }
+
+    fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
+        self.runs += 1;
+        self.failed = false;
+        self.step = 0;
+        self.time_secs = observation.time_secs;
+        {
+            let mut s = self.shared.lock().map_err(|_| poisoned())?;
+            s.failure = None;
+            s.join_secs = None;
+        }
+        self.hold.reset(model, observation)?;
+        let alive = self.process.as_mut().is_some_and(|p| p.exited().is_none());
+        let fresh = self.options.restart == Restart::Episode || !alive;
+        if fresh {
+            self.stop_process();
+        }
+        self.inner.discard_pending();
+        self.inner.reset(model, observation)?;
+        if self.runs > 1 {
+            self.new_recording()?;
+        }
+        let stats = self.inner.stats();
+        self.stats_at_reset = (stats.periods, stats.commands_applied);
+        self.hold_steps = self.steps_per_period;
+        if fresh {
+            self.start_process()?;
+        } else {
+            self.note(&format!("run {}: the same process, the simulation reset under it", self.runs));
+            self.announce_jump(observation.time_secs);
+        }
+        Ok(())
+    }
+
+    /// The first control period holds the start pose while the state goes out; then the
+    /// process commands, one command per period. A kept process (`restart = "never"`) was
+    /// told the episode's start time at the reset, alone for `reset_settle_secs`
+    /// ([`ExternalController::announce_jump`]): its sim-time timers saw time jump back (rcl
+    /// then fires them one period after the jump), so they fire at the first lockstep period
+    /// as a fresh process's do, and every episode runs the same periods whichever process it
+    /// got (the same `episodes.csv` whatever the thread count).
+    fn compute(&mut self, model: &Model, observation: &Observation<'_>, command: &mut [f64]) {
+        self.time_secs = observation.time_secs;
+        if self.failed || self.step < self.hold_steps {
+            self.hold.compute(model, observation, command);
+            self.step += 1;
+            return;
+        }
+        if (self.step - self.hold_steps).is_multiple_of(self.steps_per_period)
+            && let Some(why) = self.exit_reason()
+        {
+            self.fail(why);
+            self.hold.compute(model, observation, command);
+            return;
+        }
+        self.inner.compute(model, observation, command);
+        self.step += 1;
+    }
+
+    fn proceed(&mut self) -> Result<bool> {
+        let go = if self.failed {
+            false
+        } else {
+            match self.inner.proceed() {
+                Ok(go) => go,
+                Err(_) => {
+                    let flood = self.inner.flood().map(|f| format!("flood: {f}"));
+                    let why = flood.or_else(|| self.exit_reason()).unwrap_or_else(|| {
+                        format!(
+                            "no command: none within {} s (period_timeout_secs) after /clock = {:.3} s: the process \
+                             hangs or stopped publishing (see {})",
+                            self.options.period_timeout_secs,
+                            self.time_secs,
+                            self.log.display()
+                        )
+                    });
+                    self.fail(why);
+                    false
+                }
+            }
+        };
+        if let Ok(mut s) = self.shared.lock() {
+            let stats = self.inner.stats();
+            s.periods = stats.periods - self.stats_at_reset.0;
+            s.commands = stats.commands_applied - self.stats_at_reset.1;
+        }
+        Ok(go)
+    }
+
+    fn report(&self) -> Vec<String> {
+        let s = self.inner.stats();
+        let mut lines = vec![format!(
+            "external controller `{}`: domain {}, {} process start(s) ({:.3} s to join on average), \
+             {} control periods, {} commands applied, {} rejected; its output: {}",
+            self.options.command,
+            self.lease.id(),
+            self.startup.1,
+            self.startup.0 / self.startup.1.max(1) as f64,
+            s.periods,
+            s.commands_applied,
+            s.commands_rejected,
+            self.log.display()
+        )];
+        if let (Some(p50), Some(p99)) =
+            (live::percentile(&s.round_trip_micros, 50.0), live::percentile(&s.round_trip_micros, 99.0))
+        {
+            lines.push(format!("lockstep round trip (/clock out to command in): p50 {p50:.0} µs, p99 {p99:.0} µs"));
+        }
+        if let Ok(sh) = self.shared.lock()
+            && let Some(f) = &sh.failure
+        {
+            lines.push(format!("controller failed: {f}"));
+        }
+        lines
+    }
+
+    fn topics(&self) -> Vec<TopicInfo> {
+        self.inner.topics()
+    }
+
+    fn diagnostics(&self, emit: &mut dyn FnMut(usize, u64, TypedMessage<'_>)) {
+        self.inner.diagnostics(emit);
+    }
+
+    fn position_targets(&self, emit: &mut dyn FnMut(usize, f64)) {
+        if self.failed || self.step <= self.hold_steps {
+            self.hold.position_targets(emit);
+        } else {
+            self.inner.position_targets(emit);
+        }
+    }
+}
+
+impl Drop for ExternalController {
+    /// Never leaves the process behind.
+    fn drop(&mut self) {
+        self.stop_process();
+    }
+}
+
+impl Observer for ControllerHealth {
+    fn start(&mut self, model: &Model, data: &Data) -> Result<()> {
+        self.tracking.start(model, data)?;
+        let mut s = self.shared.lock().map_err(|_| poisoned())?;
+        match s.recording.as_mut() {
+            Some(r) => r.start(model, data),
+            None => Ok(()),
+        }
+    }
+
+    fn observe(&mut self, step: &StepView<'_>) -> Result<Flow> {
+        self.tracking.observe(step)?;
+        let mut s = self.shared.lock().map_err(|_| poisoned())?;
+        if let Some(r) = s.recording.as_mut() {
+            r.record(step)?;
+        }
+        Ok(Flow::Continue)
+    }
+}
+
+impl Check for ControllerHealth {
+    fn name(&self) -> &str {
+        "controller"
+    }
+
+    fn verdict(&self) -> Verdict {
+        let tracking = self.tracking.summary();
+        let (failure, join, periods, commands) = match self.shared.lock() {
+            Ok(s) => (s.failure.clone(), s.join_secs.unwrap_or(0.0), s.periods, s.commands),
+            Err(_) => (Some("internal: poisoned".into()), 0.0, 0, 0),
+        };
+        Verdict {
+            name: "controller".into(),
+            passed: failure.is_none(),
+            metrics: [
+                Measurement::new("commands", commands as f64, ""),
+                Measurement::new("periods", periods as f64, ""),
+                // Commands per simulated second.
+                Measurement::new("command_rate", commands as f64 / tracking.sim_secs.max(1e-12), "Hz"),
+            ]
+            .into_iter()
+            .chain(tracking.measurements())
+            .collect(),
+            details: vec![format!("joined in {join:.3} s wall"), tracking.to_string()],
+            cause: failure,
+        }
+    }
+}
