@@ -466,13 +466,13 @@ fn twin_test_fails_on_a_tracking_threshold_and_junit_names_it() {
     assert!(stdout.contains(&format!("worst (RMS/max): left_ankle_pitch_joint {measured:.4}/")), "{stdout}");
 }
 
-/// The README's "Test your controller with twin" commands (scenario, randomize, test) run as
+/// The "Test your controller with twin" commands of docs/src/controller.md (scenario, randomize, test) run as
 /// shown, from the repository root, their outputs (`runs/…`) in a scratch folder.
 #[test]
 fn readme_test_your_controller_commands_run() {
     let python = python();
-    let readme = std::fs::read_to_string(repo_root().join("README.md")).unwrap();
-    let start = readme.find("## Test your controller with twin").expect("README has the section");
+    let readme = std::fs::read_to_string(repo_root().join("docs/src/controller.md")).unwrap();
+    let start = readme.find("## Test your controller with twin").expect("docs/src/controller.md has the section");
     let section = &readme[start..];
     let section = &section[..section[3..].find("\n## ").map_or(section.len(), |k| k + 3)];
     let scratch = tempfile::tempdir().unwrap();

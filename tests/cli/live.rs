@@ -440,7 +440,8 @@ fn ros_services_pause_step_resume_reset_and_quit_and_the_node_is_on_the_graph() 
 // domain of its own per run.
 
 const RCLPY_NODE: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/tests/python/rclpy_node.py");
-const README: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/README.md");
+/// The chapter of the book that documents the ROS 2 bridge, its example nodes and commands.
+const CONTROLLER_DOC: &str = concat!(env!("CARGO_MANIFEST_DIR"), "/docs/src/controller.md");
 
 /// The Python of `TWIN_PYTHON` with rclpy and the message packages, or a failure saying what
 /// to install.
@@ -458,11 +459,11 @@ fn rclpy_python() -> String {
     }
 }
 
-/// The README's example node, verbatim: the python block after its `gait_controller.py`
+/// The controller chapter's example node, verbatim: the python block after its `gait_controller.py`
 /// heading line, written into `dir`.
 fn readme_node(dir: &Path) -> PathBuf {
-    let readme = std::fs::read_to_string(README).unwrap();
-    let at = readme.find("A complete 100 Hz controller (`gait_controller.py`)").expect("the README's node");
+    let readme = std::fs::read_to_string(CONTROLLER_DOC).unwrap();
+    let at = readme.find("A complete 100 Hz controller (`gait_controller.py`)").expect("the controller chapter's node");
     let start = readme[at..].find("```python\n").expect("its python block") + at + "```python\n".len();
     let end = readme[start..].find("```").expect("the block's end") + start;
     let path = dir.join("gait_controller.py");
@@ -470,15 +471,15 @@ fn readme_node(dir: &Path) -> PathBuf {
     path
 }
 
-/// The README's `twin sim` command with `flag` (e.g. `--lockstep`), as its arguments after
+/// The controller chapter's `twin sim` command with `flag` (e.g. `--lockstep`), as its arguments after
 /// `twin`, and the node's command's arguments after the script; both with `ROS_DOMAIN_ID=7`.
 fn readme_commands(flag: &str) -> (Vec<String>, Vec<String>) {
-    let readme = std::fs::read_to_string(README).unwrap();
+    let readme = std::fs::read_to_string(CONTROLLER_DOC).unwrap();
     let lines: Vec<&str> = readme.lines().collect();
     let k = lines
         .iter()
         .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains(flag))
-        .unwrap_or_else(|| panic!("no README command with {flag}"));
+        .unwrap_or_else(|| panic!("no command in docs/src/controller.md with {flag}"));
     let twin_args = lines[k].split_whitespace().skip(3).map(String::from).collect();
     let node = lines[k + 1];
     assert!(node.starts_with("ROS_DOMAIN_ID=7 python3 gait_controller.py"), "{node}");
@@ -738,15 +739,15 @@ fn ros_gazebo_empty_services_from_rclpy_pause_unpause_and_reset() {
     assert!(run.stdout.contains("4 service calls, 2 resets"), "{}", run.stdout);
 }
 
-/// The README's "Steer the walker": its `twin sim` arguments (after `sim`, the recording as
+/// The controller chapter's "Steer the walker": its `twin sim` arguments (after `sim`, the recording as
 /// `run.mcap`), its node's arguments, and the node written into `dir`.
 fn readme_steer(dir: &Path) -> (Vec<String>, Vec<String>, PathBuf) {
-    let readme = std::fs::read_to_string(README).unwrap();
+    let readme = std::fs::read_to_string(CONTROLLER_DOC).unwrap();
     let lines: Vec<&str> = readme.lines().collect();
     let k = lines
         .iter()
         .position(|l| l.starts_with("ROS_DOMAIN_ID=7 target/release/twin sim") && l.contains("steer.mcap"))
-        .expect("the README's steering command");
+        .expect("the controller chapter's steering command");
     let twin_args = lines[k]
         .split_whitespace()
         .skip(3)
@@ -754,7 +755,7 @@ fn readme_steer(dir: &Path) -> (Vec<String>, Vec<String>, PathBuf) {
         .collect();
     assert!(lines[k + 1].starts_with("ROS_DOMAIN_ID=7 python3 steer.py"), "{}", lines[k + 1]);
     let node_args = lines[k + 1].split_whitespace().skip(3).map(String::from).collect();
-    let at = readme.find("`steer.py`: 1 m\nforward").expect("the README's steering node");
+    let at = readme.find("`steer.py`: 1 m\nforward").expect("the controller chapter's steering node");
     let start = readme[at..].find("```python\n").expect("its python block") + at + "```python\n".len();
     let end = readme[start..].find("```").expect("the block's end") + start;
     let path = dir.join("steer.py");
@@ -781,7 +782,7 @@ fn turned(odom: &[(u64, Odometry)], from: f64, to: f64) -> f64 {
         .sum()
 }
 
-/// The README's steering node (rclpy, Fast DDS, loopback) drives the humanoid's walker over
+/// The controller chapter's steering node (rclpy, Fast DDS, loopback) drives the humanoid's walker over
 /// `/cmd_vel` in lockstep: 1 m forward, 90° in place, 0.5 m to the left. In `/odom` (the
 /// simulation's ground truth), each leg (its move and the stop after it) covers its
 /// commanded distance or angle within 20 %; the humanoid stays up; every period after the
