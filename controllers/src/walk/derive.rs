@@ -120,7 +120,7 @@ const CROUCH_STEP: f64 = 0.02;
 /// and the G1 0.71 at their scaled crouches (unchanged). At the highest crouch that reaches
 /// their steps Romeo kept 0.27 (0.680 m) and fell walking at 3.3 s, Talos (motors) 0.12
 /// (0.924 m) and fell at 4.7 s; kept to 0.5 they crouch to 0.664 m (0.53 rad) and 0.887 m
-/// (0.65 rad) and walk (BENCHMARKS.md, "Romeo walking").
+/// (0.65 rad) and walk (docs/src/benchmarks-notebook.md, "Romeo walking").
 pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
 /// The legs' static load in the crouch ([`Walker::crouch_load`]: the largest part of a leg
 /// actuator's torque spent holding the robot on both feet) above which the swing foot is
@@ -129,7 +129,7 @@ pub const MIN_KNEE_BEND_RAD: f64 = 0.5;
 /// lags pitched toe-down and its toe strikes the ground short of the landing spot (a
 /// mechanism the joint log suggests, not measured as such). The shipped humanoid's legs are
 /// loaded 0.12, the G1's 0.16, Talos's (motors) 0.21 at their crouches: unchanged. Fitted on
-/// Romeo, the one robot above it (BENCHMARKS.md, "Romeo walking"): at its crouch it walks at
+/// Romeo, the one robot above it (docs/src/benchmarks-notebook.md, "Romeo walking"): at its crouch it walks at
 /// 0.2 and 0.22 m/s and follows `steer.toml` with a clearance of 0.08 to 0.09 m (derived:
 /// 0.087); with 0.075 it falls at 0.22 m/s, with 0.0955 in `steer.toml`.
 pub const SAG_FREE_LOAD: f64 = 0.22;

@@ -9,7 +9,7 @@
 //!
 //! Its sines, cosines and arctangents are the `libm` crate's (musl's port of fdlibm, pure Rust):
 //! glibc's `sincos`/`atan2` set and restore the rounding mode on every call, which was a third of
-//! the whole-tree pass and half of the closed-form IK (BENCHMARKS.md, "Walking controller cost
+//! the whole-tree pass and half of the closed-form IK (docs/src/benchmarks-notebook.md, "Walking controller cost
 //! per tick"). The headings' `sin_cos` stays std's, bit for bit, behind a small memo
 //! ([`kept_sin_cos`]; why, with figures, in the same section).
 
@@ -72,7 +72,7 @@ thread_local! {
 
 /// `angle.sin_cos()` bit for bit, the last few angles' kept: the walker takes the sine and
 /// cosine of the same few headings (the footholds', the pelvis's) many times a tick. A kept
-/// angle costs 1.4 ns where std's `sin_cos` costs 16 ns and `libm::sincos` 8 ns (BENCHMARKS.md,
+/// angle costs 1.4 ns where std's `sin_cos` costs 16 ns and `libm::sincos` 8 ns (docs/src/benchmarks-notebook.md,
 /// "libm for the walker's trigonometry"); `libm::sincos` would also change the walk's last bits
 /// (it differs from glibc's in 6 % of angles).
 pub fn kept_sin_cos(angle: f64) -> (f64, f64) {

@@ -67,7 +67,7 @@
 //! Romeo 1.04 m, 91.9° and 0.53 m. Without the outer loop (`command_hold_gain` 0) the
 //! G1 stepped 0.39 m of 0.5 sideways: each step's landing correction, against a DCM that
 //! lagged its reference sideways and back, moved the trailing foot 1.9 cm and the leading one
-//! 0.8 cm back, and the next step counted from there (BENCHMARKS.md, "Walker velocity
+//! 0.8 cm back, and the next step counted from there (docs/src/benchmarks-notebook.md, "Walker velocity
 //! tracking"). Romeo and Talos (motors) walk since two rules derived from the robot and one
 //! measured on its first step: the crouch keeps the knees bent [`derive::MIN_KNEE_BEND_RAD`]
 //! in the gait's extreme poses (at the highest crouch that reached their steps their knees
@@ -78,7 +78,7 @@
 //! targets' velocity (Talos 0.63, Romeo 0.78; the shipped humanoid 0.39 and the G1 0.07 do
 //! not switch). At 0.3 m/s Romeo needs all three (each left out, it falls at 3.5, 5.4 and
 //! 3.4 s); Talos walks with either the crouch or the switch, and with the switch at the pace
-//! it is asked (0.24 against 0.31 m/s at `--vx 0.25`). BENCHMARKS.md, "Romeo walking" and
+//! it is asked (0.24 against 0.31 m/s at `--vx 0.25`). docs/src/benchmarks-notebook.md, "Romeo walking" and
 //! "Talos walks straight". What was known of those falls before:
 //! - Romeo: the swing foot touches the ground at two thirds of its swing (0.2 m short, 420 N
 //!   backward on the toe) while the stance foot turns on its sole (−2° to −15° in 0.5 s,

@@ -65,7 +65,7 @@ pub struct WalkOptions {
     /// keep pulling steps back, the distance walked follows the command; a single long or
     /// short step (a kick) moves it by the gain times that step's error only. On rough ground
     /// (±1 cm, `walk_rough.toml`) the shipped humanoid's steps came out 0.120 m against 0.129 m
-    /// on flat ground for 0.133 m asked; measurements in BENCHMARKS.md, "Rough ground: the pace".
+    /// on flat ground for 0.133 m asked; measurements in docs/src/benchmarks-notebook.md, "Rough ground: the pace".
     #[default(0.0)]
     pub stride_hold_gain: f64,
     /// Largest length `stride_hold_gain` adds to (or takes from) a step, m (default: 0.03).
@@ -165,7 +165,7 @@ pub struct WalkOptions {
     pub swing_stiffness: f64,
     /// Damped-least-squares iterations of the leg IK per tick, warm-started from the last
     /// tick's solution (default: 1: the targets move by millimetres per tick and the residual
-    /// is taken up at the next one; measurements in BENCHMARKS.md, "Walker option choices").
+    /// is taken up at the next one; measurements in docs/src/benchmarks-notebook.md, "Walker option choices").
     #[default(1)]
     pub ik_iterations: usize,
     /// Body and sensor names overriding what the walker finds.
@@ -175,7 +175,7 @@ pub struct WalkOptions {
     /// down there for the rest); the spot follows the predicted capture point for the first
     /// 2/3 of it (default: 0.6). Spread over the whole swing, the foot's sideways move comes
     /// in its middle, fast enough to saturate the hip roll, and sideways steps land short
-    /// (measurements in BENCHMARKS.md, "Walker option choices").
+    /// (measurements in docs/src/benchmarks-notebook.md, "Walker option choices").
     #[default(0.6)]
     pub recovery_reach_fraction: f64,
     /// Walking corrects the swing foot's landing spot (and touchdown time) for the measured
@@ -188,7 +188,7 @@ pub struct WalkOptions {
     /// the commanded pelvis, the stance leg's give (its joints' PD error, a stance foot
     /// turning on its contacts) moves the landing spot with the body: a body tilted by a push
     /// carries the swing foot into the ground short of its spot, and on a robot with compliant
-    /// legs every landing lands off by the stance leg's error (measurements in BENCHMARKS.md,
+    /// legs every landing lands off by the stance leg's error (measurements in docs/src/benchmarks-notebook.md,
     /// "Walker option choices"). `stand.toml`'s recovery steps keep `false`.
     #[default(true)]
     pub swing_from_measured_pelvis: bool,
@@ -203,7 +203,7 @@ pub struct WalkOptions {
     /// shipped humanoid's strays 39 % on `walk.toml` (its tuned gait walks with it), the G1's
     /// 7 %: both keep the damping as tuned (tracking the targets' velocity, the G1 held fewer
     /// pushes). Only the first step is measured: undisturbed, the same on every walk (later
-    /// steps stray after a push too). Measurements in BENCHMARKS.md, "Talos walks straight".
+    /// steps stray after a push too). Measurements in docs/src/benchmarks-notebook.md, "Talos walks straight".
     #[default(0.5)]
     pub swing_miss_fraction: f64,
     /// Hip strategy ([`hip`]): the part of the commanded ZMP beyond the feet's support that
@@ -225,7 +225,7 @@ pub struct WalkOptions {
     /// the legs' targets moved by the torso-tilt feedback on every step (its pelvis
     /// counter-rotation through a linear map of the leg IK, [`LegIk::base_motion_map`])
     /// (default: 1, every step; at 2 the walker costs a third less: measurements in
-    /// BENCHMARKS.md, "Walker option choices").
+    /// docs/src/benchmarks-notebook.md, "Walker option choices").
     #[default(1)]
     pub plan_every_ticks: u64,
     /// Blind walking on uneven ground: each landed sole's height is the ground under that foot
@@ -313,7 +313,7 @@ pub struct WalkOptions {
     /// each step back and the loss adds up (the G1 stepping left at 0.1 m/s went 0.41 m of 0.5;
     /// 0.46 m with it). A constant command (`vx`, `vy`, `yaw_rate` without a target) is not
     /// held: on the G1's randomized walk (`walk_g1.toml`, pushes) holding it lost episodes
-    /// (8/40 against 13/40). Measurements in BENCHMARKS.md, "Walker velocity tracking".
+    /// (8/40 against 13/40). Measurements in docs/src/benchmarks-notebook.md, "Walker velocity tracking".
     #[default(0.35)]
     pub command_hold_gain: f64,
     /// Touch-down from contact ([`contact`]): whether a swing foot has landed is read from the

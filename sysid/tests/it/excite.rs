@@ -4,7 +4,7 @@
 //! trajectory a random draw typically gives; ≥ 10× on the leg, ≥ 5× on the arm), respects every limit, starts and ends at rest,
 //! and identification along it predicts a held-out log better than along the median random one.
 //! `TWIN_EXCITE_SEED` sets the design's seed (default 1) to see the spread over draws
-//! (BENCHMARKS.md, "sysid's synthetic logs over many draws").
+//! (docs/src/benchmarks-notebook.md, "sysid's synthetic logs over many draws").
 
 use std::f64::consts::PI;
 use std::path::{Path, PathBuf};

@@ -14,7 +14,7 @@ mod test_python;
 
 /// The three seeds of a synthetic identification run (training log, held-out log, perturbed
 /// start): `default`, or from the environment variable `var` ("a,b,c") to measure the spread
-/// over draws (BENCHMARKS.md, "sysid's synthetic logs over many draws").
+/// over draws (docs/src/benchmarks-notebook.md, "sysid's synthetic logs over many draws").
 fn seeds(var: &str, default: [u64; 3]) -> [u64; 3] {
     match std::env::var(var) {
         Ok(v) => {
