@@ -248,14 +248,14 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     let pick = |given: &Option<String>, type_name: &str, what: &str| -> Result<Option<String>> {
         match given {
             Some(t) if has(t) => Ok(Some(t.clone())),
-            Some(t) => Err(Error::LogTopic {
+            Some(t) => Err(Error::Log(twin_core::log::Error::LogTopic {
                 path: log.path().to_path_buf(),
                 topic: t.clone(),
                 message: format!(
                     "no {what} topic {t} in the log; its {type_name} topics: {}",
                     none_if_empty(&topics_of(&info, type_name))
                 ),
-            }),
+            })),
             None => Ok(topics_of(&info, type_name).into_iter().next()),
         }
     };
@@ -265,7 +265,7 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
     let command_topic = match &options.command_topic {
         Some(t) if trajectory_topics.contains(t) => Some(t.clone()),
         Some(t) if has(t) && !topics_of(&info, Float64MultiArray::TYPE_NAME).contains(t) => {
-            return Err(Error::LogTopic {
+            return Err(Error::Log(twin_core::log::Error::LogTopic {
                 path: log.path().to_path_buf(),
                 topic: t.clone(),
                 message: format!(
@@ -275,7 +275,7 @@ pub fn analyze(log: &Log, robot: Option<&Robot>, options: &AnalyzeOptions) -> Re
                         &[topics_of(&info, Float64MultiArray::TYPE_NAME), trajectory_topics.clone()].concat()
                     )
                 ),
-            });
+            }));
         }
         Some(_) => pick(&options.command_topic, Float64MultiArray::TYPE_NAME, "command")?,
         None => {

@@ -901,20 +901,14 @@ mod live {
     use super::Args;
     use twin_core::control::Controller;
     use twin_core::engine::Disturbance;
-    use twin_core::robot::Robot;
-    use twin_core::sim::{RecordOptions, Recording};
+    use twin_core::sim::Recording;
 
     /// No bridge in this build: never made.
     pub enum Live {}
 
     impl Live {
-        pub fn start(
-            _: &Args,
-            _: &Robot,
-            _: RecordOptions,
-            _: Vec<Box<dyn twin_core::topics::Sink>>,
-            _: Option<twin_controllers::walk::Walker>,
-        ) -> anyhow::Result<(Live, Recording)> {
+        /// Refused before any of the bridge's parts (robot, options, sinks, walker) is used.
+        pub fn start<R, O, S, W>(_: &Args, _: R, _: O, _: S, _: W) -> anyhow::Result<(Live, Recording)> {
             Err(twin_core::Error::FeatureMissing { feature: "ros", what: "--ros (the live ROS 2 bridge)".into() }
                 .into())
         }

@@ -68,23 +68,13 @@ pub enum Error {
 /// `Result` with [`Error`].
 pub type Result<T, E = Error> = std::result::Result<T, E>;
 
-impl From<twin_core::fsio::Error> for Error {
-    /// A file error, as `twin_core::Error` reports it.
-    fn from(e: twin_core::fsio::Error) -> Error {
-        Error::Core(e.into())
-    }
+/// The errors of the floors below (files, the MuJoCo wrapper, logs), as `twin_core::Error`
+/// reports them.
+macro_rules! as_core_error {
+    ($($t:ty),*) => {$(
+        impl From<$t> for Error {
+            fn from(e: $t) -> Error { Error::Core(e.into()) }
+        }
+    )*};
 }
-
-impl From<twin_core::mj::Error> for Error {
-    /// A MuJoCo error, as `twin_core::Error` reports it.
-    fn from(e: twin_core::mj::Error) -> Error {
-        Error::Core(e.into())
-    }
-}
-
-impl From<twin_core::log::Error> for Error {
-    /// A log error, as `twin_core::Error` reports it.
-    fn from(e: twin_core::log::Error) -> Error {
-        Error::Core(e.into())
-    }
-}
+as_core_error!(twin_core::fsio::Error, twin_core::mj::Error, twin_core::log::Error);

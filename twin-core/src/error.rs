@@ -12,6 +12,22 @@ pub enum Error {
     #[error(transparent)]
     File(#[from] twin_fsio::Error),
 
+    /// The MuJoCo wrapper failed: MuJoCo refused a model, raised `mju_user_error`, a model edit
+    /// would be invalid, or the library is not the one twin was built for (twin-mj's error,
+    /// with its text).
+    #[error(transparent)]
+    Mj(twin_mj::Error),
+
+    /// A ROS 2 log could not be read or written: not MCAP, damaged, a message that does not
+    /// decode, a topic missing (twin-log's error, with its text).
+    #[error(transparent)]
+    Log(twin_log::Error),
+
+    /// A URDF is invalid or not well-formed XML (twin-convert's error, with its text: the file,
+    /// the line and element, what to do).
+    #[error(transparent)]
+    Convert(twin_convert::Error),
+
     /// A number in a model or an option is out of its valid range; the message gives the range.
     #[error("{what}: {message}")]
     OutOfRange {
@@ -20,43 +36,6 @@ pub enum Error {
         /// The value, the valid range and what to do.
         message: String,
     },
-
-    /// MuJoCo refused a model (parse or compile error). `message` is MuJoCo's text, which names
-    /// the element and line where it can.
-    #[error("{}: MuJoCo could not load the model: {message}", path.as_deref().map_or_else(|| "<string>".into(), |p| p.display().to_string()))]
-    Load {
-        /// The model file, `None` when loaded from a string.
-        path: Option<PathBuf>,
-        /// MuJoCo's error text.
-        message: String,
-    },
-
-    /// A MuJoCo call raised `mju_user_error`; the process keeps running and the data involved
-    /// should be reset before further use.
-    #[error("MuJoCo error in {call}: {message}")]
-    MuJoCo {
-        /// The MuJoCo function that raised it.
-        call: &'static str,
-        /// MuJoCo's error text.
-        message: String,
-    },
-
-    /// The header MuJoCo was compiled against does not match the loaded library.
-    #[error(
-        "MuJoCo library version {library} does not match the headers twin was built with ({header}); \
-         rebuild twin against the same MuJoCo (unset MUJOCO_DIR to use the pinned one)"
-    )]
-    Version {
-        /// `mj_version()` of the loaded library.
-        library: i32,
-        /// `mjVERSION_HEADER` of the bindings.
-        header: i32,
-    },
-
-    /// A URDF is invalid or not well-formed XML (twin-convert's error, with its text: the file,
-    /// the line and element, what to do).
-    #[error(transparent)]
-    Convert(twin_convert::Error),
 
     /// No object of this kind and name in the model.
     #[error("the model has no {kind} named \"{name}\"")]
@@ -117,65 +96,6 @@ pub enum Error {
         message: String,
     },
 
-    /// A log file is not MCAP, or is damaged and strict reading was asked for. `offset` is the
-    /// byte offset of the offending record.
-    #[error("{}{}: {message}", path.display(), offset.map_or_else(String::new, |o| format!(" (byte {o})")))]
-    LogFormat {
-        /// The `.mcap` file or bag folder.
-        path: PathBuf,
-        /// Byte offset in the file, when known.
-        offset: Option<u64>,
-        /// What is wrong and what to do about it.
-        message: String,
-    },
-
-    /// A `ros2msg` schema text could not be parsed; `line` is 1-based within the schema text
-    /// (0 when not tied to a line).
-    #[error("message definition of {type_name}, line {line}: {message}")]
-    MsgDef {
-        /// The message type, e.g. `sensor_msgs/msg/JointState`.
-        type_name: String,
-        /// Line in the schema text.
-        line: usize,
-        /// What is wrong.
-        message: String,
-    },
-
-    /// A message could not be decoded with its channel's schema.
-    #[error("{}: topic {topic} ({type_name}), message at log time {log_time_nanos} ns: {message}", path.display())]
-    Decode {
-        /// The file.
-        path: PathBuf,
-        /// The topic.
-        topic: String,
-        /// The message type.
-        type_name: String,
-        /// Log time of the message.
-        log_time_nanos: u64,
-        /// What went wrong (with the byte offset in the message where known).
-        message: String,
-    },
-
-    /// A topic asked for is missing from a log or has an unexpected type.
-    #[error("{}: {message}", path.display())]
-    LogTopic {
-        /// The file or bag folder.
-        path: PathBuf,
-        /// The topic.
-        topic: String,
-        /// What is wrong, with the topics that are there.
-        message: String,
-    },
-
-    /// Writing an MCAP file failed.
-    #[error("{}: writing MCAP", path.display())]
-    McapWrite {
-        /// The file being written.
-        path: PathBuf,
-        /// The mcap crate's error.
-        source: mcap::McapError,
-    },
-
     /// A model edit would make the model physically invalid (e.g. negative mass).
     /// A joint trajectory (CSV or log) that can't be replayed.
     #[error("{}{}: {message}", path.display(), line.map_or_else(String::new, |l| format!(":{l}")))]
@@ -187,9 +107,6 @@ pub enum Error {
         /// What is wrong and what to do.
         message: String,
     },
-
-    #[error("invalid model edit: {0}")]
-    InvalidEdit(String),
 
     /// Options that don't fit together (e.g. the replay controller without a trajectory).
     #[error("{0}")]
@@ -249,46 +166,35 @@ impl From<twin_convert::Error> for Error {
     fn from(e: twin_convert::Error) -> Error {
         match e {
             twin_convert::Error::File(e) => Error::File(e),
-            twin_convert::Error::Load { path, message } => Error::Load { path, message },
+            twin_convert::Error::Load { path, message } => Error::Mj(twin_mj::Error::Load { path, message }),
             other => Error::Convert(other),
         }
     }
 }
 
 impl From<twin_mj::Error> for Error {
-    /// The variant of the same name, with the same text.
+    /// The variants both floors have (a file, a number out of range, a URDF, a name or size the
+    /// model lacks, options) stay themselves; the rest is [`Error::Mj`]. The text is the same.
     fn from(e: twin_mj::Error) -> Error {
         use twin_mj::Error as M;
         match e {
             M::File(e) => Error::File(e),
-            M::OutOfRange { what, message } => Error::OutOfRange { what, message },
-            M::Load { path, message } => Error::Load { path, message },
-            M::MuJoCo { call, message } => Error::MuJoCo { call, message },
-            M::Version { library, header } => Error::Version { library, header },
             M::Convert(e) => Error::Convert(e),
+            M::OutOfRange { what, message } => Error::OutOfRange { what, message },
             M::NotFound { kind, name } => Error::NotFound { kind, name },
             M::Size { what, expected, got } => Error::Size { what, expected, got },
-            M::InvalidEdit(message) => Error::InvalidEdit(message),
             M::Options(message) => Error::Options(message),
-            other => Error::Options(other.to_string()),
+            other => Error::Mj(other),
         }
     }
 }
 
 impl From<twin_log::Error> for Error {
-    /// The variant of the same name, with the same text.
+    /// A file error stays [`Error::File`]; the rest is [`Error::Log`], with the same text.
     fn from(e: twin_log::Error) -> Error {
-        use twin_log::Error as L;
         match e {
-            L::File(e) => Error::File(e),
-            L::LogFormat { path, offset, message } => Error::LogFormat { path, offset, message },
-            L::MsgDef { type_name, line, message } => Error::MsgDef { type_name, line, message },
-            L::Decode { path, topic, type_name, log_time_nanos, message } => {
-                Error::Decode { path, topic, type_name, log_time_nanos, message }
-            }
-            L::LogTopic { path, topic, message } => Error::LogTopic { path, topic, message },
-            L::McapWrite { path, source } => Error::McapWrite { path, source },
-            other => Error::Options(other.to_string()),
+            twin_log::Error::File(e) => Error::File(e),
+            other => Error::Log(other),
         }
     }
 }

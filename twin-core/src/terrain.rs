@@ -556,11 +556,11 @@ pub const FLOOR_FRICTION: [f64; 3] = [1.0, 0.005, 0.0001];
 pub fn settle(model: &Model, geometry: &TerrainGeometry, feet: &[usize]) -> crate::Result<(Model, f64)> {
     let ours = terrain_geoms(model);
     if ours.is_empty() {
-        return Err(crate::Error::InvalidEdit(
+        return Err(crate::Error::Mj(twin_mj::Error::InvalidEdit(
             "the model holds no terrain geoms: terrain is composed with URDF robots (converted by twin); \
              for an MJCF model, add the terrain to its <worldbody> yourself"
                 .into(),
-        ));
+        )));
     }
     let floor = model.id(ObjType::Geom, "floor");
     let priority = floor.map_or(0, |g| model.geom_priority()[g]);
@@ -632,13 +632,13 @@ impl TerrainGeometry {
             ours.iter().copied().find(|&g| model.name(ObjType::Geom, g) == format!("{GEOM_PREFIX}_hfield"));
         let boxes: Vec<usize> = ours.iter().copied().filter(|&g| Some(g) != hfield_geom).collect();
         if boxes.len() != self.boxes.len() || hfield_geom.is_some() != self.hfield.is_some() {
-            return Err(crate::Error::InvalidEdit(format!(
+            return Err(crate::Error::Mj(twin_mj::Error::InvalidEdit(format!(
                 "the model's terrain has {} boxes{}, this one {}{}: not the same terrain kind",
                 boxes.len(),
                 if hfield_geom.is_some() { " and a heightfield" } else { "" },
                 self.boxes.len(),
                 if self.hfield.is_some() { " and a heightfield" } else { "" },
-            )));
+            ))));
         }
         let mut edit = model.edit()?;
         if let (Some(g), Some(h)) = (hfield_geom, &self.hfield) {

@@ -84,24 +84,12 @@ impl Walker {
 
     pub(super) fn build_loops(&mut self, model: &Model) {
         let o = &self.options;
-        let pd_legs = PdHold::new(
-            model,
-            PdHoldOptions {
-                saturation_error: o.leg_saturation_error,
-                damping_ratio: o.damping_ratio,
-                ..Default::default()
-            },
-        )
-        .gains();
-        let pd_rest = PdHold::new(
-            model,
-            PdHoldOptions {
-                saturation_error: o.saturation_error,
-                damping_ratio: o.damping_ratio,
-                ..Default::default()
-            },
-        )
-        .gains();
+        let gains = |saturation_error: f64| {
+            let options = PdHoldOptions { saturation_error, damping_ratio: o.damping_ratio, ..Default::default() };
+            PdHold::new(model, options).gains()
+        };
+        let pd_legs = gains(o.leg_saturation_error);
+        let pd_rest = gains(o.saturation_error);
         let mut frames = self.tree.frames();
         self.tree.forward(&self.nominal, &mut frames);
         let actuation = Actuation::of(model);

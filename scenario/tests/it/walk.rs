@@ -31,6 +31,19 @@ impl Observer for Last {
     }
 }
 
+/// Runs `robot` under `controller` for `scenario`'s duration and seed, with `disturbances` and
+/// `observers`.
+fn simulate(
+    scenario: &Scenario,
+    robot: &twin_core::robot::Robot,
+    controller: &mut dyn twin_core::control::Controller,
+    disturbances: &mut [&mut dyn Disturbance],
+    observers: &mut [&mut dyn Observer],
+) {
+    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
+    sim::simulate_with(robot, controller, &options, None, &mut |_| {}, disturbances, observers).unwrap();
+}
+
 /// Runs `scenario` (with `edit` applied) on the rollout engine and returns the gait metrics,
 /// the verdicts and the final state.
 fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (GaitSummary, Vec<Threshold>, Vec<f64>) {
@@ -41,17 +54,7 @@ fn run_scenario(mut scenario: Scenario, edit: impl FnOnce(&mut Scenario)) -> (Ga
     let mut disturbances: Vec<&mut dyn Disturbance> = pushes.iter_mut().map(|p| p as &mut dyn Disturbance).collect();
     let mut check = scenario.check(&robot.model).unwrap();
     let mut last = Last(Vec::new(), Vec::new());
-    let options = SimOptions { duration_secs: scenario.duration_secs, seed: scenario.seed };
-    sim::simulate_with(
-        &robot,
-        controller.as_mut(),
-        &options,
-        None,
-        &mut |_| {},
-        &mut disturbances,
-        &mut [&mut check, &mut last],
-    )
-    .unwrap();
+    simulate(&scenario, &robot, controller.as_mut(), &mut disturbances, &mut [&mut check, &mut last]);
     let summary = check.metrics.summary();
     let verdicts = check.verdicts();
     // The engine verdict agrees with the per-threshold ones.

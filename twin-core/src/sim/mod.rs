@@ -181,10 +181,10 @@ pub fn simulate_with(
         return Err(e);
     }
     if let (Some(reason), Some(t)) = (&divergence.reason, divergence.time_secs) {
-        return Err(Error::MuJoCo {
+        return Err(Error::Mj(twin_mj::Error::MuJoCo {
             call: "mj_step",
             message: format!("the simulation diverged at t = {t:.3} s: {reason}"),
-        });
+        }));
     }
     (timing.progress)(1.0);
     Ok(SimReport {

@@ -561,7 +561,7 @@ impl Recording {
             );
             for t in wanted {
                 if !known.contains(t) && !t.starts_with("/contacts/") {
-                    return Err(Error::LogTopic {
+                    return Err(Error::Log(twin_log::Error::LogTopic {
                         path: path.clone(),
                         topic: t.clone(),
                         message: format!(
@@ -569,7 +569,7 @@ impl Recording {
                             crate::fsio::excerpt(t, crate::fsio::EXCERPT_CHARS),
                             known.join(", ")
                         ),
-                    });
+                    }));
                 }
             }
         }

@@ -285,17 +285,7 @@ pub(super) fn talos_on_motors_stands_upright_and_turns_in_place() {
     let mut controller = s.controller(&robot.model).unwrap();
     let mut check = s.check(&robot.model).unwrap();
     let mut standing = MaxTilt { until_secs: 1.0, tilt_rad: 0.0 };
-    let options = SimOptions { duration_secs: s.duration_secs, seed: s.seed };
-    sim::simulate_with(
-        &robot,
-        controller.as_mut(),
-        &options,
-        None,
-        &mut |_| {},
-        &mut [],
-        &mut [&mut check, &mut standing],
-    )
-    .unwrap();
+    simulate(&s, &robot, controller.as_mut(), &mut [], &mut [&mut check, &mut standing]);
     let summary = check.metrics.summary();
     println!("Talos (motors), turning: {summary}; tilt standing {} rad", standing.tilt_rad);
     assert!(standing.tilt_rad < 0.02, "pelvis tilted {} rad while standing", standing.tilt_rad);
