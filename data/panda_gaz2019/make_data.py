@@ -109,7 +109,7 @@ def write_bag(gaz):
         w.finish()
     dt = np.diff(t)
     print(f"{out.name}: {len(t)} samples over {t[-1]:.3f} s, dt median {np.median(dt) * 1e3:.3f} ms, "
-          f"min {dt.min() * 1e3:.2f}, max {dt.max() * 1e3:.2f}, {(dt > 2e-3).sum()} gaps > 2 ms")
+          f"min {dt.min() * 1e3:.2f}, max {dt.max() * 1e3:.2f}, {(np.round(dt * 1e9) > 2e6).sum()} steps > 2 ms")
 
 
 def copy_urdf(erd):

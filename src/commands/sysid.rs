@@ -390,6 +390,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
             let nrmse = sysid::select::models_nrmse(&robot, other, &score_opts, &models)
                 .with_context(|| format!("scoring the models on {held_label}"))?;
+            if !default_split {
+                // A held-out log of the user's: also the before/after table of earlier versions.
+                validation = Some(
+                    robot
+                        .joints
+                        .iter()
+                        .enumerate()
+                        .map(|(j, joint)| sysid::report::NrmseReport {
+                            joint: joint.name.clone(),
+                            before: nrmse[0][j],
+                            after: nrmse[1][j],
+                        })
+                        .collect(),
+                );
+            }
             held_table = Some(sysid::report::HeldOutTable {
                 log: held_label.clone(),
                 effort_cutoff_hz,

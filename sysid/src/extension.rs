@@ -217,7 +217,7 @@ pub fn splice_block(path: &Path, text: &str, block: &str) -> Result<String> {
     let tag_start = text[..close].rfind("</").unwrap_or(close);
     let line_start = text[..tag_start].rfind('\n').map_or(0, |i| i + 1);
     let at = if text[line_start..tag_start].trim().is_empty() { line_start } else { tag_start };
-    let sep = if at == tag_start { "\n" } else { "" };
+    let sep = if at == line_start { "" } else { "\n" };
     Ok(format!("{}{sep}{}{}", &text[..at], block, &text[at..]))
 }
 
@@ -241,6 +241,7 @@ mod tests {
         let path = Path::new("r.urdf");
         let once = splice_block(path, urdf, &block_text(std::slice::from_ref(&j), "first")).unwrap();
         assert_eq!(read_block(path, &once).unwrap(), vec![j.clone()]);
+        assert!(once.starts_with("<robot name=\"r\">\n  <link name=\"a\"/>\n  <!--"), "{once}");
         let mut k = j.clone();
         k.offset = -1.0;
         let twice = splice_block(path, &once, &block_text(std::slice::from_ref(&k), "second")).unwrap();
@@ -249,7 +250,7 @@ mod tests {
         assert!(!twice.contains("first") && twice.contains("second"), "{twice}");
         assert!(twice.starts_with("<robot name=\"r\">\n  <link name=\"a\"/>\n  <!--"), "{twice}");
         // The Gaz et al. sigmoid: A/(1+e^{−α(v+φ)}) − A/(1+e^{−αφ}).
-        let (a, alpha, phi) = (0.54615, 5.1181, 0.039533);
+        let (a, alpha, phi) = (0.54615_f64, 5.1181_f64, 0.039533_f64);
         let gaz = JointFriction {
             name: "j".into(),
             offset: a / 2.0 - a / (1.0 + (-alpha * phi).exp()),

@@ -331,54 +331,56 @@ pub fn select(robot: &RobotModel, log: &JointLog, base: &SysidOptions, sel: &Sel
     let mut candidates = Vec::new();
     let mut options = base.clone();
     let mut last_error = None;
-    let mut run = |opts: &SysidOptions, candidates: &mut Vec<Candidate>| -> Option<f64> {
-        let cutoff = opts.condition.cutoff_hz.unwrap_or(f64::NAN);
-        match cross_validate(robot, log, opts, sel.folds, effort_cutoff_hz) {
-            Ok(per_joint) => {
-                let score = mean(&per_joint);
-                candidates.push(Candidate {
-                    cutoff_hz: cutoff,
-                    friction: opts.friction.describe(),
-                    score: score.is_finite().then_some(score),
-                    per_joint,
-                    error: None,
-                    chosen: false,
-                });
-                score.is_finite().then_some(score)
-            }
-            Err(e) => {
-                candidates.push(Candidate {
-                    cutoff_hz: cutoff,
-                    friction: opts.friction.describe(),
-                    score: None,
-                    per_joint: Vec::new(),
-                    error: Some(e.to_string()),
-                    chosen: false,
-                });
-                last_error = Some(e);
-                None
-            }
-        }
-    };
-    if sel.choose_cutoff && base.condition.cutoff_hz.is_none() {
-        let mut probe = base.clone();
-        if sel.choose_friction {
-            probe.friction = FrictionModel { coulomb_smoothing: Some(0.05), offset: true, asymmetry: false };
-        }
-        let mut best: Option<(f64, f64)> = None;
-        for &c in &allowed {
-            probe.condition.cutoff_hz = Some(c);
-            if let Some(s) = run(&probe, &mut candidates)
+    // Candidates are independent fits: scored in parallel, each sequential inside, so the scores
+    // (and the choice) do not depend on the thread count.
+    let mut stage = |trials: Vec<SysidOptions>, candidates: &mut Vec<Candidate>| -> Option<(f64, usize)> {
+        use rayon::prelude::*;
+        let results: Vec<Result<Vec<f64>>> =
+            trials.par_iter().map(|o| cross_validate(robot, log, o, sel.folds, effort_cutoff_hz)).collect();
+        let mut best: Option<(f64, usize)> = None;
+        for (o, r) in trials.iter().zip(results) {
+            let (score, per_joint, error) = match r {
+                Ok(per_joint) => {
+                    let s = mean(&per_joint);
+                    (s.is_finite().then_some(s), per_joint, None)
+                }
+                Err(e) => {
+                    let text = e.to_string();
+                    last_error = Some(e);
+                    (None, Vec::new(), Some(text))
+                }
+            };
+            if let Some(s) = score
                 && best.is_none_or(|(b, _)| s < b)
             {
-                best = Some((s, c));
+                best = Some((s, candidates.len()));
             }
+            candidates.push(Candidate {
+                cutoff_hz: o.condition.cutoff_hz.unwrap_or(f64::NAN),
+                friction: o.friction.describe(),
+                score,
+                per_joint,
+                error,
+                chosen: false,
+            });
         }
-        if let Some((_, c)) = best {
-            options.condition.cutoff_hz = Some(c);
-            if let Some(cand) = candidates.iter_mut().find(|k| k.cutoff_hz == c) {
-                cand.chosen = !sel.choose_friction;
-            }
+        best
+    };
+    if sel.choose_cutoff && base.condition.cutoff_hz.is_none() {
+        let trials: Vec<SysidOptions> = allowed
+            .iter()
+            .map(|&c| {
+                let mut probe = base.clone();
+                if sel.choose_friction {
+                    probe.friction = FrictionModel { coulomb_smoothing: Some(0.05), offset: true, asymmetry: false };
+                }
+                probe.condition.cutoff_hz = Some(c);
+                probe
+            })
+            .collect();
+        if let Some((_, i)) = stage(trials, &mut candidates) {
+            options.condition.cutoff_hz = Some(candidates[i].cutoff_hz);
+            candidates[i].chosen = !sel.choose_friction;
         }
     }
     if options.condition.cutoff_hz.is_none() {
@@ -390,26 +392,20 @@ pub fn select(robot: &RobotModel, log: &JointLog, base: &SysidOptions, sel: &Sel
             FrictionModel { coulomb_smoothing: None, offset: true, asymmetry: false },
         ];
         for &eps in &sel.smoothings {
-            for (offset, asymmetry) in [(false, false), (true, false), (true, true)] {
-                models.push(FrictionModel { coulomb_smoothing: Some(eps), offset, asymmetry });
-            }
+            models.push(FrictionModel { coulomb_smoothing: Some(eps), offset: true, asymmetry: false });
+            models.push(FrictionModel { coulomb_smoothing: Some(eps), offset: true, asymmetry: true });
         }
-        let mut best: Option<(f64, usize)> = None;
-        for fm in models {
-            let mut probe = options.clone();
-            probe.friction = fm;
-            if let Some(s) = run(&probe, &mut candidates)
-                && best.is_none_or(|(b, _)| s < b)
-            {
-                best = Some((s, candidates.len() - 1));
-                options.friction = fm;
-            }
-        }
-        if best.is_none() {
-            options.friction = base.friction;
-        }
-        if let Some((_, i)) = best {
+        let trials: Vec<SysidOptions> = models
+            .iter()
+            .map(|&fm| {
+                let mut probe = options.clone();
+                probe.friction = fm;
+                probe
+            })
+            .collect();
+        if let Some((_, i)) = stage(trials, &mut candidates) {
             candidates[i].chosen = true;
+            options.friction = models[i - (candidates.len() - models.len())];
         }
     }
     if candidates.iter().all(|c| c.score.is_none())
