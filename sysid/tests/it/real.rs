@@ -73,3 +73,57 @@ fn real_panda_log_fits_at_every_cutoff_from_4_to_25_hz() {
         }
     }
 }
+
+/// The arm's joints published by two drivers (joints 1–4 at the log's own stamps, 5–7 at
+/// 500 Hz, 0.5 ms after, written by mcap-ros2-support): read without `--topic`, merged by joint
+/// name with each topic's timestamps, the fit predicts the held-out part as the one-topic log's
+/// fit does.
+#[test]
+fn joint_states_split_over_two_topics_merge_into_the_same_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    let split = dir.path().join("split.mcap");
+    let script = Path::new(env!("CARGO_MANIFEST_DIR")).join("../tests/python/split_joint_states.py");
+    let counts = crate::test_python::script_json(
+        script.to_str().unwrap(),
+        &[
+            data("panda_exciting_traj.mcap").as_os_str(),
+            split.as_os_str(),
+            "4".as_ref(),
+            "2000000".as_ref(),
+            "500000".as_ref(),
+        ],
+    );
+    assert_eq!(counts["a"], 20544);
+    let (merged, warnings) = JointLog::read_mcap(&split, None).unwrap();
+    assert!(
+        warnings
+            .iter()
+            .any(|w| w.contains("merged by joint name from 2 topics (/arm_a/joint_states, /arm_b/joint_states)")),
+        "{warnings:?}"
+    );
+    let mut names = merged.joint_names.clone();
+    names.sort();
+    assert_eq!(names, (1..=7).map(|i| format!("panda_joint{i}")).collect::<Vec<_>>());
+    let one = panda_log();
+    let held = sysid::hold::from_urdf_holding(&panda_urdf(), &one.joint_names, false).unwrap();
+    let robot = &held.robot;
+    let mut opts = SysidOptions::default();
+    opts.condition.cutoff_hz = Some(6.0);
+    opts.friction = FrictionModel { offset: true, ..Default::default() };
+    let train = |log: &JointLog| sysid::identify(robot, &sysid::select::time_slice(log, 0.0, 0.7), &opts).unwrap();
+    let (fit_one, fit_merged) = (train(&one), train(&merged));
+    let test = sysid::select::time_slice(&one, 0.7, 1.0);
+    let models = [
+        sysid::select::ScoredModel::of_identification(robot, &fit_one),
+        sysid::select::ScoredModel::of_identification(robot, &fit_merged),
+    ];
+    let nrmse = sysid::select::models_nrmse(robot, &test, &opts, &models).unwrap();
+    for j in 0..7 {
+        assert!(
+            (nrmse[1][j] - nrmse[0][j]).abs() < 0.1 * nrmse[0][j] + 0.002,
+            "joint {j}: merged {:?} vs one topic {:?}",
+            nrmse[1],
+            nrmse[0]
+        );
+    }
+}
