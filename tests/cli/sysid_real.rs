@@ -26,12 +26,15 @@ fn copy_dir(from: &Path, to: &Path) {
     }
 }
 
+/// An element of a URDF as compared: tag, attributes, inside `<inertial>` or `<dynamics>`.
+type Element = (String, Vec<(String, String)>, bool);
+
 /// Every element and attribute of `a` and `b` equal except the numbers of `<inertial>` and
 /// `<dynamics>`, and `b`'s `<twin_sysid>` block.
 fn only_dynamics_numbers_differ(a: &str, b: &str) {
     let da = roxmltree::Document::parse(a).unwrap();
     let db = roxmltree::Document::parse(b).unwrap();
-    let elems = |d: &roxmltree::Document<'_>| -> Vec<(String, Vec<(String, String)>, bool)> {
+    let elems = |d: &roxmltree::Document<'_>| -> Vec<Element> {
         d.descendants()
             .filter(|n| n.is_element())
             .filter(|n| !n.ancestors().any(|p| p.has_tag_name("twin_sysid")))
@@ -130,4 +133,57 @@ fn sysid_defaults_on_a_real_panda_log_beat_the_published_model_on_held_out_data(
     for j in 0..7 {
         assert!(twin[j] <= 1.1 * paper[j], "joint {j}: twin {twin:?} vs paper {paper:?}");
     }
+}
+
+/// `--effort-scale`: a log whose drives report 10× the joint torque (motor current through a
+/// torque constant, say) gives, scaled back by 0.1, the URDF the torque log gives; unscaled,
+/// the effort-semantics diagnosis flags it.
+#[test]
+fn effort_scale_turns_a_current_like_log_into_the_torque_log_fit() {
+    let dir = tempfile::tempdir().unwrap();
+    copy_dir(&data("robot"), dir.path());
+    let urdf_dir = dir.path().join("example-robot-data/robots/panda_description/urdf");
+    let original = std::fs::read_to_string(urdf_dir.join("panda.urdf")).unwrap();
+    let (mut log, _) = sysid::JointLog::read_mcap(data("panda_exciting_traj.mcap"), None).unwrap();
+    for e in &mut log.effort {
+        e.iter_mut().for_each(|x| *x *= 10.0);
+    }
+    let scaled = dir.path().join("current.mcap");
+    log.write_mcap(&scaled, "/joint_states").unwrap();
+    let run = |name: &str, bag: &Path, extra: &[&str]| -> (String, String) {
+        let urdf = urdf_dir.join(name);
+        std::fs::write(&urdf, &original).unwrap();
+        let out = Command::new(env!("CARGO_BIN_EXE_twin"))
+            .args(["sysid", "--log"])
+            .arg(bag)
+            .arg("--update")
+            .arg(&urdf)
+            .args(["--cutoff-hz", "6", "--offset", "--held-out", "0"])
+            .args(extra)
+            .output()
+            .unwrap();
+        let stderr = String::from_utf8_lossy(&out.stderr).into_owned();
+        assert!(out.status.success(), "{stderr}");
+        (std::fs::read_to_string(&urdf).unwrap(), String::from_utf8_lossy(&out.stdout).into_owned())
+    };
+    let (torque, _) = run("a.urdf", &data("panda_exciting_traj.mcap"), &[]);
+    let (current, report) = run("b.urdf", &scaled, &["--effort-scale", "0.1"]);
+    assert!(report.contains("multiplied by 0.1 (--effort-scale)"), "{report}");
+    let masses = |text: &str| -> Vec<f64> {
+        roxmltree::Document::parse(text)
+            .unwrap()
+            .descendants()
+            .filter(|n| n.has_tag_name("mass"))
+            .map(|n| n.attribute("value").unwrap().parse().unwrap())
+            .collect()
+    };
+    let (a, b) = (masses(&torque), masses(&current));
+    for (x, y) in a.iter().zip(&b) {
+        assert!((x - y).abs() <= 1e-5 * x.abs().max(1e-3), "{a:?} vs {b:?}");
+    }
+    let pairs = (1..=7).map(|i| format!("panda_joint{i}=0.1")).collect::<Vec<_>>().join(",");
+    let (per_joint, _) = run("c.urdf", &scaled, &["--effort-scale", &pairs]);
+    assert_eq!(masses(&per_joint), b);
+    let (_, unscaled) = run("d.urdf", &scaled, &[]);
+    assert!(unscaled.contains("is it motor current or motor-side torque"), "{unscaled}");
 }
