@@ -14,6 +14,19 @@ fn panda_urdf() -> PathBuf {
     data("robot/example-robot-data/robots/panda_description/urdf/panda.urdf")
 }
 
+fn copy_dir(from: &Path, to: &Path) {
+    std::fs::create_dir_all(to).unwrap();
+    for e in std::fs::read_dir(from).unwrap() {
+        let e = e.unwrap();
+        let target = to.join(e.file_name());
+        if e.file_type().unwrap().is_dir() {
+            copy_dir(&e.path(), &target);
+        } else {
+            std::fs::copy(e.path(), target).unwrap();
+        }
+    }
+}
+
 fn panda_log() -> JointLog {
     let (log, warnings) = JointLog::read_mcap(data("panda_exciting_traj.mcap"), None).unwrap();
     assert!(warnings.is_empty(), "{warnings:?}");
@@ -126,4 +139,47 @@ fn joint_states_split_over_two_topics_merge_into_the_same_fit() {
             nrmse[0]
         );
     }
+}
+
+/// `twin gap` on the held-out last 30 % of the real log: the URDF identified on the first 70 %
+/// narrows the gap, and more with its `<twin_sysid>` block (the torque sensor's offset is not
+/// replayed as torque on the joint) than with `<dynamics>` alone.
+#[test]
+fn gap_on_the_held_out_real_log_narrows_with_the_identified_friction_block() {
+    let log = panda_log();
+    let held = sysid::hold::from_urdf_holding(&panda_urdf(), &log.joint_names, false).unwrap();
+    let robot = &held.robot;
+    let mut opts = SysidOptions::default();
+    opts.condition.cutoff_hz = Some(6.0);
+    opts.friction = FrictionModel { offset: true, ..Default::default() };
+    let ident = sysid::identify(robot, &sysid::select::time_slice(&log, 0.0, 0.7), &opts).unwrap();
+    let (links, joints) = sysid::urdf_updates(robot, &ident);
+    let original = std::fs::read_to_string(panda_urdf()).unwrap();
+    let dynamics_only = sysid::writeback::rewrite_urdf(&panda_urdf(), &original, &links, &joints).unwrap();
+    let block = sysid::extension::block_text(&ident.report.joint_friction, "test");
+    let with_block = sysid::extension::splice_block(&panda_urdf(), &dynamics_only, &block).unwrap();
+    // Beside a copy of the description package, so that its package:// meshes resolve.
+    let tmp = tempfile::tempdir().unwrap();
+    copy_dir(&data("robot"), tmp.path());
+    let (a, b) = (tmp.path().join("dynamics.urdf"), tmp.path().join("block.urdf"));
+    std::fs::write(&a, dynamics_only).unwrap();
+    std::fs::write(&b, with_block).unwrap();
+    let test = sysid::select::time_slice(&log, 0.7, 1.0);
+    let gap = |urdf: &Path| sysid::gap::measure_gap(urdf, &test, &sysid::gap::GapOptions::default()).unwrap();
+    let (before, dynamics, full) = (gap(&panda_urdf()), gap(&a), gap(&b));
+    eprintln!(
+        "held-out gap (position rmse rad, torque nrmse): URDF {:.4} {:.3}, <dynamics> only {:.4} {:.3}, with the block {:.4} {:.3}",
+        before.mean_position_rmse,
+        before.mean_torque_nrmse,
+        dynamics.mean_position_rmse,
+        dynamics.mean_torque_nrmse,
+        full.mean_position_rmse,
+        full.mean_torque_nrmse
+    );
+    assert!(before.warnings.iter().any(|w| w.contains("panda_finger_joint1")), "{:?}", before.warnings);
+    assert!(full.mean_position_rmse < dynamics.mean_position_rmse, "{full:?}\nvs {dynamics:?}");
+    assert!(dynamics.mean_position_rmse < before.mean_position_rmse);
+    assert!(
+        full.mean_torque_nrmse < dynamics.mean_torque_nrmse && dynamics.mean_torque_nrmse < before.mean_torque_nrmse
+    );
 }
