@@ -361,6 +361,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let fit_secs = started.elapsed().as_secs_f64();
     let mut held_table = None;
     let mut validation = None;
+    let mut held_warning = None;
     if let Some(other) = &held_out {
         if opts.base == Base::Fixed {
             let effort_cutoff_hz = selection
@@ -388,9 +389,17 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             for (r, b) in &others {
                 models.push(sysid::select::ScoredModel::of_urdf(r, b));
             }
-            let nrmse = sysid::select::models_nrmse(&robot, other, &score_opts, &models)
-                .with_context(|| format!("scoring the models on {held_label}"))?;
-            if !default_split {
+            let nrmse = match sysid::select::models_nrmse(&robot, other, &score_opts, &models) {
+                Ok(n) => n,
+                // A held-out part the user did not choose that cannot be scored (too short for
+                // the filter, say) is a warning; a --validate log that cannot is an error.
+                Err(e) if default_split => {
+                    held_warning = Some(format!("the models were not scored on {held_label}: {e}"));
+                    Vec::new()
+                }
+                Err(e) => return Err(anyhow::Error::new(e).context(format!("scoring the models on {held_label}"))),
+            };
+            if !nrmse.is_empty() && !default_split {
                 // A held-out log of the user's: also the before/after table of earlier versions.
                 validation = Some(
                     robot
@@ -405,7 +414,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                         .collect(),
                 );
             }
-            held_table = Some(sysid::report::HeldOutTable {
+            held_table = (!nrmse.is_empty()).then(|| sysid::report::HeldOutTable {
                 log: held_label.clone(),
                 effort_cutoff_hz,
                 models: names,
@@ -438,7 +447,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     ident.report.selection = selection;
     ident.report.held_out = held_table;
-    ident.report.warnings.splice(0..0, held.into_iter().chain(notes));
+    ident.report.warnings.splice(0..0, held.into_iter().chain(notes).chain(held_warning));
     if validation.is_some() {
         ident.report.validation_nrmse = validation;
         ident.report.validation_log = Some(held_label);

@@ -317,9 +317,12 @@ fn mean(v: &[f64]) -> f64 {
 /// (see the module docs), starting from `base` (whose cut-off and friction model are kept
 /// where `sel` says not to choose them).
 ///
+/// When no candidate can be scored, `base` stands (cut-off `min(rate/25, 20 Hz)` if it had
+/// none); each candidate's error is in [`Candidate::error`].
+///
 /// # Errors
-/// [`Error::Option`] for bad selection options; the last candidate's error when none could be
-/// fitted.
+/// [`Error::Option`] for bad selection options; [`Error::BadLog`] for a log whose timestamps
+/// are all equal.
 pub fn select(robot: &RobotModel, log: &JointLog, base: &SysidOptions, sel: &SelectOptions) -> Result<Selection> {
     if !(2..=10).contains(&sel.folds) {
         return Err(Error::Option { name: "folds", message: format!("{} must be 2 to 10", sel.folds) });
@@ -408,11 +411,10 @@ pub fn select(robot: &RobotModel, log: &JointLog, base: &SysidOptions, sel: &Sel
             options.friction = models[i - (candidates.len() - models.len())];
         }
     }
-    if candidates.iter().all(|c| c.score.is_none())
-        && let Some(e) = last_error
-    {
-        return Err(e);
-    }
+    // No candidate could be scored (a log too short to cut into folds at these cut-offs, or
+    // one identification refuses anyway): the base options stand, and the fit on the whole
+    // part says what is wrong with the log if anything is.
+    let _ = last_error;
     Ok(Selection { options, candidates })
 }
 
