@@ -134,9 +134,16 @@
 //!   held-out NRMSE by the measured `τ`). CSV logs can't carry base motion.
 //! - Logs are ROS 2 bags (`sensor_msgs/msg/JointState`, plus `nav_msgs/msg/Odometry` and
 //!   `geometry_msgs/msg/WrenchStamped` for a floating base) or CSV ([`log`]).
-//! - Joints are revolute or prismatic; each must be in the log. Contacts, joint-limit forces and
-//!   transmissions other than a direct drive are not modelled: log the robot in free space,
-//!   inside its joint ranges, with joint-side torques.
+//! - Joints are revolute or prismatic; a fixed-base robot's joints the log lacks are held at
+//!   home ([`hold`]; a floating base needs every joint in the log). Contacts, joint-limit forces
+//!   and transmissions other than a direct drive are not modelled: log the robot in free space,
+//!   inside its joint ranges, with joint-side torques (or `--effort-scale` to them).
+//! - The friction model is chosen for all joints at once (the cross-validation scores each
+//!   joint, but one model's columns serve every joint); Stribeck terms are not among the
+//!   candidates (`twin sysid friction` fits them from constant-velocity sweeps). The fit's
+//!   velocity shift of a sigmoid is its first-order term (`asymmetry`), not the shift itself.
+//! - Held-out scoring and the cross-validation are for fixed-base robots; a floating base is
+//!   validated with `--validate` on a log of its own.
 //! - Links joined by fixed joints are identified as the MuJoCo bodies they are (loaded with
 //!   `fusestatic="false"`): a welded link's inertia is only seen together with its parent's,
 //!   and its share stays at the URDF's value.
