@@ -298,6 +298,19 @@ pub fn convert_urdf_str<C: Compiler>(
     let ctx = Ctx { path, doc: &doc };
     let mut robot = ir::parse_robot(&ctx)?;
     add_contact_sensors(path, &mut robot, &opts.contact_sensors)?;
+    // Armature identified by `twin sysid` (its `<twin_sysid>` block), where the caller gave none.
+    let with_block;
+    let opts = match urdf::sysid_armature(&ctx)? {
+        block if block.is_empty() => opts,
+        block => {
+            let mut o = opts.clone();
+            for (joint, armature) in block {
+                o.joint_armature.entry(joint).or_insert(armature);
+            }
+            with_block = o;
+            &with_block
+        }
+    };
     let tree = Tree::build(&robot)?;
     let mut conv = Converter::new(&robot, &tree, opts)?;
     conv.prepare()?;

@@ -52,6 +52,33 @@ pub(crate) fn parse<'a>(path: &Path, text: &'a str) -> Result<Document<'a>> {
     })
 }
 
+/// The `armature` of each joint in the URDF's `<twin_sysid>` block (written by `twin sysid`,
+/// format in the sysid crate's `extension` module), by joint name; empty without a block.
+/// MuJoCo's joint `armature` holds it; the block's other terms (offset, smooth and asymmetric
+/// Coulomb) have no MuJoCo joint property and are not converted.
+///
+/// # Errors
+/// A block entry whose `armature` is not a finite, non-negative number, naming its line.
+pub(crate) fn sysid_armature(ctx: &crate::ir::Ctx<'_, '_>) -> Result<Vec<(String, f64)>> {
+    let Some(block) = ctx.doc.root_element().children().find(|n| n.has_tag_name("twin_sysid")) else {
+        return Ok(Vec::new());
+    };
+    let mut out = Vec::new();
+    for j in block.children().filter(|n| n.has_tag_name("joint")) {
+        let (Some(name), Some(value)) = (j.attribute("name"), j.attribute("armature")) else { continue };
+        match value.trim().parse::<f64>() {
+            Ok(a) if a.is_finite() && a >= 0.0 => out.push((name.to_string(), a)),
+            _ => {
+                return Err(ctx.err(
+                    j,
+                    format!("<twin_sysid> joint \"{name}\" armature=\"{value}\" must be a finite, non-negative number"),
+                ));
+            }
+        }
+    }
+    Ok(out)
+}
+
 fn line_of(doc: &Document<'_>, node: Node<'_, '_>) -> u32 {
     doc.text_pos_at(node.range().start).row
 }

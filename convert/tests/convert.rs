@@ -312,3 +312,27 @@ fn contact_sensors_put_a_touch_sensor_over_a_links_collision() {
     assert!(text.contains("no link \"foot\"") && text.contains("contact_sensors"), "{text}");
     assert!(text.contains("base, payload, arm"), "{text}");
 }
+
+/// The `<twin_sysid>` block `twin sysid` writes: its armature becomes the joint's MuJoCo
+/// `armature` unless the caller gives one; a bad value names the line.
+#[test]
+fn the_sysid_block_gives_the_joint_its_armature() {
+    let block = "<twin_sysid version=\"1\">\n    <joint name=\"shoulder\" offset=\"0.1\" coulomb=\"0.2\" armature=\"0.035\"/>\n  </twin_sysid>\n</robot>";
+    let urdf = robot_urdf().replace("</robot>", block);
+    let out = convert_urdf_str(Path::new("boxbot.urdf"), &urdf, &ConvertOptions::default(), &mut BoxEngine::default())
+        .unwrap();
+    let doc = roxmltree::Document::parse(&out.mjcf).unwrap();
+    let joint = doc.descendants().find(|n| n.has_tag_name("joint") && n.attribute("name") == Some("shoulder")).unwrap();
+    assert_eq!(attr_nums(joint, "armature"), vec![0.035]);
+    let mut given = ConvertOptions::default();
+    given.joint_armature.insert("shoulder".into(), 0.5);
+    let out = convert_urdf_str(Path::new("boxbot.urdf"), &urdf, &given, &mut BoxEngine::default()).unwrap();
+    let doc = roxmltree::Document::parse(&out.mjcf).unwrap();
+    let joint = doc.descendants().find(|n| n.has_tag_name("joint") && n.attribute("name") == Some("shoulder")).unwrap();
+    assert_eq!(attr_nums(joint, "armature"), vec![0.5]);
+    let bad = urdf.replace("armature=\"0.035\"", "armature=\"-1\"");
+    let err = convert_urdf_str(Path::new("boxbot.urdf"), &bad, &ConvertOptions::default(), &mut BoxEngine::default())
+        .unwrap_err()
+        .to_string();
+    assert!(err.contains("boxbot.urdf") && err.contains("armature=\"-1\""), "{err}");
+}

@@ -24,6 +24,10 @@ pub struct Args {
     /// Armature of every joint of the twin, kg·m² (URDF has none; `twin sysid` reports it).
     #[arg(long, default_value_t = 0.0, value_name = "KGM2")]
     pub armature: f64,
+    /// Refuse a log that lacks some of the robot's joints (default: hold them at their home
+    /// position, with a warning).
+    #[arg(long)]
+    pub strict: bool,
     /// Write the report as JSON.
     #[arg(long, value_name = "gap.json")]
     pub report: Option<PathBuf>,
@@ -40,9 +44,12 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &[args.urdf.as_path(), args.log.as_path()],
     )?;
     let log = super::sysid::read_log(&args.log, args.topic.as_deref(), None)?;
-    let opts = GapOptions { resync_secs: args.resync, armature: args.armature };
+    let opts = GapOptions { resync_secs: args.resync, armature: args.armature, strict: args.strict };
     let report = measure_gap(&args.urdf, &log, &opts)
         .with_context(|| format!("no gap measured for {} on {}", args.urdf.display(), args.log.display()))?;
+    for w in &report.warnings {
+        eprintln!("warning: {w}");
+    }
     print!("{}", report.table());
     if let Some(p) = &args.report {
         super::write_output(p, &report.to_json(), "report")?;

@@ -40,9 +40,28 @@ pub struct Args {
     /// Write the full report as JSON.
     #[arg(long, value_name = "sysid.json")]
     pub report: Option<PathBuf>,
-    /// A held-out log: print per-joint torque NRMSE before and after on it.
+    /// A held-out log: print per-joint torque NRMSE before and after on it (default: the last
+    /// --held-out fraction of LOG is held out).
     #[arg(long, value_name = "OTHER")]
     pub validate: Option<PathBuf>,
+    /// Fraction of the log (its end) held out from fitting and from choosing the cut-off and
+    /// friction model, to score the URDF before, the fit and --compare models on; the fit
+    /// written back is then refitted on the whole log. 0 turns it off.
+    #[arg(long, value_name = "F", default_value_t = 0.3)]
+    pub held_out: f64,
+    /// Write the fit of the first part (the one the held-out table scores) instead of refitting
+    /// on the whole log.
+    #[arg(long)]
+    pub no_refit: bool,
+    /// Another model of the robot (a URDF, with its own `<twin_sysid>` friction block if any)
+    /// to score on the held-out data beside the URDF before and the fit (repeatable).
+    #[arg(long, value_name = "OTHER.urdf")]
+    pub compare: Vec<PathBuf>,
+    /// Scale from the logged effort to joint torque (N·m or N), for drives that publish motor
+    /// current or motor-side torque: one number for every joint, or JOINT=SCALE pairs
+    /// (comma separated).
+    #[arg(long, value_name = "S|J=S,…", value_delimiter = ',')]
+    pub effort_scale: Vec<String>,
     /// Also write a MuJoCo model (MJCF) with the identified values, armature included.
     #[arg(long, value_name = "OUT.xml")]
     pub mjcf: Option<PathBuf>,
@@ -56,13 +75,14 @@ pub struct Args {
     /// in the base frame, REP-105).
     #[arg(long, value_name = "T", default_value = "/odom")]
     pub odom_topic: String,
-    /// Low-pass cut-off in Hz (default: rate / 25, at most 20 Hz).
+    /// Low-pass cut-off in Hz (default: chosen by time-blocked cross-validation among 4–25 Hz).
     #[arg(long, value_name = "HZ")]
     pub cutoff_hz: Option<f64>,
     /// Butterworth filter order.
     #[arg(long, default_value_t = 4, value_name = "N")]
     pub filter_order: usize,
-    /// Identify a constant torque offset per joint as well (sensor bias).
+    /// Identify a constant torque offset per joint as well (sensor bias); with this or
+    /// --coulomb-smoothing the friction model is given, not chosen by cross-validation.
     #[arg(long)]
     pub offset: bool,
     /// Smooth Coulomb friction as tanh(velocity / EPS) instead of sign(velocity) with a dead
@@ -186,6 +206,39 @@ pub(crate) fn read_log(path: &Path, topic: Option<&str>, odom_topic: Option<&str
     }
 }
 
+/// Parses `--effort-scale`: one number for all joints, or `JOINT=SCALE` pairs.
+fn effort_scales(specs: &[String], joints: &[String]) -> anyhow::Result<Vec<(usize, f64)>> {
+    let parse = |v: &str| -> anyhow::Result<f64> {
+        match v.trim().parse::<f64>() {
+            Ok(x) if x.is_finite() && x != 0.0 => Ok(x),
+            _ => bail!("--effort-scale: \"{v}\" is not a finite, non-zero number"),
+        }
+    };
+    match specs {
+        [] => Ok(Vec::new()),
+        [one] if !one.contains('=') => {
+            let s = parse(one)?;
+            Ok((0..joints.len()).map(|j| (j, s)).collect())
+        }
+        pairs => pairs
+            .iter()
+            .map(|p| {
+                let (name, v) = p.split_once('=').with_context(|| {
+                    format!("--effort-scale: \"{p}\" is not JOINT=SCALE (or give one number for all)")
+                })?;
+                let j = joints.iter().position(|n| n == name.trim()).with_context(|| {
+                    format!(
+                        "--effort-scale: joint \"{}\" is not in the log (which has {})",
+                        name.trim(),
+                        joints.join(", ")
+                    )
+                })?;
+                Ok((j, parse(v)?))
+            })
+            .collect(),
+    }
+}
+
 pub fn run(args: Args) -> anyhow::Result<()> {
     let args = match args.mode {
         Some(Mode::Friction(f)) => return friction(f),
@@ -199,13 +252,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     {
         bail!("--coulomb-smoothing must be a positive velocity, got {eps}");
     }
+    if !(0.0..0.9).contains(&args.held_out) {
+        bail!("--held-out must be a fraction in [0, 0.9), got {}", args.held_out);
+    }
     let opts = SysidOptions {
         condition: sysid::condition::ConditionOptions {
             cutoff_hz: args.cutoff_hz,
             filter_order: args.filter_order,
             ..Default::default()
         },
-        friction: sysid::regressor::FrictionModel { offset: args.offset, coulomb_smoothing: args.coulomb_smoothing },
+        friction: sysid::regressor::FrictionModel {
+            offset: args.offset,
+            coulomb_smoothing: args.coulomb_smoothing,
+            asymmetry: false,
+        },
         strict: args.strict,
         base: match args.base {
             BaseArg::Fixed => Base::Fixed,
@@ -216,9 +276,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     // Every output is checked before any work: not a folder or device, not an input.
     let mut inputs: Vec<&Path> = vec![log_path.as_path()];
     inputs.extend(args.validate.as_deref());
+    inputs.extend(args.compare.iter().map(PathBuf::as_path));
     fsio::check_input(&log_path, fsio::InputKind::FileOrDir)?;
     if let Some(v) = &args.validate {
         fsio::check_input(v, fsio::InputKind::FileOrDir)?;
+    }
+    for c in &args.compare {
+        fsio::check_input(c, fsio::InputKind::File)?;
     }
     let urdf_target = fsio::check_output(&update, &inputs)?;
     inputs.push(update.as_path());
@@ -227,36 +291,193 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .into_iter();
     let (report_target, mjcf_target) = (targets.next().flatten(), targets.next().flatten());
     let odom = (opts.base == Base::Floating).then_some(args.odom_topic.as_str());
-    let robot = match opts.base {
-        Base::Fixed => RobotModel::from_urdf(&update),
-        Base::Floating => RobotModel::from_urdf_floating(&update),
+    let mut log = read_log(&log_path, args.topic.as_deref(), odom)?;
+    let mut held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref(), odom)).transpose()?;
+    let scales = effort_scales(&args.effort_scale, &log.joint_names)?;
+    let mut notes = Vec::new();
+    if !scales.is_empty() {
+        let scale_log = |l: &mut JointLog| {
+            for &(j, s) in &scales {
+                if let Some(k) = l.joint_index(&log.joint_names[j].clone()) {
+                    l.effort[k].iter_mut().for_each(|e| *e *= s);
+                }
+            }
+        };
+        if let Some(h) = held_out.as_mut() {
+            scale_log(h);
+        }
+        let names = log.joint_names.clone();
+        for &(j, s) in &scales {
+            let k = j;
+            log.effort[k].iter_mut().for_each(|e| *e *= s);
+            notes.push(format!(
+                "effort of joint \"{}\" multiplied by {s} (--effort-scale) to give joint torque",
+                names[j]
+            ));
+        }
     }
-    .with_context(|| format!("loading the robot {}", update.display()))?;
-    let log = read_log(&log_path, args.topic.as_deref(), odom)?;
-    let held_out = args.validate.as_deref().map(|p| read_log(p, args.topic.as_deref(), odom)).transpose()?;
-    let mut ident = sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?;
-    if let (Some(path), Some(other)) = (&args.validate, &held_out) {
-        let nrmse = sysid::validate(&robot, other, &opts, &[&ident.before, &ident.after])
-            .with_context(|| format!("validating on {}", path.display()))?;
-        ident.report.validation_nrmse = Some(
-            robot
-                .joints
+    let (robot, held) = match opts.base {
+        Base::Fixed => {
+            let h = sysid::hold::from_urdf_holding(&update, &log.joint_names, args.strict)
+                .with_context(|| format!("loading the robot {}", update.display()))?;
+            (h.robot.clone(), h.warning())
+        }
+        Base::Floating => (
+            RobotModel::from_urdf_floating(&update)
+                .with_context(|| format!("loading the robot {}", update.display()))?,
+            None,
+        ),
+    };
+    if let Some(w) = &held {
+        eprintln!("warning: {w}");
+    }
+    let started = std::time::Instant::now();
+    // Fit part and held-out part: --validate's log, or the end of LOG.
+    let default_split = held_out.is_none() && args.held_out > 0.0 && opts.base == Base::Fixed;
+    let (fit_log, held_label) = if default_split {
+        let cut = 1.0 - args.held_out;
+        held_out = Some(sysid::select::time_slice(&log, cut, 1.0));
+        (
+            sysid::select::time_slice(&log, 0.0, cut),
+            format!("the last {:.0} % of {}", 100.0 * args.held_out, log_path.display()),
+        )
+    } else {
+        (log.clone(), args.validate.as_ref().map(|p| p.display().to_string()).unwrap_or_default())
+    };
+    // Cut-off and friction model from the data unless given.
+    let sel = sysid::select::SelectOptions {
+        choose_cutoff: args.cutoff_hz.is_none(),
+        choose_friction: !args.offset && args.coulomb_smoothing.is_none(),
+        ..Default::default()
+    };
+    let (opts, selection) = if opts.base == Base::Fixed && (sel.choose_cutoff || sel.choose_friction) {
+        let s =
+            sysid::select::select(&robot, &fit_log, &opts, &sel).context("choosing the cut-off and friction model")?;
+        (s.options, s.candidates)
+    } else {
+        (opts, Vec::new())
+    };
+    let fit = sysid::identify(&robot, &fit_log, &opts).context("identification failed; the URDF was not changed")?;
+    let fit_secs = started.elapsed().as_secs_f64();
+    let mut held_table = None;
+    let mut validation = None;
+    let mut held_warning = None;
+    if let Some(other) = &held_out {
+        if opts.base == Base::Fixed {
+            let effort_cutoff_hz = selection
                 .iter()
-                .enumerate()
-                .map(|(j, joint)| sysid::report::NrmseReport {
-                    joint: joint.name.clone(),
-                    before: nrmse[0][j],
-                    after: nrmse[1][j],
-                })
-                .collect(),
-        );
-        ident.report.validation_log = Some(path.display().to_string());
+                .map(|c| c.cutoff_hz)
+                .fold(opts.condition.cutoff_hz.unwrap_or(0.0), f64::max)
+                .max(opts.condition.cutoff_hz.unwrap_or(0.0));
+            let mut score_opts = opts.clone();
+            score_opts.condition.effort_cutoff_hz = Some(effort_cutoff_hz);
+            let update_text = fsio::read_to_string(&update)?;
+            let block = sysid::extension::read_block(&update, &update_text)?;
+            let mut models = vec![
+                sysid::select::ScoredModel::of_urdf(&robot, &block),
+                sysid::select::ScoredModel::of_identification(&robot, &fit),
+            ];
+            let mut names = vec!["URDF before".to_string(), "twin fit".to_string()];
+            let mut others = Vec::new();
+            for c in &args.compare {
+                let h = sysid::hold::from_urdf_holding(c, &log.joint_names, false)
+                    .with_context(|| format!("loading --compare {}", c.display()))?;
+                let text = fsio::read_to_string(c)?;
+                others.push((h.robot, sysid::extension::read_block(c, &text)?));
+                names.push(c.display().to_string());
+            }
+            for (r, b) in &others {
+                models.push(sysid::select::ScoredModel::of_urdf(r, b));
+            }
+            let nrmse = match sysid::select::models_nrmse(&robot, other, &score_opts, &models) {
+                Ok(n) => n,
+                // A held-out part the user did not choose that cannot be scored (too short for
+                // the filter, say) is a warning; a --validate log that cannot is an error.
+                Err(e) if default_split => {
+                    held_warning = Some(format!("the models were not scored on {held_label}: {e}"));
+                    Vec::new()
+                }
+                Err(e) => return Err(anyhow::Error::new(e).context(format!("scoring the models on {held_label}"))),
+            };
+            if !nrmse.is_empty() && !default_split {
+                // A held-out log of the user's: also the before/after table of earlier versions.
+                validation = Some(
+                    robot
+                        .joints
+                        .iter()
+                        .enumerate()
+                        .map(|(j, joint)| sysid::report::NrmseReport {
+                            joint: joint.name.clone(),
+                            before: nrmse[0][j],
+                            after: nrmse[1][j],
+                        })
+                        .collect(),
+                );
+            }
+            held_table = (!nrmse.is_empty()).then(|| sysid::report::HeldOutTable {
+                log: held_label.clone(),
+                effort_cutoff_hz,
+                models: names,
+                joints: robot.joints.iter().map(|j| j.name.clone()).collect(),
+                nrmse,
+            });
+        } else {
+            let nrmse = sysid::validate(&robot, other, &opts, &[&fit.before, &fit.after])
+                .with_context(|| format!("validating on {held_label}"))?;
+            validation = Some(
+                robot
+                    .joints
+                    .iter()
+                    .enumerate()
+                    .map(|(j, joint)| sysid::report::NrmseReport {
+                        joint: joint.name.clone(),
+                        before: nrmse[0][j],
+                        after: nrmse[1][j],
+                    })
+                    .collect(),
+            );
+        }
     }
+    // The fit written back: on the whole log with the chosen settings (the held-out scores are
+    // of the fit on the first part).
+    let mut ident = if default_split && !args.no_refit {
+        sysid::identify(&robot, &log, &opts).context("identification failed; the URDF was not changed")?
+    } else {
+        fit
+    };
+    ident.report.selection = selection;
+    ident.report.held_out = held_table;
+    ident.report.warnings.splice(0..0, held.into_iter().chain(notes).chain(held_warning));
+    if validation.is_some() {
+        ident.report.validation_nrmse = validation;
+        ident.report.validation_log = Some(held_label);
+    }
+    ident.report.wall_secs = started.elapsed().as_secs_f64();
     print!("{}", ident.report.table());
+    eprintln!(
+        "fit (selection included) on the first part took {fit_secs:.2} s; everything {:.2} s",
+        ident.report.wall_secs
+    );
     let (links, joints) = sysid::urdf_updates(&robot, &ident);
     let plan = sysid::writeback::plan_urdf_update(&update, &links, &joints)?;
+    // The friction model beyond <dynamics> goes to the <twin_sysid> block.
+    let comment = format!(
+        "Identified from {} with a {:.1} Hz cut-off, friction model {}",
+        log_path.display(),
+        ident.report.cutoff_hz,
+        ident.layout.friction.describe()
+    );
+    let new_text = sysid::extension::splice_block(
+        &update,
+        &plan.new,
+        &sysid::extension::block_text(&ident.report.joint_friction, &comment),
+    )?;
     if args.dry_run {
-        println!("\n--dry-run: {} would change as follows:\n{}", update.display(), plan.diff);
+        println!(
+            "\n--dry-run: {} would change as follows:\n{}",
+            update.display(),
+            sysid::writeback::unified_diff(&update, &plan.original, &new_text)
+        );
     }
     // All outputs are staged and renamed only when every one was written: a failing --mjcf
     // leaves the URDF and the report untouched.
@@ -270,7 +491,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         tx.stage(target, text.as_bytes(), fsio::Backup::None)?;
     }
     if !args.dry_run {
-        tx.stage(&urdf_target, plan.new.as_bytes(), fsio::Backup::Numbered)?;
+        tx.stage(&urdf_target, new_text.as_bytes(), fsio::Backup::Numbered)?;
         tx.expect_unchanged(plan.original.as_bytes());
     }
     let written = tx.commit()?;
@@ -279,7 +500,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     if let Some(backup) = written.iter().find(|w| w.path == update).and_then(|w| w.backup.as_ref()) {
         eprintln!(
-            "updated {} ({} links, {} joints); original kept as {}",
+            "updated {} ({} links, {} joints, <twin_sysid> friction block); original kept as {}",
             update.display(),
             links.len(),
             joints.len(),

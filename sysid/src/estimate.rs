@@ -357,7 +357,9 @@ pub(crate) struct Bounds<'a> {
 /// `t·f(π) − Σ log det J_l(π) − Σ log π_i`, `t` raised ×10 per round until the duality gap
 /// is below 1e-7 of the cost, faer Cholesky for each step). Every iterate, the answer included, is strictly physically consistent.
 /// `cost_offset` makes `f + cost_offset` the χ²-like cost (data residual + prior), which sets
-/// the accuracy. Returns the parameters and the number of Newton steps.
+/// the accuracy. Returns the parameters, the number of Newton steps and the largest
+/// regularisation a step needed ([`solve_spd`]): the method does not fail numerically; a step
+/// that no regularisation can make is the end, at the last (feasible) iterate.
 pub(crate) fn consistent_fit(
     h: &Mat<f64>,
     b: &[f64],
@@ -365,7 +367,7 @@ pub(crate) fn consistent_fit(
     start: &[f64],
     bounds: &Bounds<'_>,
     max_iterations: usize,
-) -> Result<(Vec<f64>, usize)> {
+) -> Result<FitOutcome> {
     let Bounds { kinds, scales, shift } = *bounds;
     let n = b.len();
     let basis = pseudo_inertia_basis();
@@ -399,11 +401,7 @@ pub(crate) fn consistent_fit(
         Some(phi)
     };
     // Start: the unconstrained minimiser H⁻¹·b pulled strictly inside, else the prior's point.
-    let llt =
-        h.llt(Side::Lower).map_err(|e| Error::Numerical(format!("normal matrix not positive definite: {e:?}")))?;
-    let rhs = Mat::from_fn(n, 1, |i, _| b[i]);
-    let sol = llt.solve(&rhs);
-    let unconstrained: Vec<f64> = (0..n).map(|i| sol[(i, 0)]).collect();
+    let unconstrained = solve_spd(h, b).map(|s| s.solution).unwrap_or_else(|| start.to_vec());
     let mut p = interior_point(&unconstrained, kinds, scales, shift, 1e-3);
     if barrier(&p).is_none() || p.iter().any(|v| !v.is_finite()) {
         p = interior_point(start, kinds, scales, shift, 1e-3);
@@ -415,6 +413,7 @@ pub(crate) fn consistent_fit(
     // Barrier weight: duality gap m/t starts near 10 % of the cost, ends below 1e-7 of it.
     let mut t = barrier_terms / (0.1 * chi2(&p));
     let mut steps = 0;
+    let mut max_ridge = 0.0f64;
     'outer: loop {
         for _ in 0..50 {
             if steps >= max_iterations {
@@ -449,12 +448,17 @@ pub(crate) fn consistent_fit(
                 grad[i] -= 1.0 / p[i];
                 hess[(i, i)] += 1.0 / (p[i] * p[i]);
             }
-            let step = match hess.llt(Side::Lower) {
-                Ok(llt) => llt.solve(&Mat::from_fn(n, 1, |i, _| -grad[i])),
-                Err(_) => {
-                    return Err(Error::Numerical("barrier Hessian not positive definite".into()));
-                }
+            // The Hessian is positive definite in exact arithmetic (2t·H with the prior, plus
+            // the barrier's); rounding can break that when the data leave a direction flat and
+            // t is large. Scaled and, if need be, regularised (a Levenberg step), it always
+            // gives a descent direction; if even that fails, the current iterate, strictly
+            // feasible, is the answer.
+            let neg: Vec<f64> = grad.iter().map(|g| -g).collect();
+            let Some(solved) = solve_spd(&hess, &neg) else {
+                break 'outer;
             };
+            max_ridge = max_ridge.max(solved.ridge);
+            let step = Mat::from_fn(n, 1, |i, _| solved.solution[i]);
             let decrement: f64 = -(0..n).map(|i| grad[i] * step[(i, 0)]).sum::<f64>();
             if decrement / 2.0 < 1e-7 {
                 break;
@@ -486,7 +490,55 @@ pub(crate) fn consistent_fit(
     if p.iter().any(|v| !v.is_finite()) {
         return Err(Error::Numerical("the physically consistent fit did not converge to finite values".into()));
     }
-    Ok((p, steps))
+    Ok(FitOutcome { params: p, steps, max_ridge })
+}
+
+/// What [`consistent_fit`] returns.
+#[derive(Debug, Clone)]
+pub(crate) struct FitOutcome {
+    /// The parameters (strictly physically consistent).
+    pub params: Vec<f64>,
+    /// Newton steps taken.
+    pub steps: usize,
+    /// Largest relative regularisation a Newton step needed (0: none).
+    pub max_ridge: f64,
+}
+
+/// The solution of a symmetric positive (semi)definite system and the regularisation it took.
+pub(crate) struct SpdSolution {
+    /// `x` with `(D·A·D + ridge·1)·D⁻¹x = D·b`, `D = diag(A)^-1/2`.
+    pub solution: Vec<f64>,
+    /// Relative ridge added to the unit-diagonal scaled matrix (0: none).
+    pub ridge: f64,
+}
+
+/// Solves `A·x = b` for symmetric `A` that should be positive definite: Jacobi-scaled to a unit
+/// diagonal, Cholesky; where rounding makes it fail, a ridge `μ·1` (μ = 1e-14 … 1e-2) is added
+/// to the scaled matrix. `None` only for a non-finite or non-positive diagonal, or a matrix
+/// that no ridge up to 1e-2 makes factorizable.
+pub(crate) fn solve_spd(a: &Mat<f64>, b: &[f64]) -> Option<SpdSolution> {
+    let n = b.len();
+    let d: Vec<f64> = (0..n).map(|i| a[(i, i)]).collect();
+    if d.iter().any(|v| !(v.is_finite() && *v > 0.0)) || b.iter().any(|v| !v.is_finite()) {
+        return None;
+    }
+    let s: Vec<f64> = d.iter().map(|v| 1.0 / v.sqrt()).collect();
+    let rhs = Mat::from_fn(n, 1, |i, _| s[i] * b[i]);
+    let mut ridge = 0.0;
+    loop {
+        let scaled = Mat::from_fn(n, n, |i, j| s[i] * a[(i, j)] * s[j] + if i == j { ridge } else { 0.0 });
+        if let Ok(llt) = scaled.llt(Side::Lower) {
+            let y = llt.solve(&rhs);
+            let x: Vec<f64> = (0..n).map(|i| s[i] * y[(i, 0)]).collect();
+            if x.iter().all(|v| v.is_finite()) {
+                return Some(SpdSolution { solution: x, ridge });
+            }
+        }
+        ridge = if ridge == 0.0 { 1e-14 } else { ridge * 100.0 };
+        if ridge > 1e-2 {
+            return None;
+        }
+    }
 }
 
 #[cfg(test)]

@@ -658,7 +658,8 @@ pub fn design(urdf: &Path, opts: &ExciteOptions) -> Result<ExciteReport> {
             torque,
         });
     }
-    let friction = FrictionModel { coulomb_smoothing: Some(opts.velocity_deadzone.max(1e-3)), offset: false };
+    let friction =
+        FrictionModel { coulomb_smoothing: Some(opts.velocity_deadzone.max(1e-3)), offset: false, asymmetry: false };
     let reg = Regressor::new(&robot, friction)?;
     let layout = reg.layout();
     let cad = crate::identify::cad_params(&robot, &layout);

@@ -9,12 +9,12 @@
 //! effort of sample `k` is applied as a joint torque from `t_k` to `t_{k+1}`; a gap in the log
 //! (a step over 1.5 median steps) re-synchronizes.
 
+use crate::SysidOptions;
 use crate::error::{Error, Result};
 use crate::log::JointLog;
 use crate::model::RobotModel;
 use crate::plot::{COLORS, Plot, stack_svg};
 use crate::signal::median_step;
-use crate::{SysidOptions, identify::cad_params, regressor::Layout};
 use twin_core::mj::Data;
 
 /// Options of [`measure_gap`].
@@ -23,8 +23,12 @@ pub struct GapOptions {
     /// The twin is reset to the logged state every this many seconds (default: 1.0).
     #[default(1.0)]
     pub resync_secs: f64,
-    /// Armature of every joint of the twin, kg·m² (default: 0: URDF has none).
+    /// Armature of every joint of the twin, kg·m² (default: 0: URDF has none; a joint's
+    /// armature in the URDF's `<twin_sysid>` block wins).
     pub armature: f64,
+    /// Refuse a log that lacks some of the robot's joints instead of holding them at their home
+    /// position (default: false: held, with a warning, as `twin sysid` does).
+    pub strict: bool,
 }
 
 /// One joint's gap.
@@ -58,6 +62,8 @@ pub struct GapReport {
     pub joints: Vec<JointGap>,
     /// Mean of the joints' RMS position errors, rad.
     pub mean_position_rmse: f64,
+    /// What the reader should know (joints held because the log lacks them).
+    pub warnings: Vec<String>,
     /// Mean of the joints' RMS velocity errors, rad/s.
     pub mean_velocity_rmse: f64,
     /// Mean of the joints' torque NRMSE.
@@ -146,6 +152,29 @@ pub fn measure_gap(urdf: &std::path::Path, log: &JointLog, opts: &GapOptions) ->
     let t: Vec<f64> = log.t_nanos.iter().map(|&x| (x - log.t_nanos[0]) as f64 * 1e-9).collect();
     let dt = median_step(&t).ok_or_else(|| log.bad("all timestamps are equal".into()))?;
     let source = crate::model::UrdfSource::read(urdf)?;
+    // Joints the log lacks are held at home, as `twin sysid` holds them.
+    let (text, held) = crate::hold::hold_joints(&source, &log.joint_names)?;
+    let mut warnings = Vec::new();
+    if !held.is_empty() {
+        let names: Vec<String> = held.iter().map(|(n, _)| n.clone()).collect();
+        if opts.strict {
+            return Err(log.bad(format!(
+                "the robot's joint(s) {} are not in the log (which has {}); without --strict they are held at \
+                 their home position",
+                crate::condition::quote_list(&names),
+                crate::condition::quote_list(&log.joint_names)
+            )));
+        }
+        warnings.push(format!(
+            "joint(s) {} of {} are not in the log: held at their home position",
+            crate::condition::quote_list(&names),
+            urdf.display()
+        ));
+    }
+    // The friction and sensor model beyond <dynamics>: a torque sensor's offset is not torque
+    // on the joint, the asymmetry term is friction MuJoCo's frictionloss does not hold.
+    let block = crate::extension::read_block(urdf, &source.text)?;
+    let source = crate::model::UrdfSource { path: source.path.clone(), text };
     let model = crate::synth::simulation_model_of(&source, dt, opts.armature)?;
     let robot = RobotModel::of_urdf(&source, model.clone(), false)?;
     let (map, _) = crate::condition::match_joints(log, &robot)?;
@@ -193,7 +222,11 @@ pub fn measure_gap(urdf: &std::path::Path, log: &JointLog, opts: &GapOptions) ->
             if k % decimate == 0 {
                 traces[j].push((t[k], data.qpos()[joint.qpos_adr], log.position[i][k]));
             }
-            data.qfrc_applied_mut()[joint.dof] = log.effort[i][k];
+            let extra = block.iter().find(|b| b.name == joint.name).map_or(0.0, |b| {
+                let bump = b.smoothing.map_or(0.0, |eps| 1.0 / (data.qvel()[joint.dof] / eps).cosh().powi(2));
+                b.offset + b.asymmetry * bump
+            });
+            data.qfrc_applied_mut()[joint.dof] = log.effort[i][k] - extra;
         }
         data.step()?;
         since += 1;
@@ -207,9 +240,8 @@ pub fn measure_gap(urdf: &std::path::Path, log: &JointLog, opts: &GapOptions) ->
     }
     // Torque: the twin's inverse dynamics along the logged motion (as `twin sysid --validate`).
     let sysid_opts = SysidOptions::default();
-    let layout = Layout { links: robot.links.len(), joints: nj, friction: sysid_opts.friction };
-    let cad = cad_params(&robot, &layout);
-    let torque = crate::identify::validate(&robot, log, &sysid_opts, &[&cad])?;
+    let torque =
+        crate::select::models_nrmse(&robot, log, &sysid_opts, &[crate::select::ScoredModel::of_urdf(&robot, &block)])?;
     let joints: Vec<JointGap> = robot
         .joints
         .iter()
@@ -231,6 +263,7 @@ pub fn measure_gap(urdf: &std::path::Path, log: &JointLog, opts: &GapOptions) ->
         mean_position_rmse: mean(&|j| j.position_rmse),
         mean_velocity_rmse: mean(&|j| j.velocity_rmse),
         mean_torque_nrmse: mean(&|j| j.torque_nrmse),
+        warnings,
         joints,
         traces,
     })

@@ -8,8 +8,7 @@ use crate::log::JointLog;
 use crate::model::{LINK_PARAM_NAMES, LINK_PARAMS, MassProperties, RobotModel, physically_valid};
 use crate::regressor::{FrictionModel, Layout, Regressor};
 use crate::report::{BaseParamReport, BaseRowReport, JointReport, LinkReport, NrmseReport, ParamReport, Report};
-use faer::linalg::solvers::DenseSolveCore;
-use faer::{Mat, Side};
+use faer::Mat;
 use std::time::Instant;
 
 /// How the robot's base was held while logging.
@@ -146,7 +145,7 @@ pub(crate) fn joint_columns(robot: &RobotModel, layout: &Layout, j: usize) -> Ve
 
 /// Body ids of the log's wrench series: `(series index, body)` for the series whose frame is a
 /// body of the robot; warnings for the others.
-fn wrench_bodies(robot: &RobotModel, log: &JointLog) -> (Vec<(usize, usize)>, Vec<String>) {
+pub(crate) fn wrench_bodies(robot: &RobotModel, log: &JointLog) -> (Vec<(usize, usize)>, Vec<String>) {
     let mut found = Vec::new();
     let mut warnings = Vec::new();
     for (i, w) in log.wrenches.iter().enumerate() {
@@ -169,7 +168,7 @@ fn wrench_bodies(robot: &RobotModel, log: &JointLog) -> (Vec<(usize, usize)>, Ve
 /// (base rows), the external part `Jᵀ·w_ext` alone, and per joint whether its row is used: its
 /// speed at least `opts.velocity_deadzone` and its velocity's nearest reversal at least
 /// `opts.reversal_guard_periods` cut-off periods away.
-fn for_each_sample(
+pub(crate) fn for_each_sample(
     robot: &RobotModel,
     reg: &mut Regressor<'_>,
     data: &Conditioned,
@@ -286,6 +285,9 @@ fn prior_scales(robot: &RobotModel, layout: &Layout) -> Vec<f64> {
         s[c + 2] = joint.armature.max(0.01);
         if layout.friction.offset {
             s[c + 3] = 1.0;
+        }
+        if let Some(k) = layout.friction.asymmetry_col() {
+            s[c + k] = 0.1;
         }
     }
     s
@@ -493,7 +495,7 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
     for (l, link) in robot.links.iter().enumerate() {
         shift[layout.link_col(l)..layout.link_col(l) + LINK_PARAMS].copy_from_slice(&link.welded);
     }
-    let (after, iterations) = consistent_fit(
+    let fit = consistent_fit(
         &h,
         &b,
         offset,
@@ -501,13 +503,23 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
         &Bounds { kinds: &kinds, scales: &scales, shift: &shift },
         opts.max_iterations,
     )?;
-    // Posterior covariance σ²·H⁻¹ (data and prior together).
-    let h_inv = h
-        .llt(Side::Lower)
-        .map_err(|e| Error::Numerical(format!("normal matrix not positive definite: {e:?}")))?
-        .inverse();
+    let (after, iterations) = (fit.params, fit.steps);
+    if fit.max_ridge > 1e-8 {
+        warnings.push(format!(
+            "the physically consistent fit needed a regularisation of {:.1e} (relative) on some Newton steps: \
+             the data leave some directions nearly flat; the prior holds them near the URDF values",
+            fit.max_ridge
+        ));
+    }
+    // Posterior covariance σ²·H⁻¹ (data and prior together), column by column.
     let s2 = ba.sigma2.max(1e-300);
-    let std: Vec<f64> = (0..n).map(|i| (s2 * h_inv[(i, i)]).max(0.0).sqrt()).collect();
+    let std: Vec<f64> = (0..n)
+        .map(|i| {
+            let mut e = vec![0.0; n];
+            e[i] = 1.0;
+            crate::estimate::solve_spd(&h, &e).map_or(f64::INFINITY, |x| (s2 * x.solution[i]).max(0.0).sqrt())
+        })
+        .collect();
 
     // Report.
     let param_report = |name: &str, i: usize| ParamReport {
@@ -639,8 +651,13 @@ pub fn identify(robot: &RobotModel, log: &JointLog, opts: &SysidOptions) -> Resu
         base_rows,
         validation_nrmse: None,
         validation_log: None,
+        selection: Vec::new(),
+        held_out: None,
+        joint_friction: Vec::new(),
     };
-    Ok(Identification { layout, before, after, std, identifiability: ba.identifiability, report })
+    let mut ident = Identification { layout, before, after, std, identifiability: ba.identifiability, report };
+    ident.report.joint_friction = crate::select::joint_frictions(robot, &ident);
+    Ok(ident)
 }
 
 /// Per-joint torque NRMSE (`rms(τ_model − τ_log) / rms(τ_log)`) of `params` on the held-out

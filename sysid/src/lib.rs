@@ -17,8 +17,14 @@
 //! ```
 //!
 //! ## Pipeline
+//! 0. **Log and robot** ([`log`], [`hold`]): every `JointState` topic of a bag is read and
+//!    merged by joint name, each with its own timestamps (`header.stamp`; the log time where a
+//!    stamp is zero); URDF joints the log never names are held at their home position (links
+//!    lumped into the parent, URDF inertia kept; a warning, an error with `strict`).
 //! 1. **Data** ([`condition`]): the log's joints are matched to the URDF's by name, resampled
-//!    on a uniform grid at the log's median rate, split at gaps (never bridged), low-pass
+//!    on a uniform grid at the log's median rate (linear interpolation between each sample's
+//!    own neighbours: a jittered 1 kHz log keeps its timing), split at gaps (a step over 5
+//!    median steps: dropped samples are never bridged), low-pass
 //!    filtered forward and backward (Butterworth, order 4, cut-off `min(rate/25, 20 Hz)` by
 //!    default), differentiated by central differences (velocity and acceleration from the
 //!    filtered positions; the effort gets the same filter), edges trimmed (3 cut-off periods),
@@ -51,6 +57,11 @@
 //!    `ROBOT.urdf.bak` kept. Armature goes to the report and, with [`mjcf`], to an MJCF model.
 //! 6. **Report** ([`report`]): table and JSON; torque NRMSE before/after on the log and on a
 //!    held-out log ([`validate`]).
+//! 7. **Defaults from the data** ([`select`], `twin sysid` without `--cutoff-hz`/friction
+//!    options): the cut-off and the friction model (sign or smooth Coulomb, torque offset,
+//!    asymmetry) chosen by time-blocked cross-validation, the last 30 % held out to score the
+//!    URDF before, the fit and `--compare` models on the same samples. What `<dynamics>` cannot
+//!    hold goes to the URDF's `<twin_sysid>` block ([`extension`]).
 
 //! ## Around identification
 //! - [`excite`] (`twin excite`): designs the trajectory to log, a finite Fourier series per
@@ -95,6 +106,13 @@
 //! every link valid; on 20 of 20 seed triples (BENCHMARKS.md).
 //!
 //! ## Why an interior-point fit with faer instead of Clarabel's SDP cones
+//! (Real data, issue 39: on the Franka Panda log of `data/panda_gaz2019`, the barrier method
+//! as first written stopped with "barrier Hessian not positive definite" in 22 of 32 runs (8
+//! cut-offs × 4 friction models): at large barrier weights the Hessian spreads the identifiable
+//! directions and those only the prior holds over more than a double-precision Cholesky
+//! resolves. Each Newton system is now Jacobi-scaled and, where Cholesky still fails, given a
+//! ridge (10⁻¹⁴ … 10⁻² of the unit diagonal, reported above 10⁻⁸); a step no ridge allows ends
+//! the fit at its last iterate, which is strictly feasible. All 32 runs fit; BENCHMARKS.md.)
 //! Clarabel's PSD cones need BLAS and LAPACK, which a fresh machine lacks (no OpenBLAS, no
 //! gfortran) and which the build may not download. The LMI problem above is convex with tiny
 //! PSD blocks (4×4 per link), so twin solves it directly: a primal log-barrier interior-point
@@ -116,9 +134,16 @@
 //!   held-out NRMSE by the measured `τ`). CSV logs can't carry base motion.
 //! - Logs are ROS 2 bags (`sensor_msgs/msg/JointState`, plus `nav_msgs/msg/Odometry` and
 //!   `geometry_msgs/msg/WrenchStamped` for a floating base) or CSV ([`log`]).
-//! - Joints are revolute or prismatic; each must be in the log. Contacts, joint-limit forces and
-//!   transmissions other than a direct drive are not modelled: log the robot in free space,
-//!   inside its joint ranges, with joint-side torques.
+//! - Joints are revolute or prismatic; a fixed-base robot's joints the log lacks are held at
+//!   home ([`hold`]; a floating base needs every joint in the log). Contacts, joint-limit forces
+//!   and transmissions other than a direct drive are not modelled: log the robot in free space,
+//!   inside its joint ranges, with joint-side torques (or `--effort-scale` to them).
+//! - The friction model is chosen for all joints at once (the cross-validation scores each
+//!   joint, but one model's columns serve every joint); Stribeck terms are not among the
+//!   candidates (`twin sysid friction` fits them from constant-velocity sweeps). The fit's
+//!   velocity shift of a sigmoid is its first-order term (`asymmetry`), not the shift itself.
+//! - Held-out scoring and the cross-validation are for fixed-base robots; a floating base is
+//!   validated with `--validate` on a log of its own.
 //! - Links joined by fixed joints are identified as the MuJoCo bodies they are (loaded with
 //!   `fusestatic="false"`): a welded link's inertia is only seen together with its parent's,
 //!   and its share stays at the URDF's value.
@@ -135,8 +160,10 @@ pub mod condition;
 pub mod error;
 pub mod estimate;
 pub mod excite;
+pub mod extension;
 pub mod friction;
 pub mod gap;
+pub mod hold;
 pub mod identify;
 pub mod log;
 pub mod mjcf;
@@ -147,6 +174,7 @@ pub mod number;
 pub use twin_core::plot;
 pub mod regressor;
 pub mod report;
+pub mod select;
 pub mod signal;
 pub mod synth;
 pub mod writeback;

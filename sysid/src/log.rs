@@ -323,51 +323,81 @@ mod tests {
 
 impl JointLog {
     /// Reads `sensor_msgs/msg/JointState` from a ROS 2 bag (a rosbag2 folder or a bare `.mcap`).
-    /// `topic` picks the topic; without it the only JointState topic is used (`/joint_states`
-    /// when there are several). Publishers of one topic are merged by joint name; joints
-    /// published at different instants are put on the union of their times by linear
-    /// interpolation (conditioning resamples to a uniform grid afterwards anyway). Damage the
-    /// reader recovered from comes back as warnings.
+    /// `topic` picks one topic; without it every JointState topic is read and merged by joint
+    /// name (an arm's driver and its gripper's publish on topics of their own; per-limb
+    /// controllers likewise), each topic with its own timestamps (`header.stamp`, or the log
+    /// time where a stamp is zero). A joint named on several topics is taken from the one with
+    /// the most samples of it (a warning names the others). Publishers of one topic are merged
+    /// by joint name too. Joints sampled at different instants are put on the union of their
+    /// times within the span they all cover, by linear interpolation between each joint's own
+    /// neighbouring samples. Damage the reader recovered from comes back as warnings.
     ///
     /// # Errors
     /// [`Error::Core`] for unreadable or damaged (strict) files and a missing topic;
-    /// [`Error::BadLog`] when there is no JointState topic or several and none chosen.
+    /// [`Error::BadLog`] when there is no JointState topic.
     pub fn read_mcap(path: impl AsRef<Path>, topic: Option<&str>) -> Result<(JointLog, Vec<String>)> {
         use twin_core::log::{Log, ReadOptions};
         let path = path.as_ref();
         let log = Log::open(path, ReadOptions::default())?;
         let source_name = path.display().to_string();
-        let topic = match topic {
-            Some(t) => t.to_string(),
+        let topics: Vec<String> = match topic {
+            Some(t) => vec![t.to_string()],
             None => {
                 let info = log.info()?;
-                let candidates = info.topics_of_type("JointState");
-                match candidates.as_slice() {
-                    [one] => one.to_string(),
-                    [] => {
-                        return Err(Error::BadLog {
-                            source_name,
-                            message: "no sensor_msgs/msg/JointState topic in the log; record /joint_states".into(),
-                        });
-                    }
-                    many if many.contains(&"/joint_states") => "/joint_states".to_string(),
-                    many => {
-                        return Err(Error::BadLog {
-                            source_name,
-                            message: format!(
-                                "several JointState topics ({}): choose one with --topic",
-                                many.join(", ")
-                            ),
-                        });
-                    }
+                let candidates: Vec<String> =
+                    info.topics_of_type("JointState").into_iter().map(str::to_string).collect();
+                if candidates.is_empty() {
+                    return Err(Error::BadLog {
+                        source_name,
+                        message: "no sensor_msgs/msg/JointState topic in the log; record /joint_states".into(),
+                    });
                 }
+                candidates
             }
         };
-        let series = log.joint_states(&topic)?;
-        // The series report includes the read report (damage recovered from).
-        let warnings = series.report.warnings();
-        let source = format!("{} topic {topic}", path.display());
-        Ok((JointLog::from_series(&series.joints, source), warnings))
+        let mut warnings = Vec::new();
+        // Joint name → (topic, series); the topic with the most samples of a joint wins.
+        let mut joints: Vec<(String, twin_core::log::JointSeries)> = Vec::new();
+        for t in &topics {
+            let series = log.joint_states(t)?;
+            warnings.extend(series.report.warnings());
+            for j in series.joints {
+                match joints.iter_mut().find(|(_, have)| have.name == j.name) {
+                    Some((other_topic, have)) => {
+                        let (kept, dropped) = if j.len() > have.len() {
+                            (t.as_str(), other_topic.as_str())
+                        } else {
+                            (other_topic.as_str(), t.as_str())
+                        };
+                        warnings.push(format!(
+                            "joint \"{}\" is published on {kept} and {dropped}: the samples of {kept} (more of them) are used",
+                            j.name
+                        ));
+                        if j.len() > have.len() {
+                            *other_topic = t.clone();
+                            *have = j;
+                        }
+                    }
+                    None => joints.push((t.clone(), j)),
+                }
+            }
+        }
+        let used: Vec<&str> =
+            topics.iter().filter(|t| joints.iter().any(|(jt, _)| jt == *t)).map(String::as_str).collect();
+        if used.len() > 1 {
+            warnings.push(format!(
+                "joint states merged by joint name from {} topics ({}), each with its own timestamps",
+                used.len(),
+                used.join(", ")
+            ));
+        }
+        let source = if used.len() == 1 {
+            format!("{} topic {}", path.display(), used[0])
+        } else {
+            format!("{} topics {}", path.display(), used.join(", "))
+        };
+        let series: Vec<twin_core::log::JointSeries> = joints.into_iter().map(|(_, j)| j).collect();
+        Ok((JointLog::from_series(&series, source), warnings))
     }
 
     /// Builds a log from per-joint series (each with its own sorted times).
@@ -384,7 +414,11 @@ impl JointLog {
             }
             return log;
         }
-        let mut times: Vec<i64> = joints.iter().flat_map(|j| j.time_nanos.iter().copied()).collect();
+        // The span every joint covers: outside it some joint has no neighbours to interpolate.
+        let start = joints.iter().filter_map(|j| j.time_nanos.first()).copied().max().unwrap_or(0);
+        let end = joints.iter().filter_map(|j| j.time_nanos.last()).copied().min().unwrap_or(0);
+        let mut times: Vec<i64> =
+            joints.iter().flat_map(|j| j.time_nanos.iter().copied()).filter(|t| (start..=end).contains(t)).collect();
         times.sort_unstable();
         times.dedup();
         for (k, j) in joints.iter().enumerate() {
@@ -684,10 +718,10 @@ mod mcap_tests {
             effort: vec![1.0, 3.0],
         };
         let log = JointLog::from_series(&[arm, grip], "t");
-        assert_eq!(log.t_nanos, vec![0, 5, 10, 15, 20]);
-        assert_eq!(log.position[0], vec![0.0, 0.5, 1.0, 1.5, 2.0]);
-        assert!(log.position[1][0].is_nan() && log.position[1][4].is_nan());
-        assert_eq!(&log.position[1][1..4], &[5.0, 10.0, 15.0]);
-        assert_eq!(&log.effort[1][1..4], &[1.0, 2.0, 3.0]);
+        // The span both cover, each joint's own samples and the other's interpolated there.
+        assert_eq!(log.t_nanos, vec![5, 10, 15]);
+        assert_eq!(log.position[0], vec![0.5, 1.0, 1.5]);
+        assert_eq!(log.position[1], vec![5.0, 10.0, 15.0]);
+        assert_eq!(log.effort[1], vec![1.0, 2.0, 3.0]);
     }
 }

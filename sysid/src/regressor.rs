@@ -29,17 +29,55 @@ pub struct FrictionModel {
     pub coulomb_smoothing: Option<f64>,
     /// Add a constant torque offset per joint (sensor bias) (default: `false`).
     pub offset: bool,
+    /// Add an asymmetry column `sech²(q̇/ε)` per joint (needs `coulomb_smoothing`): the first
+    /// order of a Coulomb sigmoid shifted in velocity, `c·tanh((q̇ + φ)/ε) ≈ c·tanh(q̇/ε) +
+    /// (c·φ/ε)·sech²(q̇/ε)`, which with the offset makes the friction differ between the two
+    /// directions of motion near rest (default: `false`).
+    pub asymmetry: bool,
 }
 
 impl FrictionModel {
-    /// Columns per joint: viscous, Coulomb, armature (, offset).
+    /// Columns per joint: viscous, Coulomb, armature (, offset) (, asymmetry).
     pub fn columns_per_joint(&self) -> usize {
-        if self.offset { 4 } else { 3 }
+        3 + usize::from(self.offset) + usize::from(self.asymmetry)
     }
 
     /// Names of the per-joint columns.
     pub fn column_names(&self) -> &'static [&'static str] {
-        if self.offset { &["viscous", "coulomb", "armature", "offset"] } else { &["viscous", "coulomb", "armature"] }
+        match (self.offset, self.asymmetry) {
+            (false, false) => &["viscous", "coulomb", "armature"],
+            (true, false) => &["viscous", "coulomb", "armature", "offset"],
+            (false, true) => &["viscous", "coulomb", "armature", "asymmetry"],
+            (true, true) => &["viscous", "coulomb", "armature", "offset", "asymmetry"],
+        }
+    }
+
+    /// Column of the asymmetry term within a joint's block, when there is one.
+    pub fn asymmetry_col(&self) -> Option<usize> {
+        self.asymmetry.then_some(3 + usize::from(self.offset))
+    }
+
+    /// Asymmetry regressor value `sech²(q̇/ε)` at velocity `qd` (0 without smoothing).
+    pub fn asymmetry_value(&self, qd: f64) -> f64 {
+        match self.coulomb_smoothing {
+            Some(eps) => 1.0 / (qd / eps).cosh().powi(2),
+            None => 0.0,
+        }
+    }
+
+    /// A short description, e.g. `"tanh(q̇/0.05) + offset + asymmetry"`.
+    pub fn describe(&self) -> String {
+        let mut s = match self.coulomb_smoothing {
+            Some(eps) => format!("viscous + Coulomb tanh(q̇/{eps})"),
+            None => "viscous + Coulomb sign(q̇)".to_string(),
+        };
+        if self.offset {
+            s.push_str(" + offset");
+        }
+        if self.asymmetry {
+            s.push_str(" + asymmetry");
+        }
+        s
     }
 
     /// Coulomb regressor value at velocity `qd`.
@@ -275,6 +313,9 @@ impl<'a> Regressor<'a> {
             rows[c + 2] = qdd[j];
             if fm.offset {
                 rows[c + 3] = 1.0;
+            }
+            if let Some(k) = fm.asymmetry_col() {
+                rows[c + k] = fm.asymmetry_value(qd[j]);
             }
         }
         Ok(())

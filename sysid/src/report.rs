@@ -146,6 +146,67 @@ pub struct Report {
     pub validation_nrmse: Option<Vec<NrmseReport>>,
     /// The held-out log.
     pub validation_log: Option<String>,
+    /// Cross-validation candidates tried to choose the cut-off and the friction model (empty
+    /// when both were given).
+    pub selection: Vec<crate::select::Candidate>,
+    /// Per-joint held-out torque NRMSE of the URDF before, the fit and `--compare` models on the
+    /// same samples (`None` without held-out data).
+    pub held_out: Option<HeldOutTable>,
+    /// Each joint's friction and sensor model as written to the `<twin_sysid>` block.
+    pub joint_friction: Vec<crate::extension::JointFriction>,
+}
+
+/// Held-out torque NRMSE of several models on the same samples.
+#[derive(Debug, Clone, Serialize)]
+pub struct HeldOutTable {
+    /// Where the held-out data came from (a file, or "last 30 % of LOG").
+    pub log: String,
+    /// Cut-off of the effort the models are scored against, Hz.
+    pub effort_cutoff_hz: f64,
+    /// Model names (columns): "URDF before", "twin fit", then each `--compare` file.
+    pub models: Vec<String>,
+    /// Joint names (rows).
+    pub joints: Vec<String>,
+    /// `nrmse[model][joint]`.
+    pub nrmse: Vec<Vec<f64>>,
+}
+
+impl HeldOutTable {
+    /// Mean over joints of model `m` (finite values only).
+    pub fn mean(&self, m: usize) -> f64 {
+        let v: Vec<f64> = self.nrmse[m].iter().copied().filter(|x| x.is_finite()).collect();
+        if v.is_empty() { f64::NAN } else { v.iter().sum::<f64>() / v.len() as f64 }
+    }
+
+    /// The table as text.
+    pub fn text(&self) -> String {
+        let mut out = String::new();
+        let _ = writeln!(
+            out,
+            "
+held-out torque NRMSE on {} (effort low-passed at {:.1} Hz for every model)",
+            self.log, self.effort_cutoff_hz
+        );
+        let _ = write!(out, "{:<28}", "joint");
+        for m in &self.models {
+            let short: String = m.chars().rev().take(22).collect::<Vec<_>>().into_iter().rev().collect();
+            let _ = write!(out, " {short:>22}");
+        }
+        let _ = writeln!(out);
+        for (j, name) in self.joints.iter().enumerate() {
+            let _ = write!(out, "{name:<28}");
+            for m in 0..self.models.len() {
+                let _ = write!(out, " {:>21.2}%", 100.0 * self.nrmse[m][j]);
+            }
+            let _ = writeln!(out);
+        }
+        let _ = write!(out, "{:<28}", "mean");
+        for m in 0..self.models.len() {
+            let _ = write!(out, " {:>21.2}%", 100.0 * self.mean(m));
+        }
+        let _ = writeln!(out);
+        out
+    }
 }
 
 fn ident_label(i: Identifiability) -> &'static str {
@@ -220,6 +281,12 @@ impl Report {
                     r.row, r.rms_external, r.before_rms, r.after_rms
                 );
             }
+        }
+        if !self.selection.is_empty() {
+            let _ = write!(out, "\n{}", crate::select::candidates_table(&self.selection));
+        }
+        if let Some(h) = &self.held_out {
+            out.push_str(&h.text());
         }
         if let Some(v) = &self.validation_nrmse {
             let title = format!("torque NRMSE on the held-out log {}", self.validation_log.as_deref().unwrap_or(""));

@@ -373,7 +373,9 @@ fn stiff_friction(
 ) -> Result<Arc<twin_core::mj::Model>> {
     let mut edit = base.edit()?;
     for dof in first_dof..base.nv() {
-        edit.set_dof_armature(dof, armature)?;
+        // An armature the URDF carries (its `<twin_sysid>` block, which the converter reads) wins.
+        let own = base.dof_armature()[dof];
+        edit.set_dof_armature(dof, if own > 0.0 { own } else { armature })?;
         edit.set_dof_friction_solver(dof, [2.0 * dt, 1.0], [0.99, 0.999, 0.001, 0.5, 2.0])?;
     }
     Ok(Arc::new(edit.finish()?))

@@ -41,7 +41,7 @@ fn gap_reports_the_cad_twin_far_off_a_perturbed_robot() {
     let mut renamed = log.clone();
     renamed.joint_names[0] = "not_a_joint".into();
     renamed.write_mcap(&other, "/joint_states").unwrap();
-    let out = twin(dir.path(), &["gap", arm_urdf().to_str().unwrap(), "--log", "other.mcap"]);
+    let out = twin(dir.path(), &["gap", arm_urdf().to_str().unwrap(), "--log", "other.mcap", "--strict"]);
     assert!(!out.status.success());
     let stderr = String::from_utf8_lossy(&out.stderr);
     assert!(stderr.contains("shoulder_pan_joint") && stderr.contains("not in the log"), "{stderr}");

@@ -7,6 +7,7 @@ mod floating;
 mod friction;
 mod gap;
 mod noise;
+mod real;
 mod regressor;
 mod synthetic;
 #[path = "../../../twin-core/tests/it/test_python.rs"]
