@@ -19,7 +19,9 @@
 //!    in position (gravity and offsets, the same both ways) plus `±f`, so `f` is `(τ⁺ − τ⁻)/2`
 //!    with gravity cancelled even where the two directions sample the positions unevenly (the
 //!    difference of plain means was biased by up to 3 % at 1.3 rad/s on gravity-loaded joints);
-//!    inertia is absent at constant velocity.
+//!    and `J·a`, the inertia torque of the speed changes still ringing in the segments (a heavy
+//!    joint under a drive tuned for less: see `paired_friction`), with the acceleration `a`
+//!    the central difference of the smoothed velocity across its window.
 //! 3. **Fit** the richest model the paired speeds identify ([`FrictionModel`]), and say which:
 //!    - with ≥ 6 speeds, **Stribeck** `τ_f(v) = Fc + (Fs − Fc)·exp(−|v/vs|^δ) + Fv·v` for
 //!      `v > 0` (odd in `v`) by bounded Levenberg–Marquardt (`Fc, Fs, Fv ≥ 0`, `vs` in log
@@ -293,52 +295,80 @@ pub fn find_segments(t_nanos: &[i64], v: &[f64], noise_sigma: f64, opts: &Fricti
     out
 }
 
+/// Acceleration of the smoothed velocity `v` (rad/s²): its central difference across the
+/// smoothing window (`smooth_secs`), one-sided at the ends of the log.
+fn joint_acceleration(t_nanos: &[i64], v: &[f64], smooth_secs: f64) -> Vec<f64> {
+    let n = v.len();
+    if n < 2 {
+        return vec![0.0; n];
+    }
+    let t = |k: usize| t_nanos[k] as f64 * 1e-9;
+    let dt = (t(n - 1) - t(0)) / (n - 1) as f64;
+    let half = ((smooth_secs / dt / 2.0).round() as usize).max(1);
+    (0..n)
+        .map(|k| {
+            let (a, b) = (k.saturating_sub(half), (k + half).min(n - 1));
+            if b > a && t(b) > t(a) { (v[b] - v[a]) / (t(b) - t(a)) } else { 0.0 }
+        })
+        .collect()
+}
+
 /// Friction of a ±v pair over the positions `[lo, hi]` both cover: least squares of the
-/// efforts of both segments on a cubic in position (gravity and offsets, the same both ways)
-/// plus `±f` (the friction, odd in velocity): unlike the difference of plain means, this does
-/// not assume both directions sample the positions alike. Returns `(f, σ_f, samples)`.
-#[allow(clippy::needless_range_loop)] // 5 × 5 normal equations, indexed as written
+/// efforts of both segments on a cubic in position (gravity and offsets, the same both ways),
+/// `±f` (the friction, odd in velocity) and `J·a` (the inertia torque of what speed changes
+/// are left in the segments, `accel` being the joint's acceleration): unlike the difference of
+/// plain means, this does not assume both directions sample the positions alike, nor that the
+/// drive held its speed. A heavy joint tracked by a drive tuned for less rings after each speed
+/// change, through the segment: a base yaw joint moving a stretched arm (4.9 kg m²) under a
+/// drive tuned for a third of that rings so into the cruise, and the inertia torque, odd in the
+/// direction as friction is, bent its curve: on such a sweep made by MuJoCo
+/// (`tests/python/arm_sweep.py`) the yaw joint came out Coulomb 1.01 and viscous −0.23 against
+/// 0.8 and 0.35 (and 0.84 / 0.27 with a drive tuned for half), 0.798 and 0.363 with the `J·a`
+/// term; the joints whose drives held their speed are unchanged. Returns `(f, σ_f, samples)`.
+#[allow(clippy::needless_range_loop)] // 6 × 6 normal equations, indexed as written
 fn paired_friction(
     log: &JointLog,
     j: usize,
+    accel: &[f64],
     pos: &Segment,
     neg: &Segment,
     lo: f64,
     hi: f64,
 ) -> Option<(f64, f64, usize)> {
+    const F: usize = 4;
     let (mid, half) = (0.5 * (lo + hi), (0.5 * (hi - lo)).max(1e-12));
-    let mut a = [[0.0; 5]; 5];
-    let mut b = [0.0; 5];
+    let mut a = [[0.0; 6]; 6];
+    let mut b = [0.0; 6];
     let mut rows = Vec::new();
     for (seg, sign) in [(pos, 1.0), (neg, -1.0)] {
         for k in seg.start..seg.end {
             let (q, e) = (log.position[j][k], log.effort[j][k]);
-            if !(lo..=hi).contains(&q) || !e.is_finite() {
+            if !(lo..=hi).contains(&q) || !e.is_finite() || !accel[k].is_finite() {
                 continue;
             }
             let x = (q - mid) / half;
-            rows.push(([1.0, x, x * x, x * x * x, sign], e));
+            rows.push(([1.0, x, x * x, x * x * x, sign, accel[k]], e));
         }
     }
-    let n_pos = rows.iter().filter(|r| r.0[4] > 0.0).count();
-    if n_pos < 5 || rows.len() - n_pos < 5 {
+    let n_pos = rows.iter().filter(|r| r.0[F] > 0.0).count();
+    if n_pos < 6 || rows.len() - n_pos < 6 {
         return None;
     }
     for (phi, e) in &rows {
-        for p in 0..5 {
+        for p in 0..6 {
             b[p] += phi[p] * e;
-            for q in 0..5 {
+            for q in 0..6 {
                 a[p][q] += phi[p] * phi[q];
             }
         }
     }
     let coef = solve5(a, b)?;
-    let ss: f64 = rows.iter().map(|(phi, e)| (e - (0..5).map(|p| phi[p] * coef[p]).sum::<f64>()).powi(2)).sum();
-    let sigma2 = ss / (rows.len() - 5) as f64;
-    let mut unit = [0.0; 5];
-    unit[4] = 1.0;
-    let var = solve5(a, unit)?[4] * sigma2;
-    Some((coef[4], var.max(0.0).sqrt(), rows.len()))
+    let ss: f64 = rows.iter().map(|(phi, e)| (e - (0..6).map(|p| phi[p] * coef[p]).sum::<f64>()).powi(2)).sum();
+    let sigma2 = ss / (rows.len() - 6) as f64;
+    let mut unit = [0.0; 6];
+    unit[F] = 1.0;
+    let var = solve5(a, unit)?[F] * sigma2;
+    Some((coef[F], var.max(0.0).sqrt(), rows.len()))
 }
 
 /// First and last sample of `s`, seconds from the log's start.
@@ -347,8 +377,15 @@ fn segment_secs(log: &JointLog, s: &Segment) -> [f64; 2] {
     [at(s.start), at(s.end.saturating_sub(1).max(s.start))]
 }
 
-/// Paired friction points of joint `j` from its segments.
-pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &FrictionOptions) -> Vec<CurvePoint> {
+/// Paired friction points of joint `j` from its segments, `accel` being the joint's
+/// acceleration at each sample (see `paired_friction`).
+pub fn pair_segments(
+    log: &JointLog,
+    j: usize,
+    accel: &[f64],
+    segments: &[Segment],
+    opts: &FrictionOptions,
+) -> Vec<CurvePoint> {
     let range = |s: &Segment| {
         let q = &log.position[j][s.start..s.end];
         let lo = q.iter().copied().fold(f64::INFINITY, f64::min);
@@ -374,7 +411,7 @@ pub fn pair_segments(log: &JointLog, j: usize, segments: &[Segment], opts: &Fric
         // A moving pair needs common ground; a pair at one position (a joint spinning in place
         // is not possible here) falls back to whole segments.
         let (lo, hi) = if hi > lo { (lo, hi) } else { continue };
-        let Some((friction, std_err, samples)) = paired_friction(log, j, pos, neg, lo, hi) else { continue };
+        let Some((friction, std_err, samples)) = paired_friction(log, j, accel, pos, neg, lo, hi) else { continue };
         used[b] = true;
         let _ = a;
         out.push(CurvePoint {
@@ -618,25 +655,25 @@ pub fn fit_richest(points: &[CurvePoint]) -> Result<(FrictionModel, String, Stri
 }
 
 #[allow(clippy::needless_range_loop)] // Gaussian elimination on a 5 × 5 system, indexed as written
-fn solve5(mut a: [[f64; 5]; 5], mut b: [f64; 5]) -> Option<[f64; 5]> {
-    for c in 0..5 {
-        let p = (c..5).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
+fn solve5<const N: usize>(mut a: [[f64; N]; N], mut b: [f64; N]) -> Option<[f64; N]> {
+    for c in 0..N {
+        let p = (c..N).max_by(|&i, &j| a[i][c].abs().total_cmp(&a[j][c].abs()))?;
         if a[p][c].abs() < 1e-300 {
             return None;
         }
         a.swap(c, p);
         b.swap(c, p);
-        for r in c + 1..5 {
+        for r in c + 1..N {
             let f = a[r][c] / a[c][c];
-            for k in c..5 {
+            for k in c..N {
                 a[r][k] -= f * a[c][k];
             }
             b[r] -= f * b[c];
         }
     }
-    let mut x = [0.0; 5];
-    for r in (0..5).rev() {
-        let s: f64 = (r + 1..5).map(|k| a[r][k] * x[k]).sum();
+    let mut x = [0.0; N];
+    for r in (0..N).rev() {
+        let s: f64 = (r + 1..N).map(|k| a[r][k] * x[k]).sum();
         x[r] = (b[r] - s) / a[r][r];
     }
     x.iter().all(|v| v.is_finite()).then_some(x)
@@ -682,7 +719,8 @@ pub fn identify_friction(log: &JointLog, opts: &FrictionOptions) -> Result<Frict
                     100.0 * opts.rel_tol
                 )));
             }
-            let points = pair_segments(log, j, &segments, opts);
+            let accel = joint_acceleration(&log.t_nanos, &v, opts.smooth_secs);
+            let points = pair_segments(log, j, &accel, &segments, opts);
             if points.is_empty() {
                 return Ok(Err(format!(
                     "joint \"{name}\": {} constant-velocity segment(s) but no +v/−v pair of the same speed over common positions",
