@@ -7,11 +7,11 @@
 //! converter knows nothing of MuJoCo's API and the rest of this crate nothing of URDF.
 //!
 //! ```no_run
-//! use twin_core::convert::{convert_urdf, ConvertOptions};
+//! use twin_mj::convert::{convert_urdf, ConvertOptions};
 //! let out = convert_urdf("models/humanoid.urdf".as_ref(), &ConvertOptions::default())?;
 //! println!("{} IMUs, topic {:?}", out.meta.imus.len(), out.meta.imus[0].topic);
-//! let model = twin_core::mj::Model::from_xml_str(&out.mjcf)?;
-//! # Ok::<(), twin_core::Error>(())
+//! let model = twin_mj::Model::from_xml_str(&out.mjcf)?;
+//! # Ok::<(), twin_mj::Error>(())
 //! ```
 
 pub use twin_convert::{
