@@ -28,6 +28,9 @@ mod info;
 #[cfg(feature = "ros")]
 #[path = "cli/live.rs"]
 mod live;
+#[cfg(feature = "ros")]
+#[path = "cli/lockstep.rs"]
+mod lockstep;
 #[path = "cli/log.rs"]
 mod log;
 #[path = "cli/randomize.rs"]

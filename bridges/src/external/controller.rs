@@ -18,6 +18,13 @@ use twin_core::robot::Robot;
 use twin_core::sim::{RecordOptions, Recording};
 use twin_core::topics::{Sink, TopicInfo, TypedMessage};
 
+/// How often the join says in the log what it still waits for.
+const JOIN_NOTE_EVERY: Duration = Duration::from_secs(1);
+
+/// After discovery saw the node's readers, how long their set must stay the same before the
+/// first state goes out (see [`ExternalController::start_process`]).
+const JOIN_SETTLE: Duration = Duration::from_millis(150);
+
 /// The bridge's sink, shared by the recordings of successive episodes (its DDS writers stay
 /// matched to the process).
 struct SharedSink(Arc<Mutex<LiveSink>>);
@@ -73,9 +80,6 @@ pub struct ExternalController {
     /// Episodes started on this controller.
     runs: u64,
     stop: &'static AtomicBool,
-    /// Highest cumulative match counts seen: `/clock` subscriptions, command and trajectory
-    /// publications, then one per `subscribes` topic.
-    matched: Vec<i32>,
     failed: bool,
     time_secs: f64,
     /// Wall seconds spent starting processes and waiting for them to join, and how many.
@@ -160,7 +164,6 @@ pub fn external(
         hold_steps: 0,
         runs: 0,
         stop,
-        matched: vec![0; 3 + options.subscribes.len()],
         failed: false,
         time_secs: 0.0,
         startup: (0.0, 0),
@@ -205,14 +208,27 @@ impl ExternalController {
         self.startup
     }
 
-    /// A fresh state publisher for an episode (its topics' schedules start at t = 0).
+    /// A fresh state publisher for an episode (its topics' schedules start at t = 0). Every
+    /// state topic (joint states, IMUs, odometry, contacts, `/tf`) goes out at most once per
+    /// control period, as with `twin sim --ros --lockstep`: a node's executor (rclpy, rclcpp)
+    /// takes one message of a subscription per turn, so with several queued per period a timer
+    /// fires between them and reads whichever it had taken by then: the runs of the same seed
+    /// differed so (five `/joint_states` per 10 ms period at 500 Hz; two IMU samples at 200 Hz).
+    /// An IMU slower than the control rate keeps its rate.
     fn new_recording(&self) -> Result<()> {
+        let mut robot = self.robot.clone();
+        for imu in &mut robot.imus {
+            let rate = imu.meta.update_rate_hz.unwrap_or(self.options.control_rate_hz);
+            imu.meta.update_rate_hz = Some(rate.min(self.options.control_rate_hz));
+        }
         let options = RecordOptions {
             command_topic: Some(live::actuator_topic(&self.robot)),
             controller_topics: self.inner.topics().into_iter().map(|t| t.name).collect(),
+            state_rate_hz: self.options.control_rate_hz,
+            tf_rate_hz: self.options.control_rate_hz,
             ..RecordOptions::default()
         };
-        let recording = Recording::with_sinks(&self.robot, &options, vec![Box::new(SharedSink(self.sink.clone()))])?;
+        let recording = Recording::with_sinks(&robot, &options, vec![Box::new(SharedSink(self.sink.clone()))])?;
         self.shared.lock().map_err(|_| poisoned())?.recording = Some(recording);
         Ok(())
     }
@@ -244,27 +260,35 @@ impl ExternalController {
         }
     }
 
-    /// Starts the process and waits, bounded, until it has joined. A failure is the episode's.
+    /// Starts the process and waits, bounded, until it has joined: DDS discovery has seen,
+    /// from this process (endpoints discovery had not seen before it started), a reader of
+    /// `/clock`, a reader of each `subscribes` topic and a writer of a command topic
+    /// ([`crate::live::LiveController::readers_of`]: the discovery database, not match
+    /// events, which rustdds 0.15 drops). It notes in the log which topics it still waits for,
+    /// once a second. A failure is the episode's.
     fn start_process(&mut self) -> Result<()> {
         let started = Instant::now();
         let note = format!("run {} on domain {}", self.runs, self.lease.id());
+        let mut needed: Vec<String> = vec!["/clock".into()];
+        needed.extend(self.options.subscribes.iter().filter(|t| *t != "/clock").cloned());
+        let commands: Vec<String> = self.inner.command_topics().iter().map(|t| t.to_string()).collect();
+        // Endpoints of an earlier process may stay in the discovery database until its leave
+        // is heard: only new ones count.
+        let before: Vec<_> = needed
+            .iter()
+            .flat_map(|t| self.inner.readers_of(t))
+            .chain(commands.iter().flat_map(|t| self.inner.writers_of(t)))
+            .collect();
         let mut process = ControllerProcess::start(&self.options.command, &self.folder, &self.env, &self.log, &note)?;
-        let before = self.matched.clone();
         let join = Duration::from_secs_f64(self.options.join_timeout_secs);
+        let mut said = Instant::now();
         let outcome = loop {
-            self.poll_matches()?;
-            let clock = self.matched[0] > before[0];
-            let commands = self.matched[1] > before[1] || self.matched[2] > before[2];
-            let missing: Vec<&str> = self
-                .options
-                .subscribes
-                .iter()
-                .zip(&self.matched[3..])
-                .zip(&before[3..])
-                .filter(|&((_, now), then)| now <= then)
-                .map(|((t, _), _)| t.as_str())
-                .collect();
-            if clock && commands && missing.is_empty() {
+            let fresh = |seen: Vec<crate::live::dds::SeenEndpoint>| seen.iter().any(|e| !before.contains(e));
+            let missing: Vec<&str> =
+                needed.iter().filter(|t| !fresh(self.inner.readers_of(t))).map(String::as_str).collect();
+            let publishing = commands.iter().any(|t| fresh(self.inner.writers_of(t)));
+            self.inner.watch_readers();
+            if publishing && missing.is_empty() {
                 break None;
             }
             if let Some(status) = process.exited() {
@@ -276,31 +300,60 @@ impl ExternalController {
             if self.stop.load(Ordering::Relaxed) {
                 break Some("interrupted: stopped by Ctrl-C while it was joining".into());
             }
-            if started.elapsed() >= join {
+            let lacks = || {
                 let mut lacks = Vec::new();
-                if !clock {
+                if missing.contains(&"/clock") {
                     lacks.push("subscribed to /clock (is use_sim_time set?)".to_string());
                 }
-                if !missing.is_empty() {
-                    lacks.push(format!("subscribed to {}", missing.join(", ")));
+                let others: Vec<&str> = missing.iter().copied().filter(|t| *t != "/clock").collect();
+                if !others.is_empty() {
+                    lacks.push(format!("subscribed to {}", others.join(", ")));
                 }
-                if !commands {
+                if !publishing {
                     lacks.push(format!(
                         "published on {} or /{}/joint_trajectory",
                         live::command_topic(&self.robot),
                         self.robot.name
                     ));
                 }
+                lacks.join(", nor ")
+            };
+            if started.elapsed() >= join {
                 break Some(format!(
                     "never joined: within {} s (join_timeout_secs) on domain {} it had not {} (see {})",
                     self.options.join_timeout_secs,
                     self.lease.id(),
-                    lacks.join(", nor "),
+                    lacks(),
                     self.log.display()
+                ));
+            }
+            if said.elapsed() >= JOIN_NOTE_EVERY {
+                said = Instant::now();
+                self.note(&format!(
+                    "join: {:.1} s after the start, waiting for the process to have {}",
+                    started.elapsed().as_secs_f64(),
+                    lacks()
                 ));
             }
             std::thread::sleep(Duration::from_millis(5));
         };
+        if outcome.is_none() {
+            // The node creates its other readers (an IMU's) about when those waited for, and
+            // each one's own side matches twin's writer when twin's announcement of it reaches
+            // the node: wait until the set of its readers of twin's state topics has not changed
+            // for JOIN_SETTLE before the first state goes out (a reader that appears later gets
+            // the first state again, [`crate::live::outbox`]).
+            let mut readers = self.inner.state_readers();
+            let mut stable = Instant::now();
+            while stable.elapsed() < JOIN_SETTLE && started.elapsed() < join {
+                std::thread::sleep(Duration::from_millis(5));
+                let now = self.inner.state_readers();
+                if now != readers {
+                    readers = now;
+                    stable = Instant::now();
+                }
+            }
+        }
         self.process = Some(process);
         self.startup.0 += started.elapsed().as_secs_f64();
         self.startup.1 += 1;
@@ -309,21 +362,6 @@ impl ExternalController {
         }
         if let Some(why) = outcome {
             self.fail(why);
-        }
-        Ok(())
-    }
-
-    fn poll_matches(&mut self) -> Result<()> {
-        for (k, n) in self.inner.match_totals().into_iter().enumerate() {
-            if let Some(n) = n {
-                self.matched[k] = self.matched[k].max(n);
-            }
-        }
-        let mut sink = self.sink.lock().map_err(|_| poisoned())?;
-        for (k, topic) in self.options.subscribes.iter().enumerate() {
-            if let Some(n) = sink.subscription_total(topic) {
-                self.matched[3 + k] = self.matched[3 + k].max(n);
-            }
         }
         Ok(())
     }
@@ -347,6 +385,40 @@ impl ExternalController {
                 break;
             }
         }
+    }
+
+    /// Why a period had no command (the bridge's error `e`), naming what twin sent the node
+    /// before that period's `/clock` and whether its readers were there for it, before blaming
+    /// the process.
+    fn no_command(&self, e: &Error) -> String {
+        let message = e.to_string();
+        if message.contains("not acknowledged") {
+            return format!("state not delivered: {message} (see {})", self.log.display());
+        }
+        // The topics it said it reads, and the joint states every controller reads.
+        let mut reads = self.options.subscribes.clone();
+        if !reads.iter().any(|t| t == "/joint_states") {
+            reads.push("/joint_states".into());
+        }
+        let sent = self.inner.sent_before_clock(&reads);
+        let missed: Vec<&str> =
+            reads.iter().filter(|t| self.inner.reached(t) != Some(true)).map(String::as_str).collect();
+        let blame = if missed.is_empty() {
+            "every reader it had of them was there and got it: the process hangs or stopped publishing".to_string()
+        } else {
+            format!(
+                "the node never received the last {} (no reader of it was there when it went out, or it did not \
+                 acknowledge): a join that missed its readers, not necessarily the process",
+                missed.join(", ")
+            )
+        };
+        format!(
+            "no command: none within {} s (period_timeout_secs) after /clock = {:.3} s; twin had sent {sent}; {blame} \
+             (see {})",
+            self.options.period_timeout_secs,
+            self.time_secs,
+            self.log.display()
+        )
     }
 
     /// Why the process can't go on, if it has exited.
@@ -379,6 +451,7 @@ impl Controller for ExternalController {
         }
         self.inner.discard_pending();
         self.inner.reset(model, observation)?;
+        self.inner.begin_run(!fresh);
         if self.runs > 1 {
             self.new_recording()?;
         }
@@ -387,6 +460,10 @@ impl Controller for ExternalController {
         self.hold_steps = self.steps_per_period;
         if fresh {
             self.start_process()?;
+            // The episode's start time on /clock before its first state goes out (unrecorded,
+            // as under a kept process): a node that answers states once it has seen a /clock
+            // answers the first one too. A timer fires nothing on it (time does not advance).
+            self.inner.announce_time(observation.time_secs);
         } else {
             self.note(&format!("run {}: the same process, the simulation reset under it", self.runs));
             self.announce_jump(observation.time_secs);
@@ -425,17 +502,9 @@ impl Controller for ExternalController {
         } else {
             match self.inner.proceed() {
                 Ok(go) => go,
-                Err(_) => {
+                Err(e) => {
                     let flood = self.inner.flood().map(|f| format!("flood: {f}"));
-                    let why = flood.or_else(|| self.exit_reason()).unwrap_or_else(|| {
-                        format!(
-                            "no command: none within {} s (period_timeout_secs) after /clock = {:.3} s: the process \
-                             hangs or stopped publishing (see {})",
-                            self.options.period_timeout_secs,
-                            self.time_secs,
-                            self.log.display()
-                        )
-                    });
+                    let why = flood.or_else(|| self.exit_reason()).unwrap_or_else(|| self.no_command(&e));
                     self.fail(why);
                     false
                 }

@@ -10,11 +10,19 @@
 //! 2. joins that domain with the live bridge ([`crate::live`], lockstep, loopback) and starts
 //!    `command` with `sh -c` in the scenario file's folder, in a process group of its own, its
 //!    stdout and stderr appended to a log ([`process::ControllerProcess`]);
-//! 3. waits, at most `join_timeout_secs`, until the process has joined: subscribed to `/clock`
-//!    and to the `subscribes` topics (default `/joint_states`), and publishing commands;
+//! 3. waits, at most `join_timeout_secs`, until the process has joined: DDS discovery has seen
+//!    its readers of `/clock` and of the `subscribes` topics (default `/joint_states`) and its
+//!    command publisher (the discovery database, [`crate::live::dds::Node::readers_of`]: rustdds
+//!    0.15 has no publication-matched status and drops match events), saying in the log each
+//!    second which it still waits for; then until its readers of twin's state topics have not
+//!    changed for 150 ms (an IMU reader made just after), and says the episode's start time on
+//!    `/clock`;
 //! 4. holds the start pose for the first control period (PD with the hold gains, as
-//!    `pd-hold`; the state goes out on `/joint_states`), then runs in lockstep: `/clock` = t,
-//!    exactly one command per control period, waiting at most `period_timeout_secs` for it;
+//!    `pd-hold`; the state goes out once per period on every state topic, an IMU included),
+//!    then runs in lockstep: the state acknowledged, `/clock` = t, exactly one command per
+//!    control period, waiting at most `period_timeout_secs` for it ([`crate::live`]); a missing
+//!    command's cause names what twin had sent, to which of the node's readers, and whether
+//!    they acknowledged it;
 //! 5. stops it: SIGINT, then SIGTERM, then SIGKILL to its process group, each after
 //!    `stop_timeout_secs` — per episode (`restart = "episode"`, the default) or at the end
 //!    (`restart = "never"`: one process per worker, the simulation reset under it; twin then
@@ -109,7 +117,9 @@ pub struct RosOptions {
     #[default(0.1)]
     pub reset_settle_secs: f64,
     /// Topics (besides `/clock`) the process must subscribe to before simulated time starts,
-    /// so that it misses none of their messages (default: `["/joint_states"]`).
+    /// so that it misses none of their messages (default: `["/joint_states"]`). A node that
+    /// subscribes only later (in a callback) leaves its topic out: its first state is sent
+    /// again when its reader appears, until its first command.
     #[default(vec!["/joint_states".into()])]
     pub subscribes: Vec<String>,
     /// Commands beyond one per control period, averaged over `flood_window_secs`, above which

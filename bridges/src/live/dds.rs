@@ -161,6 +161,15 @@ pub struct Node {
     entities: std::sync::Mutex<Entities>,
 }
 
+/// Another participant's reader or writer of one of twin's topics, as discovery saw it.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct SeenEndpoint {
+    /// Its GUID (a new process's endpoints have new ones).
+    pub guid: GUID,
+    /// Reliable (it acknowledges what it gets) or best effort (it cannot).
+    pub reliable: bool,
+}
+
 /// The ROS 2 node name of the bridge.
 pub const NODE_NAME: &str = "twin";
 /// The ROS 2 namespace of the bridge's node.
@@ -245,6 +254,43 @@ impl Node {
             if writer { e.writers.push(guid) } else { e.readers.push(guid) }
         }
         self.announce()
+    }
+
+    /// The other participants' readers of `ros_topic` that discovery has seen now: the full
+    /// current set from rustdds's discovery database ([`DomainParticipant::discovered_readers`]),
+    /// not the writer's match events (rustdds keeps 4 of those per writer and drops the rest).
+    /// A reader seen here gets what a writer of the topic sends from then on; a reader not seen
+    /// yet gets nothing (DDS keeps no volatile sample for a reader it has not met).
+    pub fn readers_of(&self, ros_topic: &str) -> Vec<SeenEndpoint> {
+        let topic = dds_topic(ros_topic);
+        let me = self.participant.guid().prefix;
+        self.participant
+            .discovered_readers()
+            .into_iter()
+            .filter(|r| r.subscription_topic_data.topic_name == topic)
+            .map(|r| SeenEndpoint {
+                guid: r.reader_proxy.remote_reader_guid,
+                reliable: r.subscription_topic_data.qos().is_reliable(),
+            })
+            .filter(|r| r.guid.prefix != me)
+            .collect()
+    }
+
+    /// The other participants' writers of `ros_topic` that discovery has seen now (see
+    /// [`Node::readers_of`]).
+    pub fn writers_of(&self, ros_topic: &str) -> Vec<SeenEndpoint> {
+        let topic = dds_topic(ros_topic);
+        let me = self.participant.guid().prefix;
+        self.participant
+            .discovered_writers()
+            .into_iter()
+            .filter(|w| w.publication_topic_data.topic_name == topic)
+            .map(|w| SeenEndpoint {
+                guid: w.writer_proxy.remote_writer_guid,
+                reliable: matches!(w.publication_topic_data.reliability, Some(Reliability::Reliable { .. })),
+            })
+            .filter(|w| w.guid.prefix != me)
+            .collect()
     }
 
     /// A writer of `ros_topic` (type `ros_type`, e.g. `sensor_msgs/msg/JointState`).

@@ -34,11 +34,17 @@
 //! 2. **period 0** runs without waiting, under hold (the home pose): a `use_sim_time` timer
 //!    fires when simulation time has advanced by its period, so it can only fire once `/clock`
 //!    moves past 0;
-//! 3. **each later period k** (t_k = k·P): the twin publishes `/clock` = t_k (every state
-//!    message stamped before t_k is out), takes exactly the next command in arrival order
-//!    (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and applies it over
-//!    [t_k, t_k + P). A rejected command counts as the period's command (the last good one is
-//!    held), so the run stays deterministic.
+//! 3. **each later period k** (t_k = k·P): every state message stamped before t_k is
+//!    delivered first: acknowledged by each reliable reader that has matched (rustdds
+//!    `wait_for_acknowledgments`, at most the lockstep timeout; [`outbox`]); a best-effort
+//!    reader (`qos_profile_sensor_data`) cannot acknowledge and gets its sample before `/clock`
+//!    only in the writing order. Then the twin publishes `/clock` = t_k, takes exactly the next
+//!    command in arrival order (waiting at most [`LiveOptions::lockstep_timeout_secs`]) and
+//!    applies it over [t_k, t_k + P). A rejected command counts as the period's command (the
+//!    last good one is held), so the run stays deterministic. Until the run's first command,
+//!    a state message goes out again (with `/clock`, every 200 ms) when a reader of its topic
+//!    appears that discovery had not seen when it went out ([`outbox`]): a node that subscribes
+//!    late still gets its first state.
 //! 4. **flood**: just before each later period's `/clock`, every command still queued is taken:
 //!    the first stays for that period, the others (commands beyond one per period) are dropped
 //!    and counted; above [`LiveOptions::flood_commands_per_period`] on average over
@@ -52,9 +58,13 @@
 //! t_k during period k, and twin applies that answer from t_(k+1). Either way a command acts
 //! one period after the state it answers (the one-period delay), and the k-th command a node
 //! sends is applied in period k: the run is a function of the node's answers alone, however
-//! long they take. Topics are not ordered against each other in DDS; the bridge writes the
-//! state before the `/clock` that follows it, from one thread, and on loopback they arrive in
-//! that order.
+//! long they take. Topics are not ordered against each other in DDS; the bridge waits for the
+//! reliable readers' acknowledgments of the state before it writes the `/clock` that follows
+//! it, and writes a best-effort reader's sample before that `/clock` from the same thread.
+//! A node's executor (rclpy, rclcpp) takes one message of a subscription per turn: with one
+//! message per topic and period, a single-threaded executor has taken period k's state by the
+//! time its timer fires on `/clock` k (the `/clock` subscription comes first in its turn); a
+//! topic sent several times per period (an IMU faster than the control rate) would not be.
 //!
 //! Services ([`simulation`]): pause, resume, step, reset and quit through the
 //! `simulation_interfaces` services `/twin/get_simulation_state`, `/twin/set_simulation_state`,
@@ -86,6 +96,7 @@ pub mod command;
 pub mod dds;
 pub mod flood;
 pub mod loopback;
+pub mod outbox;
 pub mod service;
 pub mod simulation;
 
@@ -207,7 +218,12 @@ pub struct LiveSink {
     /// The `/joint_states` writer, shared with the controller half, which asks it for matched
     /// readers before time starts (lockstep join).
     state_writer: SharedWriter,
+    /// The stream writers and what they sent, shared with the controller half ([`outbox`]).
+    outbox: SharedOutbox,
 }
+
+/// The [`outbox::Outbox`] the two halves share.
+type SharedOutbox = Arc<Mutex<outbox::Outbox>>;
 
 /// A writer the sink creates and the controller half watches.
 type SharedWriter = Arc<Mutex<Option<Arc<RawWriter>>>>;
@@ -220,7 +236,13 @@ impl Sink for LiveSink {
             return Ok(false);
         }
         if !self.writers.contains_key(&topic.name) {
-            let w = Arc::new(self.node.writer(&topic.name, topic.type_name, TopicQos::of(topic.qos))?);
+            let qos = TopicQos::of(topic.qos);
+            let w = Arc::new(self.node.writer(&topic.name, topic.type_name, qos)?);
+            if matches!(qos, TopicQos::Stream { .. })
+                && let Ok(mut o) = self.outbox.lock()
+            {
+                o.add(&topic.name, w.clone());
+            }
             if topic.kind == TopicKind::JointStates
                 && let Ok(mut s) = self.state_writer.lock()
             {
@@ -232,12 +254,17 @@ impl Sink for LiveSink {
         Ok(true)
     }
 
-    fn write(&mut self, id: usize, _topic: &TopicInfo, _log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
+    fn write(&mut self, id: usize, _topic: &TopicInfo, log_time_nanos: u64, message: &TypedMessage<'_>) -> Result<()> {
         if let Some(name) = self.by_id.get(id)
             && let Some(w) = self.writers.get(name)
-            && w.write(RawCdr(message.to_cdr(&mut self.cdr).to_vec()), None).is_err()
         {
-            self.write_failures += 1;
+            let cdr = message.to_cdr(&mut self.cdr).to_vec();
+            if let Ok(mut o) = self.outbox.lock() {
+                o.sent(name, log_time_nanos, &cdr);
+            }
+            if w.write(RawCdr(cdr), None).is_err() {
+                self.write_failures += 1;
+            }
         }
         Ok(())
     }
@@ -311,6 +338,13 @@ pub struct LiveController {
     last_twist_secs: Option<f64>,
     /// The sink's `/joint_states` writer (lockstep join).
     state_writer: SharedWriter,
+    /// The participant (what discovery has seen).
+    node: Arc<Node>,
+    /// The sink's stream writers and what they sent ([`outbox`]).
+    outbox: SharedOutbox,
+    /// Lockstep: no command has come yet in this run (its first period's state is sent again
+    /// to readers that appear late, [`outbox::Outbox::resend_to_late_readers`]).
+    awaiting_first: bool,
     poll: rustdds::mio1::Poll,
     events: rustdds::mio1::Events,
     exchanged: Exchanged,
@@ -430,7 +464,11 @@ pub fn start(
         cdr: CdrWriter::new(),
         write_failures: 0,
         state_writer: SharedWriter::default(),
+        outbox: Arc::new(Mutex::new(outbox::Outbox::new(node.clone()))),
     };
+    if let Ok(mut o) = sink.outbox.lock() {
+        o.set_lockstep(options.pacing == Pacing::Lockstep);
+    }
     if twin_core::urdf::is_urdf(&text) {
         let w = node.writer("/robot_description", RosString::TYPE_NAME, TopicQos::Latched)?;
         let mut cdr = CdrWriter::new();
@@ -475,6 +513,9 @@ pub fn start(
         walker_reset: false,
         last_twist_secs: None,
         state_writer: sink.state_writer.clone(),
+        node: node.clone(),
+        outbox: sink.outbox.clone(),
+        awaiting_first: true,
         poll,
         events: rustdds::mio1::Events::with_capacity(16),
         exchanged,
@@ -1099,6 +1140,7 @@ impl LiveController {
         let mut resend = published + CLOCK_RESEND;
         loop {
             if self.take_one(t_nanos) {
+                self.first_command_came(t_nanos);
                 break;
             }
             let now = Instant::now();
@@ -1106,8 +1148,9 @@ impl LiveController {
                 return Err(Error::Live {
                     message: format!(
                         "lockstep: no command on {} (nor {}, {}, {}) within {} s after /clock = {:.3} s (command {} \
-                         of the run); is the controller still running in domain {} (ROS_DOMAIN_ID), sending one \
-                         command per /clock period? (--lockstep-timeout sets the wait)",
+                         of the run); what twin sent before that /clock: {}; is the controller still running in \
+                         domain {} (ROS_DOMAIN_ID), sending one command per /clock period? (--lockstep-timeout \
+                         sets the wait)",
                         self.command_topic,
                         self.trajectory_topic,
                         self.by_name_topic,
@@ -1115,6 +1158,7 @@ impl LiveController {
                         self.options.lockstep_timeout_secs,
                         t_nanos as f64 * 1e-9,
                         self.stats.periods,
+                        self.sent_before_clock(&["/joint_states".to_string()]),
                         self.options.domain_id
                     ),
                 });
@@ -1126,6 +1170,11 @@ impl LiveController {
             // (volatile): say the time again now and then. A use_sim_time node sees the same
             // time twice, which fires nothing.
             if now >= resend {
+                // Before the run's first command, the state that went out before a reader of
+                // its topic appeared goes out again (then /clock, in the period's order).
+                if self.awaiting_first {
+                    self.resend_to_late_readers(t_nanos);
+                }
                 let _ = self.clock.write(RawCdr(self.clock_cdr.bytes().to_vec()), None);
                 resend = now + CLOCK_RESEND;
             }
@@ -1164,7 +1213,11 @@ impl LiveController {
         if !first && self.options.pacing == Pacing::Lockstep {
             self.take_surplus(t_secs)?;
         }
-        // /clock first: the state stamped before t is already out.
+        // Lockstep: the state stamped before t is delivered (acknowledged by every reliable
+        // reader), then /clock = t ([`outbox`]).
+        if !first && self.options.pacing == Pacing::Lockstep {
+            self.deliver(t_secs)?;
+        }
         if !first || self.options.pacing != Pacing::Lockstep {
             self.publish_clock(t_nanos);
         }
@@ -1204,6 +1257,7 @@ impl Controller for LiveController {
     fn reset(&mut self, model: &Model, observation: &Observation<'_>) -> Result<()> {
         self.commander = Commander::new(model, self.options.command_interface);
         self.step = 0;
+        self.begin_run(true);
         self.flood.reset();
         self.flooded = None;
         if let Some(w) = self.walker.as_mut() {
