@@ -143,6 +143,12 @@ pub fn external(
         }
     });
     let (sink, mut inner) = live::start(robot, &live_options, stop, warn)?;
+    // The topics it said it reads, and the joint states every controller reads.
+    let mut reads = options.subscribes.clone();
+    if !reads.iter().any(|t| t == "/joint_states") {
+        reads.push("/joint_states".into());
+    }
+    inner.set_reads(reads);
     // The process's join and the first period's hold are done here, per episode.
     inner.mark_joined();
     let shared = Arc::new(Mutex::new(Shared::default()));
@@ -395,14 +401,7 @@ impl ExternalController {
         if message.contains("not acknowledged") {
             return format!("state not delivered: {message} (see {})", self.log.display());
         }
-        // The topics it said it reads, and the joint states every controller reads.
-        let mut reads = self.options.subscribes.clone();
-        if !reads.iter().any(|t| t == "/joint_states") {
-            reads.push("/joint_states".into());
-        }
-        let sent = self.inner.sent_before_clock(&reads);
-        let missed: Vec<&str> =
-            reads.iter().filter(|t| self.inner.reached(t) != Some(true)).map(String::as_str).collect();
+        let (sent, missed) = self.inner.missing_command().cloned().unwrap_or_default();
         let blame = if missed.is_empty() {
             "every reader it had of them was there and got it: the process hangs or stopped publishing".to_string()
         } else {

@@ -345,6 +345,11 @@ pub struct LiveController {
     /// Lockstep: no command has come yet in this run (its first period's state is sent again
     /// to readers that appear late, [`outbox::Outbox::resend_to_late_readers`]).
     awaiting_first: bool,
+    /// The state topics the node reads, and, when a command did not come, what twin had sent
+    /// before that `/clock` and which of them had not reached the node
+    /// ([`LiveController::missing_command`]).
+    reads: Vec<String>,
+    missing: Option<(String, Vec<String>)>,
     poll: rustdds::mio1::Poll,
     events: rustdds::mio1::Events,
     exchanged: Exchanged,
@@ -516,6 +521,8 @@ pub fn start(
         node: node.clone(),
         outbox: sink.outbox.clone(),
         awaiting_first: true,
+        reads: vec!["/joint_states".into()],
+        missing: None,
         poll,
         events: rustdds::mio1::Events::with_capacity(16),
         exchanged,
@@ -1145,10 +1152,13 @@ impl LiveController {
             }
             let now = Instant::now();
             if now >= deadline {
+                let sent = self.sent_before_clock(&self.reads);
+                let missed = self.reads.iter().filter(|t| self.reached(t) != Some(true)).cloned().collect();
+                self.missing = Some((sent.clone(), missed));
                 return Err(Error::Live {
                     message: format!(
                         "lockstep: no command on {} (nor {}, {}, {}) within {} s after /clock = {:.3} s (command {} \
-                         of the run); what twin sent before that /clock: {}; is the controller still running in \
+                         of the run); what twin sent before that /clock: {sent}; is the controller still running in \
                          domain {} (ROS_DOMAIN_ID), sending one command per /clock period? (--lockstep-timeout \
                          sets the wait)",
                         self.command_topic,
@@ -1158,7 +1168,6 @@ impl LiveController {
                         self.options.lockstep_timeout_secs,
                         t_nanos as f64 * 1e-9,
                         self.stats.periods,
-                        self.sent_before_clock(&["/joint_states".to_string()]),
                         self.options.domain_id
                     ),
                 });

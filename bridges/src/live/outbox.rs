@@ -343,6 +343,19 @@ impl LiveController {
         format!("{state}; /clock to {clock} reader(s)")
     }
 
+    /// Sets the state topics the node reads (default: `/joint_states`): a missing command's
+    /// account names them even without a reader ([`LiveController::missing_command`]).
+    pub fn set_reads(&mut self, topics: Vec<String>) {
+        self.reads = topics;
+    }
+
+    /// When the last period's command did not come: what twin had sent before that `/clock`
+    /// ([`LiveController::sent_before_clock`]), and which of the topics the node reads had not
+    /// reached it then ([`LiveController::reached`]).
+    pub fn missing_command(&self) -> Option<&(String, Vec<String>)> {
+        self.missing.as_ref()
+    }
+
     /// Whether the last message on `topic` reached every reader the node has of it
     /// ([`Outbox::reached`]; `None`: nothing sent on it).
     pub fn reached(&self, topic: &str) -> Option<bool> {
