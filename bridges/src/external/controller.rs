@@ -403,7 +403,9 @@ impl ExternalController {
         }
         let (sent, missed) = self.inner.missing_command().cloned().unwrap_or_default();
         let blame = if missed.is_empty() {
-            "every reader it had of them was there and got it: the process hangs or stopped publishing".to_string()
+            "every reader it had of them was there and acknowledged it: the process hangs, stopped publishing or \
+             waits for something else"
+                .to_string()
         } else {
             format!(
                 "the node never received the last {} (no reader of it was there when it went out, or it did not \
@@ -462,7 +464,7 @@ impl Controller for ExternalController {
             // The episode's start time on /clock before its first state goes out (unrecorded,
             // as under a kept process): a node that answers states once it has seen a /clock
             // answers the first one too. A timer fires nothing on it (time does not advance).
-            self.inner.announce_time(observation.time_secs);
+            self.inner.announce_time_delivered(observation.time_secs, Duration::from_secs(1));
         } else {
             self.note(&format!("run {}: the same process, the simulation reset under it", self.runs));
             self.announce_jump(observation.time_secs);

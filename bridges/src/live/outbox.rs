@@ -318,6 +318,19 @@ impl LiveController {
         }
     }
 
+    /// Says `t_secs` on `/clock` before a run's first state goes out ([`Self::announce_time`]),
+    /// waits (at most `timeout`) until every reliable `/clock` reader acknowledged it, and says
+    /// it again: a volatile reader that matched twin's writer only after the first write
+    /// acknowledges what it skipped (Cyclone DDS does), so the second write is the one it gets.
+    /// A node that answers states only once it has seen a `/clock` lost whole episodes so. The
+    /// same time twice fires no timer.
+    pub fn announce_time_delivered(&mut self, t_secs: f64, timeout: Duration) {
+        self.announce_time(t_secs);
+        let _ = self.clock.wait_for_acknowledgments(timeout);
+        self.repeat_time();
+        let _ = self.clock.wait_for_acknowledgments(timeout);
+    }
+
     /// Sends the state again to readers that appeared after it went out, saying so.
     pub(super) fn resend_to_late_readers(&mut self, t_nanos: u64) {
         let resent = match self.outbox.lock() {
