@@ -14,6 +14,7 @@
 //!   outputs (`episodes.csv`, `summary.json`, `worst/`).
 //! - [`merge`]: what each shard records (`shard.json`: twin version, spec hash, command), shard
 //!   progress, and merging shards into the single-machine outputs.
+//! - [`repeat`]: the first episode run again and compared (is a user's node reproducible?).
 //! - [`summary`]: success rate with a Wilson interval, metric quantiles, and the parameters
 //!   that separate failures from successes.
 //! - [`sweep`]: success against one parameter (`--sweep NAME=FROM:TO:STEP`): a batch per level,
@@ -47,6 +48,7 @@ pub mod draw;
 pub mod episode;
 pub mod error;
 pub mod merge;
+pub mod repeat;
 pub mod run;
 pub mod spec;
 pub mod summary;
@@ -56,6 +58,7 @@ pub use draw::Layout;
 pub use episode::{Batch, CheckFactory, ControllerFactory, DisturbanceFactory, EpisodeOptions, EpisodeResult, Worker};
 pub use error::{Error, Result};
 pub use merge::{Merged, ShardManifest, ShardStart, merge};
+pub use repeat::Repeat;
 pub use run::{Report, RunInfo, RunOptions, Shard, run_batch};
 pub use spec::{Mode, Spec, Term};
 pub use summary::{Outcomes, Summary};

@@ -67,6 +67,9 @@ pub struct RunOptions {
     pub out_dir: Option<PathBuf>,
     /// Re-simulate the K worst episodes and write their trajectories to `worst/`. (default: 0)
     pub record_worst: usize,
+    /// Run the first episode again and compare its row ([`crate::repeat`]): one episode more,
+    /// for controllers outside twin (a ROS 2 node). (default: false)
+    pub repeat_first: bool,
 }
 
 /// What identifies a batch: equal for all shards of one batch (except `shard`).
@@ -120,6 +123,8 @@ pub struct Report {
     pub interrupted: bool,
     /// Simulation steps taken by the finished episodes (falls end episodes early).
     pub simulated_steps: u64,
+    /// The first episode run again ([`RunOptions::repeat_first`]), if it was.
+    pub repeat: Option<crate::repeat::Repeat>,
 }
 
 /// How bad an episode is, for `--record-worst`: diverged, then fell (earlier is worse), then
@@ -205,6 +210,7 @@ pub fn run_batch(
     let chunk = (threads * 32).max(1);
     let mut interrupted = false;
     let mut simulated_steps = 0u64;
+    let mut first: Option<EpisodeResult> = None;
     let dt = batch.nominal.timestep_secs();
     for ids in indices.chunks(chunk) {
         if stop.load(Ordering::Relaxed) {
@@ -242,6 +248,9 @@ pub fn run_batch(
             let r = r?;
             simulated_steps += (r.sim_secs / dt).round() as u64;
             builder.push(&r);
+            if options.repeat_first && first.is_none() {
+                first = Some(r.clone());
+            }
             if let Some(w) = csv_writer.as_mut() {
                 w.write_record(crate::summary::csv_record(&r)).map_err(|e| csv_io(&tmp_csv, e))?;
             }
@@ -259,6 +268,10 @@ pub fn run_batch(
         }
     }
     let summary = builder.finish();
+    let repeat = match first.filter(|_| !interrupted) {
+        Some(r) => Some(crate::repeat::check(batch, &r)?),
+        None => None,
+    };
 
     if let (Some(dir), Some(w)) = (&options.out_dir, csv_writer) {
         let file = w
@@ -281,6 +294,7 @@ pub fn run_batch(
         worst: worst.iter().map(|r| r.index).collect(),
         interrupted,
         simulated_steps,
+        repeat,
     })
 }
 

@@ -68,6 +68,12 @@ pub struct Args {
     #[arg(long, default_value_t = 0)]
     pub record_worst: usize,
 
+    /// With a controller outside twin (a scenario's `controller = "ros"`), do not run the first
+    /// episode a second time to check that the node's answers are reproducible (by default it
+    /// is run again and a difference is reported with the node's likely pattern).
+    #[arg(long)]
+    pub no_repeat_check: bool,
+
     /// Controller driving the robot: pd-hold (alias hold: hold the home pose), passive (no
     /// torque) or walk (stand and balance; with a scenario, walk as it says) [default:
     /// pd-hold, or the scenario's].
@@ -363,6 +369,7 @@ fn run_one(
         shard,
         out_dir: out.map(Path::to_path_buf),
         record_worst: args.record_worst,
+        repeat_first: external && !args.no_repeat_check,
     };
     let requested = (0..args.episodes).filter(|&i| shard.is_none_or(|s| s.contains(i))).count() as u64;
     // A shard records what it runs before its first episode (for merge and --status); a shard
@@ -405,6 +412,11 @@ fn run_one(
     }
     let secs = started.elapsed().as_secs_f64();
     print!("{}", report.summary.to_text(report.requested));
+    match &report.repeat {
+        Some(r) if !r.reproducible() => println!("warning: {}", r.explain()),
+        Some(r) => eprintln!("{}", r.explain()),
+        None => {}
+    }
     eprintln!(
         "\n{} episodes in {:.1} s ({:.1} episodes/s, {:.0} steps/s){}",
         report.summary.outcomes.episodes,

@@ -518,6 +518,8 @@ struct RosRun {
     mcap: PathBuf,
     stdout: String,
     node_out: PathBuf,
+    /// The node's stdout and stderr, for the failure messages.
+    node_log: String,
 }
 
 /// Runs `twin sim MODEL <twin_args>` (its `run.mcap` replaced by a file of its own, in a
@@ -536,6 +538,8 @@ fn run_rclpy_on(model: &Path, twin_args: &[String], script: Option<&Path>, node_
     let loopback = twin_bridges::live::Loopback::write(dir.path(), lease.id()).unwrap();
     let args: Vec<String> =
         twin_args.iter().map(|a| if a == "run.mcap" { mcap.display().to_string() } else { a.clone() }).collect();
+    // The Python venv first (made on first use, a minute): twin in real time would be done by then.
+    rclpy_python();
     let mut cmd = twin();
     cmd.arg("sim").arg(model).args(["--ros-interface", "lo"]).args(&args);
     for (key, v) in loopback.environment() {
@@ -561,7 +565,9 @@ fn run_rclpy_on(model: &Path, twin_args: &[String], script: Option<&Path>, node_
         String::from_utf8_lossy(&node_output.stdout),
         String::from_utf8_lossy(&node_output.stderr)
     );
-    RosRun { _dir: dir, mcap, stdout, node_out }
+    let node_log =
+        format!("{}{}", String::from_utf8_lossy(&node_output.stdout), String::from_utf8_lossy(&node_output.stderr));
+    RosRun { _dir: dir, mcap, stdout, node_out, node_log }
 }
 
 /// (height of the base above the ground, m; tilt from upright, rad) from `/odom` (the
@@ -710,8 +716,9 @@ fn ros_gazebo_empty_services_from_rclpy_pause_unpause_and_reset() {
         ["--ros", "--rtf", "1", "--duration", "15", "--record", "run.mcap"].map(String::from).to_vec();
     let node_args: Vec<String> = ["--mode", "services", "--out", "NODE_OUT"].map(String::from).to_vec();
     let run = run_rclpy(&twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
-    let text = std::fs::read_to_string(&run.node_out)
-        .unwrap_or_else(|e| panic!("the client wrote nothing ({e}): it failed or timed out\n{}", run.stdout));
+    let text = std::fs::read_to_string(&run.node_out).unwrap_or_else(|e| {
+        panic!("the client wrote nothing ({e}): it failed or timed out\n{}\nnode:\n{}", run.stdout, run.node_log)
+    });
     let node: Json = serde_json::from_str(&text).unwrap();
     let f = |v: &Json| v.as_f64().unwrap_or_else(|| panic!("not a number: {v} in {node}"));
     // Paused: the same /clock before and after 1 s of wall time, and no /clock message at all.

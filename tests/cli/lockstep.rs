@@ -128,6 +128,8 @@ fn identical_under_load(scenario: &Path, dir: &Path, runs: u32, episodes: u32, p
         let out = dir.join(format!("run{run}"));
         let (ok, stdout, stderr) = randomize(scenario, &out, episodes, threads);
         assert!(ok, "run {run}: {stdout}\n{stderr}");
+        // The first episode was run twice in each batch (the repeat check) and came out the same.
+        assert!(stderr.contains("episode 0 run again: the same row of episodes.csv"), "run {run}: {stdout}\n{stderr}");
         let csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
         let checks = column(&csv, "checks");
         assert!(
@@ -188,6 +190,48 @@ fn a_cyclone_node_that_waits_for_clock_runs_every_episode_identically_under_load
     let runs = count("TWIN_LOCKSTEP_RUNS", 3);
     let episodes = count("TWIN_LOCKSTEP_EPISODES", 4);
     identical_under_load(&s, dir.path(), runs, episodes, 50);
+}
+
+/// A node that answers each IMU sample (best effort) in its callback, from the latest
+/// `/joint_states` (reliable): twin delivers and has acknowledged a period's `/joint_states`
+/// before the IMU goes out, so each answer reads one period's state.
+#[test]
+fn a_node_that_answers_its_imu_runs_every_episode_identically_under_load() {
+    let dir = tempfile::tempdir().unwrap();
+    let reads = "subscribes = [\"/joint_states\", \"/humanoid/imu/data\"]";
+    let s = scenario(dir.path(), "imu.toml", 0.5, &rclpy_node("imu", "", &tag("imu")), reads);
+    let runs = count("TWIN_LOCKSTEP_RUNS", 3);
+    let episodes = count("TWIN_LOCKSTEP_EPISODES", 4);
+    identical_under_load(&s, dir.path(), runs, episodes, 50);
+}
+
+/// A node twin cannot make reproducible (its command also depends on the wall clock): the
+/// batch runs its first episode again, finds another row and says so, naming the node's
+/// pattern from when its commands came (after each `/clock`: a timer) and the likely causes.
+#[test]
+fn a_node_that_is_not_reproducible_is_caught_by_running_its_first_episode_again() {
+    let dir = tempfile::tempdir().unwrap();
+    let reads = "subscribes = [\"/joint_states\", \"/humanoid/imu/data\"]";
+    let s = scenario(dir.path(), "wall.toml", 0.3, &rclpy_node("wall-clock", "", &tag("wall")), reads);
+    let out = dir.path().join("wall");
+    let (ok, stdout, stderr) = randomize(&s, &out, 1, 1);
+    assert!(ok, "{stdout}\n{stderr}");
+    let warning = stdout.lines().find(|l| l.starts_with("warning: episode 0 run again gave another result"));
+    let warning = warning.unwrap_or_else(|| panic!("no repeat warning:\n{stdout}\n{stderr}"));
+    assert!(warning.contains("this batch is not reproducible"), "{warning}");
+    assert!(warning.contains("energy_j"), "{warning}");
+    assert!(warning.contains("29 of 29 commands came after their period's /clock"), "{warning}");
+    assert!(warning.contains("wall clock"), "{warning}");
+    // Without the check, one episode and no warning.
+    let (ok, stdout, stderr) = {
+        let o = twin()
+            .args(["randomize", "--no-repeat-check", "--episodes", "1", "--seed", "4", "--scenario"])
+            .arg(&s)
+            .output()
+            .unwrap();
+        output_of(o)
+    };
+    assert!(ok && !stdout.contains("run again") && !stderr.contains("run again"), "{stdout}\n{stderr}");
 }
 
 /// A node that never subscribes to `/joint_states` (it would 1000 s after its start) and so

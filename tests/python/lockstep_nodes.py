@@ -14,12 +14,20 @@ Modes (--mode):
                (its readers match late: twin's join must wait for them)
   callback     subscribes to /joint_states and the IMU in its first /clock callback (a reader
                twin can never see before time starts: twin must send the first state again)
+  multi        first-state on a MultiThreadedExecutor (4 threads), every callback in one
+               ReentrantCallbackGroup: callbacks of one node may run at the same time
+  subscription no timer: answers each /joint_states in its callback
+  imu          no timer: answers each IMU sample in its callback, from the latest /joint_states
+  wall-clock   first-state, its command also a little function of the wall clock
+               (time.monotonic()): a node twin can never make reproducible
 """
 import argparse
 import signal
 import time
 
 import rclpy
+import rclpy.callback_groups
+import rclpy.executors
 from rclpy.node import Node
 from rclpy.qos import qos_profile_sensor_data
 from rosgraph_msgs.msg import Clock
@@ -39,9 +47,12 @@ class Balance(Node):
         self.latest = None
         self.rate = 0.0
         self.pub = self.create_publisher(Float64MultiArray, f"/{robot}/joint_commands", 10)
-        self.create_timer(0.01, self.tick)
+        self.group = rclpy.callback_groups.ReentrantCallbackGroup() if mode == "multi" else None
+        self.mode = mode
+        if mode not in ("subscription", "imu"):
+            self.create_timer(0.01, self.tick, callback_group=self.group)
         self.subscribed = False
-        if mode == "first-state":
+        if mode in ("first-state", "multi", "subscription", "imu", "wall-clock"):
             self.subscribe()
         elif mode == "late":
             self.later = self.create_timer(delay, self.subscribe_once, clock=rclpy.clock.Clock())
@@ -49,8 +60,9 @@ class Balance(Node):
             self.clock_sub = self.create_subscription(Clock, "/clock", self.on_clock, qos_profile_sensor_data)
 
     def subscribe(self):
-        self.create_subscription(JointState, "/joint_states", self.on_joints, 10)
-        self.create_subscription(Imu, self.imu_topic, self.on_imu, qos_profile_sensor_data)
+        g = self.group
+        self.create_subscription(JointState, "/joint_states", self.on_joints, 10, callback_group=g)
+        self.create_subscription(Imu, self.imu_topic, self.on_imu, qos_profile_sensor_data, callback_group=g)
         self.subscribed = True
 
     def subscribe_once(self):
@@ -67,10 +79,14 @@ class Balance(Node):
             self.hold = list(msg.position)
             self.names = list(msg.name)
         self.latest = msg
+        if self.mode == "subscription":
+            self.tick()
 
     def on_imu(self, msg):
         self.rate = msg.angular_velocity.y
         self.imu = msg
+        if self.mode == "imu":
+            self.tick()
 
     def tick(self):
         if self.trace is not None:
@@ -85,12 +101,14 @@ class Balance(Node):
         for k, name in enumerate(self.names):
             if name in HIPS:
                 target[k] -= 0.05 * self.rate
+        if self.mode == "wall-clock":
+            target = [q + 1e-3 * (time.monotonic() % 1.0) for q in target]
         self.pub.publish(Float64MultiArray(data=target))
 
 
 def main():
     p = argparse.ArgumentParser()
-    p.add_argument("--mode", choices=["first-state", "late", "callback"], default="first-state")
+    p.add_argument("--mode", choices=["first-state", "late", "callback", "multi", "subscription", "imu", "wall-clock"], default="first-state")
     p.add_argument("--delay", type=float, default=2.0)
     p.add_argument("--robot", default="humanoid")
     p.add_argument("--imu-topic", default="/humanoid/imu/data")
@@ -102,8 +120,9 @@ def main():
     if a.trace:
         node.trace = open(a.trace, "a")
     signal.signal(signal.SIGTERM, lambda *_: rclpy.try_shutdown())
+    executor = rclpy.executors.MultiThreadedExecutor(4) if a.mode == "multi" else None
     try:
-        rclpy.spin(node)
+        rclpy.spin(node, executor=executor)
     except (KeyboardInterrupt, rclpy.executors.ExternalShutdownException):
         pass
     finally:

@@ -56,6 +56,9 @@ struct Shared {
     commands: u64,
     /// Control periods this episode.
     periods: u64,
+    /// Commands this episode that came before their period's `/clock`
+    /// ([`live::LiveStats::commands_before_clock`]).
+    before_clock: u64,
 }
 
 /// A user's ROS 2 node driving the twin (see the [module docs](super)).
@@ -86,7 +89,8 @@ pub struct ExternalController {
     startup: (f64, u64),
     /// Wall seconds spent stopping processes.
     stopping_secs: f64,
-    stats_at_reset: (u64, u64),
+    /// The bridge's periods, commands applied and commands before `/clock` at this episode's reset.
+    stats_at_reset: (u64, u64, u64),
 }
 
 /// The health of an external controller as a [`Check`] (named `controller`): it also
@@ -174,7 +178,7 @@ pub fn external(
         time_secs: 0.0,
         startup: (0.0, 0),
         stopping_secs: 0.0,
-        stats_at_reset: (0, 0),
+        stats_at_reset: (0, 0, 0),
     };
     // The state publisher now, so that its writers exist for the process to match.
     controller.new_recording()?;
@@ -457,7 +461,7 @@ impl Controller for ExternalController {
             self.new_recording()?;
         }
         let stats = self.inner.stats();
-        self.stats_at_reset = (stats.periods, stats.commands_applied);
+        self.stats_at_reset = (stats.periods, stats.commands_applied, stats.commands_before_clock);
         self.hold_steps = self.steps_per_period;
         if fresh {
             self.start_process()?;
@@ -515,6 +519,7 @@ impl Controller for ExternalController {
             let stats = self.inner.stats();
             s.periods = stats.periods - self.stats_at_reset.0;
             s.commands = stats.commands_applied - self.stats_at_reset.1;
+            s.before_clock = stats.commands_before_clock - self.stats_at_reset.2;
         }
         Ok(go)
     }
@@ -597,9 +602,9 @@ impl Check for ControllerHealth {
 
     fn verdict(&self) -> Verdict {
         let tracking = self.tracking.summary();
-        let (failure, join, periods, commands) = match self.shared.lock() {
-            Ok(s) => (s.failure.clone(), s.join_secs.unwrap_or(0.0), s.periods, s.commands),
-            Err(_) => (Some("internal: poisoned".into()), 0.0, 0, 0),
+        let (failure, join, periods, commands, before_clock) = match self.shared.lock() {
+            Ok(s) => (s.failure.clone(), s.join_secs.unwrap_or(0.0), s.periods, s.commands, s.before_clock),
+            Err(_) => (Some("internal: poisoned".into()), 0.0, 0, 0, 0),
         };
         Verdict {
             name: "controller".into(),
@@ -613,8 +618,33 @@ impl Check for ControllerHealth {
             .into_iter()
             .chain(tracking.measurements())
             .collect(),
-            details: vec![format!("joined in {join:.3} s wall"), tracking.to_string()],
+            details: vec![format!("joined in {join:.3} s wall"), pattern(commands, before_clock), tracking.to_string()],
             cause: failure,
         }
+    }
+}
+
+/// What the command timing says of the node's pattern, and what would make that pattern's
+/// output depend on more than the states twin sent (quoted when a run differs when run again).
+fn pattern(commands: u64, before_clock: u64) -> String {
+    if commands == 0 {
+        return "no command: nothing to say of how the node computes".into();
+    }
+    if before_clock * 2 > commands {
+        format!(
+            "{before_clock} of {commands} commands came before their period's /clock: the node answers a state message \
+             in its subscription callback (runs differ when what it uses of its other topics, the IMU or another state \
+             topic, depends on which callback its executor ran first, or when it uses the wall clock: compute from \
+             the answered message alone, or on /clock with a timer on simulation time reading the latest of each topic)"
+        )
+    } else {
+        format!(
+            "{} of {commands} commands came after their period's /clock: the node computes on /clock, a timer on \
+             simulation time (twin delivers a period's states before its /clock; runs differ when the node's callbacks \
+             run at the same time, a MultiThreadedExecutor with a ReentrantCallbackGroup, and the timer reads a state \
+             being taken: use a SingleThreadedExecutor or one MutuallyExclusiveCallbackGroup; or when it uses the \
+             wall clock, time.time() or a timer not on simulation time)",
+            commands - before_clock
+        )
     }
 }

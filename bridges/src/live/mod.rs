@@ -299,6 +299,10 @@ pub struct LiveStats {
     pub cmd_vel_clamped: u64,
     /// Stops of the walker after [`LiveOptions::cmd_vel_timeout_secs`] without a Twist.
     pub cmd_vel_timeouts: u64,
+    /// Lockstep: periods whose command was already there before their `/clock` went out (a
+    /// node that answers a state message in its subscription callback), not after it (a node
+    /// that computes on `/clock`, a timer on simulation time).
+    pub commands_before_clock: u64,
 }
 
 impl LiveStats {
@@ -1005,6 +1009,7 @@ impl LiveController {
                 let Ok(Some(sample)) = reader.take_next_sample() else { break };
                 if self.held.is_none() {
                     self.held = Some((input, sample.into_value()));
+                    self.stats.commands_before_clock += 1;
                 } else {
                     surplus[slot] += 1;
                 }

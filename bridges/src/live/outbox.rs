@@ -21,10 +21,10 @@
 
 use super::LiveController;
 use super::dds::{self, Node, RawCdr, RawWriter, SeenEndpoint};
-use twin_core::error::{Error, Result};
 use std::fmt::Write as _;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use twin_core::error::{Error, Result};
 
 /// The last message of one topic and what became of it.
 struct Last {
