@@ -157,7 +157,8 @@ fn identical_under_load(scenario: &Path, dir: &Path, runs: u32, episodes: u32, p
 /// 100 Hz sim-time timer, nothing until the first `/joint_states`; its commands lean on the
 /// latest state. Before, 2 to 5 of 8 episodes failed "no command" and the others differed
 /// between runs. And the same node subscribing 2 s late: the join waits for its readers,
-/// says so in the log, and the episodes are the same as the prompt node's.
+/// says so in the log, and the episodes are the same as the prompt node's; so are those of the
+/// node subscribing in its first `/clock` callback.
 #[test]
 fn a_node_that_waits_for_its_first_state_runs_every_episode_identically_under_load() {
     let dir = tempfile::tempdir().unwrap();
@@ -179,6 +180,15 @@ fn a_node_that_waits_for_its_first_state_runs_every_episode_identically_under_lo
     assert!(logs.lines().any(|l| l.contains("waiting for the process to have subscribed to /joint_states")), "{logs}");
     let late_csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
     assert_eq!(late_csv, csv, "a node whose readers matched late ran other episodes\n{logs}");
+
+    // The same node subscribing in its first /clock callback: the join says the start time
+    // before it waits for the state readers, so they are there before time starts.
+    let on_clock = scenario(dir.path(), "on_clock.toml", 0.5, &rclpy_node("callback", "", &t), reads);
+    let out = dir.path().join("on_clock");
+    let (ok, stdout, stderr) = randomize(&on_clock, &out, episodes, 1);
+    assert!(ok, "{stdout}\n{stderr}");
+    let on_clock_csv = std::fs::read_to_string(out.join("episodes.csv")).unwrap();
+    assert_eq!(on_clock_csv, csv, "a node subscribing on /clock ran other episodes\n{}", controller_logs(&out));
 }
 
 /// Cyclone DDS (not rclpy): a node that answers each `/joint_states` once it has seen a

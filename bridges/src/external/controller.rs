@@ -25,6 +25,10 @@ const JOIN_NOTE_EVERY: Duration = Duration::from_secs(1);
 /// first state goes out (see [`ExternalController::start_process`]).
 const JOIN_SETTLE: Duration = Duration::from_millis(150);
 
+/// While the join waits for the node's state readers, how often the episode's start time is
+/// said again on `/clock`.
+const CLOCK_REPEAT: Duration = Duration::from_millis(100);
+
 /// The bridge's sink, shared by the recordings of successive episodes (its DDS writers stay
 /// matched to the process).
 struct SharedSink(Arc<Mutex<LiveSink>>);
@@ -270,89 +274,44 @@ impl ExternalController {
         }
     }
 
-    /// Starts the process and waits, bounded, until it has joined: DDS discovery has seen,
-    /// from this process (endpoints discovery had not seen before it started), a reader of
-    /// `/clock`, a reader of each `subscribes` topic and a writer of a command topic
-    /// ([`crate::live::LiveController::readers_of`]: the discovery database, not match
-    /// events, which rustdds 0.15 drops). It notes in the log which topics it still waits for,
-    /// once a second. A failure is the episode's.
-    fn start_process(&mut self) -> Result<()> {
+    /// Starts the process and waits, bounded, until it has joined, in two phases, each
+    /// against the DDS discovery database ([`crate::live::LiveController::readers_of`], not
+    /// match events, which rustdds 0.15 drops; only endpoints discovery had not seen before the
+    /// process started count):
+    /// 1. a reader of `/clock` and a writer of a command topic;
+    /// 2. then `/clock` = `start_secs` (the episode's start, acknowledged by the `/clock`
+    ///    readers: a timer fires nothing on it, time does not advance) and a reader of each
+    ///    `subscribes` topic. A node that subscribes to its state in its first `/clock` callback
+    ///    does so now, before time starts, like one that subscribed at its start.
+    ///
+    /// Then the set of its readers of twin's state topics must not change for `JOIN_SETTLE`
+    /// (an IMU reader made a moment after the one waited for). It notes in the log which topics
+    /// it still waits for, once a second. A failure is the episode's.
+    fn start_process(&mut self, start_secs: f64) -> Result<()> {
         let started = Instant::now();
         let note = format!("run {} on domain {}", self.runs, self.lease.id());
-        let mut needed: Vec<String> = vec!["/clock".into()];
-        needed.extend(self.options.subscribes.iter().filter(|t| *t != "/clock").cloned());
+        let subscribes: Vec<String> = self.options.subscribes.iter().filter(|t| *t != "/clock").cloned().collect();
         let commands: Vec<String> = self.inner.command_topics().iter().map(|t| t.to_string()).collect();
         // Endpoints of an earlier process may stay in the discovery database until its leave
         // is heard: only new ones count.
-        let before: Vec<_> = needed
-            .iter()
+        let before: Vec<_> = std::iter::once("/clock")
+            .chain(subscribes.iter().map(String::as_str))
             .flat_map(|t| self.inner.readers_of(t))
             .chain(commands.iter().flat_map(|t| self.inner.writers_of(t)))
             .collect();
         let mut process = ControllerProcess::start(&self.options.command, &self.folder, &self.env, &self.log, &note)?;
-        let join = Duration::from_secs_f64(self.options.join_timeout_secs);
-        let mut said = Instant::now();
-        let outcome = loop {
-            let fresh = |seen: Vec<crate::live::dds::SeenEndpoint>| seen.iter().any(|e| !before.contains(e));
-            let missing: Vec<&str> =
-                needed.iter().filter(|t| !fresh(self.inner.readers_of(t))).map(String::as_str).collect();
-            let publishing = commands.iter().any(|t| fresh(self.inner.writers_of(t)));
-            self.inner.watch_readers();
-            if publishing && missing.is_empty() {
-                break None;
-            }
-            if let Some(status) = process.exited() {
-                break Some(format!(
-                    "exited before joining: {status}, before it joined the graph (see {})",
-                    self.log.display()
-                ));
-            }
-            if self.stop.load(Ordering::Relaxed) {
-                break Some("interrupted: stopped by Ctrl-C while it was joining".into());
-            }
-            let lacks = || {
-                let mut lacks = Vec::new();
-                if missing.contains(&"/clock") {
-                    lacks.push("subscribed to /clock (is use_sim_time set?)".to_string());
-                }
-                let others: Vec<&str> = missing.iter().copied().filter(|t| *t != "/clock").collect();
-                if !others.is_empty() {
-                    lacks.push(format!("subscribed to {}", others.join(", ")));
-                }
-                if !publishing {
-                    lacks.push(format!(
-                        "published on {} or /{}/joint_trajectory",
-                        live::command_topic(&self.robot),
-                        self.robot.name
-                    ));
-                }
-                lacks.join(", nor ")
-            };
-            if started.elapsed() >= join {
-                break Some(format!(
-                    "never joined: within {} s (join_timeout_secs) on domain {} it had not {} (see {})",
-                    self.options.join_timeout_secs,
-                    self.lease.id(),
-                    lacks(),
-                    self.log.display()
-                ));
-            }
-            if said.elapsed() >= JOIN_NOTE_EVERY {
-                said = Instant::now();
-                self.note(&format!(
-                    "join: {:.1} s after the start, waiting for the process to have {}",
-                    started.elapsed().as_secs_f64(),
-                    lacks()
-                ));
-            }
-            std::thread::sleep(Duration::from_millis(5));
-        };
+        let mut outcome = self.wait_for(&mut process, started, &before, &["/clock".to_string()], &commands, false);
+        if outcome.is_none() {
+            self.inner.announce_time_delivered(start_secs, Duration::from_secs(1));
+            outcome = self.wait_for(&mut process, started, &before, &subscribes, &[], true);
+        }
         if outcome.is_none() {
             // The node creates its other readers (an IMU's) about when those waited for, and
             // each one's own side matches twin's writer when twin's announcement of it reaches
             // the node: wait until the set of its readers of twin's state topics has not changed
             // for JOIN_SETTLE before the first state goes out (a reader that appears later gets
             // the first state again, [`crate::live::outbox`]).
+            let join = Duration::from_secs_f64(self.options.join_timeout_secs);
             let mut readers = self.inner.state_readers();
             let mut stable = Instant::now();
             while stable.elapsed() < JOIN_SETTLE && started.elapsed() < join {
@@ -374,6 +333,84 @@ impl ExternalController {
             self.fail(why);
         }
         Ok(())
+    }
+
+    /// Waits, bounded by `join_timeout_secs` from `started`, until discovery has a reader of each
+    /// of `readers` and (when `writers` is not empty) a writer of one of `writers` that are not
+    /// in `before`; `None` when it has, else why not (the episode's failure). With `say_time`,
+    /// the last `/clock` is said again every [`CLOCK_REPEAT`] meanwhile (a `/clock` reader that
+    /// discovery had seen may have matched twin's writer only after the first saying).
+    fn wait_for(
+        &mut self,
+        process: &mut ControllerProcess,
+        started: Instant,
+        before: &[crate::live::dds::SeenEndpoint],
+        readers: &[String],
+        writers: &[String],
+        say_time: bool,
+    ) -> Option<String> {
+        let join = Duration::from_secs_f64(self.options.join_timeout_secs);
+        let mut said = Instant::now();
+        let mut time_said = Instant::now();
+        loop {
+            if say_time && time_said.elapsed() >= CLOCK_REPEAT {
+                self.inner.repeat_time();
+                time_said = Instant::now();
+            }
+            let fresh = |seen: Vec<crate::live::dds::SeenEndpoint>| seen.iter().any(|e| !before.contains(e));
+            let missing: Vec<&str> =
+                readers.iter().filter(|t| !fresh(self.inner.readers_of(t))).map(String::as_str).collect();
+            let publishing = writers.is_empty() || writers.iter().any(|t| fresh(self.inner.writers_of(t)));
+            self.inner.watch_readers();
+            if publishing && missing.is_empty() {
+                return None;
+            }
+            if let Some(status) = process.exited() {
+                return Some(format!(
+                    "exited before joining: {status}, before it joined the graph (see {})",
+                    self.log.display()
+                ));
+            }
+            if self.stop.load(Ordering::Relaxed) {
+                return Some("interrupted: stopped by Ctrl-C while it was joining".into());
+            }
+            let lacks = || {
+                let mut lacks = Vec::new();
+                if missing.contains(&"/clock") {
+                    lacks.push("subscribed to /clock (is use_sim_time set?)".to_string());
+                }
+                let others: Vec<&str> = missing.iter().copied().filter(|t| *t != "/clock").collect();
+                if !others.is_empty() {
+                    lacks.push(format!("subscribed to {}", others.join(", ")));
+                }
+                if !publishing {
+                    lacks.push(format!(
+                        "published on {} or /{}/joint_trajectory",
+                        live::command_topic(&self.robot),
+                        self.robot.name
+                    ));
+                }
+                lacks.join(", nor ")
+            };
+            if started.elapsed() >= join {
+                return Some(format!(
+                    "never joined: within {} s (join_timeout_secs) on domain {} it had not {} (see {})",
+                    self.options.join_timeout_secs,
+                    self.lease.id(),
+                    lacks(),
+                    self.log.display()
+                ));
+            }
+            if said.elapsed() >= JOIN_NOTE_EVERY {
+                said = Instant::now();
+                self.note(&format!(
+                    "join: {:.1} s after the start, waiting for the process to have {}",
+                    started.elapsed().as_secs_f64(),
+                    lacks()
+                ));
+            }
+            std::thread::sleep(Duration::from_millis(5));
+        }
     }
 
     /// Says `t_secs` (the episode's start) on `/clock` after a reset under a kept process (a
@@ -464,11 +501,10 @@ impl Controller for ExternalController {
         self.stats_at_reset = (stats.periods, stats.commands_applied, stats.commands_before_clock);
         self.hold_steps = self.steps_per_period;
         if fresh {
-            self.start_process()?;
-            // The episode's start time on /clock before its first state goes out (unrecorded,
-            // as under a kept process): a node that answers states once it has seen a /clock
-            // answers the first one too. A timer fires nothing on it (time does not advance).
-            self.inner.announce_time_delivered(observation.time_secs, Duration::from_secs(1));
+            // The episode's start time goes out on /clock during the join (unrecorded, as under
+            // a kept process): a node that answers states once it has seen a /clock answers the
+            // first one too, one that subscribes on it has by the time the first state goes out.
+            self.start_process(observation.time_secs)?;
         } else {
             self.note(&format!("run {}: the same process, the simulation reset under it", self.runs));
             self.announce_jump(observation.time_secs);

@@ -11,12 +11,13 @@
 //!    `command` with `sh -c` in the scenario file's folder, in a process group of its own, its
 //!    stdout and stderr appended to a log ([`process::ControllerProcess`]);
 //! 3. waits, at most `join_timeout_secs`, until the process has joined: DDS discovery has seen
-//!    its readers of `/clock` and of the `subscribes` topics (default `/joint_states`) and its
-//!    command publisher (the discovery database, [`crate::live::dds::Node::readers_of`]: rustdds
-//!    0.15 has no publication-matched status and drops match events), saying in the log each
-//!    second which it still waits for; then until its readers of twin's state topics have not
-//!    changed for 150 ms (an IMU reader made just after), and says the episode's start time on
-//!    `/clock`;
+//!    its reader of `/clock` and its command publisher (the discovery database,
+//!    [`crate::live::dds::Node::readers_of`]: rustdds 0.15 has no publication-matched status
+//!    and drops match events); then says the episode's start time on `/clock` (acknowledged;
+//!    time does not advance, so a timer fires nothing) and waits for its readers of the
+//!    `subscribes` topics (default `/joint_states`), made at its start or in its first `/clock`
+//!    callback, saying in the log each second which it still waits for; then until its readers
+//!    of twin's state topics have not changed for 150 ms (an IMU reader made just after);
 //! 4. holds the start pose for the first control period (PD with the hold gains, as
 //!    `pd-hold`; the state goes out once per period on every state topic, an IMU included),
 //!    then runs in lockstep: the state acknowledged, `/clock` = t, exactly one command per
@@ -117,8 +118,9 @@ pub struct RosOptions {
     #[default(0.1)]
     pub reset_settle_secs: f64,
     /// Topics (besides `/clock`) the process must subscribe to before simulated time starts,
-    /// so that it misses none of their messages (default: `["/joint_states"]`). A node that
-    /// subscribes only later (in a callback) leaves its topic out: its first state is sent
+    /// at its start or in its callback of the start time on `/clock`, so that it misses none of
+    /// their messages (default: `["/joint_states"]`). A node that subscribes only later (in
+    /// another callback, after time has started) leaves its topic out: its first state is sent
     /// again when its reader appears, until its first command.
     #[default(vec!["/joint_states".into()])]
     pub subscribes: Vec<String>,
