@@ -155,10 +155,12 @@ fn randomize_with_an_rclpy_controller_is_identical_on_1_and_2_threads() {
     assert_eq!(column(&csv1, "checks"), vec!["controller=PASS;scenario=PASS"; 4], "{csv1}");
     assert_eq!(column(&csv1, "metric:controller.commands"), vec!["29"; 4], "{csv1}");
     assert_eq!(column(&csv1, "metric:controller.periods"), vec!["29"; 4], "{csv1}");
-    // Four processes each time, one per episode: their starts are in the workers' logs.
+    // Five processes each time, one per episode and one for the first episode run again (the
+    // repeat check, which found the same row): their starts are in the workers' logs.
+    assert!(err2.contains("episode 0 run again: the same row"), "{err2}");
     let logs = controller_logs(&dir.path().join("t2"));
-    assert_eq!(logs.matches("--- twin: run ").count(), 4, "{logs}");
-    assert_eq!(logs.matches("it ended after SIGINT").count(), 4, "{logs}");
+    assert_eq!(logs.matches("--- twin: run ").count(), 5, "{logs}");
+    assert_eq!(logs.matches("it ended after SIGINT").count(), 5, "{logs}");
     assert_none_left(&tag);
 }
 
@@ -186,7 +188,8 @@ fn a_kept_timer_driven_rclpy_node_runs_every_episode_and_the_same_on_1_and_2_thr
             let logs = controller_logs(&dir.path().join(name));
             let started = logs.matches(" on domain ").count();
             let kept = logs.matches("the same process, the simulation reset under it").count();
-            assert_eq!(started + kept, 8, "{name}: {logs}");
+            // (The repeat check runs the first episode once more.)
+            assert_eq!(started + kept, 9, "{name}: {logs}");
             assert!(kept >= 2, "{name}: only {kept} episodes under a kept process: {logs}");
         }
         csvs.push(csv);
@@ -292,7 +295,8 @@ fn a_flooding_rclpy_node_fails_each_episode_with_its_rate_and_leaves_nothing() {
     }
     assert_all_failed_as(&out, &stdout, "controller: flood", 2);
     let logs = controller_logs(&out);
-    assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 2, "{logs}");
+    // Both episodes and the first one's second run (the repeat check).
+    assert_eq!(logs.matches("flooding from t = 0.100 s").count(), 3, "{logs}");
     assert_none_left(&tag);
 }
 
