@@ -203,8 +203,9 @@ fn a_cyclone_node_that_waits_for_clock_runs_every_episode_identically_under_load
 }
 
 /// A node that answers each IMU sample (best effort) in its callback, from the latest
-/// `/joint_states` (reliable): twin delivers and has acknowledged a period's `/joint_states`
-/// before the IMU goes out, so each answer reads one period's state.
+/// `/joint_states` (reliable): twin writes a period's `/joint_states` before its IMU sample
+/// (the recording's topic order), and on loopback the node has it first: each answer reads
+/// that period's state (measured, not a DDS guarantee: BENCHMARKS.md, 20 runs under load).
 #[test]
 fn a_node_that_answers_its_imu_runs_every_episode_identically_under_load() {
     let dir = tempfile::tempdir().unwrap();
