@@ -401,18 +401,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             };
             if !nrmse.is_empty() && !default_split {
                 // A held-out log of the user's: also the before/after table of earlier versions.
-                validation = Some(
-                    robot
-                        .joints
-                        .iter()
-                        .enumerate()
-                        .map(|(j, joint)| sysid::report::NrmseReport {
-                            joint: joint.name.clone(),
-                            before: nrmse[0][j],
-                            after: nrmse[1][j],
-                        })
-                        .collect(),
-                );
+                validation = Some(before_after(&robot, &nrmse));
             }
             held_table = (!nrmse.is_empty()).then(|| sysid::report::HeldOutTable {
                 log: held_label.clone(),
@@ -424,18 +413,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         } else {
             let nrmse = sysid::validate(&robot, other, &opts, &[&fit.before, &fit.after])
                 .with_context(|| format!("validating on {held_label}"))?;
-            validation = Some(
-                robot
-                    .joints
-                    .iter()
-                    .enumerate()
-                    .map(|(j, joint)| sysid::report::NrmseReport {
-                        joint: joint.name.clone(),
-                        before: nrmse[0][j],
-                        after: nrmse[1][j],
-                    })
-                    .collect(),
-            );
+            validation = Some(before_after(&robot, &nrmse));
         }
     }
     // The fit written back: on the whole log with the chosen settings (the held-out scores are
@@ -511,4 +489,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eprintln!("MuJoCo model with the identified values (armature included) written to {}", out.display());
     }
     Ok(())
+}
+
+/// Per joint, the NRMSE before (`nrmse[0]`) and after (`nrmse[1]`) identification.
+fn before_after(robot: &sysid::RobotModel, nrmse: &[Vec<f64>]) -> Vec<sysid::report::NrmseReport> {
+    robot
+        .joints
+        .iter()
+        .enumerate()
+        .map(|(j, joint)| sysid::report::NrmseReport { joint: joint.name.clone(), before: nrmse[0][j], after: nrmse[1][j] })
+        .collect()
 }

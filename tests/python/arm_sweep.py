@@ -19,6 +19,7 @@ import sys
 
 import mujoco
 import numpy as np
+import sweep_plan
 from rosbags.rosbag2 import StoragePlugin, Writer
 from rosbags.typesys import Stores, get_typestore
 
@@ -130,33 +131,7 @@ def main():
                 mujoco.mj_step(model, data)
                 step += 1
 
-        def trapezoid(start, sign, speed, cruise):
-            ramp = speed / ACCEL
-
-            def profile(s):
-                if s < ramp:
-                    return (start + sign * 0.5 * ACCEL * s * s, sign * ACCEL * s, sign * ACCEL)
-                d_ramp = 0.5 * speed * ramp
-                if s < ramp + cruise:
-                    return (start + sign * (d_ramp + speed * (s - ramp)), sign * speed, 0.0)
-                r = min(s - ramp - cruise, ramp)
-                return (
-                    start + sign * (d_ramp + speed * cruise + speed * r - 0.5 * ACCEL * r * r),
-                    sign * (speed - ACCEL * r),
-                    -sign * ACCEL if r < ramp else 0.0,
-                )
-
-            return profile, 2 * ramp + cruise
-
-        for j in range(n):
-            for speed in speeds:
-                cruise = min(MAX_CRUISE, (STROKE - speed * speed / ACCEL) / speed)
-                for sign in (1.0, -1.0):
-                    advance(j, None, SETTLE)
-                    profile, secs = trapezoid(ref[j][0], sign, speed, cruise)
-                    advance(j, profile, secs)
-                    ref[j] = (profile(secs)[0], 0.0, 0.0)
-            advance(j, None, SETTLE)
+        sweep_plan.sweep(n, speeds, ref, advance, ACCEL, STROKE, MAX_CRUISE, SETTLE)
     truth = {}
     for name, (fc, fs, vs, delta, fv) in zip(NAMES, FRICTION):
         truth[name] = {"coulomb": fc, "breakaway": fs, "stribeck_velocity": vs, "exponent": delta, "viscous": fv}
