@@ -497,6 +497,10 @@ fn before_after(robot: &sysid::RobotModel, nrmse: &[Vec<f64>]) -> Vec<sysid::rep
         .joints
         .iter()
         .enumerate()
-        .map(|(j, joint)| sysid::report::NrmseReport { joint: joint.name.clone(), before: nrmse[0][j], after: nrmse[1][j] })
+        .map(|(j, joint)| sysid::report::NrmseReport {
+            joint: joint.name.clone(),
+            before: nrmse[0][j],
+            after: nrmse[1][j],
+        })
         .collect()
 }

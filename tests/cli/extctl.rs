@@ -111,7 +111,8 @@ fn randomize(scenario: &Path, out: &Path, episodes: u32, threads: u32) -> (bool,
     (ok, stdout, stderr, t.elapsed().as_secs_f64())
 }
 
-fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
+/// The `name` column of `episodes.csv` text, a value per episode.
+pub(crate) fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
     let mut r = csv.lines();
     let header: Vec<&str> = r.next().unwrap().split(',').collect();
     let k = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
@@ -120,7 +121,7 @@ fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
 }
 
 /// Every controller log a batch in `out` wrote (`out/controller_logs/*`), concatenated.
-fn controller_logs(out: &Path) -> String {
+pub(crate) fn controller_logs(out: &Path) -> String {
     std::fs::read_dir(out.join("controller_logs"))
         .unwrap()
         .flatten()

@@ -10,6 +10,7 @@
 //! so CI stays within a minute or two; BENCHMARKS.md gives the 20 × 10 run and its command).
 
 use crate::common::{output_of, repo_root, twin, write};
+use crate::extctl::{column, controller_logs};
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -98,21 +99,6 @@ fn randomize(scenario: &Path, out: &Path, episodes: u32, threads: u32) -> (bool,
         .output()
         .unwrap();
     output_of(o)
-}
-
-fn column<'a>(csv: &'a str, name: &str) -> Vec<&'a str> {
-    let mut r = csv.lines();
-    let header: Vec<&str> = r.next().unwrap().split(',').collect();
-    let k = header.iter().position(|h| *h == name).unwrap_or_else(|| panic!("no column {name}: {header:?}"));
-    r.map(|l| l.split(',').nth(k).unwrap_or("")).collect()
-}
-
-fn controller_logs(out: &Path) -> String {
-    std::fs::read_dir(out.join("controller_logs"))
-        .unwrap()
-        .flatten()
-        .map(|e| std::fs::read_to_string(e.path()).unwrap())
-        .collect()
 }
 
 /// Runs `scenario` `runs` times under CPU load (the last at 2 threads, the others at 1), each
