@@ -8,15 +8,22 @@
 //! `TWIN_EGL_LIBRARY` and `TWIN_OSMESA_LIBRARY` name the library files to load instead of
 //! `libEGL.so.1` and `libOSMesa.so.8`/`.6`. The library is loaded with `RTLD_GLOBAL`: MuJoCo
 //! finds its OpenGL functions through `eglGetProcAddress`/`OSMesaGetProcAddress` in the global
-//! namespace. One process uses one backend (the first that worked).
+//! namespace, and it is never unloaded. One process uses one backend (the first that worked).
 //!
-//! A [`GlContext`] is used by one thread at a time: [`GlContext::make_current`] binds it to the
-//! calling thread, [`GlContext::release`] unbinds it, so a renderer can move between a pool's
-//! threads between frames; each renderer has a context of its own.
+//! A context lives on a [`GlThread`] of its own for its whole life: made there, current there
+//! from the start, every OpenGL call of its renderer run there ([`GlThread::run`]), destroyed
+//! there, and the thread joined when the `GlThread` drops, after `eglReleaseThread`. No other
+//! thread touches EGL's per-thread state (loading runs on a short thread of its own too). This
+//! is what keeps the process's exit sound: libglvnd's `libEGL` frees, in its destructor at
+//! exit (`__eglFini`), the per-thread state of every thread that ever called EGL and has not
+//! released it, while a thread that ends frees its own in a `pthread` key destructor; a thread
+//! still ending when `main` returns (a `rayon` pool's are not joined when the pool drops) made
+//! both free the same block ("corrupted size vs. prev_size in fastbins", "double free" at exit).
+//! A thread that releases its state and is joined before exit cannot race that destructor.
 
 use crate::error::{Error, Result};
 use std::ffi::{CStr, CString, c_char, c_int, c_uint, c_void};
-use std::sync::{Mutex, OnceLock};
+use std::sync::{Mutex, OnceLock, mpsc};
 
 /// What to install when no OpenGL library loads.
 const INSTALL: &str = "install EGL with Mesa's software renderer (Debian/Ubuntu: `apt-get install libegl1 \
@@ -65,6 +72,7 @@ struct Egl {
     create_context: unsafe extern "C" fn(EglDisplay, EglConfig, EglContext, *const EglInt) -> EglContext,
     destroy_context: unsafe extern "C" fn(EglDisplay, EglContext) -> EglBoolean,
     make_current: unsafe extern "C" fn(EglDisplay, *mut c_void, *mut c_void, EglContext) -> EglBoolean,
+    release_thread: unsafe extern "C" fn() -> EglBoolean,
     /// The display every context of the process is made on, and the platform it came from.
     display: EglDisplay,
     config: EglConfig,
@@ -96,7 +104,34 @@ unsafe impl Sync for Loaded {}
 /// function loader to it).
 fn loaded() -> std::result::Result<&'static Loaded, String> {
     static LOADED: OnceLock<std::result::Result<Loaded, String>> = OnceLock::new();
-    LOADED.get_or_init(load).as_ref().map_err(Clone::clone)
+    LOADED
+        .get_or_init(|| {
+            // On a thread of its own that releases EGL's per-thread state and is joined (see the
+            // module docs): the caller may be a pool's thread that is never joined.
+            std::thread::scope(|scope| {
+                scope
+                    .spawn(|| {
+                        let loaded = load();
+                        if let Ok(Loaded::Egl(egl)) = &loaded {
+                            egl.release_thread();
+                        }
+                        loaded
+                    })
+                    .join()
+                    .unwrap_or_else(|_| Err("loading the OpenGL library panicked".into()))
+            })
+        })
+        .as_ref()
+        .map_err(Clone::clone)
+}
+
+impl Egl {
+    /// `eglReleaseThread`: unbinds the calling thread's context and frees EGL's state of the
+    /// thread, so that nothing of this thread is left for libEGL's destructor at exit.
+    fn release_thread(&self) {
+        // SAFETY: no preconditions; a thread without EGL state is a no-op.
+        unsafe { (self.release_thread)() };
+    }
 }
 
 fn load() -> std::result::Result<Loaded, String> {
@@ -187,7 +222,7 @@ fn load_egl() -> std::result::Result<Egl, String> {
         )
     };
     // SAFETY: as above.
-    let (create_context, destroy_context, make_current) = unsafe {
+    let (create_context, destroy_context, make_current, release_thread) = unsafe {
         (
             symbol::<unsafe extern "C" fn(EglDisplay, EglConfig, EglContext, *const EglInt) -> EglContext>(
                 handle,
@@ -198,6 +233,7 @@ fn load_egl() -> std::result::Result<Egl, String> {
                 handle,
                 "eglMakeCurrent",
             )?,
+            symbol::<unsafe extern "C" fn() -> EglBoolean>(handle, "eglReleaseThread")?,
         )
     };
     let ext = |name: &str| -> Option<*mut c_void> {
@@ -295,7 +331,17 @@ fn load_egl() -> std::result::Result<Egl, String> {
     if ok == 0 || n < 1 {
         return Err(format!("the EGL {platform} display has no 8-bit RGBA, 24-bit depth OpenGL configuration"));
     }
-    Ok(Egl { get_error, bind_api, create_context, destroy_context, make_current, display, config, platform })
+    Ok(Egl {
+        get_error,
+        bind_api,
+        create_context,
+        destroy_context,
+        make_current,
+        release_thread,
+        display,
+        config,
+        platform,
+    })
 }
 
 fn load_osmesa() -> std::result::Result<OsMesa, String> {
@@ -311,10 +357,10 @@ fn load_osmesa() -> std::result::Result<OsMesa, String> {
     }
 }
 
-/// An OpenGL context for offscreen rendering (see the module docs). MuJoCo renders into its own
-/// framebuffer object, so the context needs no surface; OSMesa's gets a small colour buffer of
-/// its own.
-pub struct GlContext {
+/// An OpenGL context for offscreen rendering, current on the [`GlThread`] that made it. MuJoCo
+/// renders into its own framebuffer object, so the context needs no surface; OSMesa's gets a
+/// small colour buffer of its own. Not `Send`: it never leaves its thread.
+struct GlContext {
     context: *mut c_void,
     /// OSMesa's colour buffer (RGBA, `OSMESA_BUFFER` pixels); empty for EGL.
     buffer: Vec<u8>,
@@ -323,31 +369,17 @@ pub struct GlContext {
 /// Side of OSMesa's default framebuffer: MuJoCo renders into its own offscreen buffer.
 const OSMESA_BUFFER: usize = 16;
 
-// SAFETY: a context is made current on one thread at a time (`make_current` takes `&mut self`
-// and `release` unbinds it); EGL and OSMesa allow a context that is current nowhere to be made
-// current on another thread.
-unsafe impl Send for GlContext {}
-
-impl std::fmt::Debug for GlContext {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("GlContext").field("backend", &self.backend()).finish()
-    }
-}
-
 /// Serialises context creation: EGL's `eglBindAPI` is per thread, but Mesa's context creation
 /// is not always safe to race.
 static CREATE: Mutex<()> = Mutex::new(());
 
 impl GlContext {
-    /// A new context of the process's backend (loading it on first use).
-    ///
-    /// # Errors
-    /// [`Error::Render`] when neither EGL nor OSMesa loads or gives a context, naming what to
-    /// install.
-    pub fn new() -> Result<GlContext> {
+    /// A new context of the process's backend (loading it on first use), current on the calling
+    /// thread.
+    fn new_current() -> Result<GlContext> {
         let lib = loaded().map_err(|message| Error::Render { message })?;
         let _guard = CREATE.lock().unwrap_or_else(|e| e.into_inner());
-        match lib {
+        let mut context = match lib {
             Loaded::Egl(egl) => {
                 // SAFETY: EGL_OPENGL_API is a valid API enum.
                 if unsafe { (egl.bind_api)(EGL_OPENGL_API) } == 0 {
@@ -368,7 +400,7 @@ impl GlContext {
                         ),
                     });
                 }
-                Ok(GlContext { context, buffer: Vec::new() })
+                GlContext { context, buffer: Vec::new() }
             }
             Loaded::OsMesa(osmesa) => {
                 // SAFETY: RGBA with 24-bit depth, 8-bit stencil, no accumulation, no sharing.
@@ -376,77 +408,164 @@ impl GlContext {
                 if context.is_null() {
                     return Err(Error::Render { message: "OSMesa could not create an OpenGL context".into() });
                 }
-                Ok(GlContext { context, buffer: vec![0; OSMESA_BUFFER * OSMESA_BUFFER * 4] })
+                GlContext { context, buffer: vec![0; OSMESA_BUFFER * OSMESA_BUFFER * 4] }
             }
-        }
-    }
-
-    /// Which library the context comes from.
-    pub fn backend(&self) -> GlBackend {
-        match loaded() {
-            Ok(Loaded::OsMesa(_)) => GlBackend::OsMesa,
-            _ => GlBackend::Egl,
-        }
-    }
-
-    /// A short description of the backend, e.g. `EGL (device platform)`.
-    pub fn describe(&self) -> String {
-        match loaded() {
-            Ok(Loaded::Egl(egl)) => format!("EGL ({} platform)", egl.platform),
-            Ok(Loaded::OsMesa(_)) => "OSMesa".into(),
-            Err(e) => e,
-        }
-    }
-
-    /// Binds the context to the calling thread.
-    ///
-    /// # Errors
-    /// [`Error::Render`] when the library refuses (the context is current on another thread).
-    pub fn make_current(&mut self) -> Result<()> {
-        let ok = match loaded().map_err(|message| Error::Render { message })? {
+        };
+        let ok = match lib {
             // SAFETY: a live context of this display, no surfaces (EGL_KHR_surfaceless_context).
             Loaded::Egl(egl) => unsafe {
-                (egl.make_current)(egl.display, std::ptr::null_mut(), std::ptr::null_mut(), self.context) != 0
+                (egl.make_current)(egl.display, std::ptr::null_mut(), std::ptr::null_mut(), context.context) != 0
             },
             // SAFETY: a live context and its buffer of OSMESA_BUFFER² RGBA bytes, which lives as
-            // long as the context.
+            // long as the context (the Vec's heap block does not move with the struct).
             Loaded::OsMesa(osmesa) => unsafe {
                 (osmesa.make_current)(
-                    self.context,
-                    self.buffer.as_mut_ptr().cast(),
+                    context.context,
+                    context.buffer.as_mut_ptr().cast(),
                     GL_UNSIGNED_BYTE,
                     OSMESA_BUFFER as c_int,
                     OSMESA_BUFFER as c_int,
                 ) != 0
             },
         };
-        if ok { Ok(()) } else { Err(Error::Render { message: "could not make the OpenGL context current".into() }) }
-    }
-
-    /// Unbinds the calling thread's context (EGL; OSMesa's stays bound until another is made
-    /// current, which is harmless).
-    pub fn release(&mut self) {
-        if let Ok(Loaded::Egl(egl)) = loaded() {
-            // SAFETY: unbinding: no surfaces, no context.
-            unsafe {
-                (egl.make_current)(egl.display, std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut())
-            };
+        if ok {
+            Ok(context)
+        } else {
+            // Dropping it unbinds nothing and destroys the context.
+            Err(Error::Render { message: "could not make the new OpenGL context current".into() })
         }
     }
 }
 
 impl Drop for GlContext {
+    /// Unbinds the context from its thread, then destroys it.
     fn drop(&mut self) {
         match loaded() {
             Ok(Loaded::Egl(egl)) => {
-                // SAFETY: a context of this display, current nowhere after `release` (EGL defers
-                // the destruction of a context still current on some thread).
-                unsafe { (egl.destroy_context)(egl.display, self.context) };
+                // SAFETY: unbinding the calling thread's context (no surfaces, no context), then
+                // destroying this context of this display, now current nowhere.
+                unsafe {
+                    (egl.make_current)(egl.display, std::ptr::null_mut(), std::ptr::null_mut(), std::ptr::null_mut());
+                    (egl.destroy_context)(egl.display, self.context);
+                }
             }
-            // SAFETY: a context made by OSMesaCreateContextExt.
-            Ok(Loaded::OsMesa(osmesa)) => unsafe { (osmesa.destroy_context)(self.context) },
+            // SAFETY: OSMesaMakeCurrent with no context and no buffer unbinds the thread's
+            // context; then a context made by OSMesaCreateContextExt, destroyed once.
+            Ok(Loaded::OsMesa(osmesa)) => unsafe {
+                (osmesa.make_current)(std::ptr::null_mut(), std::ptr::null_mut(), 0, 0, 0);
+                (osmesa.destroy_context)(self.context);
+            },
             Err(_) => {}
         }
+    }
+}
+
+/// A job for a [`GlThread`].
+type Job = Box<dyn FnOnce() + Send + 'static>;
+
+/// A thread that owns one OpenGL context for the context's whole life (see the module docs):
+/// it makes the context and makes it current, runs the jobs given to [`GlThread::run`] one at
+/// a time with it current, and when the `GlThread` drops it destroys the context, releases
+/// EGL's state of the thread and is joined. A renderer's OpenGL calls (MuJoCo's `mjr_*`) all
+/// go through its `GlThread`, whichever thread the renderer is used from.
+pub struct GlThread {
+    jobs: Option<mpsc::Sender<Job>>,
+    thread: Option<std::thread::JoinHandle<()>>,
+    backend: String,
+}
+
+impl std::fmt::Debug for GlThread {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("GlThread").field("backend", &self.backend).finish()
+    }
+}
+
+impl GlThread {
+    /// Starts the thread and makes its context (loading the OpenGL library on first use).
+    ///
+    /// # Errors
+    /// [`Error::Render`] when neither EGL nor OSMesa loads or gives a context (naming what to
+    /// install), or when the thread can't be started.
+    pub fn new() -> Result<GlThread> {
+        let (jobs, queue) = mpsc::channel::<Job>();
+        let (ready, started) = mpsc::sync_channel::<Result<String>>(1);
+        let thread = std::thread::Builder::new()
+            .name("twin-gl".into())
+            .spawn(move || {
+                match GlContext::new_current() {
+                    Ok(context) => {
+                        let _ = ready.send(Ok(describe()));
+                        for job in queue {
+                            // A job that panics has handed nothing back: its caller gets an
+                            // error; the context stays for the jobs after it and the teardown.
+                            let _ = std::panic::catch_unwind(std::panic::AssertUnwindSafe(job));
+                        }
+                        drop(context);
+                    }
+                    Err(e) => {
+                        let _ = ready.send(Err(e));
+                    }
+                }
+                if let Ok(Loaded::Egl(egl)) = loaded() {
+                    egl.release_thread();
+                }
+            })
+            .map_err(|e| Error::Render { message: format!("can't start a rendering thread: {e}") })?;
+        let started = started.recv();
+        let mut gl = GlThread { jobs: Some(jobs), thread: Some(thread), backend: String::new() };
+        match started {
+            Ok(Ok(backend)) => {
+                gl.backend = backend;
+                Ok(gl)
+            }
+            // Dropping `gl` joins the thread, which has ended.
+            Ok(Err(e)) => Err(e),
+            Err(_) => Err(Error::Render { message: "the rendering thread ended before making its context".into() }),
+        }
+    }
+
+    /// A short description of the backend, e.g. `EGL (device platform)`.
+    pub fn describe(&self) -> &str {
+        &self.backend
+    }
+
+    /// Runs `job` on the thread, with its context current, and waits for its result.
+    ///
+    /// # Errors
+    /// [`Error::Render`] when the job panicked or the thread is gone.
+    pub fn run<R: Send>(&self, job: impl FnOnce() -> R + Send) -> Result<R> {
+        let gone = || Error::Render { message: "the rendering thread ended (a panic in OpenGL or MuJoCo)".into() };
+        let (tx, rx) = mpsc::sync_channel::<R>(1);
+        let boxed: Box<dyn FnOnce() + Send + '_> = Box::new(move || {
+            let _ = tx.send(job());
+        });
+        // SAFETY: only the lifetime is erased (same layout). The job's borrows outlive its use:
+        // this function returns only after `rx` has a result (the job ran) or is disconnected,
+        // which happens when `tx` drops, and `tx` drops after `job` has run or unwound, or with
+        // the whole job unrun (the queue dropped); a job that can't be queued comes back in the
+        // send error and is dropped here.
+        let boxed: Job = unsafe { std::mem::transmute::<Box<dyn FnOnce() + Send + '_>, Job>(boxed) };
+        self.jobs.as_ref().ok_or_else(gone)?.send(boxed).map_err(|_| gone())?;
+        rx.recv().map_err(|_| gone())
+    }
+}
+
+impl Drop for GlThread {
+    /// Ends the thread (it destroys its context and releases EGL's thread state) and joins it.
+    fn drop(&mut self) {
+        drop(self.jobs.take());
+        if let Some(thread) = self.thread.take() {
+            let _ = thread.join();
+        }
+    }
+}
+
+/// A short description of the process's backend, e.g. `EGL (device platform)`.
+fn describe() -> String {
+    match loaded() {
+        Ok(Loaded::Egl(egl)) => format!("EGL ({} platform)", egl.platform),
+        Ok(Loaded::OsMesa(_)) => "OSMesa".into(),
+        Err(e) => e,
     }
 }
 

@@ -9,7 +9,7 @@
 //! which turns the error into [`Error::MuJoCo`] instead of ending the process. twin's unsafe
 //! code lives in this crate (and `mujoco-sys`) only, each block with a `// SAFETY:` comment.
 //! [`Renderer`] draws camera images with MuJoCo's own renderer on an offscreen OpenGL context
-//! ([`GlContext`]: EGL or OSMesa, loaded at run time).
+//! ([`GlThread`]: a thread owning an EGL or OSMesa context, loaded at run time).
 
 pub mod convert;
 mod data;
@@ -25,7 +25,7 @@ mod render;
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use error::{Error, Result};
-pub use gl::{GlBackend, GlContext, gl_available};
+pub use gl::{GlBackend, GlThread, gl_available};
 pub use kinds::{BiasType, GeomType, Integrator, SensorType, Transmission};
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 pub use ray::{RayFilter, RayHit, RayScene, RayStats};

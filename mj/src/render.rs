@@ -1,7 +1,10 @@
-//! MuJoCo's own renderer (`mjv_updateScene`, `mjr_render`, `mjr_readPixels`) offscreen, on a
-//! [`GlContext`] of its own: colour, depth and segmentation images of a camera, top row first
-//! (as `sensor_msgs/Image`; OpenGL reads bottom-up). The same calls and flags as MuJoCo's
-//! Python `Renderer`, so a frame equals that one's for the same model, state and camera.
+//! MuJoCo's own renderer (`mjv_updateScene`, `mjr_render`, `mjr_readPixels`) offscreen, on an
+//! OpenGL context of its own that lives on its own thread ([`GlThread`]): colour, depth and
+//! segmentation images of a camera, top row first (as `sensor_msgs/Image`; OpenGL reads
+//! bottom-up). The same calls and flags as MuJoCo's Python `Renderer`, so a frame equals that
+//! one's for the same model, state and camera. The scene is updated from the state on the
+//! caller's thread (no OpenGL there); drawing and reading the pixels run on the renderer's
+//! thread, which the caller waits for.
 //!
 //! ```no_run
 //! use std::sync::Arc;
@@ -15,7 +18,7 @@
 //! # Ok::<(), twin_core::Error>(())
 //! ```
 
-use super::gl::GlContext;
+use super::gl::GlThread;
 use super::{Data, Model, ObjType, ffi, guarded};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
@@ -51,21 +54,28 @@ impl Segment {
 /// An offscreen renderer of one model at one image size.
 pub struct Renderer {
     model: Arc<Model>,
-    gl: GlContext,
-    scene: Box<sys::mjvScene>,
-    context: Box<sys::mjrContext>,
+    /// The thread owning the OpenGL context; dropped after [`Renderer::drop`] has freed
+    /// MuJoCo's render context on it.
+    gl: GlThread,
+    frame: FrameBuffers,
     option: Box<sys::mjvOption>,
     width: u32,
     height: u32,
-    /// Bottom-up scratch rows read from OpenGL.
+}
+
+/// MuJoCo's scene and render context and the bottom-up scratch rows read from OpenGL: what a
+/// frame's job on the [`GlThread`] works on.
+struct FrameBuffers {
+    scene: Box<sys::mjvScene>,
+    context: Box<sys::mjrContext>,
     rgb_scratch: Vec<u8>,
     depth_scratch: Vec<f32>,
 }
 
-// SAFETY: the scene and context are heap blocks used through &mut self only; the OpenGL context
-// is made current on the calling thread for each frame and released after it (GlContext is
-// Send), so the renderer can move between threads between frames.
-unsafe impl Send for Renderer {}
+// SAFETY: heap blocks owned by the renderer (the scene's and context's pointers lead to blocks
+// MuJoCo made for them, and OpenGL object names of the renderer's own context), used by one
+// thread at a time: through `&mut Renderer`, lent to the GlThread's job while the caller waits.
+unsafe impl Send for FrameBuffers {}
 
 impl std::fmt::Debug for Renderer {
     fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
@@ -73,7 +83,7 @@ impl std::fmt::Debug for Renderer {
             .field("width", &self.width)
             .field("height", &self.height)
             .field("gl", &self.gl)
-            .finish()
+            .finish_non_exhaustive()
     }
 }
 
@@ -106,11 +116,10 @@ impl Renderer {
                 message: format!("{width}×{height} pixels: give a width and height from 1 to 16384"),
             });
         }
-        let mut gl = GlContext::new()?;
-        gl.make_current()?;
+        let gl = GlThread::new()?;
         // SAFETY: all-zero bytes are a valid mjvScene/mjrContext/mjvOption (integers, floats,
         // null pointers); each is then set by MuJoCo's default/make functions below.
-        let (mut scene, mut context, mut option) = unsafe {
+        let (mut scene, context, mut option) = unsafe {
             (
                 Box::new(std::mem::zeroed::<sys::mjvScene>()),
                 Box::new(std::mem::zeroed::<sys::mjrContext>()),
@@ -119,31 +128,43 @@ impl Renderer {
         };
         // SAFETY: a valid option struct to fill.
         unsafe { sys::mjv_defaultOption(&mut *option) };
-        let m = model.as_ptr();
         let samples = samples.map_or(-1, |s| s.min(64) as i32);
         let made = guarded("mjv_makeScene", |e, n| {
             // SAFETY: a live model and a scene struct to fill; errors are caught by the shim.
-            unsafe { ffi::twin_render_make_scene(m, &mut *scene, MAX_GEOM, e, n) }
-        })
-        .and_then(|()| {
-            guarded("mjr_makeContext", |e, n| {
-                // SAFETY: an OpenGL context is current on this thread; a live model and a context
-                // struct to fill; errors are caught by the shim.
-                unsafe { ffi::twin_render_make_context(m, &mut *context, width as i32, height as i32, samples, e, n) }
-            })
+            unsafe { ffi::twin_render_make_scene(model.as_ptr(), &mut *scene, MAX_GEOM, e, n) }
         });
+        // From here on Drop frees what was made (a zeroed context or scene is freed as empty).
         let mut renderer = Renderer {
             model,
             gl,
-            scene,
-            context,
+            frame: FrameBuffers { scene, context, rgb_scratch: Vec::new(), depth_scratch: Vec::new() },
             option,
             width,
             height,
-            rgb_scratch: Vec::new(),
-            depth_scratch: Vec::new(),
         };
-        renderer.gl.release();
+        let made = made.and_then(|()| {
+            let (model, frame) = (&*renderer.model, &mut renderer.frame);
+            renderer
+                .gl
+                .run(move || {
+                    guarded("mjr_makeContext", |e, n| {
+                        // SAFETY: the GlThread's context is current on this thread; a live model
+                        // and a context struct to fill; errors are caught by the shim.
+                        unsafe {
+                            ffi::twin_render_make_context(
+                                model.as_ptr(),
+                                &mut *frame.context,
+                                width as i32,
+                                height as i32,
+                                samples,
+                                e,
+                                n,
+                            )
+                        }
+                    })
+                })
+                .and_then(|made| made)
+        });
         made.map_err(|e| Error::Render { message: format!("MuJoCo's renderer could not start: {e}") })?;
         Ok(renderer)
     }
@@ -160,13 +181,13 @@ impl Renderer {
 
     /// The OpenGL backend, e.g. `EGL (device platform)`.
     pub fn backend(&self) -> String {
-        self.gl.describe()
+        self.gl.describe().to_string()
     }
 
     /// Turns MuJoCo's shadows and reflections on or off (both on by default, as in MuJoCo).
     pub fn set_shadows_and_reflections(&mut self, shadows: bool, reflections: bool) {
-        self.scene.flags[sys::mjtRndFlag__mjRND_SHADOW as usize] = u8::from(shadows);
-        self.scene.flags[sys::mjtRndFlag__mjRND_REFLECTION as usize] = u8::from(reflections);
+        self.frame.scene.flags[sys::mjtRndFlag__mjRND_SHADOW as usize] = u8::from(shadows);
+        self.frame.scene.flags[sys::mjtRndFlag__mjRND_REFLECTION as usize] = u8::from(reflections);
     }
 
     /// Shows or hides geoms of MuJoCo group `group` (0–5; MuJoCo shows 0–2 by default).
@@ -183,7 +204,7 @@ impl Renderer {
     /// As [`Renderer::depth`].
     pub fn rgb(&mut self, data: &mut Data, view: View) -> Result<Vec<u8>> {
         self.draw(data, view, false, true, false)?;
-        Ok(flip_rows(&self.rgb_scratch, 3 * self.width as usize))
+        Ok(flip_rows(&self.frame.rgb_scratch, 3 * self.width as usize))
     }
 
     /// The depth image of `data`'s state seen from `view`: metres along the optical axis,
@@ -202,7 +223,7 @@ impl Renderer {
         let (near, far) = (f64::from(near), f64::from(far));
         let c = 0.5 * (far + near) / (far - near) - 0.5;
         let d = far * near / (far - near);
-        let linear: Vec<f32> = self.depth_scratch.iter().map(|&x| (d / (f64::from(x) + c)) as f32).collect();
+        let linear: Vec<f32> = self.frame.depth_scratch.iter().map(|&x| (d / (f64::from(x) + c)) as f32).collect();
         Ok(flip_rows(&linear, self.width as usize))
     }
 
@@ -222,16 +243,17 @@ impl Renderer {
     pub fn segmentation(&mut self, data: &mut Data, view: View) -> Result<Vec<Option<Segment>>> {
         self.draw(data, view, true, true, false)?;
         // Colour value = segid + 1 (0: background) → the scene geom's object.
-        let ngeom = self.scene.ngeom.max(0) as usize;
+        let ngeom = self.frame.scene.ngeom.max(0) as usize;
         let mut by_segid = vec![None; ngeom + 2];
         if ngeom > 0 {
             // SAFETY: `geoms` holds `ngeom` initialised entries after mjv_updateScene.
-            let geoms = unsafe { std::slice::from_raw_parts(self.scene.geoms, ngeom) };
+            let geoms = unsafe { std::slice::from_raw_parts(self.frame.scene.geoms, ngeom) };
             for g in geoms.iter().filter(|g| g.segid >= 0 && (g.segid as usize) < ngeom + 1) {
                 by_segid[g.segid as usize + 1] = Some(Segment { objtype: g.objtype, objid: g.objid });
             }
         }
         let labels: Vec<Option<Segment>> = self
+            .frame
             .rgb_scratch
             .chunks_exact(3)
             .map(|p| {
@@ -279,48 +301,55 @@ impl Renderer {
             View::Free => unsafe { sys::mjv_defaultFreeCamera(self.model.as_ptr(), &mut camera) },
         }
         let n = self.width as usize * self.height as usize;
-        self.rgb_scratch.resize(if rgb { 3 * n } else { 0 }, 0);
-        self.depth_scratch.resize(if depth { n } else { 0 }, 0.0);
-        let saved = self.scene.flags;
+        let frame = &mut self.frame;
+        frame.rgb_scratch.resize(if rgb { 3 * n } else { 0 }, 0);
+        frame.depth_scratch.resize(if depth { n } else { 0 }, 0.0);
+        let saved = frame.scene.flags;
         if segment {
-            self.scene.flags[sys::mjtRndFlag__mjRND_SEGMENT as usize] = 1;
-            self.scene.flags[sys::mjtRndFlag__mjRND_IDCOLOR as usize] = 1;
+            frame.scene.flags[sys::mjtRndFlag__mjRND_SEGMENT as usize] = 1;
+            frame.scene.flags[sys::mjtRndFlag__mjRND_IDCOLOR as usize] = 1;
         }
-        self.gl.make_current()?;
         let (m, d) = data.raw_parts();
-        let (scene, context, option) = (&mut *self.scene, &*self.context, &*self.option);
+        let option = &*self.option;
         let updated = guarded("mjv_updateScene", |e, n| {
             // SAFETY: a live model/data pair of the renderer's layout (checked above), valid
-            // option/camera/scene structs; errors are caught by the shim.
-            unsafe { ffi::twin_render_update_scene(m, d, option, &mut camera, scene, e, n) }
+            // option/camera/scene structs; errors are caught by the shim. No OpenGL call.
+            unsafe { ffi::twin_render_update_scene(m, d, option, &mut camera, &mut *frame.scene, e, n) }
         });
-        let rgb_ptr = if rgb { self.rgb_scratch.as_mut_ptr() } else { std::ptr::null_mut() };
-        let depth_ptr = if depth { self.depth_scratch.as_mut_ptr() } else { std::ptr::null_mut() };
         let (w, h) = (self.width as i32, self.height as i32);
         let drawn = updated.and_then(|()| {
-            guarded("mjr_render", |e, n| {
-                // SAFETY: the context is current on this thread; the buffers hold w·h·3 bytes and
-                // w·h floats (or are null when not read); the viewport fits the offscreen buffer
-                // (grown to it in new()).
-                unsafe { ffi::twin_render_read(w, h, scene, context, rgb_ptr, depth_ptr, e, n) }
-            })
+            let buffers = &mut *frame;
+            self.gl
+                .run(move || {
+                    let rgb_ptr = if rgb { buffers.rgb_scratch.as_mut_ptr() } else { std::ptr::null_mut() };
+                    let depth_ptr = if depth { buffers.depth_scratch.as_mut_ptr() } else { std::ptr::null_mut() };
+                    let (scene, context) = (&mut *buffers.scene, &*buffers.context);
+                    guarded("mjr_render", |e, n| {
+                        // SAFETY: the GlThread's context is current on this thread; the buffers
+                        // hold w·h·3 bytes and w·h floats (or are null when not read); the
+                        // viewport fits the offscreen buffer (grown to it in new()).
+                        unsafe { ffi::twin_render_read(w, h, scene, context, rgb_ptr, depth_ptr, e, n) }
+                    })
+                })
+                .and_then(|drawn| drawn)
         });
-        self.gl.release();
-        self.scene.flags = saved;
+        frame.scene.flags = saved;
         drawn.map_err(|e| Error::Render { message: e.to_string() })
     }
 }
 
 impl Drop for Renderer {
+    /// Frees MuJoCo's render context on the GlThread (`mjr_freeContext` deletes OpenGL objects:
+    /// its context must be current), then the scene; the GlThread, dropped next, destroys the
+    /// OpenGL context and is joined.
     fn drop(&mut self) {
-        // mjr_freeContext deletes OpenGL objects: the context must be current.
-        if self.gl.make_current().is_ok() {
-            // SAFETY: a context made by mjr_makeContext, freed once, with its OpenGL context current.
-            unsafe { sys::mjr_freeContext(&mut *self.context) };
-            self.gl.release();
-        }
+        let frame = &mut self.frame;
+        // SAFETY: a context made by mjr_makeContext (or zeroed, or defaulted by
+        // mjr_defaultContext, which free as empty), freed once, on the thread where its OpenGL
+        // context is current.
+        let _ = self.gl.run(move || unsafe { sys::mjr_freeContext(&mut *frame.context) });
         // SAFETY: a scene made by mjv_makeScene (or zeroed, which mjv_freeScene accepts), freed once.
-        unsafe { sys::mjv_freeScene(&mut *self.scene) };
+        unsafe { sys::mjv_freeScene(&mut *self.frame.scene) };
     }
 }
 

@@ -264,10 +264,10 @@ impl ColourCamera {
         let intrinsics = Intrinsics::from_fovy(options.width, options.height, model.cam_fovy_rad()[camera]);
         let mut renderer = Renderer::with_samples(model.clone(), options.width, options.height, options.multisamples)
             .map_err(|e| {
-                Error::Mj(twin_mj::Error::Render {
-                    message: format!("{}: {}", what(), e.to_string().trim_start_matches("rendering: ")),
-                })
-            })?;
+            Error::Mj(twin_mj::Error::Render {
+                message: format!("{}: {}", what(), e.to_string().trim_start_matches("rendering: ")),
+            })
+        })?;
         renderer.set_shadows_and_reflections(options.shadows, options.shadows);
         let remap = (!options.distortion.is_none()).then(|| remap_of(&intrinsics, &options.distortion));
         Ok(ColourCamera {

@@ -569,3 +569,12 @@ impl Pipelined {
         reading.map(Some)
     }
 }
+
+impl Drop for Pipelined {
+    /// Waits for the reading in flight, so the device (a colour camera's rendering thread and
+    /// OpenGL context) is dropped here, before its owner goes on, and not on a pool thread that
+    /// may still be running when the process exits (the pool's threads are not joined).
+    fn drop(&mut self) {
+        let _ = self.finish();
+    }
+}
