@@ -534,7 +534,9 @@ impl GlThread {
     /// # Errors
     /// [`Error::Render`] when the job panicked or the thread is gone.
     pub fn run<R: Send>(&self, job: impl FnOnce() -> R + Send) -> Result<R> {
-        let gone = || Error::Render { message: "the rendering thread ended (a panic in OpenGL or MuJoCo)".into() };
+        let gone = || Error::Render {
+            message: "the rendering job did not finish (it panicked, or the rendering thread is gone)".into(),
+        };
         let (tx, rx) = mpsc::sync_channel::<R>(1);
         let boxed: Box<dyn FnOnce() + Send + '_> = Box::new(move || {
             let _ = tx.send(job());
@@ -576,4 +578,32 @@ pub fn gl_available() -> std::result::Result<GlBackend, String> {
         Loaded::Egl(_) => GlBackend::Egl,
         Loaded::OsMesa(_) => GlBackend::OsMesa,
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Every job of a GlThread runs on that one thread (never the caller's), which keeps its
+    /// context current; a job that panics is an error for its caller, not the end of the thread.
+    #[test]
+    fn jobs_run_on_the_context_thread_and_a_panic_is_an_error() {
+        let gl = GlThread::new().expect("an OpenGL context (EGL or OSMesa; see the module docs)");
+        let caller = std::thread::current().id();
+        let (first, name) =
+            gl.run(|| (std::thread::current().id(), std::thread::current().name().map(String::from))).unwrap();
+        let second = gl.run(|| std::thread::current().id()).unwrap();
+        assert_eq!(first, second);
+        assert_ne!(first, caller);
+        assert_eq!(name.as_deref(), Some("twin-gl"));
+        let mut borrowed = vec![1, 2, 3];
+        gl.run(|| borrowed.push(4)).unwrap();
+        assert_eq!(borrowed, [1, 2, 3, 4]);
+        let panicked = gl.run(|| -> u8 { panic!("a job that fails") });
+        assert!(
+            matches!(&panicked, Err(Error::Render { message }) if message.contains("rendering job did not finish")),
+            "{panicked:?}"
+        );
+        assert_eq!(gl.run(|| 7).unwrap(), 7);
+    }
 }
