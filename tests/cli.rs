@@ -2,6 +2,8 @@
 
 #[path = "cli/calibrate.rs"]
 mod calibrate;
+#[path = "cli/camera.rs"]
+mod camera;
 #[path = "cli/common.rs"]
 mod common;
 #[path = "cli/convert.rs"]

@@ -170,8 +170,10 @@ pub(crate) struct CameraIr {
     pub pose: Pose,
     /// `<clip><near>`, `<far>`, metres.
     pub clip_m: Option<[f64; 2]>,
-    /// `<noise><stddev>`, metres for depth (0 when none).
+    /// `<noise><stddev>`, metres for depth, fraction of full scale for colour (0 when none).
     pub noise_std: f64,
+    /// `<distortion>` k1 k2 k3 p1 p2 (Brown–Conrady), when given.
+    pub distortion: Option<[f64; 5]>,
 }
 
 #[derive(Debug, Clone)]
@@ -956,6 +958,9 @@ fn parse_sensor(ctx: &Ctx<'_, '_>, s: Node<'_, '_>, reference: &str) -> Result<S
                     Some([child_text(c, "near").and_then(parse_num)?, child_text(c, "far").and_then(parse_num)?])
                 }),
                 noise_std: child(cam, "noise").and_then(|n| child_text(n, "stddev")).and_then(parse_num).unwrap_or(0.0),
+                distortion: child(cam, "distortion").map(|d| {
+                    ["k1", "k2", "k3", "p1", "p2"].map(|k| child_text(d, k).and_then(parse_num).unwrap_or(0.0))
+                }),
             }
         })
         .collect();

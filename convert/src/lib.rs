@@ -163,6 +163,9 @@ pub struct SensorMeta {
     /// Gaussian noise standard deviation, metres (ranges, depths); 0 for none.
     pub noise_std: f64,
     /// Beam pattern of a ray sensor.
+    /// A camera's lens distortion, Gazebo's `<distortion>` k1 k2 k3 p1 p2 (Brown–Conrady), when
+    /// given.
+    pub distortion: Option<[f64; 5]>,
     pub scan: Option<ScanMeta>,
 }
 

@@ -187,6 +187,7 @@ impl RobotMeta {
                     .put_list("mujoco", &s.mujoco)
                     .put("range", s.range_m.map(|r| format!("{}:{}", r[0], r[1])).unwrap_or_default())
                     .put("noise_std", format!("{}", s.noise_std))
+                    .put("distortion", s.distortion.map(|d| d.map(|c| c.to_string()).join(":")).unwrap_or_default())
                     .put(
                         "scan",
                         s.scan
@@ -287,6 +288,10 @@ impl RobotMeta {
                         r.split_once(':').and_then(|(a, b)| Some([a.parse().ok()?, b.parse().ok()?]))
                     },
                     noise_std: f.num("noise_std").unwrap_or(0.0),
+                    distortion: {
+                        let v: Vec<f64> = f.s("distortion").split(':').filter_map(|x| x.parse().ok()).collect();
+                        <[f64; 5]>::try_from(v.as_slice()).ok()
+                    },
                     scan: {
                         let v: Vec<f64> = f.s("scan").split(':').filter_map(|x| x.parse().ok()).collect();
                         match v.as_slice() {

@@ -53,6 +53,7 @@ impl Converter<'_> {
                 mujoco,
                 range_m: None,
                 noise_std: 0.0,
+                distortion: None,
                 scan: None,
             };
             match s.kind.as_str() {
@@ -82,7 +83,8 @@ impl Converter<'_> {
                         frame_id,
                     });
                 }
-                "camera" | "depth" | "depth_camera" | "rgbd_camera" | "wideanglecamera" | "multicamera" => {
+                "camera" | "depth" | "depth_camera" | "rgbd_camera" | "wideanglecamera" | "multicamera"
+                | "segmentation" => {
                     let cams = &s.cameras;
                     let mut made = Vec::new();
                     for (k, cam) in cams.iter().enumerate() {
@@ -108,6 +110,7 @@ impl Converter<'_> {
                     self.sensor_meta.push(SensorMeta {
                         range_m: cams.first().and_then(|c| c.clip_m),
                         noise_std: cams.first().map_or(0.0, |c| c.noise_std),
+                        distortion: cams.first().and_then(|c| c.distortion),
                         ..meta(made)
                     });
                 }

@@ -217,3 +217,60 @@ int twin_multi_ray(const mjModel* m, mjData* d, const mjtNum* pnt, const mjtNum*
                          nray, cutoff),
              reset_stack(d))
 }
+
+// Offscreen rendering (twin-core/src/mj/render.rs), with an OpenGL context current on the calling
+// thread. mjr_makeContext raises when OpenGL lacks what MuJoCo needs; the offscreen buffer is
+// grown to width x height when the model's <visual><global offwidth offheight> is smaller. With
+// samples >= 0 the offscreen buffer has that many multisamples instead of the model's
+// <visual><quality offsamples> (mjr_makeContext reads them from the model: a copy carries them).
+int twin_render_make_context(const mjModel* m, mjrContext* con, int width, int height, int samples, char* err,
+                             int err_sz) {
+  mjModel* volatile copy = NULL;
+  mjr_defaultContext(con);
+  TWIN_GUARD(
+      {
+        const mjModel* use = m;
+        if (samples >= 0 && samples != m->vis.quality.offsamples) {
+          copy = mj_copyModel(NULL, m);
+          copy->vis.quality.offsamples = samples;
+          use = copy;
+        }
+        mjr_makeContext(use, con, mjFONTSCALE_100);
+        if (copy) {
+          mj_deleteModel(copy);
+          copy = NULL;
+        }
+        mjr_setBuffer(mjFB_OFFSCREEN, con);
+        if (con->currentBuffer != mjFB_OFFSCREEN) {
+          mju_error("the OpenGL context has no offscreen framebuffer");
+        }
+        if (width > con->offWidth || height > con->offHeight) {
+          mjr_resizeOffscreen(width > con->offWidth ? width : con->offWidth,
+                              height > con->offHeight ? height : con->offHeight, con);
+          mjr_setBuffer(mjFB_OFFSCREEN, con);
+        }
+        con->readDepthMap = mjDEPTH_ZEROFAR;
+      },
+      if (copy) mj_deleteModel(copy))
+}
+
+int twin_render_make_scene(const mjModel* m, mjvScene* scn, int maxgeom, char* err, int err_sz) {
+  mjv_defaultScene(scn);
+  TWIN_GUARD(mjv_makeScene(m, scn, maxgeom), (void)0)
+}
+
+int twin_render_update_scene(const mjModel* m, mjData* d, const mjvOption* opt, mjvCamera* cam, mjvScene* scn,
+                             char* err, int err_sz) {
+  TWIN_GUARD(mjv_updateScene(m, d, opt, NULL, cam, mjCAT_ALL, scn), reset_stack(d))
+}
+
+int twin_render_read(int width, int height, mjvScene* scn, const mjrContext* con, unsigned char* rgb, float* depth,
+                     char* err, int err_sz) {
+  mjrRect viewport = {0, 0, width, height};
+  TWIN_GUARD(
+      {
+        mjr_render(viewport, scn, con);
+        mjr_readPixels(rgb, depth, viewport, con);
+      },
+      (void)0)
+}

@@ -43,6 +43,15 @@ pub enum Error {
         message: String,
     },
 
+    /// A camera can't be rendered: no OpenGL library (EGL, OSMesa) on this machine, or MuJoCo's
+    /// renderer failed on it. The message names what to install; ray-cast sensors (depth
+    /// cameras, LiDARs) don't need it.
+    #[error("rendering: {message}")]
+    Render {
+        /// What failed and what to do.
+        message: String,
+    },
+
     /// The header MuJoCo was compiled against does not match the loaded library.
     #[error(
         "MuJoCo library version {library} does not match the headers twin was built with ({header}); \

@@ -8,22 +8,28 @@
 //! Every MuJoCo call that can raise `mju_user_error` goes through the C shim in `csrc/shim.c`,
 //! which turns the error into [`Error::MuJoCo`] instead of ending the process. twin's unsafe
 //! code lives in this crate (and `mujoco-sys`) only, each block with a `// SAFETY:` comment.
+//! [`Renderer`] draws camera images with MuJoCo's own renderer on an offscreen OpenGL context
+//! ([`GlThread`]: a thread owning an EGL or OSMesa context, loaded at run time).
 
 pub mod convert;
 mod data;
 mod edit;
 pub mod error;
+mod gl;
 mod kinds;
 mod model;
 mod ray;
 mod ray_shape;
+mod render;
 
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use error::{Error, Result};
+pub use gl::{GlBackend, GlThread, gl_available};
 pub use kinds::{BiasType, GeomType, Integrator, SensorType, Transmission};
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 pub use ray::{RayFilter, RayHit, RayScene, RayStats};
+pub use render::{Renderer, Segment, View};
 
 use std::ffi::{CStr, c_char, c_int};
 use std::mem::MaybeUninit;
@@ -116,6 +122,41 @@ pub(crate) mod ffi {
             dist: *mut mjtNum,
             nray: c_int,
             cutoff: mjtNum,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
+        pub fn twin_render_make_context(
+            m: *const mjModel,
+            con: *mut mujoco_sys::mjrContext,
+            width: c_int,
+            height: c_int,
+            samples: c_int,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
+        pub fn twin_render_make_scene(
+            m: *const mjModel,
+            scn: *mut mujoco_sys::mjvScene,
+            maxgeom: c_int,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
+        pub fn twin_render_update_scene(
+            m: *const mjModel,
+            d: *mut mjData,
+            opt: *const mujoco_sys::mjvOption,
+            cam: *mut mujoco_sys::mjvCamera,
+            scn: *mut mujoco_sys::mjvScene,
+            err: *mut c_char,
+            err_sz: c_int,
+        ) -> c_int;
+        pub fn twin_render_read(
+            width: c_int,
+            height: c_int,
+            scn: *mut mujoco_sys::mjvScene,
+            con: *const mujoco_sys::mjrContext,
+            rgb: *mut u8,
+            depth: *mut f32,
             err: *mut c_char,
             err_sz: c_int,
         ) -> c_int;

@@ -266,6 +266,17 @@ impl Recorder {
         self.sensor_points(&format!("{}_points", entity_name(name, "camera", 0)), &frame.points_world())
     }
 
+    /// Logs a rendered colour frame at `world/sensors/<name>/rgb` at the current time.
+    ///
+    /// # Errors
+    /// [`Error::Rerun`] if writing fails.
+    pub fn colour_frame(&self, name: &str, frame: &crate::sense::ColourFrame) -> Result<()> {
+        let base = format!("world/sensors/{}", entity_name(name, "camera", 0));
+        let k = &frame.intrinsics;
+        let image = rerun::Image::from_rgb24(frame.rgb.clone(), [k.width, k.height]);
+        self.rec.log(format!("{base}/rgb"), &image).map_err(|e| self.err(e))
+    }
+
     /// Logs points (world frame, metres) at `world/sensors/<name>` at the current time.
     ///
     /// # Errors

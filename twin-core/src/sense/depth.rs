@@ -242,7 +242,27 @@ pub struct DepthCamera {
     clip_dist: Vec<f64>,
     /// Pixel index of each ray.
     pixel: Vec<u32>,
+    /// What the rays see of the geoms that move with the camera (the bodies welded to its
+    /// body: its housing, the head it sits in; with a camera welded to the world, the static
+    /// scene): the same in every frame, so cast once per model and kept.
+    rigid: Box<RigidHits>,
     frames: u64,
+}
+
+/// The hits of the geoms rigid with a camera, cast once per model: in the camera's frame they
+/// never move, so each frame casts only against the others and takes the nearer hit. A camera
+/// inside a mesh head (example-robot-data's TIAGo Pro: 17 000 triangles around the lens) would
+/// otherwise test that mesh with every ray of every frame.
+struct RigidHits {
+    /// The bodies welded to the camera's body.
+    bodies: Vec<usize>,
+    /// The options' filter with those bodies left out: what each frame casts against.
+    moving: crate::mj::RayFilter,
+    /// The options' filter with every other body left out.
+    only_rigid: crate::mj::RayFilter,
+    /// The model the hits were cast on (a weak reference keeps its address from being reused
+    /// by another model), and the nearest hit of each ray, in fan order.
+    cached: Option<(std::sync::Weak<Model>, Vec<Option<crate::mj::RayHit>>)>,
 }
 
 impl std::fmt::Debug for DepthCamera {
@@ -315,6 +335,14 @@ impl DepthCamera {
         }
         let fan = RayFan::new(rays_optical, (TILE * TILE) as usize, opts.ray.threads, &what())?;
         let clip_dist = depth_per_dist.iter().map(|s| opts.ray.min_range_m / s).collect();
+        let weld = model.body_weldid();
+        let camera_weld = weld[model.cam_bodyid()[camera] as usize];
+        let bodies: Vec<usize> = (0..model.nbody()).filter(|&b| weld[b] == camera_weld).collect();
+        let mut moving = opts.ray.filter.clone();
+        moving.exclude_bodies.extend(bodies.iter().copied());
+        let mut only_rigid = opts.ray.filter.clone();
+        only_rigid.exclude_bodies.extend((0..model.nbody()).filter(|b| !bodies.contains(b)));
+        let rigid = Box::new(RigidHits { bodies, moving, only_rigid, cached: None });
         Ok(DepthCamera {
             camera,
             name: camera_name.to_string(),
@@ -326,6 +354,7 @@ impl DepthCamera {
             depth_per_dist,
             clip_dist,
             pixel,
+            rigid,
             frames: 0,
         })
     }
@@ -351,9 +380,16 @@ impl DepthCamera {
         &self.name
     }
 
-    /// What the last [`DepthCamera::render`] cost in ray–geom tests.
+    /// What the last [`DepthCamera::render`] cost in ray–geom tests (against the geoms that
+    /// move relative to the camera; those rigid with it are cast on its first frame only).
     pub fn last_ray_stats(&self) -> RayStats {
         self.fan.last_stats()
+    }
+
+    /// The bodies welded to the camera's body (its housing, the head it sits in; the world's
+    /// static bodies for a camera fixed in the world): their geoms are cast once per model.
+    pub fn rigid_bodies(&self) -> &[usize] {
+        &self.rigid.bodies
     }
 
     /// Pose of the optical frame in the world at `data`'s last forward pass.
@@ -386,11 +422,22 @@ impl DepthCamera {
         let max_dist = max_z / self.depth_per_dist.iter().copied().fold(1.0f64, f64::min);
         let rot = world_from_optical.rotation.to_rotation_matrix();
         let origin = [origin.x, origin.y, origin.z];
-        let hits = self.fan.cast(data, &self.options.ray.filter, origin, &rot, max_dist, &self.clip_dist)?;
+        // The geoms rigid with the camera: cast once per model (their hits never change).
+        let key = std::sync::Arc::downgrade(data.model());
+        if self.rigid.cached.as_ref().is_none_or(|(k, _)| !k.ptr_eq(&key)) {
+            let hits = self.fan.cast(data, &self.rigid.only_rigid, origin, &rot, max_dist, &self.clip_dist)?;
+            self.rigid.cached = Some((key, hits.to_vec()));
+        }
+        let rigid = &self.rigid.cached.as_ref().expect("cast just above").1;
+        let hits = self.fan.cast(data, &self.rigid.moving, origin, &rot, max_dist, &self.clip_dist)?;
         // Depth along the optical axis, in pixel order; NaN outside the range.
         let mut depth_m = vec![f32::NAN; self.intrinsics.len()];
-        for ((hit, &k), &s) in hits.iter().zip(&self.pixel).zip(&self.depth_per_dist) {
-            if let Some(h) = hit {
+        for (((hit, fixed), &k), &s) in hits.iter().zip(rigid).zip(&self.pixel).zip(&self.depth_per_dist) {
+            let nearest = match (hit, fixed) {
+                (Some(a), Some(b)) => Some(if b.dist_m < a.dist_m { b } else { a }),
+                (a, b) => a.as_ref().or(b.as_ref()),
+            };
+            if let Some(h) = nearest {
                 let z = h.dist_m * s;
                 if z >= min_z && z <= max_z {
                     depth_m[k as usize] = z as f32;

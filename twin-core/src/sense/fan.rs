@@ -13,10 +13,10 @@ use rand::SeedableRng;
 /// LiDAR's; [`super::DepthCameraOptions::default`] changes `min_range_m` and `rate_hz`.
 #[derive(Debug, Clone, PartialEq, smart_default::SmartDefault)]
 pub struct RayOptions {
-    /// Nearest range measured, metres: a LiDAR's minimum range along the beam (a nearer return
-    /// reads `−Inf`); a depth camera's near clip in depth, as a renderer's near plane (Gazebo's
-    /// `<clip><near>`): nearer geometry is not seen and what lies behind it is measured, so a
-    /// camera inside its own housing or head sees out of it. (default: 0.1)
+    /// Nearest range measured, metres, the near clip as in Gazebo: a LiDAR's minimum range
+    /// along the beam (`<range><min>`), a depth camera's in depth, as a renderer's near plane
+    /// (`<clip><near>`): nearer geometry is not seen and what lies behind it is measured, so a
+    /// sensor inside its own housing or head sees out of it. (default: 0.1)
     #[default(0.1)]
     pub min_range_m: f64,
     /// Farthest range measured, metres; farther returns read `+Inf` in a scan, NaN in a depth

@@ -4,8 +4,11 @@
 //!
 //! Beams follow Gazebo's convention in the sensor frame (x forward, z up): horizontal angle
 //! `h` about z from x, vertical angle `v` up from the x–y plane, direction
-//! `(cos v cos h, cos v sin h, sin v)`. Ranges are along the beam; REP 117: `+Inf` for no
-//! return within range, `−Inf` for a return nearer than the minimum range.
+//! `(cos v cos h, cos v sin h, sin v)`. Ranges are along the beam. As in Gazebo, a beam starts
+//! at the minimum range (`<range><min>`, the near clip): geometry nearer than that is not seen
+//! and the beam measures what lies behind it, so a scanner inside its own housing sees out of
+//! it. REP 117: `+Inf` for no return within range; `−Inf` (a return nearer than the minimum)
+//! then never occurs.
 
 use super::fan::{RayFan, RayOptions, noise_rng};
 use crate::error::{Error, Result};
@@ -66,7 +69,7 @@ pub struct LidarScan {
     /// Vertical beams (rings).
     pub vertical: ScanAxis,
     /// Range of each beam, ring-major (`ring · horizontal.samples + i`), metres along the
-    /// beam; `+Inf` no return, `−Inf` nearer than the minimum range.
+    /// beam; `+Inf` no return (REP 117; nothing nearer than the minimum range is seen).
     pub ranges_m: Vec<f32>,
     /// Nearest range measured, metres.
     pub min_range_m: f64,
@@ -213,14 +216,14 @@ impl Lidar {
         let world_from_sensor =
             Isometry3::from_parts(Translation3::new(p[0], p[1], p[2]), UnitQuaternion::from_rotation_matrix(&rot));
         let (lo, hi) = (self.options.ray.min_range_m, self.options.ray.max_range_m);
-        let hits = self.fan.cast(data, &self.options.ray.filter, p, &rot, hi, &[])?;
+        // Beams start at the minimum range (Gazebo's near clip): what is nearer is not seen.
+        let hits = self.fan.cast(data, &self.options.ray.filter, p, &rot, hi, &[lo])?;
         let mut rng = noise_rng(self.options.ray.seed, self.scans);
         let noise = self.options.ray.noise_std_m;
         let ranges_m = hits
             .iter()
             .map(|h| match h {
                 None => f32::INFINITY,
-                Some(h) if h.dist_m < lo => f32::NEG_INFINITY,
                 Some(h) if h.dist_m > hi => f32::INFINITY,
                 Some(h) if noise > 0.0 => (h.dist_m + noise * rng.sample::<f64, _>(StandardNormal)) as f32,
                 Some(h) => h.dist_m as f32,
@@ -314,5 +317,27 @@ mod tests {
         let d: Vec<f64> = noisy.ranges_m.iter().zip(&scan.ranges_m).map(|(a, b)| f64::from(a - b)).collect();
         let std = (d.iter().map(|x| x * x).sum::<f64>() / d.len() as f64).sqrt();
         assert!((std - 0.01).abs() < 0.0005, "noise std {std}");
+    }
+
+    /// Gazebo's beams start at the minimum range: a scanner inside its own housing (the robot's
+    /// 0.1 m sphere, not excluded here) sees the wall behind it when the minimum range is
+    /// beyond the housing, and sees the housing's inside (never `−Inf`) when it is not.
+    #[test]
+    fn beams_start_at_the_minimum_range() {
+        let model = Arc::new(Model::from_xml_str(WALL).unwrap());
+        let mut data = Data::new(model.clone()).unwrap();
+        data.forward().unwrap();
+        let opts = |min_range_m| LidarOptions {
+            horizontal: ScanAxis { samples: 181, min_rad: -0.9, max_rad: 0.9 },
+            ray: RayOptions { min_range_m, max_range_m: 30.0, ..RayOptions::default() },
+            ..LidarOptions::default()
+        };
+        let scan = Lidar::new(&model, "laser", opts(0.15)).unwrap().scan(&data).unwrap();
+        for (i, &r) in scan.ranges_m.iter().enumerate() {
+            let expected = 2.0 / scan.horizontal.angle(i).cos();
+            assert!((f64::from(r) - expected).abs() < 1e-4, "beam {i}: {r} m, expected {expected} m");
+        }
+        let inside = Lidar::new(&model, "laser", opts(0.05)).unwrap().scan(&data).unwrap();
+        assert!(inside.ranges_m.iter().all(|&r| (r - 0.1).abs() < 1e-4), "{:?}", &inside.ranges_m[..4]);
     }
 }

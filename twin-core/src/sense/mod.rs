@@ -1,13 +1,16 @@
-//! Sensing by ray casting, without OpenGL: depth cameras ([`depth`]), scanning range finders
-//! ([`lidar`]), both as a robot's file describes them with their topics ([`rig`]), and finding a
-//! cup on a table in their point clouds ([`cup`]).
+//! Sensing: by ray casting, without OpenGL, depth cameras ([`depth`]) and scanning range finders
+//! ([`lidar`]); by MuJoCo's renderer, colour and segmentation cameras ([`camera`]); all as a
+//! robot's file describes them with their topics ([`rig`]); and finding a cup on a table in
+//! their point clouds ([`cup`]).
 
+pub mod camera;
 pub mod cup;
 pub mod depth;
 mod fan;
 pub mod lidar;
 pub mod rig;
 
+pub use camera::{ColourCamera, ColourCameraOptions, ColourFrame, Distortion, Labels};
 pub use cup::{CupDetectOptions, CupEstimate, detect_cup};
 pub use depth::{DepthCamera, DepthCameraOptions, DepthFrame, Intrinsics};
 pub use fan::RayOptions;

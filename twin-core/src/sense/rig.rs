@@ -1,21 +1,27 @@
-//! A robot's ray-cast sensors as its file describes them, with their topics: each Gazebo depth
-//! camera (`depth`, `depth_camera`, `rgbd_camera`) is a depth camera publishing
+//! A robot's cameras and ray sensors as its file describes them, with their topics: each Gazebo
+//! depth camera (`depth`, `depth_camera`, `rgbd_camera`) is a ray-cast depth camera publishing
 //! `<prefix>/depth/image_raw` (`32FC1`), `<prefix>/depth/camera_info` and `<prefix>/points`;
-//! a colour camera (`camera`, `wideanglecamera`, `multicamera`) is not rendered (twin casts
-//! depth rays, it has no renderer for colour) and is named in [`unrendered_cameras`] instead;
-//! each `ray`/`gpu_ray`/`lidar` sensor publishes one ring as `sensor_msgs/LaserScan` (`scan`)
+//! each colour camera (`camera`, `wideanglecamera`, `multicamera`) is rendered by MuJoCo's
+//! renderer ([`super::camera`]) and publishes `<prefix>/image_raw` (`rgb8`) and
+//! `<prefix>/camera_info` (an `rgbd_camera` both: its depth ray-cast, its colour rendered); a
+//! `segmentation` camera publishes those and its labels,
+//! `<prefix>/segmentation/instances` and `.../classes` (`16UC1`) with the label table
+//! `<prefix>/segmentation/labels` (`std_msgs/String`, JSON). Without OpenGL the colour cameras
+//! are left out and named in [`unrendered_cameras`] with what to install. Each
+//! `ray`/`gpu_ray`/`lidar` sensor publishes one ring as `sensor_msgs/LaserScan` (`scan`)
 //! or several as an organized `PointCloud2` (`points`). MJCF cameras that no metadata covers
 //! count as depth cameras when they give a `resolution` (beyond MuJoCo's default 1×1).
 //!
 //! `<prefix>` is the plugin's topic without a trailing `/image_raw` (or `/depth/image_raw`),
 //! else `/<robot>/<sensor>`.
 
+use super::camera::{ColourCamera, ColourCameraOptions, ColourFrame};
 use super::depth::{DepthCamera, DepthCameraOptions, DepthFrame};
 use super::fan::RayOptions;
 use super::lidar::{Lidar, LidarOptions, LidarScan, ScanAxis};
 use crate::error::Result;
 use crate::log::cdr::CdrWriter;
-use crate::log::{CameraInfo, Image, LaserScan, PointCloud2, RosMessage};
+use crate::log::{CameraInfo, Image, LaserScan, PointCloud2, RosMessage, RosString};
 use crate::mj::{Data, ObjType};
 use crate::robot::Robot;
 
@@ -30,13 +36,24 @@ pub enum SensorStream {
     Points,
     /// `sensor_msgs/LaserScan` (one ring).
     Scan,
+    /// `sensor_msgs/Image`, `rgb8` colour.
+    ColourImage,
+    /// `sensor_msgs/Image`, `16UC1` instance labels (geom id + 1; 0 background).
+    Instances,
+    /// `sensor_msgs/Image`, `16UC1` class labels (body id + 1, the URDF link; 0 background).
+    Classes,
+    /// `std_msgs/String`: the label table (JSON, [`super::camera::label_table`]).
+    LabelTable,
 }
 
 impl SensorStream {
     /// ROS 2 type of the stream.
     pub fn type_name(self) -> &'static str {
         match self {
-            SensorStream::DepthImage => Image::TYPE_NAME,
+            SensorStream::DepthImage | SensorStream::ColourImage | SensorStream::Instances | SensorStream::Classes => {
+                Image::TYPE_NAME
+            }
+            SensorStream::LabelTable => RosString::TYPE_NAME,
             SensorStream::CameraInfo => CameraInfo::TYPE_NAME,
             SensorStream::Points => PointCloud2::TYPE_NAME,
             SensorStream::Scan => LaserScan::TYPE_NAME,
@@ -53,6 +70,13 @@ pub enum RaySensorKind {
         camera: String,
         /// Its options.
         options: DepthCameraOptions,
+    },
+    /// A colour camera on a MuJoCo camera, rendered.
+    Colour {
+        /// MuJoCo camera name.
+        camera: String,
+        /// Its options.
+        options: ColourCameraOptions,
     },
     /// A scanning range finder on a MuJoCo site.
     Lidar {
@@ -108,6 +132,9 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                         ..DepthCameraOptions::default()
                     };
                     let prefix = prefix_of(&if s.mujoco.len() == 1 { s.topic.clone() } else { None }, &name);
+                    // An RGB-D camera's colour half, rendered, on `<prefix>/image_raw`.
+                    let colour = (s.kind == "rgbd_camera" && crate::mj::gl_available().is_ok())
+                        .then(|| colour_sensor(model, s, cam, id, format!("{name}_color"), &prefix, false));
                     out.push(RaySensor {
                         frame_id: s.frame_id.clone().unwrap_or_else(|| format!("{name}_optical_frame")),
                         rate_hz: options.ray.rate_hz,
@@ -115,6 +142,19 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
                         topics: depth_topics(&prefix),
                         name,
                     });
+                    out.extend(colour);
+                }
+            }
+            kind if is_colour_camera(kind) => {
+                if crate::mj::gl_available().is_err() {
+                    continue; // named in unrendered_cameras, with what to install
+                }
+                for (k, cam) in s.mujoco.iter().enumerate() {
+                    let Some(id) = model.id(ObjType::Camera, cam) else { continue };
+                    covered.push(id);
+                    let name = if s.mujoco.len() == 1 { s.name.clone() } else { format!("{}_{k}", s.name) };
+                    let prefix = prefix_of(&if s.mujoco.len() == 1 { s.topic.clone() } else { None }, &name);
+                    out.push(colour_sensor(model, s, cam, id, name, &prefix, kind == "segmentation"));
                 }
             }
             "ray" | "gpu_ray" | "lidar" | "gpu_lidar" => {
@@ -144,7 +184,8 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
             _ => {}
         }
     }
-    // The MuJoCo cameras of colour sensors are covered too: they are not depth cameras.
+    // The MuJoCo cameras of colour sensors are covered too (rendered or not): they are not
+    // depth cameras.
     for s in robot.sensors.iter().filter(|s| is_colour_camera(&s.kind)) {
         covered.extend(s.mujoco.iter().filter_map(|c| model.id(ObjType::Camera, c)));
     }
@@ -165,6 +206,52 @@ pub fn ray_sensors(robot: &Robot) -> Vec<RaySensor> {
     out
 }
 
+/// A rendered colour camera of sensor `s` on MuJoCo camera `cam` (id `id`), publishing
+/// `<prefix>/image_raw` and `<prefix>/camera_info`, and its labels with `segmentation`.
+fn colour_sensor(
+    model: &crate::mj::Model,
+    s: &crate::convert::SensorMeta,
+    cam: &str,
+    id: usize,
+    name: String,
+    prefix: &str,
+    segmentation: bool,
+) -> RaySensor {
+    let [w, h] = model.cam_resolution()[id];
+    let options = ColourCameraOptions {
+        width: w.max(1) as u32,
+        height: h.max(1) as u32,
+        // A depth sensor's noise is in metres, not a colour's.
+        noise_std: if s.kind == "rgbd_camera" { 0.0 } else { s.noise_std },
+        distortion: s.distortion.map_or_else(Default::default, |[k1, k2, k3, p1, p2]| super::camera::Distortion {
+            k1,
+            k2,
+            k3,
+            p1,
+            p2,
+        }),
+        rate_hz: s.update_rate_hz.unwrap_or(ColourCameraOptions::default().rate_hz),
+        segmentation,
+        ..ColourCameraOptions::default()
+    };
+    let mut topics = vec![
+        (format!("{prefix}/image_raw"), SensorStream::ColourImage),
+        (format!("{prefix}/camera_info"), SensorStream::CameraInfo),
+    ];
+    if segmentation {
+        topics.push((format!("{prefix}/segmentation/instances"), SensorStream::Instances));
+        topics.push((format!("{prefix}/segmentation/classes"), SensorStream::Classes));
+        topics.push((format!("{prefix}/segmentation/labels"), SensorStream::LabelTable));
+    }
+    RaySensor {
+        frame_id: s.frame_id.clone().unwrap_or_else(|| format!("{name}_optical_frame")),
+        rate_hz: options.rate_hz,
+        kind: RaySensorKind::Colour { camera: cam.to_string(), options },
+        topics,
+        name,
+    }
+}
+
 /// What the robot file says of sensor `s` over a camera's or LiDAR's `defaults`: its noise
 /// (standard deviation, metres), its range limits (`[min, max]`, metres) and its rate (Hz),
 /// the last two where the file gives them.
@@ -179,19 +266,21 @@ fn from_file(s: &crate::convert::SensorMeta, defaults: RayOptions) -> RayOptions
     }
 }
 
-/// Whether a Gazebo sensor type is a colour camera (not rendered by twin).
+/// Whether a Gazebo sensor type is a camera twin renders in colour.
 fn is_colour_camera(kind: &str) -> bool {
-    matches!(kind, "camera" | "wideanglecamera" | "multicamera")
+    matches!(kind, "camera" | "wideanglecamera" | "multicamera" | "segmentation")
 }
 
 /// One note per colour camera of `robot`'s file (Gazebo `camera`, `wideanglecamera`,
-/// `multicamera`): twin does not render colour, so such a camera publishes nothing (it used to
-/// be turned into a depth camera, which it is not). Empty when there is none.
+/// `multicamera`, `segmentation`) when this machine has no OpenGL to render it: such a camera
+/// publishes nothing, and the note says what to install. Empty when there is none or OpenGL
+/// is there.
 pub fn unrendered_cameras(robot: &Robot) -> Vec<String> {
+    let Err(why) = crate::mj::gl_available() else { return Vec::new() };
     robot
         .sensors
         .iter()
-        .filter(|s| is_colour_camera(&s.kind))
+        .filter(|s| is_colour_camera(&s.kind) || s.kind == "rgbd_camera")
         .map(|s| {
             let size = s
                 .mujoco
@@ -203,8 +292,8 @@ pub fn unrendered_cameras(robot: &Robot) -> Vec<String> {
                 })
                 .unwrap_or_default();
             format!(
-                "camera sensor \"{}\" (Gazebo type=\"{}\", {size}colour) is not rendered: twin ray-casts depth \
-                 images only, so it publishes nothing (a depth or rgbd_camera sensor would be)",
+                "camera sensor \"{}\" (Gazebo type=\"{}\", {size}colour): its colour image is not rendered: \
+                 {why}",
                 s.name, s.kind
             )
         })
@@ -224,8 +313,29 @@ fn depth_topics(prefix: &str) -> Vec<(String, SensorStream)> {
 pub enum Reading {
     /// A depth image.
     Depth(DepthFrame),
+    /// A colour frame (with its labels when asked for).
+    Colour(ColourFrame),
     /// A LiDAR scan.
     Lidar(LidarScan),
+}
+
+impl Reading {
+    /// Simulation time of the state it shows, ns.
+    pub fn stamp_nanos(&self) -> u64 {
+        match self {
+            Reading::Depth(f) => f.stamp_nanos,
+            Reading::Colour(f) => f.stamp_nanos,
+            Reading::Lidar(l) => l.stamp_nanos,
+        }
+    }
+
+    fn set_stamp_nanos(&mut self, stamp_nanos: u64) {
+        match self {
+            Reading::Depth(f) => f.stamp_nanos = stamp_nanos,
+            Reading::Colour(f) => f.stamp_nanos = stamp_nanos,
+            Reading::Lidar(l) => l.stamp_nanos = stamp_nanos,
+        }
+    }
 }
 
 /// One message of a ray-cast sensor's topic.
@@ -239,6 +349,8 @@ pub enum SensorMessage {
     PointCloud2(PointCloud2),
     /// `sensor_msgs/LaserScan`.
     LaserScan(LaserScan),
+    /// `std_msgs/String` (a label table).
+    Text(RosString),
 }
 
 impl SensorMessage {
@@ -249,6 +361,7 @@ impl SensorMessage {
             SensorMessage::CameraInfo(_) => CameraInfo::TYPE_NAME,
             SensorMessage::PointCloud2(_) => PointCloud2::TYPE_NAME,
             SensorMessage::LaserScan(_) => LaserScan::TYPE_NAME,
+            SensorMessage::Text(_) => RosString::TYPE_NAME,
         }
     }
 
@@ -259,6 +372,7 @@ impl SensorMessage {
             SensorMessage::CameraInfo(m) => m.encode(w),
             SensorMessage::PointCloud2(m) => m.encode(w),
             SensorMessage::LaserScan(m) => m.encode(w),
+            SensorMessage::Text(m) => m.encode(w),
         }
     }
 }
@@ -268,6 +382,8 @@ impl SensorMessage {
 pub enum Device {
     /// A depth camera.
     Depth(DepthCamera),
+    /// A colour camera (rendered).
+    Colour(Box<ColourCamera>),
     /// A LiDAR.
     Lidar(Lidar),
 }
@@ -276,13 +392,16 @@ impl RaySensor {
     /// Builds the device on `robot`'s model.
     ///
     /// # Errors
-    /// As [`DepthCamera::new`] and [`Lidar::new`] (bad options from the file, a missing
-    /// camera or site).
+    /// As [`DepthCamera::new`], [`ColourCamera::new`] and [`Lidar::new`] (bad options from the
+    /// file, a missing camera or site, no OpenGL for a colour camera).
     pub fn build(&self, robot: &Robot) -> Result<Device> {
         Ok(match &self.kind {
             RaySensorKind::Depth { camera, options } => {
                 Device::Depth(DepthCamera::new(&robot.model, camera, options.clone())?.with_frame_id(&self.frame_id))
             }
+            RaySensorKind::Colour { camera, options } => Device::Colour(Box::new(
+                ColourCamera::new(&robot.model, camera, options.clone())?.with_frame_id(&self.frame_id),
+            )),
             RaySensorKind::Lidar { site, options } => {
                 Device::Lidar(Lidar::new(&robot.model, site, options.clone())?.with_frame_id(&self.frame_id))
             }
@@ -293,6 +412,7 @@ impl RaySensor {
     pub fn rays(&self) -> usize {
         match &self.kind {
             RaySensorKind::Depth { options, .. } => options.width as usize * options.height as usize,
+            RaySensorKind::Colour { options, .. } => options.width as usize * options.height as usize,
             RaySensorKind::Lidar { options, .. } => options.horizontal.samples * options.vertical.samples,
         }
     }
@@ -302,7 +422,7 @@ impl RaySensor {
     /// a LiDAR's its site. `None` when the model lacks the camera or site.
     pub fn body_from_frame(&self, model: &crate::mj::Model) -> Option<(usize, [f64; 3], [f64; 4])> {
         match &self.kind {
-            RaySensorKind::Depth { camera, .. } => {
+            RaySensorKind::Depth { camera, .. } | RaySensorKind::Colour { camera, .. } => {
                 let c = model.id(ObjType::Camera, camera)?;
                 let q = model.cam_quat()[c];
                 // body_from_optical = body_from_camera · (half turn about x) = q ⊗ (0, 1, 0, 0).
@@ -327,19 +447,28 @@ impl RaySensor {
                 (SensorStream::Points, Reading::Lidar(s)) => SensorMessage::PointCloud2(s.point_cloud()),
                 (_, Reading::Lidar(s)) => SensorMessage::LaserScan(s.laser_scan(0, 1.0 / self.rate_hz)),
                 (_, Reading::Depth(f)) => SensorMessage::Image(f.image()),
+                (SensorStream::CameraInfo, Reading::Colour(f)) => SensorMessage::CameraInfo(Box::new(f.camera_info())),
+                (SensorStream::Instances | SensorStream::Classes, Reading::Colour(f)) => {
+                    SensorMessage::Image(f.label_image(*stream == SensorStream::Classes).unwrap_or_else(|| f.image()))
+                }
+                (SensorStream::LabelTable, Reading::Colour(f)) => SensorMessage::Text(RosString {
+                    data: f.labels.as_ref().map_or_else(String::new, |l| l.table.to_string()),
+                }),
+                (_, Reading::Colour(f)) => SensorMessage::Image(f.image()),
             })
             .collect()
     }
 }
 
 impl Device {
-    /// Reads the state of `data` (its last forward pass).
+    /// Reads the state of `data` (its last forward pass; a renderer updates its scene from it).
     ///
     /// # Errors
-    /// As [`DepthCamera::render`] and [`Lidar::scan`].
-    pub fn read(&mut self, data: &Data) -> Result<Reading> {
+    /// As [`DepthCamera::render`], [`ColourCamera::render`] and [`Lidar::scan`].
+    pub fn read(&mut self, data: &mut Data) -> Result<Reading> {
         Ok(match self {
-            Device::Depth(c) => Reading::Depth(c.render(data.model(), data)?),
+            Device::Depth(c) => Reading::Depth(c.render(&data.model().clone(), data)?),
+            Device::Colour(c) => Reading::Colour(c.render(data)?),
             Device::Lidar(l) => Reading::Lidar(l.scan(data)?),
         })
     }
@@ -414,11 +543,8 @@ impl Pipelined {
         // Inside the pool, a device's `threads = 0` (the current pool) means this pool.
         self.pool.spawn(move || {
             let started = std::time::Instant::now();
-            let reading = device.read(&scratch).map(|mut r| {
-                match &mut r {
-                    Reading::Depth(f) => f.stamp_nanos = stamp_nanos,
-                    Reading::Lidar(l) => l.stamp_nanos = stamp_nanos,
-                }
+            let reading = device.read(&mut scratch).map(|mut r| {
+                r.set_stamp_nanos(stamp_nanos);
                 r
             });
             // The receiver is gone only when the owner was dropped: nothing to hand back.
@@ -441,5 +567,14 @@ impl Pipelined {
         self.readings += 1;
         self.read_secs += secs;
         reading.map(Some)
+    }
+}
+
+impl Drop for Pipelined {
+    /// Waits for the reading in flight, so the device (a colour camera's rendering thread and
+    /// OpenGL context) is dropped here, before its owner goes on, and not on a pool thread that
+    /// may still be running when the process exits (the pool's threads are not joined).
+    fn drop(&mut self) {
+        let _ = self.finish();
     }
 }

@@ -969,10 +969,7 @@ impl crate::engine::Observer for Recording {
 /// Writes one reading of a ray-cast sensor to the sinks that take its topics and to rerun
 /// (depth image, pinhole and world points), stamped with the reading's own time.
 fn write_reading(out: &mut Outputs, s: &SenseOut, reading: &crate::sense::Reading) -> Result<()> {
-    let stamp = match reading {
-        crate::sense::Reading::Depth(f) => f.stamp_nanos,
-        crate::sense::Reading::Lidar(l) => l.stamp_nanos,
-    };
+    let stamp = reading.stamp_nanos();
     if s.ids.iter().flatten().any(|&id| out.takes(id)) {
         for (id, message) in s.ids.iter().zip(s.sensor.messages(reading)) {
             if let Some(id) = id.filter(|&id| out.takes(id)) {
@@ -987,6 +984,7 @@ fn write_reading(out: &mut Outputs, s: &SenseOut, reading: &crate::sense::Readin
             rec.set_time_secs(stamp as f64 * 1e-9);
             match reading {
                 crate::sense::Reading::Depth(f) => rec.depth_frame(&s.sensor.name, f)?,
+                crate::sense::Reading::Colour(f) => rec.colour_frame(&s.sensor.name, f)?,
                 crate::sense::Reading::Lidar(l) => {
                     let pts: Vec<_> =
                         l.points_sensor().into_iter().flatten().map(|p| l.world_from_sensor * p).collect();

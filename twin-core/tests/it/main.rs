@@ -6,6 +6,8 @@ mod errors;
 mod example_robot_data;
 mod log_interop;
 mod physics;
+mod public_sensors;
+mod render;
 mod sense;
 mod sinks;
 mod test_python;
