@@ -9,6 +9,7 @@ pub mod mesh;
 mod meta;
 mod options;
 mod sensors;
+pub mod srdf;
 mod transmission;
 mod tree;
 pub mod urdf;
@@ -36,19 +37,21 @@ pub trait Compiler {
     /// [`Compile::Rejected`]); conversion errors turn into it too.
     type Error: From<Error>;
 
-    /// Compiles `mjcf` and measures it at its home pose ([`Probe`]); `bodies` are the bodies whose
-    /// [`Probe::body_invweight`] is wanted, in that order.
+    /// Compiles `mjcf` and measures it at its home pose `pose` (as in [`Compiler::home_qpos`])
+    /// ([`Probe`]); `bodies` are the bodies whose [`Probe::body_invweight`] is wanted, in that
+    /// order.
     ///
     /// # Errors
     /// [`Compile::Rejected`] with the engine's message when it refuses the document.
-    fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> Result<Probe, Compile<Self::Error>>;
+    fn probe(&mut self, mjcf: &str, bodies: &[&str], pose: &[(String, f64)]) -> Result<Probe, Compile<Self::Error>>;
 
-    /// Compiles `mjcf` and returns its home pose: `qpos0` with every limited hinge and slide
+    /// Compiles `mjcf` and returns its home pose: `qpos0` with the joints named in `pose` (an
+    /// SRDF's named pose, [`srdf`]) set to their values, then every limited hinge and slide
     /// clamped into its range (some URDFs put 0 outside the range, e.g. knees of quadrupeds).
     ///
     /// # Errors
     /// As [`Compiler::probe`].
-    fn home_qpos(&mut self, mjcf: &str) -> Result<Vec<f64>, Compile<Self::Error>>;
+    fn home_qpos(&mut self, mjcf: &str, pose: &[(String, f64)]) -> Result<Vec<f64>, Compile<Self::Error>>;
 }
 
 /// Why a [`Compiler`] gave no answer.
@@ -314,6 +317,7 @@ pub fn convert_urdf_str<C: Compiler>(
     let tree = Tree::build(&robot)?;
     let mut conv = Converter::new(&robot, &tree, opts)?;
     conv.prepare()?;
+    let pose = conv.named_pose(path)?;
 
     let world = match &opts.world {
         Some(w) => Some(world::load(w)?),
@@ -324,7 +328,7 @@ pub fn convert_urdf_str<C: Compiler>(
     let (mut base_height_m, placed_geoms) = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
         let bodies = conv.contact_bodies();
-        let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies))?;
+        let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies, &pose))?;
         conv.contact_solrefs(&measured);
         let base = match measured.lowest_collision_z_m {
             Some(z) if conv.world_root => (-z).max(0.0),
@@ -343,7 +347,7 @@ pub fn convert_urdf_str<C: Compiler>(
     }
     // Pass 2: the real model; its qpos0 is the home pose.
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), None)?;
-    let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf))?;
+    let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf, &pose))?;
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), Some(&home))?;
     let mut notes = robot.notes.clone();
     notes.append(&mut conv.notes);
@@ -393,6 +397,13 @@ fn body_nesting(mjcf: &str) -> Option<Nesting> {
     deepest
 }
 
+/// Deepest a contact may sink with the robot's whole weight on its link before the converter
+/// stiffens it ([`Converter::weight_solref`]), metres.
+const MAX_SINK_M: f64 = 0.005;
+
+/// Standard gravity, m/s² (the converter's floor and worlds use 9.81).
+const GRAVITY_M_S2: f64 = 9.81;
+
 /// Constant impedance of contacts converted from Gazebo kp/kd (`solimp="d d …"`).
 const CONTACT_IMPEDANCE: f64 = 0.9;
 
@@ -433,6 +444,8 @@ struct Converter<'a> {
     sensor_meta: Vec<SensorMeta>,
     joint_meta: Vec<JointMeta>,
     notes: Vec<String>,
+    /// Where the home pose comes from ([`RobotMeta::home_pose`]).
+    home_pose: String,
     converted: Vec<PathBuf>,
     converted_from: HashMap<PathBuf, PathBuf>,
     sensor_names: std::collections::HashSet<String>,
@@ -531,6 +544,7 @@ impl<'a> Converter<'a> {
             sensor_meta: Vec::new(),
             joint_meta: Vec::new(),
             notes: Vec::new(),
+            home_pose: String::new(),
             converted: Vec::new(),
             converted_from: HashMap::new(),
             sensor_names: std::collections::HashSet::new(),
@@ -891,31 +905,139 @@ impl<'a> Converter<'a> {
             sensors: self.sensor_meta.clone(),
             joints: self.joint_meta.clone(),
             differentials: self.differential_meta.clone(),
+            home_pose: self.home_pose.clone(),
         }
     }
 
-    /// Bodies (links) with Gazebo kp/kd, whose effective mass the probe measures.
+    /// The joint values of the home pose (an SRDF's named pose, [`srdf`]) by MJCF joint name;
+    /// empty for the zero pose clamped into the joint ranges. Sets [`RobotMeta::home_pose`] and
+    /// notes what was used.
+    ///
+    /// # Errors
+    /// An SRDF named by [`ConvertOptions::srdf`] that can't be read or lacks the pose asked for,
+    /// or a pose asked for that no SRDF beside the URDF has.
+    fn named_pose(&mut self, urdf: &Path) -> Result<Vec<(String, f64)>> {
+        let movable: Vec<&str> = self
+            .robot
+            .joints
+            .iter()
+            .filter(|j| matches!(j.kind, JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic))
+            .map(|j| j.name.as_str())
+            .collect();
+        let wanted = self.opts.pose.as_deref();
+        let found = match &self.opts.srdf {
+            Some(file) => srdf::read(file, wanted, &movable)?,
+            None => srdf::find(urdf, &self.robot.name, wanted, &movable),
+        };
+        let Some(pose) = found else {
+            if let Some(name) = wanted {
+                return Err(Error::Urdf {
+                    path: urdf.to_path_buf(),
+                    line: 1,
+                    element: "robot".into(),
+                    name: Some(self.robot.name.clone()),
+                    message: format!(
+                        "pose \"{name}\" asked for, but no SRDF beside the URDF (its folder, srdf/ there or srdf/ one folder up) has a group state of that name for this robot: name the file with --srdf"
+                    ),
+                });
+            }
+            self.home_pose =
+                "zero pose clamped into every joint's range (no SRDF with a standing or home pose beside the URDF)"
+                    .into();
+            return Ok(Vec::new());
+        };
+        let mut joints = Vec::with_capacity(pose.joints.len());
+        for (name, value) in &pose.joints {
+            let limit = self.robot.joints.iter().find(|j| &j.name == name).and_then(|j| match j.kind {
+                JointKind::Continuous => None,
+                _ => j.limit.as_ref().map(|l| (l.lower, l.upper)),
+            });
+            if let Some((lo, hi)) = limit.filter(|&(lo, hi)| lo < hi && !(lo..=hi).contains(value)) {
+                self.notes.push(format!(
+                    "SRDF pose \"{}\": joint \"{name}\" at {value} is outside its range [{lo}, {hi}]: clamped",
+                    pose.name
+                ));
+            }
+            joints.push((name.clone(), *value));
+        }
+        if !pose.unknown_joints.is_empty() {
+            self.notes.push(format!(
+                "SRDF pose \"{}\" ({}): joints not in this robot skipped: {}",
+                pose.name,
+                pose.file.display(),
+                pose.unknown_joints.join(", ")
+            ));
+        }
+        self.home_pose = format!(
+            "SRDF pose \"{}\" of {} ({} of {} joints; the others at zero clamped into their ranges)",
+            pose.name,
+            pose.file.display(),
+            joints.len(),
+            movable.len()
+        );
+        Ok(joints)
+    }
+
+    /// Bodies (links) with collision geoms or Gazebo kp/kd, whose effective mass the probe
+    /// measures.
     fn contact_bodies(&self) -> Vec<&'a str> {
         let robot = self.robot;
         (0..robot.links.len())
-            .filter(|&li| self.gazebo_contact[li].is_some())
+            .filter(|&li| self.gazebo_contact[li].is_some() || !robot.links[li].collisions.is_empty())
             .map(|li| robot.links[li].name.as_str())
             .collect()
     }
 
-    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe: each link's
-    /// effective mass at its contacts is `1 / body_invweight0` at the home pose (the bodies in
-    /// the order of [`Converter::contact_bodies`]).
+    /// Contact `solref`s from the compiled probe: each link's effective mass at its contacts is
+    /// `1 / body_invweight0` (the bodies in the order of [`Converter::contact_bodies`]). Links
+    /// with Gazebo kp/kd get Gazebo's stiffness ([`Converter::direct_solref`]); other links keep
+    /// MuJoCo's default contact unless it would let the robot's whole weight on that link sink
+    /// it more than [`MAX_SINK_M`] ([`Converter::weight_solref`]).
     fn contact_solrefs(&mut self, probe: &Probe) {
         let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
+        let bodies = self.contact_bodies();
         let mut invweights = probe.body_invweight.iter();
         for li in 0..self.robot.links.len() {
-            let Some((kp, kd, line)) = self.gazebo_contact[li] else { continue };
+            if !bodies.contains(&self.robot.links[li].name.as_str()) {
+                continue;
+            }
             let name = &self.robot.links[li].name;
             let inv = invweights.next().copied().flatten().unwrap_or(0.0);
             let mass = if inv > 0.0 { 1.0 / inv } else { total };
-            self.contact[li] = Some(self.direct_solref(name, line, kp, kd, mass));
+            self.contact[li] = match self.gazebo_contact[li] {
+                Some((kp, kd, line)) => Some(self.direct_solref(name, line, kp, kd, mass)),
+                None if self.opts.fixed_base => None,
+                None => self.weight_solref(name, mass, total),
+            };
         }
+    }
+
+    /// A stiffer contact for a light link that may carry a heavy robot (a quadruped's foot):
+    /// MuJoCo's contact stiffness is an acceleration, so under MuJoCo's default (`solref 0.02 1`,
+    /// `solimp 0.9 0.95 0.001`) a contact of effective mass `mass` carrying force `f` settles
+    /// `(1 − d)/d · f/(mass·k)` deep, k = 1/(0.95·0.02)²: ANYmal C's 0.09 kg feet under its 52 kg
+    /// sank 3.7 cm. Where that depth, with the robot's whole weight (`total_kg`) on the link,
+    /// exceeds [`MAX_SINK_M`], the direct-form `solref` of [`Converter::direct_solref`] whose
+    /// depth at that weight is [`MAX_SINK_M`] (critically damped); `None` (the default) elsewhere.
+    fn weight_solref(&mut self, link: &str, mass: f64, total_kg: f64) -> Option<[f64; 2]> {
+        const DEFAULT_DMAX: f64 = 0.95;
+        let k_default = 1.0 / (DEFAULT_DMAX * 0.02).powi(2);
+        let accel = total_kg * GRAVITY_M_S2 / mass;
+        let sink_default = (1.0 - DEFAULT_DMAX) / DEFAULT_DMAX * accel / k_default;
+        if sink_default <= MAX_SINK_M {
+            return None;
+        }
+        // Gazebo's form: depth (1 − d)·f/(mass·K) = MAX_SINK_M at f = total·g, as kp = f/depth.
+        let kp = total_kg * GRAVITY_M_S2 / MAX_SINK_M;
+        let solref = self.direct_solref(link, 0, kp, 0.0, mass);
+        self.notes.push(format!(
+            "link \"{link}\": contact stiffened (solref {:.4e} {:.4e}): its effective mass {mass:.3} kg under the robot's {total_kg:.1} kg would sink {:.1} mm with MuJoCo's default contact, at most {:.0} mm now",
+            solref[0],
+            solref[1],
+            sink_default * 1e3,
+            MAX_SINK_M * 1e3
+        ));
+        Some(solref)
     }
 
     /// MuJoCo's direct-form `solref = (−K, −B)` reproducing Gazebo's contact `kp` (N/m) and
