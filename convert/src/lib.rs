@@ -76,6 +76,9 @@ pub struct Probe {
     /// Per body asked for: MuJoCo's `body_invweight0[0]` (inverse of the effective mass at the
     /// body, 1/kg), `None` when the model has no such body.
     pub body_invweight: Vec<Option<f64>>,
+    /// Per body asked for: the lowest world z of its collision geoms at the home pose, m; `None`
+    /// when it has none (or no such body).
+    pub body_lowest_z_m: Vec<Option<f64>>,
 }
 
 /// How far a robot whose collision geoms are `geoms` ([`Probe::collision_geoms_m`], measured with
@@ -400,6 +403,10 @@ fn body_nesting(mjcf: &str) -> Option<Nesting> {
 /// Deepest a contact may sink with the robot's whole weight on its link before the converter
 /// stiffens it ([`Converter::weight_solref`]), metres.
 const MAX_SINK_M: f64 = 0.005;
+
+/// A link is a foot (may carry the robot, [`Converter::weight_solref`]) when its collision
+/// geoms reach within this of the robot's lowest point in the home pose, metres.
+const FOOT_BAND_M: f64 = 0.02;
 
 /// Standard gravity, m/s² (the converter's floor and worlds use 9.81).
 const GRAVITY_M_S2: f64 = 9.81;
@@ -991,22 +998,27 @@ impl<'a> Converter<'a> {
     /// Contact `solref`s from the compiled probe: each link's effective mass at its contacts is
     /// `1 / body_invweight0` (the bodies in the order of [`Converter::contact_bodies`]). Links
     /// with Gazebo kp/kd get Gazebo's stiffness ([`Converter::direct_solref`]); other links keep
-    /// MuJoCo's default contact unless it would let the robot's whole weight on that link sink
-    /// it more than [`MAX_SINK_M`] ([`Converter::weight_solref`]).
+    /// MuJoCo's default contact unless they are feet (within [`FOOT_BAND_M`] of the lowest point
+    /// in the home pose) that the robot's whole weight would sink more than [`MAX_SINK_M`]
+    /// ([`Converter::weight_solref`]).
     fn contact_solrefs(&mut self, probe: &Probe) {
         let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
         let bodies = self.contact_bodies();
-        let mut invweights = probe.body_invweight.iter();
+        let lowest = probe.lowest_collision_z_m.unwrap_or(f64::NEG_INFINITY);
+        let mut measured =
+            probe.body_invweight.iter().zip(probe.body_lowest_z_m.iter().chain(std::iter::repeat(&None)));
         for li in 0..self.robot.links.len() {
             if !bodies.contains(&self.robot.links[li].name.as_str()) {
                 continue;
             }
             let name = &self.robot.links[li].name;
-            let inv = invweights.next().copied().flatten().unwrap_or(0.0);
+            let (inv, low) = measured.next().map_or((0.0, None), |(i, z)| (i.unwrap_or(0.0), *z));
             let mass = if inv > 0.0 { 1.0 / inv } else { total };
+            // A foot: its collision geoms reach within FOOT_BAND_M of the robot's lowest point.
+            let foot = low.is_some_and(|z| z <= lowest + FOOT_BAND_M);
             self.contact[li] = match self.gazebo_contact[li] {
                 Some((kp, kd, line)) => Some(self.direct_solref(name, line, kp, kd, mass)),
-                None if self.opts.fixed_base => None,
+                None if self.opts.fixed_base || !foot || inv <= 0.0 => None,
                 None => self.weight_solref(name, mass, total),
             };
         }

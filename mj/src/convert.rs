@@ -40,13 +40,15 @@ impl Compiler for MuJoCo {
     ) -> std::result::Result<Probe, Compile<Error>> {
         let model = compile(mjcf)?;
         let geoms = collision_geoms(&model, pose).map_err(Compile::Other)?;
+        let ids: Vec<Option<usize>> = bodies.iter().map(|b| model.id(ObjType::Body, b)).collect();
         Ok(Probe {
-            lowest_collision_z_m: geoms.iter().map(|g| g[4]).reduce(f64::min),
-            collision_geoms_m: geoms,
-            body_invweight: bodies
+            lowest_collision_z_m: geoms.iter().map(|g| g.1[4]).reduce(f64::min),
+            body_lowest_z_m: ids
                 .iter()
-                .map(|b| model.id(ObjType::Body, b).map(|b| model.body_invweight0()[b][0]))
+                .map(|id| id.and_then(|b| geoms.iter().filter(|g| g.0 == b).map(|g| g.1[4]).reduce(f64::min)))
                 .collect(),
+            collision_geoms_m: geoms.into_iter().map(|g| g.1).collect(),
+            body_invweight: ids.iter().map(|id| id.map(|b| model.body_invweight0()[b][0])).collect(),
         })
     }
 
@@ -118,8 +120,8 @@ fn home_pose(model: &Model, pose: &[(String, f64)]) -> Result<Vec<f64>> {
 
 /// Each collision geom of the robot at the model's home pose (planes ignored): the world x-y box
 /// around it (centre x, y, half sizes x, y, from MuJoCo's local bounding box) and its lowest
-/// world z ([`Probe::collision_geoms_m`]).
-fn collision_geoms(model: &Model, pose: &[(String, f64)]) -> Result<Vec<[f64; 5]>> {
+/// world z ([`Probe::collision_geoms_m`]), with the geom's body.
+fn collision_geoms(model: &Model, pose: &[(String, f64)]) -> Result<Vec<(usize, [f64; 5])>> {
     let model = Arc::new(model.try_clone()?);
     let mut data = Data::new(model.clone())?;
     let home = home_pose(&model, pose)?;
@@ -160,7 +162,7 @@ fn collision_geoms(model: &Model, pose: &[(String, f64)]) -> Result<Vec<[f64; 5]
         let [cx, cy, cz, hx, hy, hz] = m.geom_aabb()[g];
         let centre = p + r * Vector3::new(cx, cy, cz);
         let half = |row: usize| r[(row, 0)].abs() * hx + r[(row, 1)].abs() * hy + r[(row, 2)].abs() * hz;
-        geoms.push([centre.x, centre.y, half(0), half(1), z]);
+        geoms.push((m.geom_bodyid()[g] as usize, [centre.x, centre.y, half(0), half(1), z]));
     }
     Ok(geoms)
 }
