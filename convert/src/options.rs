@@ -116,8 +116,8 @@ pub struct ConvertOptions {
     /// beside the URDF, in `srdf/` beside it or in `srdf/` one folder up, that names this
     /// robot's joints; see [`crate::srdf`]).
     pub srdf: Option<PathBuf>,
-    /// Name of the SRDF pose taken as home (`--pose`) (default: `None`: "standing",
-    /// "half_sitting", "home", "default" or "neutral", else one whose name says "stand" or
-    /// "home"; with no such pose, the zero pose clamped into every joint's range).
+    /// Name of the SRDF pose taken as home (`--pose`) (default: `None`: "standing", "home",
+    /// "default" or "neutral", else one whose name says "stand" or "home"; with no such pose,
+    /// the zero pose clamped into every joint's range; see [`crate::srdf`]).
     pub pose: Option<String>,
 }

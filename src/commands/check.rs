@@ -19,8 +19,8 @@ pub struct Args {
     /// Refuse invalid inertias instead of repairing them by the smallest change.
     #[arg(long)]
     pub strict_inertia: bool,
-    /// SRDF pose held as home (a `<group_state>` name; default: "standing", "half_sitting",
-    /// "home", … where an SRDF beside the URDF has one, else the zero pose clamped into every
+    /// SRDF pose held as home (a `<group_state>` name; default: "standing", "home", …
+    /// where an SRDF beside the URDF has one, else the zero pose clamped into every
     /// joint's range).
     #[arg(long, value_name = "NAME")]
     pub pose: Option<String>,

@@ -40,7 +40,7 @@ pub struct Args {
     #[arg(long = "contact-sensor", value_name = "LINK")]
     pub contact_sensors: Vec<String>,
     /// SRDF pose written as keyframe `home` (a `<group_state>` name; default: "standing",
-    /// "half_sitting", "home", … where an SRDF beside the URDF has one, else the zero pose
+    /// "home", … where an SRDF beside the URDF has one, else the zero pose
     /// clamped into every joint's range).
     #[arg(long, value_name = "NAME")]
     pub pose: Option<String>,
