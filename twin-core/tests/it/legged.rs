@@ -79,55 +79,6 @@ const ICUB_MODELS: &[&str] = &[
 /// Robots that do not stand under the check's hold, with what was measured and why.
 const FALLS_KNOWN: &[(&str, &str)] = &[
     ("bolt_description/robots/bolt.urdf", "point feet: no support polygon for a PD hold to balance on"),
-    ("romeo_description/urdf/romeo_laas_small.urdf", None),
-    ("romeo_description/urdf/romeo_small.urdf", None),
-    ("simple_humanoid_description/urdf/simple_humanoid.urdf", None),
-    ("solo_description/robots/solo.urdf", Some("standing")),
-    ("solo_description/robots/solo12.urdf", Some("standing")),
-    ("talos_data/robots/talos_full_v2.urdf", None),
-    ("talos_data/robots/talos_full_v2_box.urdf", None),
-    ("talos_data/robots/talos_reduced.urdf", None),
-    ("talos_data/robots/talos_reduced_box.urdf", None),
-    ("talos_data/robots/talos_reduced_corrected.urdf", None),
-];
-
-/// example-robot-data's legged robots without any `<collision>`: nothing of them can touch the
-/// floor, so no hold can stand them (checked: the URDF has no collision element).
-const NO_COLLISION: &[&str] = &[
-    "alexander_description/urdf/alexander_v1.lowerBodyOnly.urdf",
-    "human_description/robots/human.urdf",
-    "simple_humanoid_description/urdf/simple_humanoid_classical.urdf",
-];
-
-/// icub-models' full-body iCubs (`iCub/robots/NAME/model.urdf`); no SRDF: zero pose.
-const ICUB_MODELS: &[&str] = &[
-    "iCubDarmstadt01",
-    "iCubErzelli02",
-    "iCubGazeboV2_5",
-    "iCubGazeboV2_5_KIT_007",
-    "iCubGazeboV2_6",
-    "iCubGazeboV2_7",
-    "iCubGenova01",
-    "iCubGenova02",
-    "iCubGenova03",
-    "iCubGenova04",
-    "iCubGenova11",
-    "iCubLisboa01",
-    "iCubNancy01",
-    "iCubWaterloo01",
-];
-
-/// Robots that do not stand under the check's hold, with what was measured and why.
-const FALLS_KNOWN: &[(&str, &str)] = &[
-    ("bolt_description/robots/bolt.urdf", "point feet: no support polygon for a PD hold to balance on"),
-    (
-        "icub_description/robots/icub.urdf",
-        "its SRDF's half_sitting falls (diverges) where its zero pose stands: not investigated",
-    ),
-    (
-        "icub_description/robots/icub_reduced.urdf",
-        "its SRDF's half_sitting falls where its zero pose stands: not investigated",
-    ),
     ("romeo_description/urdf/romeo_laas_small.urdf", "feet slide 0.10 m at its zero pose (no SRDF for this variant)"),
     // These four are one model (same numbers): the robot stands (tilt 0.016 rad, drift 1.1 mm,
     // penetration 0.3 mm) but a joint under the check's servo gains rings ever more (joint speed
