@@ -3,6 +3,7 @@
 
 mod error;
 pub mod hfield;
+mod home;
 pub(crate) mod inertia;
 mod ir;
 pub mod mesh;
@@ -399,17 +400,6 @@ fn body_nesting(mjcf: &str) -> Option<Nesting> {
     }
     deepest
 }
-
-/// Deepest a contact may sink with the robot's whole weight on its link before the converter
-/// stiffens it ([`Converter::weight_solref`]), metres.
-const MAX_SINK_M: f64 = 0.005;
-
-/// A link is a foot (may carry the robot, [`Converter::weight_solref`]) when its collision
-/// geoms reach within this of the robot's lowest point in the home pose, metres.
-const FOOT_BAND_M: f64 = 0.02;
-
-/// Standard gravity, m/s² (the converter's floor and worlds use 9.81).
-const GRAVITY_M_S2: f64 = 9.81;
 
 /// Constant impedance of contacts converted from Gazebo kp/kd (`solimp="d d …"`).
 const CONTACT_IMPEDANCE: f64 = 0.9;
@@ -916,75 +906,6 @@ impl<'a> Converter<'a> {
         }
     }
 
-    /// The joint values of the home pose (an SRDF's named pose, [`srdf`]) by MJCF joint name;
-    /// empty for the zero pose clamped into the joint ranges. Sets [`RobotMeta::home_pose`] and
-    /// notes what was used.
-    ///
-    /// # Errors
-    /// An SRDF named by [`ConvertOptions::srdf`] that can't be read or lacks the pose asked for,
-    /// or a pose asked for that no SRDF beside the URDF has.
-    fn named_pose(&mut self, urdf: &Path) -> Result<Vec<(String, f64)>> {
-        let movable: Vec<&str> = self
-            .robot
-            .joints
-            .iter()
-            .filter(|j| matches!(j.kind, JointKind::Revolute | JointKind::Continuous | JointKind::Prismatic))
-            .map(|j| j.name.as_str())
-            .collect();
-        let wanted = self.opts.pose.as_deref();
-        let found = match &self.opts.srdf {
-            Some(file) => srdf::read(file, wanted, &movable)?,
-            None => srdf::find(urdf, &self.robot.name, wanted, &movable),
-        };
-        let Some(pose) = found else {
-            if let Some(name) = wanted {
-                return Err(Error::Urdf {
-                    path: urdf.to_path_buf(),
-                    line: 1,
-                    element: "robot".into(),
-                    name: Some(self.robot.name.clone()),
-                    message: format!(
-                        "pose \"{name}\" asked for, but no SRDF beside the URDF (its folder, srdf/ there or srdf/ one folder up) has a group state of that name for this robot: name the file with --srdf"
-                    ),
-                });
-            }
-            self.home_pose =
-                "zero pose clamped into every joint's range (no SRDF with a standing or home pose beside the URDF)"
-                    .into();
-            return Ok(Vec::new());
-        };
-        let mut joints = Vec::with_capacity(pose.joints.len());
-        for (name, value) in &pose.joints {
-            let limit = self.robot.joints.iter().find(|j| &j.name == name).and_then(|j| match j.kind {
-                JointKind::Continuous => None,
-                _ => j.limit.as_ref().map(|l| (l.lower, l.upper)),
-            });
-            if let Some((lo, hi)) = limit.filter(|&(lo, hi)| lo < hi && !(lo..=hi).contains(value)) {
-                self.notes.push(format!(
-                    "SRDF pose \"{}\": joint \"{name}\" at {value} is outside its range [{lo}, {hi}]: clamped",
-                    pose.name
-                ));
-            }
-            joints.push((name.clone(), *value));
-        }
-        if !pose.unknown_joints.is_empty() {
-            self.notes.push(format!(
-                "SRDF pose \"{}\" ({}): joints not in this robot skipped: {}",
-                pose.name,
-                pose.file.display(),
-                pose.unknown_joints.join(", ")
-            ));
-        }
-        self.home_pose = format!(
-            "SRDF pose \"{}\" of {} ({} of {} joints; the others at zero clamped into their ranges)",
-            pose.name,
-            pose.file.display(),
-            joints.len(),
-            movable.len()
-        );
-        Ok(joints)
-    }
-
     /// Bodies (links) with collision geoms or Gazebo kp/kd, whose effective mass the probe
     /// measures.
     fn contact_bodies(&self) -> Vec<&'a str> {
@@ -998,8 +919,8 @@ impl<'a> Converter<'a> {
     /// Contact `solref`s from the compiled probe: each link's effective mass at its contacts is
     /// `1 / body_invweight0` (the bodies in the order of [`Converter::contact_bodies`]). Links
     /// with Gazebo kp/kd get Gazebo's stiffness ([`Converter::direct_solref`]); other links keep
-    /// MuJoCo's default contact unless they are feet (within [`FOOT_BAND_M`] of the lowest point
-    /// in the home pose) that the robot's whole weight would sink more than [`MAX_SINK_M`]
+    /// MuJoCo's default contact unless they are feet (within [`home::FOOT_BAND_M`] of the lowest point
+    /// in the home pose) that the robot's whole weight would sink more than [`home::MAX_SINK_M`]
     /// ([`Converter::weight_solref`]).
     fn contact_solrefs(&mut self, probe: &Probe) {
         let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
@@ -1015,41 +936,13 @@ impl<'a> Converter<'a> {
             let (inv, low) = measured.next().map_or((0.0, None), |(i, z)| (i.unwrap_or(0.0), *z));
             let mass = if inv > 0.0 { 1.0 / inv } else { total };
             // A foot: its collision geoms reach within FOOT_BAND_M of the robot's lowest point.
-            let foot = low.is_some_and(|z| z <= lowest + FOOT_BAND_M);
+            let foot = low.is_some_and(|z| z <= lowest + home::FOOT_BAND_M);
             self.contact[li] = match self.gazebo_contact[li] {
                 Some((kp, kd, line)) => Some(self.direct_solref(name, line, kp, kd, mass)),
                 None if self.opts.fixed_base || !foot || inv <= 0.0 => None,
                 None => self.weight_solref(name, mass, total),
             };
         }
-    }
-
-    /// A stiffer contact for a light link that may carry a heavy robot (a quadruped's foot):
-    /// MuJoCo's contact stiffness is an acceleration, so under MuJoCo's default (`solref 0.02 1`,
-    /// `solimp 0.9 0.95 0.001`) a contact of effective mass `mass` carrying force `f` settles
-    /// `(1 − d)/d · f/(mass·k)` deep, k = 1/(0.95·0.02)²: ANYmal C's 0.09 kg feet under its 52 kg
-    /// sank 3.7 cm. Where that depth, with the robot's whole weight (`total_kg`) on the link,
-    /// exceeds [`MAX_SINK_M`], the direct-form `solref` of [`Converter::direct_solref`] whose
-    /// depth at that weight is [`MAX_SINK_M`] (critically damped); `None` (the default) elsewhere.
-    fn weight_solref(&mut self, link: &str, mass: f64, total_kg: f64) -> Option<[f64; 2]> {
-        const DEFAULT_DMAX: f64 = 0.95;
-        let k_default = 1.0 / (DEFAULT_DMAX * 0.02).powi(2);
-        let accel = total_kg * GRAVITY_M_S2 / mass;
-        let sink_default = (1.0 - DEFAULT_DMAX) / DEFAULT_DMAX * accel / k_default;
-        if sink_default <= MAX_SINK_M {
-            return None;
-        }
-        // Gazebo's form: depth (1 − d)·f/(mass·K) = MAX_SINK_M at f = total·g, as kp = f/depth.
-        let kp = total_kg * GRAVITY_M_S2 / MAX_SINK_M;
-        let solref = self.direct_solref(link, 0, kp, 0.0, mass);
-        self.notes.push(format!(
-            "link \"{link}\": contact stiffened (solref {:.4e} {:.4e}): its effective mass {mass:.3} kg under the robot's {total_kg:.1} kg would sink {:.1} mm with MuJoCo's default contact, at most {:.0} mm now",
-            solref[0],
-            solref[1],
-            sink_default * 1e3,
-            MAX_SINK_M * 1e3
-        ));
-        Some(solref)
     }
 
     /// MuJoCo's direct-form `solref = (−K, −B)` reproducing Gazebo's contact `kp` (N/m) and
