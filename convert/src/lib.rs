@@ -3,12 +3,14 @@
 
 mod error;
 pub mod hfield;
+mod home;
 pub(crate) mod inertia;
 mod ir;
 pub mod mesh;
 mod meta;
 mod options;
 mod sensors;
+pub mod srdf;
 mod transmission;
 mod tree;
 pub mod urdf;
@@ -36,19 +38,21 @@ pub trait Compiler {
     /// [`Compile::Rejected`]); conversion errors turn into it too.
     type Error: From<Error>;
 
-    /// Compiles `mjcf` and measures it at its home pose ([`Probe`]); `bodies` are the bodies whose
-    /// [`Probe::body_invweight`] is wanted, in that order.
+    /// Compiles `mjcf` and measures it at its home pose `pose` (as in [`Compiler::home_qpos`])
+    /// ([`Probe`]); `bodies` are the bodies whose [`Probe::body_invweight`] is wanted, in that
+    /// order.
     ///
     /// # Errors
     /// [`Compile::Rejected`] with the engine's message when it refuses the document.
-    fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> Result<Probe, Compile<Self::Error>>;
+    fn probe(&mut self, mjcf: &str, bodies: &[&str], pose: &[(String, f64)]) -> Result<Probe, Compile<Self::Error>>;
 
-    /// Compiles `mjcf` and returns its home pose: `qpos0` with every limited hinge and slide
+    /// Compiles `mjcf` and returns its home pose: `qpos0` with the joints named in `pose` (an
+    /// SRDF's named pose, [`srdf`]) set to their values, then every limited hinge and slide
     /// clamped into its range (some URDFs put 0 outside the range, e.g. knees of quadrupeds).
     ///
     /// # Errors
     /// As [`Compiler::probe`].
-    fn home_qpos(&mut self, mjcf: &str) -> Result<Vec<f64>, Compile<Self::Error>>;
+    fn home_qpos(&mut self, mjcf: &str, pose: &[(String, f64)]) -> Result<Vec<f64>, Compile<Self::Error>>;
 }
 
 /// Why a [`Compiler`] gave no answer.
@@ -73,6 +77,9 @@ pub struct Probe {
     /// Per body asked for: MuJoCo's `body_invweight0[0]` (inverse of the effective mass at the
     /// body, 1/kg), `None` when the model has no such body.
     pub body_invweight: Vec<Option<f64>>,
+    /// Per body asked for: the lowest world z of its collision geoms at the home pose, m; `None`
+    /// when it has none (or no such body).
+    pub body_lowest_z_m: Vec<Option<f64>>,
 }
 
 /// How far a robot whose collision geoms are `geoms` ([`Probe::collision_geoms_m`], measured with
@@ -317,6 +324,7 @@ pub fn convert_urdf_str<C: Compiler>(
     let tree = Tree::build(&robot)?;
     let mut conv = Converter::new(&robot, &tree, opts)?;
     conv.prepare()?;
+    let pose = conv.named_pose(path)?;
 
     let world = match &opts.world {
         Some(w) => Some(world::load(w)?),
@@ -327,7 +335,7 @@ pub fn convert_urdf_str<C: Compiler>(
     let (mut base_height_m, placed_geoms) = if conv.placed {
         let probe = conv.emit(0.0, false, None, None)?;
         let bodies = conv.contact_bodies();
-        let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies))?;
+        let measured = conv.compile(&probe, |mjcf| compiler.probe(mjcf, &bodies, &pose))?;
         conv.contact_solrefs(&measured);
         let base = match measured.lowest_collision_z_m {
             Some(z) if conv.world_root => (-z).max(0.0),
@@ -346,7 +354,7 @@ pub fn convert_urdf_str<C: Compiler>(
     }
     // Pass 2: the real model; its qpos0 is the home pose.
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), None)?;
-    let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf))?;
+    let home = conv.compile(&mjcf, |mjcf| compiler.home_qpos(mjcf, &pose))?;
     let mjcf = conv.emit(base_height_m, true, world.as_ref(), Some(&home))?;
     let mut notes = robot.notes.clone();
     notes.append(&mut conv.notes);
@@ -436,6 +444,8 @@ struct Converter<'a> {
     sensor_meta: Vec<SensorMeta>,
     joint_meta: Vec<JointMeta>,
     notes: Vec<String>,
+    /// Where the home pose comes from ([`RobotMeta::home_pose`]).
+    home_pose: String,
     converted: Vec<PathBuf>,
     converted_from: HashMap<PathBuf, PathBuf>,
     sensor_names: std::collections::HashSet<String>,
@@ -534,6 +544,7 @@ impl<'a> Converter<'a> {
             sensor_meta: Vec::new(),
             joint_meta: Vec::new(),
             notes: Vec::new(),
+            home_pose: String::new(),
             converted: Vec::new(),
             converted_from: HashMap::new(),
             sensor_names: std::collections::HashSet::new(),
@@ -894,30 +905,46 @@ impl<'a> Converter<'a> {
             sensors: self.sensor_meta.clone(),
             joints: self.joint_meta.clone(),
             differentials: self.differential_meta.clone(),
+            home_pose: self.home_pose.clone(),
         }
     }
 
-    /// Bodies (links) with Gazebo kp/kd, whose effective mass the probe measures.
+    /// Bodies (links) with collision geoms or Gazebo kp/kd, whose effective mass the probe
+    /// measures.
     fn contact_bodies(&self) -> Vec<&'a str> {
         let robot = self.robot;
         (0..robot.links.len())
-            .filter(|&li| self.gazebo_contact[li].is_some())
+            .filter(|&li| self.gazebo_contact[li].is_some() || !robot.links[li].collisions.is_empty())
             .map(|li| robot.links[li].name.as_str())
             .collect()
     }
 
-    /// Contact `solref`s of links with Gazebo kp/kd, from the compiled probe: each link's
-    /// effective mass at its contacts is `1 / body_invweight0` at the home pose (the bodies in
-    /// the order of [`Converter::contact_bodies`]).
+    /// Contact `solref`s from the compiled probe: each link's effective mass at its contacts is
+    /// `1 / body_invweight0` (the bodies in the order of [`Converter::contact_bodies`]). Links
+    /// with Gazebo kp/kd get Gazebo's stiffness ([`Converter::direct_solref`]); other links keep
+    /// MuJoCo's default contact unless they are feet (within [`home::FOOT_BAND_M`] of the lowest point
+    /// in the home pose) that the robot's whole weight would sink more than [`home::MAX_SINK_M`]
+    /// ([`Converter::weight_solref`]).
     fn contact_solrefs(&mut self, probe: &Probe) {
         let total: f64 = self.inertials.iter().flatten().map(|i| i.2).sum::<f64>().max(1e-9);
-        let mut invweights = probe.body_invweight.iter();
+        let bodies = self.contact_bodies();
+        let lowest = probe.lowest_collision_z_m.unwrap_or(f64::NEG_INFINITY);
+        let mut measured =
+            probe.body_invweight.iter().zip(probe.body_lowest_z_m.iter().chain(std::iter::repeat(&None)));
         for li in 0..self.robot.links.len() {
-            let Some((kp, kd, line)) = self.gazebo_contact[li] else { continue };
+            if !bodies.contains(&self.robot.links[li].name.as_str()) {
+                continue;
+            }
             let name = &self.robot.links[li].name;
-            let inv = invweights.next().copied().flatten().unwrap_or(0.0);
+            let (inv, low) = measured.next().map_or((0.0, None), |(i, z)| (i.unwrap_or(0.0), *z));
             let mass = if inv > 0.0 { 1.0 / inv } else { total };
-            self.contact[li] = Some(self.direct_solref(name, line, kp, kd, mass));
+            // A foot: its collision geoms reach within FOOT_BAND_M of the robot's lowest point.
+            let foot = low.is_some_and(|z| z <= lowest + home::FOOT_BAND_M);
+            self.contact[li] = match self.gazebo_contact[li] {
+                Some((kp, kd, line)) => Some(self.direct_solref(name, line, kp, kd, mass)),
+                None if self.opts.fixed_base || !foot || inv <= 0.0 => None,
+                None => self.weight_solref(name, mass, total),
+            };
         }
     }
 

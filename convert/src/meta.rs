@@ -26,6 +26,9 @@ pub struct RobotMeta {
     pub joints: Vec<JointMeta>,
     /// Differential transmissions.
     pub differentials: Vec<DifferentialMeta>,
+    /// Where the home pose (keyframe `home`) comes from, in words: an SRDF's named pose or the
+    /// zero pose clamped into the joint ranges (empty for models converted before twin said).
+    pub home_pose: String,
 }
 
 fn enc(s: &str) -> String {
@@ -156,7 +159,10 @@ impl RobotMeta {
         let mut recs: Vec<(String, Rec)> = Vec::new();
         recs.push((
             "twin:robot".into(),
-            Rec(Vec::new()).put("name", &self.name).put("floating_base", if self.floating_base { "1" } else { "0" }),
+            Rec(Vec::new())
+                .put("name", &self.name)
+                .put("floating_base", if self.floating_base { "1" } else { "0" })
+                .put("home_pose", &self.home_pose),
         ));
         for (k, i) in self.imus.iter().enumerate() {
             recs.push((
@@ -250,6 +256,7 @@ impl RobotMeta {
             sensors: Vec::new(),
             joints: Vec::new(),
             differentials: Vec::new(),
+            home_pose: f.s("home_pose"),
         };
         // Records in index order (model order is the written order; sort to be safe).
         let mut records: Vec<(&str, usize, Fields)> = texts

@@ -112,4 +112,12 @@ pub struct ConvertOptions {
     /// feet sense load but whose URDF does not say so (default: empty). A link that already has
     /// a contact sensor keeps its own; a name that is no link is an error.
     pub contact_sensors: Vec<String>,
+    /// SRDF file whose named pose (`<group_state>`) is the home pose (default: `None`: an SRDF
+    /// beside the URDF, in `srdf/` beside it or in `srdf/` one folder up, that names this
+    /// robot's joints; see [`crate::srdf`]).
+    pub srdf: Option<PathBuf>,
+    /// Name of the SRDF pose taken as home (`--pose`) (default: `None`: "standing", "home",
+    /// "default" or "neutral", else one whose name says "stand" or "home"; with no such pose,
+    /// the zero pose clamped into every joint's range; see [`crate::srdf`]).
+    pub pose: Option<String>,
 }

@@ -64,7 +64,7 @@ fn qpos0(mjcf: &str) -> Vec<f64> {
 impl Compiler for BoxEngine {
     type Error = Error;
 
-    fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> Result<Probe, Compile<Error>> {
+    fn probe(&mut self, mjcf: &str, bodies: &[&str], _pose: &[(String, f64)]) -> Result<Probe, Compile<Error>> {
         self.compiled.push(mjcf.to_string());
         if let Some(m) = &self.refuse {
             return Err(Compile::Rejected(m.clone()));
@@ -76,7 +76,7 @@ impl Compiler for BoxEngine {
         })
     }
 
-    fn home_qpos(&mut self, mjcf: &str) -> Result<Vec<f64>, Compile<Error>> {
+    fn home_qpos(&mut self, mjcf: &str, _pose: &[(String, f64)]) -> Result<Vec<f64>, Compile<Error>> {
         self.compiled.push(mjcf.to_string());
         Ok(qpos0(mjcf))
     }

@@ -2,10 +2,10 @@
 //! joints from the JointState series by name, interpolated) and gives the CoM (the base
 //! body's subtree), the capture point (CoM + v/ω, ω = √(g / CoM height above the ground)) and
 //! the support polygon: the bottom points of the collision geoms of the feet ([`Robot::feet`]
-//! and the bodies under them) that are on the ground. A foot is on the ground when its contact
-//! topic (`/contacts/<foot>`) carries more than 5 % of the weight or, without one, when its
-//! lowest point is within 1 cm of the ground (the lowest point of the robot over the first
-//! half second). Margins are signed distances inside the polygon
+//! and the bodies under them; a mesh's points are the corners of its box) that are on the
+//! ground. A foot is on the ground when its contact topic (`/contacts/<foot>`) carries more than
+//! 5 % of the weight or, without one, when its lowest point is within 1 cm of the ground (the
+//! feet's lowest collision point over the first half second, the median). Margins are signed distances inside the polygon
 //! ([`twin_controllers::walk::metrics::support_margin`]). A loaded foot that is flat (tilt < 0.15 rad)
 //! and moves horizontally faster than the slip speed for three samples slips.
 
@@ -123,8 +123,12 @@ fn bottom_points(model: &Model, data: &Data, g: usize, out: &mut Vec<[f64; 3]>) 
         }
         GeomType::Sphere => out.push([c[0], c[1], c[2] - s[0]]),
         _ => {
-            if let Some(z) = twin_core::robot::geom_lowest_z(model, data, g) {
-                out.push([c[0], c[1], z]);
+            // A mesh (or other shape): the corners of MuJoCo's box around it in its frame, not
+            // its bounding sphere (a sole's sphere reaches half its length below the ground).
+            let [cx, cy, cz, hx, hy, hz] = model.geom_aabb()[g];
+            for k in 0..8 {
+                let sign = |b: usize| if k & (1 << b) == 0 { -1.0 } else { 1.0 };
+                out.push(at([cx + sign(0) * hx, cy + sign(1) * hy, cz + sign(2) * hz]));
             }
         }
     }
@@ -208,6 +212,7 @@ pub(crate) fn compute(
     let mut lowest: Vec<(f64, f64)> = Vec::new();
     let mut pts3 = Vec::new();
     let mut candidates: Candidates = Vec::new();
+    let mut foot_up: Vec<Option<[f64; 3]>> = vec![None; geoms.len()];
     for &(t, q, p) in poses.iter().filter(|s| s.0 <= end) {
         let Some(p) = p else { continue };
         if posed.last().is_some_and(|l| t - l.t < 5e-4) {
@@ -226,7 +231,6 @@ pub(crate) fn compute(
         data.qpos_mut().copy_from_slice(&qpos);
         data.kinematics_with_velocity()?;
         let com = data.subtree_com()[base.body];
-        lowest.push((t, twin_core::robot::lowest_robot_point_z(model, &data)));
         let xm = data.xmat()[base.body];
         let heading = xm[3].atan2(xm[0]);
         let mut feet = Vec::new();
@@ -238,7 +242,10 @@ pub(crate) fn compute(
             }
             let fb = robot.feet[k];
             let fm = data.xmat()[fb];
-            let flat = fm[8] > 0.15f64.cos();
+            // Flat: the foot's axis that pointed up at the first pose (any foot frame) still
+            // within 0.15 rad of up.
+            let up = *foot_up[k].get_or_insert([fm[6], fm[7], fm[8]]);
+            let flat = fm[6] * up[0] + fm[7] * up[1] + fm[8] * up[2] > 0.15f64.cos();
             let (normal, ratio) = match foot_contacts[k] {
                 Some((force, ratio)) => (force.held(t), Some(ratio.held(t)).filter(|r| r.is_finite())),
                 None => (f64::NAN, None),
@@ -246,11 +253,18 @@ pub(crate) fn compute(
             feet.push((data.xpos()[fb], flat, false, normal, ratio));
             support_candidates.push((k, pts3.clone()));
         }
+        // The feet's lowest collision point (not the robot's: a visual mesh's bounding sphere
+        // reaches below the ground the feet stand on).
+        let feet_low =
+            support_candidates.iter().flat_map(|(_, p)| p.iter().map(|q| q[2])).fold(f64::INFINITY, f64::min);
+        if feet_low.is_finite() {
+            lowest.push((t, feet_low));
+        }
         posed.push(Posed { t, com, support: Vec::new(), heading, feet });
         // Support is decided once the ground height is known (below); keep the candidates.
         candidates.push((posed.len() - 1, support_candidates));
     }
-    // Ground: the lowest point of the robot over the first half second.
+    // Ground: the feet's lowest collision point over the first half second.
     let t0 = lowest.first().map_or(0.0, |l| l.0);
     let mut early: Vec<f64> = lowest.iter().filter(|l| l.0 <= t0 + 0.5).map(|l| l.1).collect();
     let ground = quantile(&mut early, 0.5);

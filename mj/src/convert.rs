@@ -32,21 +32,29 @@ pub struct MuJoCo;
 impl Compiler for MuJoCo {
     type Error = Error;
 
-    fn probe(&mut self, mjcf: &str, bodies: &[&str]) -> std::result::Result<Probe, Compile<Error>> {
+    fn probe(
+        &mut self,
+        mjcf: &str,
+        bodies: &[&str],
+        pose: &[(String, f64)],
+    ) -> std::result::Result<Probe, Compile<Error>> {
         let model = compile(mjcf)?;
-        let geoms = collision_geoms(&model).map_err(Compile::Other)?;
+        let geoms = collision_geoms(&model, pose).map_err(Compile::Other)?;
+        let ids: Vec<Option<usize>> = bodies.iter().map(|b| model.id(ObjType::Body, b)).collect();
         Ok(Probe {
-            lowest_collision_z_m: geoms.iter().map(|g| g[4]).reduce(f64::min),
-            collision_geoms_m: geoms,
-            body_invweight: bodies
+            lowest_collision_z_m: geoms.iter().map(|g| g.1[4]).reduce(f64::min),
+            body_lowest_z_m: ids
                 .iter()
-                .map(|b| model.id(ObjType::Body, b).map(|b| model.body_invweight0()[b][0]))
+                .map(|id| id.and_then(|b| geoms.iter().filter(|g| g.0 == b).map(|g| g.1[4]).reduce(f64::min)))
                 .collect(),
+            collision_geoms_m: geoms.into_iter().map(|g| g.1).collect(),
+            body_invweight: ids.iter().map(|id| id.map(|b| model.body_invweight0()[b][0])).collect(),
         })
     }
 
-    fn home_qpos(&mut self, mjcf: &str) -> std::result::Result<Vec<f64>, Compile<Error>> {
-        Ok(home_pose(&compile(mjcf)?))
+    fn home_qpos(&mut self, mjcf: &str, pose: &[(String, f64)]) -> std::result::Result<Vec<f64>, Compile<Error>> {
+        let model = compile(mjcf)?;
+        home_pose(&model, pose).map_err(Compile::Other)
     }
 }
 
@@ -83,10 +91,23 @@ pub fn robot_meta(model: &Model) -> Option<RobotMeta> {
     RobotMeta::from_custom_texts(&model.custom_texts())
 }
 
-/// `qpos0` with every limited hinge and slide clamped into its range (some URDFs put 0
-/// outside the range, e.g. knees of quadrupeds): the nominal pose of keyframe `home`.
-fn home_pose(model: &Model) -> Vec<f64> {
+/// `qpos0` with the hinges and slides named in `pose` (an SRDF's named pose) set to their
+/// values, then every limited hinge and slide clamped into its range (some URDFs put 0 outside
+/// the range, e.g. knees of quadrupeds): the nominal pose of keyframe `home`, decided here for
+/// every command.
+///
+/// # Errors
+/// [`Error::Options`] when `pose` names a joint the model does not have (a converter bug).
+fn home_pose(model: &Model, pose: &[(String, f64)]) -> Result<Vec<f64>> {
     let mut q = model.qpos0().to_vec();
+    for (name, value) in pose {
+        let j = model
+            .id(ObjType::Joint, name)
+            .ok_or_else(|| Error::Options(format!("home pose: no joint \"{name}\" in the model")))?;
+        if matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
+            q[model.jnt_qposadr()[j] as usize] = *value;
+        }
+    }
     for j in 0..model.njnt() {
         if model.jnt_limited()[j] && matches!(model.joint_type(j), JointType::Hinge | JointType::Slide) {
             let [lo, hi] = model.jnt_range()[j];
@@ -94,16 +115,16 @@ fn home_pose(model: &Model) -> Vec<f64> {
             q[a] = q[a].clamp(lo, hi);
         }
     }
-    q
+    Ok(q)
 }
 
 /// Each collision geom of the robot at the model's home pose (planes ignored): the world x-y box
 /// around it (centre x, y, half sizes x, y, from MuJoCo's local bounding box) and its lowest
-/// world z ([`Probe::collision_geoms_m`]).
-fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
+/// world z ([`Probe::collision_geoms_m`]), with the geom's body.
+fn collision_geoms(model: &Model, pose: &[(String, f64)]) -> Result<Vec<(usize, [f64; 5])>> {
     let model = Arc::new(model.try_clone()?);
     let mut data = Data::new(model.clone())?;
-    let home = home_pose(&model);
+    let home = home_pose(&model, pose)?;
     data.qpos_mut().copy_from_slice(&home);
     data.forward()?;
     let mut geoms = Vec::new();
@@ -141,7 +162,7 @@ fn collision_geoms(model: &Model) -> Result<Vec<[f64; 5]>> {
         let [cx, cy, cz, hx, hy, hz] = m.geom_aabb()[g];
         let centre = p + r * Vector3::new(cx, cy, cz);
         let half = |row: usize| r[(row, 0)].abs() * hx + r[(row, 1)].abs() * hy + r[(row, 2)].abs() * hz;
-        geoms.push([centre.x, centre.y, half(0), half(1), z]);
+        geoms.push((m.geom_bodyid()[g] as usize, [centre.x, centre.y, half(0), half(1), z]));
     }
     Ok(geoms)
 }

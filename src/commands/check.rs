@@ -19,6 +19,15 @@ pub struct Args {
     /// Refuse invalid inertias instead of repairing them by the smallest change.
     #[arg(long)]
     pub strict_inertia: bool,
+    /// SRDF pose held as home (a `<group_state>` name; default: "standing", "home", …
+    /// where an SRDF beside the URDF has one, else the zero pose clamped into every
+    /// joint's range).
+    #[arg(long, value_name = "NAME")]
+    pub pose: Option<String>,
+    /// SRDF file to take the pose from (default: one beside the URDF, in `srdf/` there or in
+    /// `srdf/` one folder up, that names this robot's joints).
+    #[arg(long, value_name = "FILE")]
+    pub srdf: Option<PathBuf>,
     /// Duration of the standing hold, seconds.
     #[arg(long, default_value_t = 5.0)]
     pub hold_secs: f64,
@@ -34,6 +43,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         fixed_base: args.fixed_base,
         package_paths: args.package_paths.clone(),
         strict_inertia: args.strict_inertia,
+        pose: args.pose.clone(),
+        srdf: args.srdf.clone(),
         ..ConvertOptions::default()
     };
     let loaded = twin_core::convert::load(&path, &opts, "")?;
@@ -53,6 +64,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         floating.nsensor(),
         floating.total_mass_kg()
     )?;
+    let home = twin_core::convert::robot_meta(&floating).map(|m| m.home_pose).filter(|h| !h.is_empty());
+    let home = match home {
+        Some(h) => h,
+        None if floating.id(twin_core::mj::ObjType::Key, "home").is_some() => "the model's keyframe \"home\"".into(),
+        None => "the model's qpos0 (no keyframe \"home\")".into(),
+    };
+    writeln!(out, "home pose: {home}")?;
     let opts = CheckOptions { hold_secs: args.hold_secs, ..CheckOptions::default() };
     let report = check(&floating, fixed.as_ref(), &opts)?;
     for step in &report.steps {

@@ -39,6 +39,15 @@ pub struct Args {
     /// robot while the URDF does not say so (repeatable).
     #[arg(long = "contact-sensor", value_name = "LINK")]
     pub contact_sensors: Vec<String>,
+    /// SRDF pose written as keyframe `home` (a `<group_state>` name; default: "standing",
+    /// "home", … where an SRDF beside the URDF has one, else the zero pose
+    /// clamped into every joint's range).
+    #[arg(long, value_name = "NAME")]
+    pub pose: Option<String>,
+    /// SRDF file to take the pose from (default: one beside the URDF, in `srdf/` there or in
+    /// `srdf/` one folder up, that names this robot's joints).
+    #[arg(long, value_name = "FILE")]
+    pub srdf: Option<PathBuf>,
 }
 
 pub fn run(args: Args) -> anyhow::Result<()> {
@@ -64,6 +73,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         mesh_dir: Some(out_dir.join(format!("{stem}_meshes"))),
         world: args.world.clone(),
         contact_sensors: args.contact_sensors.clone(),
+        pose: args.pose.clone(),
+        srdf: args.srdf.clone(),
         ..ConvertOptions::default()
     };
     let converted = convert_urdf(&args.urdf, &opts)?;
@@ -115,6 +126,7 @@ fn summary(out: &mut impl Write, output: &Path, c: &ConvertedModel, m: &Model) -
         if c.meta.floating_base { "free-floating" } else { "fixed" },
         c.base_height_m
     )?;
+    writeln!(out, "home pose: {}", c.meta.home_pose)?;
     for imu in &c.meta.imus {
         writeln!(
             out,

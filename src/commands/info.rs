@@ -91,5 +91,12 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
     }
 
     writeln!(out, "\ntotal mass: {:.4} kg", m.total_mass_kg())?;
+    let home = twin_core::convert::robot_meta(m).map(|r| r.home_pose).filter(|h| !h.is_empty());
+    let home = match home {
+        Some(h) => h,
+        None if m.id(ObjType::Key, "home").is_some() => "keyframe \"home\"".into(),
+        None => "qpos0 (no keyframe \"home\")".into(),
+    };
+    writeln!(out, "home pose: {home}")?;
     Ok(())
 }

@@ -241,6 +241,17 @@ pub fn check(floating: &Model, fixed: Option<&Model>, opts: &CheckOptions) -> Re
     Ok(CheckReport { steps })
 }
 
+/// The physics step of [`check`] alone, as `twin check` reports it first: `floating` holds its
+/// home pose under PD servos for [`CheckOptions::hold_secs`]; base height drift, tilt, slide and
+/// the deepest penetration, passed or failed with the likely cause.
+///
+/// # Errors
+/// [`crate::Error::MuJoCo`] if MuJoCo raises during the simulation.
+pub fn physics(floating: &Model, opts: &CheckOptions) -> Result<StepReport> {
+    let (servo, servos) = servo_model(floating, opts)?;
+    Ok(physics_step(&Arc::new(servo), &servos, opts)?.0)
+}
+
 /// What the standing hold measures, step by step.
 struct HoldWatch {
     servos: Vec<Servo>,

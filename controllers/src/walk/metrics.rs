@@ -139,25 +139,43 @@ enum BodyPart {
     Body,
 }
 
-/// Each geom's [`GeomPart`] for the robot rooted at `base` with feet `feet`.
-fn geom_parts(model: &Model, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
-    model
-        .geom_bodyid()
-        .iter()
-        .map(|&b| {
-            let b = b as usize;
+/// Each geom's [`GeomPart`] for the robot rooted at `base` with feet `feet`, in `data`'s pose
+/// (the start, standing): a foot is its body's subtree (toes) and the bodies of its own leg
+/// above it (an ankle link between two ankle joints) whose collision geoms reach within
+/// [`FOOT_BAND_M`] of the feet's lowest point, so that a foot of several bodies and collision
+/// shapes, named anything, stands on all of them.
+fn geom_parts(data: &Data, base: usize, feet: [usize; 2]) -> Vec<GeomPart> {
+    let model = data.model();
+    let leg_of = |b: usize| -> Option<usize> {
+        (0..2).find(|&k| model.in_subtree(feet[k], b)).or_else(|| {
+            (0..2).find(|&k| model.in_subtree(b, feet[k]) && !model.in_subtree(b, feet[1 - k]) && b != base)
+        })
+    };
+    let lowest = |g: usize| twin_core::robot::geom_lowest_z(model, data, g);
+    let ground = (0..model.ngeom())
+        .filter(|&g| feet.contains(&(model.geom_bodyid()[g] as usize)))
+        .filter_map(lowest)
+        .fold(f64::INFINITY, f64::min);
+    (0..model.ngeom())
+        .map(|g| {
+            let b = model.geom_bodyid()[g] as usize;
             let body = if !model.in_subtree(base, b) {
                 BodyPart::Scene
             } else {
-                match feet.iter().position(|&f| f == b) {
-                    Some(k) => BodyPart::Foot(k),
-                    None => BodyPart::Body,
+                match leg_of(b) {
+                    Some(k) if model.in_subtree(feet[k], b) => BodyPart::Foot(k),
+                    Some(k) if lowest(g).is_some_and(|z| z <= ground + FOOT_BAND_M) => BodyPart::Foot(k),
+                    _ => BodyPart::Body,
                 }
             };
             GeomPart { world: b == 0, body }
         })
         .collect()
 }
+
+/// A body above a foot in its leg whose collision geoms reach within this of the feet's lowest
+/// point when standing is part of that foot ([`geom_parts`]), m.
+pub const FOOT_BAND_M: f64 = 0.02;
 
 /// Where the open command segment started: (time s, base position, unwrapped yaw rad, its
 /// command, the schedule entries begun).
@@ -173,6 +191,10 @@ pub struct GaitMetrics {
     gravity: f64,
     dt: f64,
     start: Option<([f64; 3], f64, f64)>,
+    /// The base's axes that point up and forward at the start, in the base's frame (the
+    /// robot's own frames: the base may be turned any way in its model).
+    base_up: [f64; 3],
+    base_forward: [f64; 3],
     last_yaw: f64,
     yaw_total: f64,
     last_base: [f64; 3],
@@ -230,6 +252,8 @@ impl GaitMetrics {
             gravity: -model.gravity()[2],
             dt: model.timestep_secs(),
             start: None,
+            base_up: [0.0, 0.0, 1.0],
+            base_forward: [1.0, 0.0, 0.0],
             last_yaw: 0.0,
             yaw_total: 0.0,
             last_base: [0.0; 3],
@@ -305,9 +329,49 @@ impl GaitMetrics {
         self.fell_at.is_some()
     }
 
-    fn yaw_of(data: &Data, body: usize) -> f64 {
-        let m = data.xmat()[body];
-        m[3].atan2(m[0])
+    /// The heading of the base's forward axis ([`GaitMetrics::base_forward`]), rad.
+    fn yaw_of(&self, data: &Data) -> f64 {
+        let (m, f) = (data.xmat()[self.base], self.base_forward);
+        let x = m[0] * f[0] + m[1] * f[1] + m[2] * f[2];
+        let y = m[3] * f[0] + m[4] * f[1] + m[5] * f[2];
+        y.atan2(x)
+    }
+
+    /// At the start (standing): the base's axis nearest the world's up, and its horizontal axis
+    /// nearest the robot's forward (the right foot to the left one, turned a quarter turn
+    /// clockwise about up), both in the base's frame. A base frame turned about z (forward its
+    /// −x) or lying (up its y) reads as one whose x is forward and z up.
+    fn base_axes(&mut self, data: &Data) {
+        let m = data.xmat()[self.base];
+        // Column j of the row-major rotation: the base's axis j in the world.
+        let axis = |j: usize| [m[j], m[3 + j], m[6 + j]];
+        let nearest = |dir: [f64; 3], skip: Option<usize>| -> [f64; 3] {
+            let mut best = (f64::NEG_INFINITY, [0.0; 3]);
+            for j in (0..3).filter(|&j| Some(j) != skip) {
+                let a = axis(j);
+                let dot = a[0] * dir[0] + a[1] * dir[1] + a[2] * dir[2];
+                let mut unit = [0.0; 3];
+                unit[j] = dot.signum();
+                if dot.abs() > best.0 {
+                    best = (dot.abs(), unit);
+                }
+            }
+            best.1
+        };
+        self.base_up = nearest([0.0, 0.0, 1.0], None);
+        let up_index = self.base_up.iter().position(|&u| u != 0.0);
+        let (l, r) = (data.xpos()[self.feet[0]], data.xpos()[self.feet[1]]);
+        let left = [l[0] - r[0], l[1] - r[1]];
+        let n = left[0].hypot(left[1]);
+        let forward = if n > 1e-9 { [left[1] / n, -left[0] / n, 0.0] } else { [axis(0)[0], axis(0)[1], 0.0] };
+        self.base_forward = nearest(forward, up_index);
+    }
+
+    /// How much the base's up axis ([`GaitMetrics::base_up`]) still points up: the cosine of its
+    /// tilt from upright.
+    fn uprightness(&self, data: &Data) -> f64 {
+        let (m, u) = (data.xmat()[self.base], self.base_up);
+        m[6] * u[0] + m[7] * u[1] + m[8] * u[2]
     }
 
     /// Adds a touchdown's step length and width errors: the landed foot at `p` against the
@@ -330,13 +394,16 @@ impl GaitMetrics {
         }
         let t = data.time_secs();
         let base = data.xpos()[self.base];
-        let yaw = Self::yaw_of(data, self.base);
+        if self.start.is_none() {
+            self.base_axes(data);
+        }
+        let yaw = self.yaw_of(data);
         let Some((origin, _, t0)) = self.start else {
             self.start = Some((base, yaw, t));
             self.last_yaw = yaw;
             self.last_base = base;
             self.window = Some((t, [base[0], base[1]], yaw));
-            self.geoms = geom_parts(data.model(), self.base, self.feet);
+            self.geoms = geom_parts(data, self.base, self.feet);
             self.segment = Some((0.0, base, 0.0, self.command_at(0.0), self.entries_begun(0.0)));
             return;
         };
@@ -358,7 +425,7 @@ impl GaitMetrics {
         self.last_base = base;
 
         // Falls: low pelvis, tilted torso, or ground contact of another body.
-        let up = data.xmat()[self.base][8];
+        let up = self.uprightness(data);
         let mut body_on_ground = false;
         let mut foot_contact = [false; 2];
         self.hull.clear();

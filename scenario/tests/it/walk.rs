@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use twin_controllers::walk::{GaitSummary, WalkOptions, Walker};
 
+mod frames;
 mod robots;
 use robots::*;
 use twin_core::engine::{Check, Disturbance, Flow, Observer, StepView};

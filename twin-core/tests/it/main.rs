@@ -4,6 +4,7 @@ mod convert;
 mod corpus;
 mod errors;
 mod example_robot_data;
+mod legged;
 mod log_interop;
 mod physics;
 mod public_sensors;
