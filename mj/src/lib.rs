@@ -21,7 +21,7 @@ mod ray_shape;
 pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use error::{Error, Result};
-pub use kinds::{BiasType, GeomType, Integrator, SensorType, Transmission};
+pub use kinds::{BiasType, DynType, GeomType, Integrator, SensorType, Transmission};
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 pub use ray::{RayFilter, RayHit, RayScene, RayStats};
 
