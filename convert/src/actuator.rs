@@ -31,7 +31,7 @@
 //! MuJoCo's joint `armature`: it has one place. The observation latency of the sensors is a
 //! separate term of the randomization, not of the drive.
 
-use crate::error::{Error, Result};
+pub use crate::error::{Error, Result};
 use roxmltree::{Document, Node};
 use std::fmt::Write as _;
 use std::path::Path;
@@ -221,12 +221,13 @@ fn g7(x: f64) -> String {
 }
 
 /// The MJCF attributes of a delay of `delay_secs` at a `timestep_secs` step: the delay, a
-/// history buffer long enough for it, linear interpolation between samples; empty for none.
+/// history buffer long enough for it (MuJoCo reads a buffer too short at its oldest sample: a
+/// shorter delay), linear interpolation between samples; empty for none.
 pub fn delay_attrs(delay_secs: f64, timestep_secs: f64) -> String {
     if delay_secs <= 0.0 {
         return String::new();
     }
-    let nsample = (delay_secs / timestep_secs).ceil() as usize + 2;
+    let nsample = (delay_secs / timestep_secs - 1e-9).ceil() as usize + 2;
     format!(" delay=\"{}\" nsample=\"{nsample}\" interp=\"linear\"", g7(delay_secs))
 }
 
