@@ -214,6 +214,13 @@ pub struct DriveReport {
     pub warnings: Vec<String>,
 }
 
+impl DriveReport {
+    /// The report as pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).unwrap_or_else(|e| format!("{{\"error\": \"{e}\"}}"))
+    }
+}
+
 /// The states of the log on a uniform grid, low-passed, with the rigid-body torque.
 struct Prepared {
     dt: f64,
