@@ -223,12 +223,14 @@ fn g7(x: f64) -> String {
 /// The MJCF attributes of a delay of `delay_secs` at a `timestep_secs` step: the delay, a
 /// history buffer long enough for it (MuJoCo reads a buffer too short at its oldest sample: a
 /// shorter delay), linear interpolation between samples; empty for none.
-pub fn delay_attrs(delay_secs: f64, timestep_secs: f64) -> String {
-    if delay_secs <= 0.0 {
+pub fn delay_attrs(delay_secs: f64, timestep_secs: f64, buffer_secs: f64) -> String {
+    let span = delay_secs.max(buffer_secs);
+    if span <= 0.0 {
         return String::new();
     }
-    let nsample = (delay_secs / timestep_secs - 1e-9).ceil() as usize + 2;
-    format!(" delay=\"{}\" nsample=\"{nsample}\" interp=\"linear\"", g7(delay_secs))
+    let nsample = (span / timestep_secs - 1e-9).ceil() as usize + 2;
+    let delay = if delay_secs > 0.0 { format!(" delay=\"{}\"", g7(delay_secs)) } else { String::new() };
+    format!("{delay} nsample=\"{nsample}\" interp=\"linear\"")
 }
 
 /// Nominal voltage of the `dcmotor`s the envelope becomes: the envelope depends on the stall
@@ -342,6 +344,8 @@ mod tests {
         assert!(e.to_string().contains("both stall_torque and no_load_speed"), "{e}");
         let e = parse("<twin_actuator><joint name=\"j\" armature=\"3\"/></twin_actuator>").unwrap_err();
         assert!(e.to_string().contains("armature belongs in <twin_sysid>"), "{e}");
-        assert_eq!(delay_attrs(0.005, 0.002), " delay=\"0.005\" nsample=\"5\" interp=\"linear\"");
+        assert_eq!(delay_attrs(0.005, 0.002, 0.0), " delay=\"0.005\" nsample=\"5\" interp=\"linear\"");
+        assert_eq!(delay_attrs(0.0, 0.002, 0.015), " nsample=\"10\" interp=\"linear\"");
+        assert_eq!(delay_attrs(0.0, 0.002, 0.0), "");
     }
 }

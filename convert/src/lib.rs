@@ -1258,7 +1258,8 @@ impl<'a> Converter<'a> {
                 effort.map(|e| format!(" forcerange=\"{} {}\"", f(-e / g.abs()), f(e / g.abs()))).unwrap_or_default();
             let gear = if g == 1.0 { String::new() } else { format!(" gear=\"{}\"", f(g)) };
             let drive_model = self.opts.joint_drive.get(&j.name);
-            let delay = drive_model.map(|m| actuator::delay_attrs(m.delay_secs, timestep)).unwrap_or_default();
+            let delay =
+                actuator::delay_attrs(drive_model.map_or(0.0, |m| m.delay_secs), timestep, self.opts.delay_buffer_secs);
             let gear = format!("{gear}{delay}");
             let line = match (iface, drive_model.and_then(|m| m.envelope())) {
                 (Interface::Effort | Interface::Position, Some(envelope)) => {
