@@ -61,7 +61,8 @@ fn main() {
         ("DC-motor envelope, every actuator", variant(false, true)),
         ("delay + DC motor, every actuator", variant(true, true)),
     ];
-    let mut datas: Vec<Data> = variants.iter().map(|(_, m)| Data::new(Arc::new(m.try_clone().unwrap())).unwrap()).collect();
+    let mut datas: Vec<Data> =
+        variants.iter().map(|(_, m)| Data::new(Arc::new(m.try_clone().unwrap())).unwrap()).collect();
     for d in &mut datas {
         bench_c_step_loop(d, steps / 4);
         d.reset().unwrap();
