@@ -49,6 +49,8 @@ mod sim;
 mod sweep;
 #[path = "cli/sysid.rs"]
 mod sysid;
+#[path = "cli/sysid_actuator.rs"]
+mod sysid_actuator;
 #[path = "cli/sysid_real.rs"]
 mod sysid_real;
 #[path = "../twin-core/tests/it/test_python.rs"]

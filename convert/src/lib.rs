@@ -1,6 +1,7 @@
 #![doc = include_str!("../README.md")]
 #![deny(unsafe_code)]
 
+pub mod actuator;
 mod error;
 pub mod hfield;
 mod home;
@@ -319,6 +320,19 @@ pub fn convert_urdf_str<C: Compiler>(
             }
             with_block = o;
             &with_block
+        }
+    };
+    // Drive models of the `<twin_actuator>` block, where the caller gave none.
+    let with_drives;
+    let opts = match actuator::read_block(path, &doc)? {
+        block if block.is_empty() => opts,
+        block => {
+            let mut o = opts.clone();
+            for m in block {
+                o.joint_drive.entry(m.joint.clone()).or_insert(m);
+            }
+            with_drives = o;
+            &with_drives
         }
     };
     let tree = Tree::build(&robot)?;
@@ -743,6 +757,7 @@ impl<'a> Converter<'a> {
                 "{auto_motors} movable joint(s) without a transmission or ros2_control entry got a motor within ±effort (--actuators auto; `transmissions` keeps them passive)"
             ));
         }
+        self.check_drives()?;
         if !differential_joints.is_empty() {
             self.differentials()?;
         }
@@ -1272,8 +1287,16 @@ impl<'a> Converter<'a> {
             let fr =
                 effort.map(|e| format!(" forcerange=\"{} {}\"", f(-e / g.abs()), f(e / g.abs()))).unwrap_or_default();
             let gear = if g == 1.0 { String::new() } else { format!(" gear=\"{}\"", f(g)) };
-            let line = match iface {
-                Interface::Effort => {
+            let drive_model = self.opts.joint_drive.get(&j.name);
+            let delay =
+                actuator::delay_attrs(drive_model.map_or(0.0, |m| m.delay_secs), timestep, self.opts.delay_buffer_secs);
+            let gear = format!("{gear}{delay}");
+            let line = match (iface, drive_model.and_then(|m| m.envelope())) {
+                (Interface::Effort | Interface::Position, Some(envelope)) => {
+                    let m = drive_model.expect("an envelope comes with its model");
+                    self.dcmotor_xml(name, &j.name, *iface, m, envelope, meta, &gear, effort)
+                }
+                (Interface::Effort, None) => {
                     let range = drive
                         .filter(|d| d.interface == *iface)
                         .and_then(|d| d.cmd_range)
@@ -1282,9 +1305,12 @@ impl<'a> Converter<'a> {
                     let cr = range.map(|r| format!(" ctrlrange=\"{}\"", fv(&r))).unwrap_or_default();
                     format!("<motor name=\"{}\" joint=\"{}\"{gear}{cr}{fr}/>", esc(name), esc(&j.name))
                 }
-                Interface::Position => {
+                (Interface::Position, None) => {
                     let kp = effort.map_or(100.0, |e| self.opts.position_kp_per_effort * e);
                     let kv = kp * self.opts.position_kv_per_kp;
+                    // The drive's own gains (joint space) in actuator space: τ = g²·kp_a·(q* − q).
+                    let kp = drive_model.and_then(|m| m.kp).map_or(kp, |k| k / (g * g));
+                    let kv = drive_model.and_then(|m| m.kd).map_or(kv, |k| k / (g * g));
                     let cr = meta
                         .range
                         .map(|r| format!(" ctrlrange=\"{} {}\"", f(r[0] * g), f(r[1] * g)))
@@ -1297,8 +1323,9 @@ impl<'a> Converter<'a> {
                         f(kv)
                     )
                 }
-                Interface::Velocity => {
+                (Interface::Velocity, _) => {
                     let kv = effort.map_or(10.0, |e| self.opts.velocity_kv_per_effort * e);
+                    let kv = drive_model.and_then(|m| m.kd).map_or(kv, |k| k / (g * g));
                     let cr = meta
                         .velocity_limit
                         .map(|v| format!(" ctrlrange=\"{} {}\"", f(-v * g.abs()), f(v * g.abs())))

@@ -90,6 +90,14 @@ pub struct ConvertOptions {
     /// [`ConvertOptions::armature`] for those joints (e.g. identified by `twin sysid`; URDF has
     /// no place for it) (default: empty).
     pub joint_armature: std::collections::BTreeMap<String, f64>,
+    /// Drive model (command delay, position-loop gains, torque–speed envelope) of individual
+    /// joints by URDF joint name (see [`crate::actuator`]); the URDF's `<twin_actuator>` block
+    /// fills the joints the caller left out (default: empty: ideal drives).
+    pub joint_drive: std::collections::BTreeMap<String, crate::actuator::DriveModel>,
+    /// Give every actuator a command-history buffer spanning at least this delay, seconds,
+    /// so that a delay can be set (randomized) on the compiled model up to it
+    /// (default: 0: buffers only for the drive models' own delays).
+    pub delay_buffer_secs: f64,
     /// Which joints get actuators, and of which kind (default: [`ActuatorMode::Auto`]).
     #[default(ActuatorMode::Auto)]
     pub actuators: ActuatorMode,

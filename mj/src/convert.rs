@@ -16,7 +16,7 @@
 
 pub use twin_convert::{
     ActuatorMode, Compile, Compiler, ConvertOptions, ConvertedModel, DifferentialMeta, ImuBias, ImuMeta, Interface,
-    JointMeta, MAX_XML_DEPTH, Probe, RobotMeta, ScanMeta, SensorMeta, mesh, urdf,
+    JointMeta, MAX_XML_DEPTH, Probe, RobotMeta, ScanMeta, SensorMeta, actuator, mesh, urdf,
 };
 
 use crate::error::{Error, Result};
@@ -231,7 +231,31 @@ pub fn load_str(path: &Path, text: &str, options: &ConvertOptions, extra_mjcf: &
         Error::Load { message, .. } => Error::Load { path: Some(path.to_path_buf()), message },
         other => other,
     })?;
+    check_delay_buffers(path, &model)?;
     Ok(Loaded { model, converted: Some(converted) })
+}
+
+/// Every delayed actuator's history buffer spans its delay at the model's timestep: MuJoCo
+/// reads a buffer too short for its delay at its oldest sample, a shorter delay without a word.
+fn check_delay_buffers(path: &Path, model: &Model) -> Result<()> {
+    let dt = model.timestep_secs();
+    for a in 0..model.nu() {
+        let delay = model.actuator_delay()[a];
+        let nsample = model.actuator_history()[a][0];
+        if delay > 0.0 && f64::from(nsample - 1) * dt < delay - 1e-12 {
+            return Err(Error::Load {
+                path: Some(path.to_path_buf()),
+                message: format!(
+                    "actuator \"{}\": its {delay} s delay needs at least {} history samples at the {dt} s timestep, \
+                     it has {nsample}: convert the robot with this timestep (ConvertOptions::timestep_secs) instead \
+                     of overriding it afterwards",
+                    model.name(ObjType::Actuator, a),
+                    (delay / dt).ceil() as i64 + 1
+                ),
+            });
+        }
+    }
+    Ok(())
 }
 
 impl Model {

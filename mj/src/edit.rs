@@ -292,6 +292,31 @@ impl ModelEdit {
         Ok(self)
     }
 
+    /// Sets actuator `act`'s command delay (MuJoCo's `actuator_delay`), seconds; its history
+    /// buffer (`nsample`, fixed when the model was compiled) must span it at the timestep.
+    ///
+    /// # Errors
+    /// [`Error::InvalidEdit`] for a negative or non-finite delay, or one longer than the buffer
+    /// holds (saying how long it may be); [`Error::Size`] for a bad id.
+    pub fn set_actuator_delay(&mut self, act: usize, delay_secs: f64) -> Result<&mut Self> {
+        check("actuator id", act, self.model.nu())?;
+        finite("actuator delay", &[delay_secs])?;
+        let nsample = self.model.actuator_history()[act][0];
+        let longest = f64::from((nsample - 1).max(0)) * self.model.timestep_secs();
+        if delay_secs < 0.0 || delay_secs > longest + 1e-12 {
+            return Err(Error::InvalidEdit(format!(
+                "actuator {act}: delay {delay_secs} s outside [0, {longest}] s, what its {nsample}-sample history \
+                 buffer holds at the {} s timestep (convert the robot with a longer delay buffer, \
+                 ConvertOptions::delay_buffer_secs)",
+                self.model.timestep_secs()
+            )));
+        }
+        let n = self.model.nu();
+        // SAFETY: actuator_delay has nu rows; id checked above.
+        unsafe { self.set_row(n, act, delay_secs, |m| m.actuator_delay) };
+        Ok(self)
+    }
+
     /// Sets the integrator.
     pub fn set_integrator(&mut self, integrator: Integrator) -> &mut Self {
         self.raw_mut().opt.integrator = integrator.raw();

@@ -117,8 +117,32 @@ mj_kind! {
         Affine = sys::mjtBias_mjBIAS_AFFINE,
         /// `mjBIAS_MUSCLE`
         Muscle = sys::mjtBias_mjBIAS_MUSCLE,
+        /// `mjBIAS_DCMOTOR`: back-EMF (and cogging, LuGre friction) of a `dcmotor`.
+        Dcmotor = sys::mjtBias_mjBIAS_DCMOTOR,
         /// `mjBIAS_USER`
         User = sys::mjtBias_mjBIAS_USER,
+    }
+}
+
+mj_kind! {
+    /// Activation dynamics of an actuator (`mjtDyn`).
+    DynType {
+        /// `mjDYN_NONE`: stateless.
+        None = sys::mjtDyn_mjDYN_NONE,
+        /// `mjDYN_INTEGRATOR`
+        Integrator = sys::mjtDyn_mjDYN_INTEGRATOR,
+        /// `mjDYN_FILTER`
+        Filter = sys::mjtDyn_mjDYN_FILTER,
+        /// `mjDYN_FILTEREXACT`
+        FilterExact = sys::mjtDyn_mjDYN_FILTEREXACT,
+        /// `mjDYN_MUSCLE`
+        Muscle = sys::mjtDyn_mjDYN_MUSCLE,
+        /// `mjDYN_DCMOTOR`: a `dcmotor` (`gainprm`: R, K, …, kp, ki, kd, Vmax at 4..8).
+        Dcmotor = sys::mjtDyn_mjDYN_DCMOTOR,
+        /// `mjDYN_PID`
+        Pid = sys::mjtDyn_mjDYN_PID,
+        /// `mjDYN_USER`
+        User = sys::mjtDyn_mjDYN_USER,
     }
 }
 

@@ -26,7 +26,7 @@ pub use data::{ContactWrench, Data, StateSig, Warning};
 pub use edit::ModelEdit;
 pub use error::{Error, Result};
 pub use gl::{GlBackend, GlThread, gl_available};
-pub use kinds::{BiasType, GeomType, Integrator, SensorType, Transmission};
+pub use kinds::{BiasType, DynType, GeomType, Integrator, SensorType, Transmission};
 pub use model::{FreeJoint, JointType, Model, ModelLayout, ObjType};
 pub use ray::{RayFilter, RayHit, RayScene, RayStats};
 pub use render::{Renderer, Segment, View};

@@ -1,4 +1,4 @@
-use super::{BiasType, GeomType, Integrator, SensorType, Transmission, buf_to_string, ffi, guarded, init};
+use super::{BiasType, DynType, GeomType, Integrator, SensorType, Transmission, buf_to_string, ffi, guarded, init};
 use crate::error::{Error, Result};
 use mujoco_sys as sys;
 use std::ffi::{CStr, CString, c_char, c_int};
@@ -331,6 +331,13 @@ model_arrays! {
     actuator_gainprm: f64 x 10 = nu;
     /// Bias parameters of each actuator (len `nu`).
     actuator_biasprm: f64 x 10 = nu;
+    /// Command delay of each actuator, seconds (0: none), read from its history buffer (len `nu`).
+    actuator_delay: f64 = nu;
+    /// History buffer of each actuator: number of samples and interpolation (0 zero-order hold,
+    /// 1 linear) (len `nu`).
+    actuator_history: i32 x 2 = nu;
+    /// Armature of each actuator's transmission, kg·m² or kg (len `nu`).
+    actuator_armature: f64 = nu;
     /// Type of each sensor (`mjtSensor`) (len `nsensor`).
     sensor_type: i32 = nsensor;
     /// Number of values each sensor writes (len `nsensor`).
@@ -1047,6 +1054,23 @@ impl Model {
     /// Actuator `id`'s bias force type.
     pub fn actuator_bias(&self, id: usize) -> BiasType {
         BiasType::from_raw(self.actuator_biastype()[id])
+    }
+
+    /// Actuator `id`'s activation dynamics type (`Dcmotor` for a `dcmotor`).
+    pub fn actuator_dyn(&self, id: usize) -> DynType {
+        DynType::from_raw(self.actuator_dyntype()[id])
+    }
+
+    /// Actuator `id`'s torque–speed envelope `(stall force, no-load speed)` in actuator space
+    /// (N·m or N, rad/s or m/s per unit gear) when it is a `dcmotor` whose driver clamps its
+    /// voltage (`controller` Vmax): `τ_s = K·Vmax/R`, `ω₀ = Vmax/K`.
+    pub fn actuator_envelope(&self, id: usize) -> Option<(f64, f64)> {
+        if self.actuator_dyn(id) != DynType::Dcmotor {
+            return None;
+        }
+        let p = self.actuator_gainprm()[id];
+        let (r, k, vmax) = (p[0], p[1], p[7]);
+        (r > 0.0 && k > 0.0 && vmax > 0.0).then(|| (k * vmax / r, vmax / k))
     }
 
     /// The numerical integrator.

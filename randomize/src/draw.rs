@@ -51,6 +51,7 @@ enum Kind {
     ImuBias,
     EncoderNoise,
     Latency,
+    Delay,
     InitQpos,
     PushInterval,
     PushSpeed,
@@ -290,6 +291,15 @@ impl Layout {
                     }
                 }
             }
+            "delay_secs" => {
+                kind = Kind::Delay;
+                for u in 0..model.nu() {
+                    let name = name_or(model, ObjType::Actuator, u);
+                    if select(&name) {
+                        objects.push((u, name, model.actuator_delay()[u], 0));
+                    }
+                }
+            }
             "latency_steps" => {
                 kind = Kind::Latency;
                 objects.push((0, String::new(), 0.0, 0));
@@ -456,6 +466,9 @@ impl Layout {
                     Kind::ImuNoise => sensor_noise_std[object] = v.abs(),
                     Kind::ImuBias => sensor_bias[object] = v,
                     Kind::EncoderNoise => qpos_noise_std[object] = v.abs(),
+                    Kind::Delay => {
+                        edit.set_actuator_delay(object, v.max(0.0)).map_err(apply_err)?;
+                    }
                     Kind::Latency => latency_steps = v.round().max(0.0) as usize,
                     Kind::InitQpos => {
                         let joint = (0..nominal.njnt())
@@ -533,5 +546,49 @@ mod tests {
             seen_x.push(x);
         }
         assert!(seen_x.iter().any(|&x| x > 0.32) && seen_x.iter().any(|&x| x < 0.28), "{seen_x:?}");
+    }
+
+    /// A drawn command delay is MuJoCo's actuator delay of the episode's model: a torque step
+    /// reaches the joint that late; a model whose buffers are too short says so.
+    #[test]
+    fn command_delay_is_drawn_into_the_model_and_acts_at_the_joint() {
+        let xml = |nsample: u32| {
+            format!(
+                r#"<mujoco><option timestep="0.001" gravity="0 0 0"/><worldbody><body><joint name="j" type="hinge"/>
+                   <geom size="0.1" mass="1"/></body></worldbody>
+                   <actuator><motor name="m" joint="j" nsample="{nsample}"/></actuator></mujoco>"#
+            )
+        };
+        let spec =
+            Spec::from_toml_str("[delay_secs]\nmode = \"absolute\"\ndist = \"uniform\"\nlow = 0.0\nhigh = 0.015\n")
+                .unwrap();
+        let short = Model::from_xml_str(&xml(5)).unwrap();
+        assert_eq!(spec.delay_buffer_secs(&short), Some(0.015));
+        let model = Model::from_xml_str(&xml(17)).unwrap();
+        assert_eq!(spec.delay_buffer_secs(&model), None);
+        let layout = Layout::new(&spec, &model).unwrap();
+        assert_eq!(layout.columns, ["delay_secs"]);
+        let mut seen = Vec::new();
+        for episode in 0..6 {
+            let draw = layout.draw(&model, episode, &mut episode_rng(5, episode, 0)).unwrap();
+            let delay = draw.model.actuator_delay()[0];
+            assert!((0.0..=0.015).contains(&delay) && delay == draw.values[0], "{delay}");
+            let mut data = twin_core::mj::Data::new(std::sync::Arc::new(draw.model)).unwrap();
+            data.ctrl_mut()[0] = 1.0;
+            let mut arrived = None;
+            for k in 0..30 {
+                data.step().unwrap();
+                if arrived.is_none() && data.qfrc_actuator()[0] != 0.0 {
+                    arrived = Some(k as f64 * 0.001);
+                }
+            }
+            // Linear interpolation between samples: the torque starts within a step of the delay.
+            let arrived = arrived.unwrap();
+            assert!((arrived - delay).abs() <= 0.001 + 1e-9, "delay {delay}, torque after {arrived}");
+            seen.push(delay);
+        }
+        assert!(seen.iter().any(|&d| d < 0.005) && seen.iter().any(|&d| d > 0.01), "{seen:?}");
+        let e = Layout::new(&spec, &short).unwrap().draw(&short, 0, &mut episode_rng(5, 1, 0));
+        assert!(e.is_err());
     }
 }

@@ -113,7 +113,7 @@ fn select_list<'de, D: serde::Deserializer<'de>>(d: D) -> std::result::Result<Ve
 }
 
 /// Terms whose resulting value is a physical quantity that cannot be negative.
-const NON_NEGATIVE: [&str; 10] = [
+const NON_NEGATIVE: [&str; 11] = [
     "camera_noise_std",
     "friction",
     "mass",
@@ -124,6 +124,7 @@ const NON_NEGATIVE: [&str; 10] = [
     "imu_noise_std",
     "encoder_noise_std",
     "latency_steps",
+    "delay_secs",
 ];
 
 impl Term {
@@ -318,6 +319,11 @@ pub struct Spec {
     /// integer ≥ 0; nominal 0).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub latency_steps: Option<Term>,
+    /// Command delay of each actuator's drive, seconds (MuJoCo's actuator `delay`: every
+    /// controller's commands reach the joint this late; `mode = "abs"` draws it in seconds,
+    /// `scale` scales the robot's own `<twin_actuator>` delay). Separate from `latency_steps`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub delay_secs: Option<Term>,
     /// Initial joint positions around the home pose, rad (clamped to joint ranges).
     #[serde(skip_serializing_if = "Option::is_none")]
     pub init_qpos: Option<Term>,
@@ -395,7 +401,7 @@ impl Spec {
     /// All terms with their keys, in the fixed order draws are made.
     pub fn terms(&self) -> Vec<(String, &Term)> {
         let mut out = Vec::new();
-        let singles: [(&str, &Option<Term>); 14] = [
+        let singles: [(&str, &Option<Term>); 15] = [
             ("friction", &self.friction),
             ("mass", &self.mass),
             ("com_offset", &self.com_offset),
@@ -408,6 +414,7 @@ impl Spec {
             ("imu_bias", &self.imu_bias),
             ("encoder_noise_std", &self.encoder_noise_std),
             ("latency_steps", &self.latency_steps),
+            ("delay_secs", &self.delay_secs),
             ("init_qpos", &self.init_qpos),
             ("camera_noise_std", &self.camera_noise_std),
         ];
@@ -429,6 +436,29 @@ impl Spec {
         out
     }
 
+    /// The longest command delay the `delay_secs` term can draw on `model`, seconds, when it
+    /// is longer than some actuator's history buffer holds (the robot must then be converted
+    /// with buffers that long, `ConvertOptions::delay_buffer_secs`); `None` otherwise. A
+    /// gaussian's reach is taken as mean + 6 std.
+    pub fn delay_buffer_secs(&self, model: &twin_core::mj::Model) -> Option<f64> {
+        let t = self.delay_secs.as_ref()?;
+        let reach = match t.dist {
+            Dist::Gaussian => t.mean.unwrap_or(0.0) + 6.0 * t.std.unwrap_or(0.0).abs(),
+            _ => t.high.unwrap_or(0.0),
+        };
+        let nominal = model.actuator_delay().iter().copied().fold(0.0, f64::max);
+        let longest = match t.mode {
+            Mode::Scale => reach * nominal,
+            Mode::Add => nominal + reach,
+            Mode::Absolute => reach,
+        };
+        let dt = model.timestep_secs();
+        let held = (0..model.nu())
+            .map(|u| f64::from((model.actuator_history()[u][0] - 1).max(0)) * dt)
+            .fold(f64::INFINITY, f64::min);
+        (longest > held + 1e-12).then_some(longest)
+    }
+
     /// The term with key `key` (as [`Spec::terms`] names them), if the spec has it.
     pub fn term_mut(&mut self, key: &str) -> Option<&mut Term> {
         let single = match key {
@@ -444,6 +474,7 @@ impl Spec {
             "imu_bias" => &mut self.imu_bias,
             "encoder_noise_std" => &mut self.encoder_noise_std,
             "latency_steps" => &mut self.latency_steps,
+            "delay_secs" => &mut self.delay_secs,
             "init_qpos" => &mut self.init_qpos,
             "camera_noise_std" => &mut self.camera_noise_std,
             "push.interval_secs" => return self.push.as_mut().map(|p| &mut p.interval_secs),

@@ -123,7 +123,7 @@ impl Sweep {
 }
 
 /// The spec's single terms (those `--sweep` can name without a `spec.` prefix).
-const SPEC_KEYS: [&str; 16] = [
+const SPEC_KEYS: [&str; 17] = [
     "friction",
     "mass",
     "com_offset",
@@ -136,6 +136,7 @@ const SPEC_KEYS: [&str; 16] = [
     "imu_bias",
     "encoder_noise_std",
     "latency_steps",
+    "delay_secs",
     "init_qpos",
     "camera_noise_std",
     "push.interval_secs",

@@ -456,10 +456,20 @@ impl Scenario {
     /// # Errors
     /// As [`Robot::load`]; [`Error::Scenario`] for a push on a missing body.
     pub fn robot(&self, default_model: &Path) -> Result<Robot> {
+        self.robot_with_delay_buffer(default_model, 0.0)
+    }
+
+    /// [`Scenario::robot`] with every actuator's command-history buffer spanning
+    /// `delay_buffer_secs` (`ConvertOptions::delay_buffer_secs`: a randomized command delay).
+    ///
+    /// # Errors
+    /// As [`Scenario::robot`].
+    pub fn robot_with_delay_buffer(&self, default_model: &Path, delay_buffer_secs: f64) -> Result<Robot> {
         let path = self.model.clone().unwrap_or_else(|| default_model.to_path_buf());
         let convert = twin_core::convert::ConvertOptions {
             world: self.world.clone(),
             contact_sensors: self.contact_sensors.clone(),
+            delay_buffer_secs,
             ..Default::default()
         };
         // A grasping scenario keeps its depth camera's noise in the model (camera user 0), where

@@ -3,7 +3,7 @@
 use anyhow::Context;
 use std::io::Write;
 use std::path::PathBuf;
-use twin_core::mj::{Model, ObjType};
+use twin_core::mj::{BiasType, DynType, Model, ObjType};
 use twin_core::robot::Robot;
 
 #[derive(Debug, clap::Args)]
@@ -77,11 +77,12 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
         let range = if m.actuator_ctrllimited()[a] { format!("[{lo}, {hi}]") } else { "unlimited".into() };
         writeln!(
             out,
-            "  {:<28} joint {:<28} gear {:<8} ctrlrange {}",
+            "  {:<28} joint {:<28} gear {:<8} ctrlrange {} · drive: {}",
             m.name(ObjType::Actuator, a),
             target,
             m.actuator_gear()[a][0],
-            range
+            range,
+            drive_model(m, a)
         )?;
     }
 
@@ -99,4 +100,38 @@ fn write_info(out: &mut impl Write, path: &std::path::Path, m: &Model) -> std::i
     };
     writeln!(out, "home pose: {home}")?;
     Ok(())
+}
+
+/// Actuator `a`'s drive model as MuJoCo compiled it, in joint space (the `<twin_actuator>` block
+/// of a URDF, or the MJCF's own actuator): its loop gains, its command delay and its
+/// torque–speed envelope; "ideal" for a torque motor that obeys at once at any speed.
+fn drive_model(m: &Model, a: usize) -> String {
+    let g = m.actuator_gear()[a][0];
+    let g2 = g * g;
+    let mut parts = Vec::new();
+    let (gain, bias) = (m.actuator_gainprm()[a], m.actuator_biasprm()[a]);
+    if m.actuator_dyn(a) == DynType::Dcmotor {
+        if gain[4] != 0.0 || gain[6] != 0.0 {
+            parts.push(format!("position loop kp {} kd {}", gain[4] * g2, gain[6] * g2));
+        }
+    } else if m.actuator_bias(a) == BiasType::Affine && bias[1] != 0.0 {
+        parts.push(format!("position loop kp {} kd {}", -bias[1] * g2, -bias[2] * g2));
+    } else if m.actuator_bias(a) == BiasType::Affine && bias[2] != 0.0 {
+        parts.push(format!("velocity loop kd {}", -bias[2] * g2));
+    }
+    let delay = m.actuator_delay()[a];
+    if delay > 0.0 {
+        parts.push(format!("delay {:.2} ms", delay * 1e3));
+    }
+    if let Some((stall, no_load)) = m.actuator_envelope(a) {
+        parts.push(format!(
+            "DC motor stall {:.4} no-load {:.4} (joint units, torque falls with speed)",
+            stall * g.abs(),
+            no_load / g.abs()
+        ));
+    }
+    if m.actuator_armature()[a] > 0.0 {
+        parts.push(format!("rotor armature {}", m.actuator_armature()[a]));
+    }
+    if parts.is_empty() { "ideal".into() } else { parts.join(" · ") }
 }

@@ -11,6 +11,7 @@ pub mod log;
 pub mod randomize;
 pub mod sim;
 pub mod sysid;
+pub mod sysid_actuator;
 pub mod test;
 pub mod view;
 pub mod viewers;

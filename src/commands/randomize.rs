@@ -295,6 +295,22 @@ fn run_one(
     if let (Some(Target::Spec(key)), Some((_, value))) = (&target, level) {
         spec = randomize::sweep::spec_at(&spec, key, value)?;
     }
+    // A drawn command delay needs every actuator's history buffer to span it: the robot is
+    // converted again with buffers for the longest delay the term can draw (same physics).
+    let (robot, model) = match spec.delay_buffer_secs(&model) {
+        Some(secs) => {
+            let robot = match &scenario {
+                Some(s) => s.robot_with_delay_buffer(&model_path, secs)?,
+                None => Robot::load_with(
+                    &model_path,
+                    &twin_core::convert::ConvertOptions { delay_buffer_secs: secs, ..Default::default() },
+                )?,
+            };
+            let model = robot.model.clone();
+            (robot, model)
+        }
+        None => (robot, model),
+    };
     let bound = if config.is_some() {
         Layout::new(&spec, &model).map(|l| (l, Vec::new()))
     } else {

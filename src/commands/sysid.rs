@@ -96,6 +96,9 @@ pub enum Mode {
     /// Joint friction curves (Coulomb + viscous + Stribeck) from constant-velocity sweeps:
     /// each joint moved forth and back at a series of constant speeds.
     Friction(FrictionArgs),
+    /// Each drive's command delay, position-loop gains and armature from a log of the commands
+    /// the drives received and the joint states (`twin sysid actuator --log LOG --update ROBOT.urdf`).
+    Actuator(super::sysid_actuator::ActuatorArgs),
 }
 
 #[derive(Debug, clap::Args)]
@@ -242,6 +245,7 @@ fn effort_scales(specs: &[String], joints: &[String]) -> anyhow::Result<Vec<(usi
 pub fn run(args: Args) -> anyhow::Result<()> {
     let args = match args.mode {
         Some(Mode::Friction(f)) => return friction(f),
+        Some(Mode::Actuator(a)) => return super::sysid_actuator::run(a),
         None => args,
     };
     let (Some(log_path), Some(update)) = (args.log.clone(), args.update.clone()) else {

@@ -190,10 +190,21 @@ fn g7(x: f64) -> String {
 /// # Errors
 /// [`Error::Urdf`] for malformed XML.
 pub fn splice_block(path: &Path, text: &str, block: &str) -> Result<String> {
+    splice_element(path, text, BLOCK, "twin sysid", block)
+}
+
+/// `text` (a URDF of `path`) with its top-level `<element>` (and the comment right before it
+/// that contains `marker`) replaced by `block`, or `block` inserted before `</robot>` when it
+/// has none: the one way twin's blocks (`<twin_sysid>`, `<twin_actuator>`) are written back,
+/// every other byte kept.
+///
+/// # Errors
+/// [`Error::Urdf`] for malformed XML.
+pub fn splice_element(path: &Path, text: &str, element: &str, marker: &str, block: &str) -> Result<String> {
     let doc = roxmltree::Document::parse(text)
         .map_err(|e| Error::Urdf { path: path.to_path_buf(), message: e.to_string() })?;
     let root = doc.root_element();
-    if let Some(old) = root.children().find(|n| n.has_tag_name(BLOCK)) {
+    if let Some(old) = root.children().find(|n| n.has_tag_name(element)) {
         // From the start of the line of the comment before it (if any) to the end of its line.
         let mut start = old.range().start;
         let mut prev = old.prev_sibling();
@@ -202,7 +213,7 @@ pub fn splice_block(path: &Path, text: &str, block: &str) -> Result<String> {
                 prev = p.prev_sibling();
                 continue;
             }
-            if p.is_comment() && p.text().is_some_and(|t| t.contains("twin sysid")) {
+            if p.is_comment() && p.text().is_some_and(|t| t.contains(marker)) {
                 start = p.range().start;
             }
             break;

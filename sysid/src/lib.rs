@@ -155,6 +155,7 @@
 
 #![forbid(unsafe_code)]
 
+pub mod actuator;
 pub mod allan;
 pub mod condition;
 pub mod error;

@@ -46,7 +46,35 @@ fn info_reports_masses_ranges_and_gear_of_an_mjcf() {
     let elbow = out.lines().find(|l| l.trim_start().starts_with("elbow ")).expect("joint line");
     assert!(elbow.contains("unlimited"), "{elbow}");
     assert!(out.contains("actuators (1):") && out.contains("gear 50"), "{out}");
+    assert!(out.contains("drive: ideal"), "{out}");
     assert!(out.contains("sensors (1):") && out.contains("shoulder_pos"), "{out}");
+}
+
+#[test]
+fn info_shows_each_joint_drive_model_from_the_urdf_block() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = write(
+        dir.path(),
+        "pair.urdf",
+        r#"<robot name="pair">
+  <link name="world"/>
+  <joint name="fix" type="fixed"><parent link="world"/><child link="base"/></joint>
+  <link name="base"><inertial><mass value="2"/><inertia ixx="0.1" ixy="0" ixz="0" iyy="0.1" iyz="0" izz="0.1"/></inertial></link>
+  <joint name="a" type="revolute"><parent link="base"/><child link="la"/><axis xyz="0 0 1"/><limit effort="20" velocity="3" lower="-1" upper="1"/></joint>
+  <link name="la"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <joint name="b" type="revolute"><parent link="base"/><child link="lb"/><origin xyz="0 0 0.2"/><axis xyz="0 0 1"/><limit effort="20" velocity="3" lower="-1" upper="1"/></joint>
+  <link name="lb"><inertial><mass value="1"/><inertia ixx="0.01" ixy="0" ixz="0" iyy="0.01" iyz="0" izz="0.01"/></inertial></link>
+  <twin_actuator version="1"><joint name="b" delay_secs="0.012" stall_torque="30" no_load_speed="6"/></twin_actuator>
+</robot>
+"#,
+    );
+    let (ok, out, err) = run(&["info", path.to_str().unwrap()]);
+    assert!(ok, "{err}");
+    let line =
+        |name: &str| out.lines().find(|l| l.trim_start().starts_with(&format!("{name} ")) && l.contains("drive:"));
+    assert!(line("a").expect("actuator a").ends_with("drive: ideal"), "{out}");
+    let b = line("b").expect("actuator b");
+    assert!(b.contains("delay 12.00 ms") && b.contains("DC motor stall 30.0000 no-load 6.0000"), "{b}");
 }
 
 #[test]

@@ -112,7 +112,13 @@ impl Actuator {
         }
         let mut force = [f64::NEG_INFINITY, f64::INFINITY];
         if let (Interface::Effort, Some([lo, hi])) = (self.interface, self.ctrl_range) {
-            let gain = model.actuator_gainprm()[self.id][0];
+            // A `dcmotor` driven by torque feed-forward (a drive model's envelope) delivers its
+            // command as force within the envelope: gain 1 (its `gainprm[0]` is a resistance).
+            let gain = if model.actuator_dyn(self.id) == crate::mj::DynType::Dcmotor {
+                1.0
+            } else {
+                model.actuator_gainprm()[self.id][0]
+            };
             force = [(lo * gain).min(hi * gain), (lo * gain).max(hi * gain)];
         }
         if model.actuator_forcelimited()[self.id] {

@@ -263,6 +263,12 @@ fn drive_of(model: &Model, a: &twin_core::robot::Actuator) -> (Option<AffineServ
     if a.interface == twin_core::convert::Interface::Effort {
         return (None, range);
     }
+    // A drive model's `dcmotor` position loop (`gainprm` 4 and 6: kp, kd in actuator space)
+    // is the same affine servo within its torque–speed envelope.
+    if model.actuator_dyn(a.id) == twin_core::mj::DynType::Dcmotor {
+        let p = model.actuator_gainprm()[a.id];
+        return (Some(AffineServo { gain: p[4], bias: [0.0, -p[4], -p[6]] }), range);
+    }
     let [gain, ..] = model.actuator_gainprm()[a.id];
     let [b0, b1, b2, ..] = model.actuator_biasprm()[a.id];
     (Some(AffineServo { gain, bias: [b0, b1, b2] }), range)

@@ -1,5 +1,6 @@
 //! sysid's integration tests, one test binary (each file a module: one link instead of one per file).
 
+mod actuator;
 #[path = "../../../twin-core/tests/it/example_robot_data.rs"]
 mod example_robot_data;
 mod excite;

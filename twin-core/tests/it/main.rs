@@ -1,5 +1,6 @@
 //! twin-core's integration tests, one test binary (each file a module: one link instead of one per file).
 
+mod actuator;
 mod convert;
 mod corpus;
 mod errors;
