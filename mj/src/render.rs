@@ -8,14 +8,14 @@
 //!
 //! ```no_run
 //! use std::sync::Arc;
-//! use twin_core::mj::{Data, Model, Renderer, View};
+//! use twin_mj::{Data, Model, Renderer, View};
 //!
 //! let model = Arc::new(Model::from_file("scene.xml")?);
 //! let mut data = Data::new(model.clone())?;
 //! data.forward()?;
 //! let mut renderer = Renderer::new(model.clone(), 640, 480)?;
 //! let rgb = renderer.rgb(&mut data, View::Free)?; // 640 × 480 × 3 bytes
-//! # Ok::<(), twin_core::Error>(())
+//! # Ok::<(), twin_mj::Error>(())
 //! ```
 
 use super::gl::GlThread;

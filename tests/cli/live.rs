@@ -880,3 +880,38 @@ fn steers_within_twenty_percent(model: &Path, runs: usize) {
         assert!(oa == ob, "two lockstep runs of the same node differ");
     }
 }
+
+/// The real drive (issue 41) under a user's node: the robot's file gives the left elbow a 10 ms
+/// command delay (`<twin_actuator>`); the rclpy node commands the elbow by name in lockstep.
+/// In the recording (`/joint_states` every 2 ms step), the elbow's effort leaves its hold value
+/// exactly 10 ms later than with the same robot and node without the block: the node's commands
+/// pass through the same drive as twin's own controllers'.
+#[test]
+fn a_command_delay_in_the_robot_file_holds_back_a_nodes_commands_at_the_joint() {
+    let dir = tempfile::tempdir().unwrap();
+    let urdf = std::fs::read_to_string(MODEL).unwrap();
+    let block = format!("  <twin_actuator version=\"1\">\n    <joint name=\"{ELBOW}\" delay_secs=\"0.010\"/>\n  </twin_actuator>\n</robot>");
+    let at = urdf.rfind("</robot>").unwrap();
+    let delayed = dir.path().join("humanoid_delayed.urdf");
+    std::fs::write(&delayed, format!("{}{block}{}", &urdf[..at], &urdf[at + "</robot>".len()..])).unwrap();
+    let twin_args: Vec<String> =
+        ["--ros", "--lockstep", "--duration", "0.3", "--record", "run.mcap"].map(String::from).to_vec();
+    let node_args: Vec<String> =
+        ["--mode", "by-name", "--out", "NODE_OUT", "--ros-args", "-p", "use_sim_time:=true"].map(String::from).to_vec();
+    let onset = |model: &Path| {
+        let run = run_rclpy_on(model, &twin_args, Some(Path::new(RCLPY_NODE)), &node_args);
+        let js = read::<JointState>(&run.mcap, "/joint_states");
+        let e = js[0].1.name.iter().position(|n| n == ELBOW).unwrap();
+        let hold = js[0].1.effort[e];
+        let (t, _) = js
+            .iter()
+            .find(|(_, m)| (m.effort[e] - hold).abs() > 0.5)
+            .unwrap_or_else(|| panic!("the elbow's effort never left {hold} N·m\n{}", run.stdout));
+        *t as f64 * 1e-9
+    };
+    let (ideal, late) = (onset(Path::new(MODEL)), onset(&delayed));
+    assert!(
+        ((late - ideal) - 0.010).abs() < 1e-6,
+        "the elbow answered at {late} s with the delay, at {ideal} s without (want 10 ms later)"
+    );
+}
