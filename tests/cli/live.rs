@@ -890,7 +890,9 @@ fn steers_within_twenty_percent(model: &Path, runs: usize) {
 fn a_command_delay_in_the_robot_file_holds_back_a_nodes_commands_at_the_joint() {
     let dir = tempfile::tempdir().unwrap();
     let urdf = std::fs::read_to_string(MODEL).unwrap();
-    let block = format!("  <twin_actuator version=\"1\">\n    <joint name=\"{ELBOW}\" delay_secs=\"0.010\"/>\n  </twin_actuator>\n</robot>");
+    let block = format!(
+        "  <twin_actuator version=\"1\">\n    <joint name=\"{ELBOW}\" delay_secs=\"0.010\"/>\n  </twin_actuator>\n</robot>"
+    );
     let at = urdf.rfind("</robot>").unwrap();
     let delayed = dir.path().join("humanoid_delayed.urdf");
     std::fs::write(&delayed, format!("{}{block}{}", &urdf[..at], &urdf[at + "</robot>".len()..])).unwrap();
